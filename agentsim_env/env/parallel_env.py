@@ -1,0 +1,179 @@
+"""The PettingZoo ParallelEnv around a scenario (the only module that imports pettingzoo).
+
+``step`` reads as the pipeline of DESIGN §4: validate and decode actions (1), run the world pipeline (2-8),
+let the scenario score (9), then build the per-agent dicts once from arrays.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+from pettingzoo import ParallelEnv
+from pettingzoo.utils.conversions import parallel_to_aec
+
+from agentsim_env.env.spaces import FORMATS, action_space_for, observation_space_for, split_action
+from agentsim_env.scenarios.base import Scenario
+from agentsim_env.scenarios.config import check_choice
+
+RENDER_MODES = ("rgb_array",)
+
+
+class AgentSimParallelEnv(ParallelEnv):
+    """A PettingZoo ``ParallelEnv`` over one world of a scenario.
+
+    Args:
+        scenario: The scenario (with its validated config).
+        render_mode: ``None`` or ``"rgb_array"``.
+        obs_format: ``"dict"`` (a Dict of the scenario's observation parts) or ``"flat"`` (one float32 Box).
+        action_format: ``"dict"`` (a Dict of action parts) or ``"flat"`` (one float32 Box in [-1, 1]).
+    """
+
+    def __init__(
+        self,
+        scenario: Scenario,
+        *,
+        render_mode: str | None = None,
+        obs_format: str = "dict",
+        action_format: str = "dict",
+    ) -> None:
+        if render_mode is not None:
+            check_choice("render_mode", render_mode, RENDER_MODES + (None,))
+        check_choice("obs_format", obs_format, FORMATS)
+        check_choice("action_format", action_format, FORMATS)
+        self.scenario = scenario
+        self.render_mode = render_mode
+        self.obs_format = obs_format
+        self.action_format = action_format
+        self.world = scenario.build(1)
+        self.metadata = {
+            "name": f"{scenario.name}_v{scenario.version}",
+            "render_modes": list(RENDER_MODES),
+            "render_fps": max(1, int(round(1.0 / self.world.config.dt))),
+            "is_parallelizable": True,
+        }
+        self.possible_agents = scenario.agent_names()
+        self._index = {a: i for i, a in enumerate(self.possible_agents)}
+        self._obs_spaces = {a: observation_space_for(scenario.obs_parts(), obs_format) for a in self.possible_agents}
+        self._act_spaces = {a: action_space_for(scenario.act_parts(), action_format) for a in self.possible_agents}
+        n = scenario.state_size()
+        self.state_space = spaces.Box(-10.0, 10.0, shape=(n,), dtype=np.float32)
+        self.agents: list[str] = []
+        self._rng: np.random.Generator | None = None
+        self._steps = 0
+        self._last_obs: dict[str, np.ndarray] | None = None
+
+    # ------------------------------------------------------------------ spaces
+    def observation_space(self, agent: str) -> spaces.Space:
+        """The (cached) observation space of ``agent``; identical for every agent."""
+        return self._obs_spaces[self._check_known(agent)]
+
+    def action_space(self, agent: str) -> spaces.Space:
+        """The (cached) action space of ``agent``; identical for every agent."""
+        return self._act_spaces[self._check_known(agent)]
+
+    def _check_known(self, agent: str) -> str:
+        if agent not in self._index:
+            raise ValueError(f"unknown agent id {agent!r}; agents are {self.possible_agents[0]!r}..."
+                             f"{self.possible_agents[-1]!r}")
+        return agent
+
+    # ------------------------------------------------------------------ episode
+    def reset(
+        self, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[dict[str, Any], dict[str, dict[str, Any]]]:
+        """Start an episode; ``seed`` re-seeds the env's generator (otherwise it continues)."""
+        if seed is not None or self._rng is None:
+            self._rng = np.random.default_rng(seed)
+        self.scenario.reset_world(self.world, 0, self._rng)
+        self.world.step_count[:] = 0
+        self.world.refresh()
+        self._steps = 0
+        self.agents = list(self.possible_agents)
+        parts = self.scenario.observe(self.world)
+        return self._obs_dicts(parts, np.ones(len(self.agents), dtype=bool)), {a: {} for a in self.agents}
+
+    def step(self, actions: dict[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
+        """Advance one step with an action for every live agent (see the scenario docstring for layouts)."""
+        if not self.agents:
+            if actions:
+                raise ValueError(f"the episode is over (no live agents); got actions for {sorted(actions)[:3]}; call reset()")
+            return {}, {}, {}, {}, {}
+        sc, world = self.scenario, self.world
+        # 1. validate everything before any state changes, then decode actions into motion commands
+        parts = self._validate_actions(actions)
+        acting = np.zeros(world.state.n_slots, dtype=bool)
+        acting[[self._index[a] for a in self.agents]] = True
+        sc.apply_actions(world, parts, acting)
+        sc.before_world_step(world)
+        # 2-8. the world pipeline; 9. the scenario scores
+        events = world.step()
+        res = sc.after_world_step(world, events, acting)
+        self._steps += 1
+        terminated = acting & (res.terminated | ~world.state.online)
+        world.set_offline(np.flatnonzero(terminated))
+        truncated = acting & ~terminated & (self._steps >= sc.max_steps)
+        obs = self._obs_dicts(sc.observe(world), acting)
+        live = self.agents
+        idx = [self._index[a] for a in live]
+        rew = res.rewards[idx].astype(float).tolist()
+        term = terminated[idx].tolist()
+        trunc = truncated[idx].tolist()
+        rewards = dict(zip(live, rew))
+        terms = dict(zip(live, term))
+        truncs = dict(zip(live, trunc))
+        info_cols = {k: v[idx].tolist() for k, v in res.info.items()}
+        infos = {a: {k: col[n] for k, col in info_cols.items()} for n, a in enumerate(live)}
+        self.agents = [a for a, t, u in zip(live, term, trunc) if not (t or u)]
+        return obs, rewards, terms, truncs, infos
+
+    def _validate_actions(self, actions: dict[str, Any]) -> dict[str, np.ndarray]:
+        if not isinstance(actions, dict):
+            raise ValueError(f"actions must be a dict agent id -> action, got {type(actions).__name__}")
+        live = set(self.agents)
+        for a in actions:
+            if a not in self._index:
+                raise ValueError(f"unknown agent id {a!r} in actions")
+            if a not in live:
+                raise ValueError(f"agent {a!r} is no longer live (terminated or truncated); remove it from actions")
+        missing = [a for a in self.agents if a not in actions]
+        if missing:
+            raise ValueError(f"missing actions for live agent(s) {missing[:5]}")
+        parts = self.scenario.act_parts()
+        s = self.world.state.n_slots
+        out = {name: np.zeros((s, p.size)) for name, p in parts.items()}
+        for a, act in actions.items():
+            decoded = split_action(act, parts, self.action_format, a)
+            i = self._index[a]
+            for name, v in decoded.items():
+                out[name][i] = v
+        return out
+
+    def _obs_dicts(self, parts: dict[str, np.ndarray], acting: np.ndarray) -> dict[str, Any]:
+        s = self.world.state.n_slots
+        if self.obs_format == "flat":
+            flat = np.concatenate([p.reshape(s, -1) for p in parts.values()], axis=1).astype(np.float32)
+            return {a: flat[self._index[a]] for a in self.agents}
+        return {a: {k: v[self._index[a]] for k, v in parts.items()} for a in self.agents}
+
+    # ------------------------------------------------------------------ extras
+    def state(self) -> np.ndarray:
+        """Global state of the world for centralised critics (see ``state_space``)."""
+        return self.scenario.state(self.world, 0)
+
+    def render(self) -> np.ndarray | None:
+        """A top-down RGB frame (``render_mode="rgb_array"``), altitude shown as shading."""
+        if self.render_mode is None:
+            return None
+        from agentsim_env.render.topdown import render_topdown
+
+        return render_topdown(self.world, 0, self.scenario.markers(self.world, 0))
+
+    def close(self) -> None:
+        """Release resources (none are held outside Python objects)."""
+
+
+def to_aec(env: AgentSimParallelEnv) -> Any:
+    """The AEC version of a parallel env (PettingZoo's ``parallel_to_aec``)."""
+    return parallel_to_aec(env)

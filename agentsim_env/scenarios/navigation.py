@@ -1,0 +1,268 @@
+"""navigation: N agents in G groups each reach their own goal among random 3D obstacles.
+
+Agents (``agent_0`` ... ``agent_{N-1}``) spawn at random in an altitude band over a square map with ground
+obstacles (boxes and vertical cylinders of random heights: low ones can be flown over). Each agent has its own
+goal; reaching it (within ``goal_radius``) ends the agent with success. A collision ends it with a penalty.
+
+Observation (Dict; the flat Box concatenates the parts in this order):
+
+| part   | shape    | content                                                                                 |
+|--------|----------|-----------------------------------------------------------------------------------------|
+| self   | (8,)     | x, y in [-1, 1] over the map; altitude in [-1, 1] over the band; vx, vy, vz / max_speed; cos, sin heading |
+| lidar  | (K, 2)   | per ray: normalised distance (1 = free), hit code / 3 (0 none, 1/3 agent, 2/3 object, 1 ground) |
+| task   | (4,)     | goal minus position (dx, dy, dz) / map diagonal, distance / map diagonal                  |
+
+Rays: ``n_azimuth`` evenly spaced azimuths (ray 0 along the heading) per elevation ring in ``elevations_deg``;
+K = n_azimuth x rings (default 16 x 2 = 32: a horizontal ring and one tilted 25 degrees down).
+
+Action (Dict with one part ``motion``; the flat Box is the same vector), values in [-1, 1]:
+- ``action_mode="velocity"`` (default): (3,) target velocity / max_speed (norm clipped to max_speed).
+- ``action_mode="primitive"``: (8,) a selector and parameters for the motion primitives (keep, velocity, linear,
+  circular, parabolic, goto); layout table in ``agentsim_env.motion.actions``.
+
+Reward: task = progress toward the goal (metres) + ``arrival_bonus`` on arrival; composed by
+``RewardConfig`` (group share = weight x mean task reward of the agent's group, collision penalty, energy =
+speed^2 x dt).
+
+Version history: v0, first release.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from agentsim_env.core.world import PHYSICS_MODES, StepEvents, World, WorldConfig
+from agentsim_env.motion import MotionLimits, decode_primitive, decode_velocity, set_hold
+from agentsim_env.scenarios.base import Part, Scenario, StepResult
+from agentsim_env.scenarios.config import build_config, check_choice, check_float, check_int
+from agentsim_env.scenarios.placement import jittered_points, obstacle_layout
+from agentsim_env.scenarios.rewards import RewardConfig, compose_rewards
+from agentsim_env.sensors.proximity import ProximityConfig
+
+ACTION_MODES = ("velocity", "primitive")
+
+
+@dataclass(frozen=True)
+class NavigationConfig:
+    """Configuration of ``navigation`` (every field validated at construction)."""
+
+    n_agents: int = 4
+    n_groups: int = 2
+    map_size: float | None = None  # None: grows with n_agents (area_per_agent), at least 60 m
+    area_per_agent: float = 150.0
+    obstacle_density: float = 1.0 / 600.0  # obstacles per square metre
+    obstacle_size: tuple[float, float] = (1.0, 3.0)
+    obstacle_height: tuple[float, float] = (4.0, 24.0)
+    altitude: tuple[float, float] = (2.0, 12.0)
+    agent_radius: float = 0.5
+    max_speed: float = 5.0
+    max_accel: float = 10.0
+    sensor_range: float = 10.0
+    n_azimuth: int = 16
+    elevations_deg: tuple[float, ...] = (0.0, -25.0)
+    goal_radius: float = 1.5
+    arrival_bonus: float = 10.0
+    action_mode: str = "velocity"
+    physics: str = "kinematic"
+    collisions: bool = True
+    dt: float = 0.1
+    max_steps: int = 400
+    reward: RewardConfig = field(default_factory=lambda: RewardConfig(group_share=0.5, energy_weight=0.001))
+
+    def __post_init__(self) -> None:
+        check_int("n_agents", self.n_agents, 1)
+        check_int("n_groups", self.n_groups, 1, self.n_agents)
+        if self.map_size is not None:
+            check_float("map_size", self.map_size, 10.0)
+        check_float("area_per_agent", self.area_per_agent, 10.0)
+        check_float("obstacle_density", self.obstacle_density, 0.0, 0.01)
+        for name in ("agent_radius", "max_speed", "max_accel", "sensor_range", "goal_radius", "dt"):
+            check_float(name, getattr(self, name), 0.0, lo_open=True)
+        check_float("arrival_bonus", self.arrival_bonus, 0.0)
+        check_int("n_azimuth", self.n_azimuth, 1, 1024)
+        check_int("max_steps", self.max_steps, 1)
+        check_choice("action_mode", self.action_mode, ACTION_MODES)
+        check_choice("physics", self.physics, PHYSICS_MODES)
+        for name in ("obstacle_size", "obstacle_height", "altitude"):
+            lo, hi = getattr(self, name)
+            check_float(f"{name}[0]", lo, 0.0)
+            check_float(f"{name}[1]", hi, lo)
+        if isinstance(self.reward, dict):
+            object.__setattr__(self, "reward", build_config(RewardConfig, self.reward))
+        if not isinstance(self.reward, RewardConfig):
+            raise ValueError(f"reward must be a RewardConfig or a dict of its fields, got {self.reward!r}")
+
+    @property
+    def side(self) -> float:
+        """Side of the square map in metres."""
+        if self.map_size is not None:
+            return float(self.map_size)
+        return max(60.0, float(np.sqrt(self.n_agents * self.area_per_agent)))
+
+
+class NavigationScenario(Scenario):
+    """Reach your own goal among obstacles; see the module docstring for layouts."""
+
+    name = "navigation"
+    config_cls = NavigationConfig
+    version = 0
+    agent_prefix = "agent"
+
+    def __init__(self, config: NavigationConfig) -> None:
+        super().__init__(config)
+        c = config
+        self.lidar = ProximityConfig(n_azimuth=c.n_azimuth, elevations_deg=tuple(c.elevations_deg))
+        self.limits = MotionLimits(
+            max_speed=c.max_speed, max_accel=c.max_accel, max_radius=c.side / 4, max_duration=10.0,
+            z_min=c.altitude[0], z_max=c.altitude[1], max_omega=1.0, arrival_radius=c.goal_radius / 2,
+        )
+        self.goal = np.zeros((0, 3))
+        self.prev_dist = np.zeros(0)
+        self.arrived = np.zeros(0, dtype=bool)
+
+    @property
+    def n_agents(self) -> int:
+        """Agents per world."""
+        return int(self.config.n_agents)
+
+    def build(self, n_worlds: int) -> World:
+        """World sized for the map, the band and the sensor; goals allocated per slot."""
+        c = self.config
+        s = c.side
+        wc = WorldConfig(
+            bounds=(0.0, s, 0.0, s), z_range=(0.0, c.altitude[1] + 5.0), dt=c.dt, physics=c.physics,
+            collisions=c.collisions, lidar=self.lidar, grid_cell=max(c.sensor_range / 2, 2.0),
+        )
+        world = World(wc, n_worlds, c.n_agents)
+        st = world.state
+        st.radius[:] = c.agent_radius
+        st.sensor_range[:] = c.sensor_range
+        st.max_speed[:] = c.max_speed
+        st.max_accel[:] = c.max_accel
+        st.group[:] = np.tile(np.arange(c.n_agents) % c.n_groups, n_worlds)
+        self.goal = np.zeros((st.n_slots, 3))
+        self.prev_dist = np.zeros(st.n_slots)
+        self.arrived = np.zeros(st.n_slots, dtype=bool)
+        return world
+
+    def reset_world(self, world: World, w: int, rng: np.random.Generator) -> None:
+        """New starts, goals and obstacles for world ``w``."""
+        c, st = self.config, world.state
+        sl = st.slots_of_world(w)
+        s, n = c.side, c.n_agents
+        bounds = (2.0, s - 2.0, 2.0, s - 2.0)
+        sep = 4.0 * c.agent_radius + 2.0
+        start = jittered_points(rng, n, bounds, sep)
+        goal = jittered_points(rng, n, bounds, sep)
+        z0 = rng.uniform(*c.altitude, n)
+        zg = rng.uniform(*c.altitude, n)
+        st.pos[sl] = np.column_stack([start, z0])
+        st.vel[sl] = 0.0
+        st.heading[sl] = rng.uniform(-np.pi, np.pi, n)
+        st.online[sl] = True
+        st.energy[sl] = 0.0
+        self.goal[sl] = np.column_stack([goal, zg])
+        self.prev_dist[sl] = np.linalg.norm(self.goal[sl] - st.pos[sl], axis=1)
+        self.arrived[sl] = False
+        set_hold(world.motion, sl)
+        world.remove_objects_of_world(w)
+        n_obs = int(round(c.obstacle_density * s * s))
+        kind, centre, half = obstacle_layout(
+            rng, n_obs, (0.0, s, 0.0, s), c.obstacle_size, c.obstacle_height,
+            np.vstack([start, goal]), keep_clear_radius=c.agent_radius + 2.0,
+        )
+        if kind.size:
+            world.scene.add(kind, centre, half, w)
+
+    def obs_parts(self) -> dict[str, Part]:
+        """self (8,), lidar (K, 2), task (4,)."""
+        k = self.lidar.n_rays
+        return {"self": Part((8,), -1.0, 1.0), "lidar": Part((k, 2), 0.0, 1.0), "task": Part((4,), -1.0, 1.0)}
+
+    def act_parts(self) -> dict[str, Part]:
+        """motion (3,) in velocity mode or (8,) in primitive mode."""
+        return {"motion": Part((3 if self.config.action_mode == "velocity" else 8,), -1.0, 1.0)}
+
+    def state_size(self) -> int:
+        """Base state plus each goal."""
+        return self.n_agents * 11
+
+    def apply_actions(self, world: World, actions: dict[str, np.ndarray], acting: np.ndarray) -> None:
+        """Set each acting slot's motion primitive from its ``motion`` action."""
+        slots = np.flatnonzero(acting)
+        a = actions["motion"][slots]
+        if self.config.action_mode == "velocity":
+            decode_velocity(world.motion, slots, a, world.state.max_speed[slots])
+        else:
+            decode_primitive(world.motion, slots, a, world.state.pos, self.limits)
+
+    def after_world_step(self, world: World, events: StepEvents, acting: np.ndarray) -> StepResult:
+        """Progress, arrival, collisions and energy -> rewards and terminations."""
+        c, st = self.config, world.state
+        dist = np.linalg.norm(self.goal - st.pos, axis=1)
+        arrived = acting & st.online & (dist <= c.goal_radius)
+        task = np.where(acting, self.prev_dist - dist, 0.0) + c.arrival_bonus * arrived
+        self.prev_dist = dist
+        self.arrived |= arrived
+        collided = np.zeros(st.n_slots)
+        collided[events.went_offline] = 1.0
+        effort = np.einsum("ij,ij->i", st.vel, st.vel) * world.config.dt
+        st.energy += np.where(acting, effort, 0.0)
+        rewards = compose_rewards(
+            c.reward, task, group=st.group, world=st.world_id, acting=acting, n_groups=c.n_groups,
+            collided=collided, energy=effort,
+        )
+        info = {"arrived": arrived.astype(np.int8), "collided": collided.astype(np.int8), "distance": dist}
+        return StepResult(rewards, arrived, info)
+
+    def observe(self, world: World) -> dict[str, np.ndarray]:
+        """Observation parts for every slot (see the module docstring)."""
+        c, st = self.config, world.state
+        s = c.side
+        lo, hi = c.altitude
+        selfp = np.column_stack([
+            st.pos[:, 0] / s * 2 - 1, st.pos[:, 1] / s * 2 - 1, (st.pos[:, 2] - lo) / (hi - lo) * 2 - 1,
+            st.vel / c.max_speed, np.cos(st.heading), np.sin(st.heading),
+        ])
+        scan = world.scan
+        assert scan is not None
+        lidar = np.stack([scan.distance, scan.hit_kind / 3.0], axis=-1)
+        diag = s * np.sqrt(2.0)
+        d = self.goal - st.pos
+        task = np.column_stack([d / diag, np.linalg.norm(d, axis=1) / diag])
+        return {
+            "self": np.clip(selfp, -1, 1).astype(np.float32),
+            "lidar": lidar.astype(np.float32),
+            "task": np.clip(task, -1, 1).astype(np.float32),
+        }
+
+    def state(self, world: World, w: int) -> np.ndarray:
+        """Base state (pos, vel, online, group per agent) followed by every goal / 100 m."""
+        sl = slice(w * self.n_agents, (w + 1) * self.n_agents)
+        base = super().state(world, w)
+        return np.concatenate([base, np.clip(self.goal[sl].ravel() / 100.0, -10, 10)]).astype(np.float32)
+
+    def markers(self, world: World, w: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Goals as green discs (grey once reached)."""
+        sl = slice(w * self.n_agents, (w + 1) * self.n_agents)
+        rgb = np.where(self.arrived[sl, None], [160, 200, 160], [40, 170, 60]).astype(np.uint8)
+        return self.goal[sl, :2], rgb, np.full(self.n_agents, self.config.goal_radius)
+
+
+SCENARIO = NavigationScenario
+
+
+def parallel_env(**config: object):  # type: ignore[no-untyped-def]
+    """The ``navigation`` ParallelEnv (``render_mode``, ``obs_format``, ``action_format`` plus config keys)."""
+    from agentsim_env import make
+
+    return make("navigation", **config)
+
+
+def env(**config: object):  # type: ignore[no-untyped-def]
+    """The ``navigation`` env in PettingZoo's AEC form."""
+    from agentsim_env.env.parallel_env import to_aec
+
+    return to_aec(parallel_env(**config))

@@ -1,0 +1,39 @@
+"""Scenario registry: scenarios are registered by name and tests iterate over it."""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+from agentsim_env.scenarios.base import Scenario
+from agentsim_env.scenarios.config import build_config
+
+# name -> module path; modules are imported on first use so `import agentsim_env` stays cheap.
+_SCENARIOS: dict[str, str] = {
+    "navigation": "agentsim_env.scenarios.navigation",
+}
+
+
+def register(name: str, module: str) -> None:
+    """Register a scenario module (it must define ``Scenario`` subclass ``SCENARIO``)."""
+    _SCENARIOS[name] = module
+
+
+def list_scenarios() -> list[str]:
+    """Names of every registered scenario, sorted."""
+    return sorted(_SCENARIOS)
+
+
+def scenario_class(name: str) -> type[Scenario]:
+    """The Scenario class registered under ``name``."""
+    if name not in _SCENARIOS:
+        raise ValueError(f"unknown scenario {name!r}; registered scenarios: {list_scenarios()}")
+    return importlib.import_module(_SCENARIOS[name]).SCENARIO  # type: ignore[no-any-return]
+
+
+def make_scenario(name: str, **config: Any) -> Scenario:
+    """Build a scenario from its name and config keys (validated; unknown keys raise)."""
+    cls = scenario_class(name)
+    if "max_cycles" in config:  # PettingZoo's name for the episode length
+        config["max_steps"] = config.pop("max_cycles")
+    return cls(build_config(cls.config_cls, config))

@@ -1,0 +1,94 @@
+"""The reward composer every scenario configures.
+
+reward_i = task_weight * task_i
+         + group_share * mean(task_j for j in i's group and world, j acting this step)
+         - collision_penalty * collided_i
+         - energy_weight * energy_i
+         - message_cost * messages_sent_i
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from agentsim_env.scenarios.config import check_float
+
+
+@dataclass(frozen=True)
+class RewardConfig:
+    """Weights of the reward terms (all >= 0).
+
+    Attributes:
+        task_weight: Weight of the agent's own task reward.
+        group_share: Weight of the mean task reward of the agent's group.
+        collision_penalty: Subtracted once when the agent collides.
+        energy_weight: Multiplies the energy spent this step (scenario units, e.g. J or a speed-squared proxy).
+        message_cost: Subtracted per message the agent sent this step.
+    """
+
+    task_weight: float = 1.0
+    group_share: float = 0.0
+    collision_penalty: float = 10.0
+    energy_weight: float = 0.0
+    message_cost: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name in ("task_weight", "group_share", "collision_penalty", "energy_weight", "message_cost"):
+            check_float(f"reward.{name}", getattr(self, name), 0.0)
+
+
+def group_mean(values: np.ndarray, group: np.ndarray, world: np.ndarray, mask: np.ndarray, n_groups: int) -> np.ndarray:
+    """Mean of ``values`` over the masked members of each (world, group), broadcast back to every slot.
+
+    Slots with group -1 (no group) get their own value.
+    """
+    g = np.where(group >= 0, group, 0).astype(np.int64)
+    key = world.astype(np.int64) * max(n_groups, 1) + g
+    size = int(key.max()) + 1 if key.size else 0
+    w = mask.astype(np.float64)
+    sums = np.bincount(key, weights=values * w, minlength=size)
+    cnt = np.bincount(key, weights=w, minlength=size)
+    mean = sums[key] / np.maximum(cnt[key], 1.0)
+    return np.where(group >= 0, mean, values)
+
+
+def compose_rewards(
+    cfg: RewardConfig,
+    task: np.ndarray,
+    *,
+    group: np.ndarray,
+    world: np.ndarray,
+    acting: np.ndarray,
+    n_groups: int,
+    collided: np.ndarray | None = None,
+    energy: np.ndarray | None = None,
+    messages_sent: np.ndarray | None = None,
+) -> np.ndarray:
+    """Combine the terms into one reward per slot (zero for slots that were not acting).
+
+    Args:
+        cfg: The weights.
+        task: Task reward per slot ``(S,)``.
+        group: Group id per slot.
+        world: World id per slot.
+        acting: Slots that acted this step (alive at its start).
+        n_groups: Number of groups per world.
+        collided: Slots that collided this step.
+        energy: Energy spent this step per slot.
+        messages_sent: Messages sent this step per slot.
+
+    Returns:
+        Rewards ``(S,)`` as float64.
+    """
+    r = cfg.task_weight * task
+    if cfg.group_share:
+        r = r + cfg.group_share * group_mean(task, group, world, acting, n_groups)
+    if collided is not None and cfg.collision_penalty:
+        r = r - cfg.collision_penalty * collided
+    if energy is not None and cfg.energy_weight:
+        r = r - cfg.energy_weight * energy
+    if messages_sent is not None and cfg.message_cost:
+        r = r - cfg.message_cost * messages_sent
+    return np.where(acting, r, 0.0)
