@@ -17,7 +17,7 @@ from agentsim_env.env.spaces import FORMATS, action_space_for, observation_space
 from agentsim_env.scenarios.base import Scenario
 from agentsim_env.scenarios.config import check_choice
 
-RENDER_MODES = ("rgb_array",)
+RENDER_MODES = ("human", "rgb_array")
 
 
 class AgentSimParallelEnv(ParallelEnv):
@@ -25,7 +25,8 @@ class AgentSimParallelEnv(ParallelEnv):
 
     Args:
         scenario: The scenario (with its validated config).
-        render_mode: ``None`` or ``"rgb_array"``.
+        render_mode: ``None``, ``"rgb_array"`` (``render()`` returns a frame) or ``"human"`` (a live pygame-ce
+            window, updated on every step).
         obs_format: ``"dict"`` (a Dict of the scenario's observation parts) or ``"flat"`` (one float32 Box).
         action_format: ``"dict"`` (a Dict of action parts) or ``"flat"`` (one float32 Box in [-1, 1]).
     """
@@ -62,7 +63,7 @@ class AgentSimParallelEnv(ParallelEnv):
         self.agents: list[str] = []
         self._rng: np.random.Generator | None = None
         self._steps = 0
-        self._last_obs: dict[str, np.ndarray] | None = None
+        self._window: Any = None
 
     # ------------------------------------------------------------------ spaces
     def observation_space(self, agent: str) -> spaces.Space:
@@ -92,6 +93,8 @@ class AgentSimParallelEnv(ParallelEnv):
         self._steps = 0
         self.agents = list(self.possible_agents)
         parts = self.scenario.observe(self.world)
+        if self.render_mode == "human":
+            self.render()
         return self._obs_dicts(parts, np.ones(len(self.agents), dtype=bool)), {a: {} for a in self.agents}
 
     def step(self, actions: dict[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
@@ -126,6 +129,8 @@ class AgentSimParallelEnv(ParallelEnv):
         info_cols = {k: v[idx].tolist() for k, v in res.info.items()}
         infos = {a: {k: col[n] for k, col in info_cols.items()} for n, a in enumerate(live)}
         self.agents = [a for a, t, u in zip(live, term, trunc) if not (t or u)]
+        if self.render_mode == "human":
+            self.render()
         return obs, rewards, terms, truncs, infos
 
     def _validate_actions(self, actions: dict[str, Any]) -> dict[str, np.ndarray]:
@@ -163,15 +168,26 @@ class AgentSimParallelEnv(ParallelEnv):
         return self.scenario.state(self.world, 0)
 
     def render(self) -> np.ndarray | None:
-        """A top-down RGB frame (``render_mode="rgb_array"``), altitude shown as shading."""
+        """A top-down RGB frame (altitude shown as shading); in ``"human"`` mode it is shown and None returned."""
         if self.render_mode is None:
             return None
         from agentsim_env.render.topdown import render_topdown
 
-        return render_topdown(self.world, 0, self.scenario.markers(self.world, 0))
+        frame = render_topdown(self.world, 0, self.scenario.markers(self.world, 0))
+        if self.render_mode == "rgb_array":
+            return frame
+        if self._window is None:
+            from agentsim_env.render.window import Window
+
+            self._window = Window(self.metadata["name"], self.metadata["render_fps"])
+        self._window.show(frame)
+        return None
 
     def close(self) -> None:
-        """Release resources (none are held outside Python objects)."""
+        """Close the live window, if any."""
+        if self._window is not None:
+            self._window.close()
+            self._window = None
 
 
 def to_aec(env: AgentSimParallelEnv) -> Any:

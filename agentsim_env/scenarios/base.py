@@ -57,6 +57,8 @@ class Scenario(ABC):
     config_cls: ClassVar[type]
     version: ClassVar[int] = 0
     agent_prefix: ClassVar[str] = "agent"
+    #: Configs the conformance suite runs (each also in flat obs/action format); keep them small and fast.
+    test_configs: ClassVar[tuple[dict[str, Any], ...]] = ({},)
 
     def __init__(self, config: Any) -> None:
         self.config = config

@@ -109,6 +109,11 @@ class NavigationScenario(Scenario):
     config_cls = NavigationConfig
     version = 0
     agent_prefix = "agent"
+    test_configs = (
+        {"n_agents": 4},
+        {"n_agents": 5, "n_groups": 1, "action_mode": "primitive"},
+        {"n_agents": 3, "physics": "pymunk"},
+    )
 
     def __init__(self, config: NavigationConfig) -> None:
         super().__init__(config)

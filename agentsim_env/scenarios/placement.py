@@ -31,6 +31,9 @@ def jittered_points(
     w, h = xmax - xmin, ymax - ymin
     cell = max(np.sqrt(w * h / (1.3 * n)), min_sep)  # ~30 % spare cells so the choice stays random
     nx, ny = int(w // cell), int(h // cell)
+    while nx * ny < 1.3 * n and cell * 0.95 >= min_sep:  # integer rounding lost cells: shrink them
+        cell *= 0.95
+        nx, ny = int(w // cell), int(h // cell)
     if nx * ny < n:
         raise ValueError(
             f"cannot place {n} points at least {min_sep} m apart in a {w:.0f} x {h:.0f} m area; enlarge map_size"

@@ -1,0 +1,570 @@
+"""The centralised message bus: agent, group, environment and heartbeat messages over a channel model.
+
+``send`` validates a batch of messages, enforces the per-sender bandwidth of the step and queues the rest
+with ``due = step + latency``; ``deliver(step, ...)`` takes everything due, expands GROUP messages to the
+group's online members, filters (offline receiver, range, loss) and pushes the survivors into the
+:class:`~agentsim_env.comms.messages.Inbox`. Every step's traffic comes back as arrays (``DeliveryEvents``).
+
+Rules (one line each, the tests check them):
+
+- Slots never cross worlds: a unicast receiver must be in the sender's world; a GROUP message reaches the
+  group's members in the sender's world only (the environment / controller, sender ``-1``, names the world).
+- GROUP: every member of the group that is ONLINE at delivery time, in that world, except the sender.
+  Offline members are not receivers (nothing is logged for them); an offline unicast receiver is a drop.
+- Range (``max_range``): measured from the sender's position at delivery time, agent senders only; the
+  environment and the controller have no position and are never range-limited.
+- Loss: one draw from the bus's generator per (message, receiver) pair, drawn for every expanded pair even
+  when another filter drops it, so the draws do not depend on positions or online masks. No draw at loss 0.
+- Bandwidth: at most ``bandwidth`` accepted messages per agent sender per ``step`` (over all ``send`` calls
+  of that step, in call order); the environment, the controller and heartbeat answers are not limited.
+- Drop counters (``Inbox.dropped``): bandwidth drops and lost answers to the controller are charged to the
+  sender; offline, range and loss drops to the receiver. Every (message, receiver) pair ends up in exactly
+  one ``delivered`` or ``dropped`` row (a GROUP message dropped for bandwidth: one row, receiver -1).
+- Heartbeats: a HEARTBEAT from the controller (sender -1) to a slot is delivered like a unicast; each
+  delivery makes the receiver answer automatically with a HEARTBEAT to the controller (target -1), queued
+  ``latency`` steps later (with latency 0 it arrives in the same ``deliver`` call), lost with probability
+  ``loss`` and collected by ``take_answers`` (the group controller reads them). Answers enter no inbox.
+- Bus messages have ``hops = 0`` (no relaying). Message ids are unique per bus until ``reset``.
+
+Queue: growable column arrays; the live region is kept sorted by due step (appends are in step order; an
+out-of-order append triggers one stable sort), so ``deliver`` slices a prefix: cost linear in the messages.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import numpy as np
+
+from agentsim_env.comms.messages import (
+    AGENT,
+    DROP_BANDWIDTH,
+    DROP_LOSS,
+    DROP_OFFLINE,
+    DROP_RANGE,
+    ENV,
+    GROUP,
+    HEARTBEAT,
+    KIND_NAMES,
+    REASON_NONE,
+    Inbox,
+)
+
+BUS_KINDS = (AGENT, GROUP, ENV, HEARTBEAT)
+
+
+@dataclass(frozen=True, slots=True)
+class ChannelConfig:
+    """Channel model of a bus.
+
+    Attributes:
+        latency: Steps between send and delivery (>= 0; 0 = delivered in the step it was sent).
+        loss: Probability that a (message, receiver) pair is lost, in [0, 1] (1 = dead channel).
+        bandwidth: Messages an agent may send per step (>= 0; 0 = unlimited).
+        max_range: Largest sender-receiver distance in metres (> 0), or None for no limit.
+    """
+
+    latency: int = 0
+    loss: float = 0.0
+    bandwidth: int = 0
+    max_range: float | None = None
+
+    def __post_init__(self) -> None:
+        """Validate every field; errors name the field and the allowed values."""
+        for name in ("latency", "bandwidth"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
+                raise ValueError(f"{name} must be an integer >= 0, got {v!r}")
+        if isinstance(self.loss, bool) or not isinstance(self.loss, (int, float)) or not 0.0 <= self.loss <= 1.0:
+            raise ValueError(f"loss must be a probability in [0, 1], got {self.loss!r}")
+        r = self.max_range
+        if r is not None and (isinstance(r, bool) or not isinstance(r, (int, float)) or not (0 < r < np.inf)):
+            raise ValueError(f"max_range must be a finite number > 0 or None, got {r!r}")
+
+
+@dataclass(frozen=True, slots=True)
+class MessageLog:
+    """Message events as arrays, one row per event (for the data store).
+
+    Attributes:
+        msg: Message id ``(n,)`` int64 (a GROUP message has one id for all its receivers).
+        kind: Kind code ``(n,)`` int8.
+        sender: Sender slot ``(n,)`` int64 (-1 = environment / controller).
+        target: Receiver slot, group id (GROUP) or -1 (controller) ``(n,)`` int64, as sent.
+        receiver: Receiving slot ``(n,)`` int64 (-1: the controller, or a GROUP message not expanded).
+        created: Step the message was sent ``(n,)`` int64.
+        step: Step of this event ``(n,)`` int64.
+        reason: Drop reason ``(n,)`` int8 (``messages.DROP_*``; 0 in sent and delivered rows).
+    """
+
+    msg: np.ndarray
+    kind: np.ndarray
+    sender: np.ndarray
+    target: np.ndarray
+    receiver: np.ndarray
+    created: np.ndarray
+    step: np.ndarray
+    reason: np.ndarray
+
+    def __len__(self) -> int:
+        """Number of rows."""
+        return int(self.msg.shape[0])
+
+    @classmethod
+    def concat(cls, parts: list[MessageLog]) -> MessageLog:
+        """Concatenate logs (an empty log when ``parts`` is empty)."""
+        if not parts:
+            i64 = np.empty(0, dtype=np.int64)
+            i8 = np.empty(0, dtype=np.int8)
+            return cls(i64, i8, i64, i64, i64, i64, i64, i8.copy())
+        if len(parts) == 1:
+            return parts[0]
+        return cls(*(np.concatenate([getattr(p, f.name) for p in parts]) for f in fields(cls)))
+
+
+@dataclass(frozen=True, slots=True)
+class DeliveryEvents:
+    """The bus traffic of one step.
+
+    Attributes:
+        step: The step passed to ``deliver``.
+        sent: Messages sent since the previous ``deliver`` (heartbeat answers included).
+        delivered: (message, receiver) pairs delivered at ``step``.
+        dropped: Bandwidth drops since the previous ``deliver`` and (message, receiver) pairs dropped now.
+    """
+
+    step: int
+    sent: MessageLog
+    delivered: MessageLog
+    dropped: MessageLog
+
+
+_QUEUE_COLUMNS = ("msg", "kind", "sender", "target", "world", "created", "due")
+
+
+class MessageBus:
+    """Centralised bus of one simulation (all its worlds), with a channel model and per-slot inboxes.
+
+    Attributes:
+        n_worlds: Worlds B.
+        n_agents: Agents per world N (slot ``s`` is in world ``s // N``).
+        payload_dim: Payload width D.
+        channel: The channel model.
+        inbox: The inboxes; the overlay pushes its deliveries here too.
+        rng: Generator of the loss draws.
+        group: Group array ``(S,)`` used to validate GROUP targets at send time (by reference), or None.
+    """
+
+    __slots__ = (
+        "n_worlds", "n_agents", "payload_dim", "channel", "inbox", "rng", "group", "_world_of", "_q",
+        "_qp", "_head", "_tail", "_last_due", "_sorted", "_next_id", "_bw_used", "_bw_step", "_sent_log",
+        "_drop_log", "_ans_slot", "_ans_step",
+    )
+
+    def __init__(
+        self,
+        n_worlds: int,
+        n_agents: int,
+        payload_dim: int,
+        channel: ChannelConfig,
+        inbox_size: int,
+        rng: np.random.Generator,
+        *,
+        group: np.ndarray | None = None,
+        age_horizon: int = 100,
+        hop_horizon: int = 16,
+        pos_scale: float = 1.0,
+    ) -> None:
+        """Create an empty bus.
+
+        Args:
+            n_worlds: Worlds B (>= 1).
+            n_agents: Agents per world N (>= 1).
+            payload_dim: Payload width D (>= 0).
+            channel: Channel model.
+            inbox_size: Messages kept per slot M (>= 1).
+            rng: Generator for the loss draws.
+            group: Optional ``(S,)`` group array (e.g. ``AgentState.group``) to validate GROUP targets.
+            age_horizon: Inbox age feature horizon in steps (see ``Inbox``).
+            hop_horizon: Inbox hops feature horizon (see ``Inbox``).
+            pos_scale: Inbox relative-position scale in metres (see ``Inbox``).
+        """
+        for name, v in (("n_worlds", n_worlds), ("n_agents", n_agents)):
+            if int(v) != v or int(v) < 1:
+                raise ValueError(f"{name} must be an integer >= 1, got {v!r}")
+        if not isinstance(channel, ChannelConfig):
+            raise ValueError(f"channel must be a ChannelConfig, got {type(channel).__name__}")
+        if not isinstance(rng, np.random.Generator):
+            raise ValueError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
+        self.n_worlds, self.n_agents = int(n_worlds), int(n_agents)
+        self.payload_dim, self.channel, self.rng = int(payload_dim), channel, rng
+        s = self.n_worlds * self.n_agents
+        self.inbox = Inbox(s, inbox_size, payload_dim, age_horizon=age_horizon, hop_horizon=hop_horizon,
+                           pos_scale=pos_scale)
+        self.group = None
+        if group is not None:
+            self.bind_groups(group)
+        self._world_of = np.arange(s, dtype=np.int64) // self.n_agents
+        self._bw_used = np.zeros(s, dtype=np.int64)
+        self._bw_step = np.full(s, -1, dtype=np.int64)
+        self._clear_queue(16)
+
+    @property
+    def n_slots(self) -> int:
+        """Total slots S."""
+        return self.n_worlds * self.n_agents
+
+    @property
+    def n_pending(self) -> int:
+        """Messages queued and not yet due."""
+        return self._tail - self._head
+
+    def bind_groups(self, group: np.ndarray) -> None:
+        """Use ``group`` (``(S,)`` ints, read by reference) to validate GROUP targets in ``send``."""
+        g = np.asarray(group)
+        if g.shape != (self.n_slots,) or not np.issubdtype(g.dtype, np.integer):
+            raise ValueError(f"group must be an integer array of shape ({self.n_slots},), got {g.dtype} {g.shape}")
+        self.group = g
+
+    def reset(self, rng: np.random.Generator) -> None:
+        """Drop everything in flight, empty the inboxes and logs, and use ``rng`` for the loss draws."""
+        if not isinstance(rng, np.random.Generator):
+            raise ValueError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
+        self.rng = rng
+        self.inbox.clear()
+        self._bw_used[:] = 0
+        self._bw_step[:] = -1
+        self._clear_queue(max(16, self._q["msg"].shape[0]))
+
+    def _clear_queue(self, cap: int) -> None:
+        self._q = {c: np.empty(cap, dtype=np.int8 if c == "kind" else np.int64) for c in _QUEUE_COLUMNS}
+        self._qp = np.empty((cap, self.payload_dim), dtype=np.float32)
+        self._head = self._tail = 0
+        self._last_due = -1
+        self._sorted = True
+        self._next_id = 0
+        self._sent_log: list[MessageLog] = []
+        self._drop_log: list[MessageLog] = []
+        self._ans_slot: list[np.ndarray] = []
+        self._ans_step: list[np.ndarray] = []
+
+    # ------------------------------------------------------------------ sending
+    def send(
+        self,
+        kind: int,
+        sender: np.ndarray,
+        target: np.ndarray,
+        payload: np.ndarray,
+        step: int,
+        *,
+        world: np.ndarray | None = None,
+        group: np.ndarray | None = None,
+    ) -> np.ndarray:
+        """Validate and queue ``k`` messages of one kind.
+
+        Args:
+            kind: ``AGENT``, ``GROUP``, ``ENV`` or ``HEARTBEAT`` (OVERLAY goes through the overlay).
+            sender: Sender slots ``(k,)`` (-1 = environment / controller; ENV requires -1).
+            target: ``(k,)`` receiver slot (AGENT, ENV, controller HEARTBEAT), group id (GROUP), or -1
+                (an agent's HEARTBEAT answer to the controller).
+            payload: ``(k, D)`` finite values.
+            step: Current step (>= 0).
+            world: ``(k,)`` (or scalar) world of each message; required for GROUP messages with sender -1,
+                must match the sender's world otherwise.
+            group: Group array to validate GROUP targets against (default: the bound ``self.group``).
+
+        Returns:
+            ``(k,)`` bool: accepted (False = dropped for bandwidth, counted and logged).
+        """
+        kind = int(kind)
+        if kind not in BUS_KINDS:
+            names = ", ".join(f"{KIND_NAMES[k]}={k}" for k in BUS_KINDS)
+            raise ValueError(f"kind must be one of {names}, got {kind}")
+        if int(step) != step or step < 0:
+            raise ValueError(f"step must be an integer >= 0, got {step!r}")
+        step = int(step)
+        snd = _int_vector(sender, "sender")
+        k = snd.shape[0]
+        tgt = _int_vector(target, "target", k)
+        s_n, n = self.n_slots, self.n_agents
+        pay = np.asarray(payload, dtype=np.float32)
+        if pay.shape != (k, self.payload_dim):
+            raise ValueError(f"payload must have shape ({k}, {self.payload_dim}) (k, D), got {pay.shape}")
+        bad = ~np.isfinite(pay).all(axis=1) if self.payload_dim else np.zeros(k, dtype=bool)
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            raise ValueError(f"payload must be finite: row {i} (sender {snd[i]}) holds NaN/inf")
+        if k and (snd.min() < -1 or snd.max() >= s_n):
+            i = int(np.flatnonzero((snd < -1) | (snd >= s_n))[0])
+            raise ValueError(f"sender must be -1 or a slot in [0, {s_n}), got {snd[i]} at row {i}")
+        if kind == ENV and np.any(snd != -1):
+            raise ValueError(f"sender of ENV messages must be -1 (the environment), got {snd[snd != -1][0]}")
+        agent = snd >= 0
+        wld = np.where(agent, snd // n, -1)
+        if world is not None:
+            w = np.broadcast_to(np.asarray(world, dtype=np.int64), (k,))
+            if np.any((w < 0) | (w >= self.n_worlds)):
+                raise ValueError(f"world must be in [0, {self.n_worlds}), got {w[(w < 0) | (w >= self.n_worlds)][0]}")
+            if np.any(agent & (w != wld)):
+                i = int(np.flatnonzero(agent & (w != wld))[0])
+                raise ValueError(f"world {w[i]} does not match the world {wld[i]} of sender agent {snd[i]}")
+            wld = np.where(agent, wld, w)
+        if kind == GROUP:
+            self._check_groups(snd, tgt, wld, agent, group)
+        else:
+            to_ctrl = agent if kind == HEARTBEAT else np.zeros(k, dtype=bool)
+            if np.any(tgt[to_ctrl] != -1):
+                raise ValueError("target of an agent's HEARTBEAT must be -1 (the controller)")
+            uni = ~to_ctrl
+            out = uni & ((tgt < 0) | (tgt >= s_n))
+            if out.any():
+                i = int(np.flatnonzero(out)[0])
+                raise ValueError(f"target receiver slot {tgt[i]} out of range [0, {s_n}) (sender {snd[i]})")
+            cross = uni & agent & (tgt // n != wld)
+            if cross.any():
+                i = int(np.flatnonzero(cross)[0])
+                raise ValueError(
+                    f"target receiver slot {tgt[i]} (world {tgt[i] // n}) is not in the world {wld[i]} of "
+                    f"sender agent {snd[i]}"
+                )
+            wld = np.where(uni & ~agent, tgt // n, wld)
+        acc = self._bandwidth(snd, step)
+        ids = np.arange(self._next_id, self._next_id + k, dtype=np.int64)
+        self._next_id += k
+        kinds = np.full(k, kind, dtype=np.int8)
+        recv = np.full(k, -1, dtype=np.int64) if kind == GROUP else tgt
+        steps = np.full(k, step, dtype=np.int64)
+        self._sent_log.append(MessageLog(ids, kinds, snd, tgt, recv, steps, steps, np.zeros(k, dtype=np.int8)))
+        if not acc.all():
+            d = ~acc
+            self._drop_log.append(MessageLog(ids[d], kinds[d], snd[d], tgt[d], recv[d], steps[d], steps[d],
+                                             np.full(int(d.sum()), DROP_BANDWIDTH, dtype=np.int8)))
+            self.inbox.add_dropped(snd[d])
+        self._enqueue(ids[acc], kinds[acc], snd[acc], tgt[acc], wld[acc], steps[acc], pay[acc])
+        return acc
+
+    def send_env(self, receiver: np.ndarray, payload: np.ndarray, step: int) -> np.ndarray:
+        """Queue environment messages (sender -1) to slots; see ``messages.env_collision_payload``.
+
+        Args:
+            receiver: Receiver slots ``(k,)``.
+            payload: ``(k, D)``.
+            step: Current step.
+
+        Returns:
+            ``(k,)`` bool, all True (the environment is not bandwidth-limited).
+        """
+        r = _int_vector(receiver, "receiver")
+        return self.send(ENV, np.full(r.shape[0], -1, dtype=np.int64), r, payload, step)
+
+    def _check_groups(self, snd, tgt, wld, agent, group) -> None:  # type: ignore[no-untyped-def]
+        if np.any(~agent & (wld < 0)):
+            raise ValueError("world is required for GROUP messages sent by the environment / controller (sender -1)")
+        g = self.group if group is None else np.asarray(group)
+        if g is None:
+            raise ValueError("group: no group array to validate GROUP targets; bind one or pass group=")
+        if g.shape != (self.n_slots,):
+            raise ValueError(f"group must have shape ({self.n_slots},), got {g.shape}")
+        if tgt.size == 0:
+            return
+        n_g = int(max(g.max(initial=-1), tgt.max())) + 1
+        members = g >= 0
+        known = np.isin(wld * n_g + tgt, self._world_of[members] * n_g + g[members]) & (tgt >= 0)
+        if not known.all():
+            i = int(np.flatnonzero(~known)[0])
+            raise ValueError(f"target: unknown group {tgt[i]} in world {wld[i]} (sender {snd[i]})")
+
+    def _bandwidth(self, snd: np.ndarray, step: int) -> np.ndarray:
+        # Rank each agent's messages within this call (stable: call order), add what it already sent this
+        # step, accept ranks below the limit.
+        acc = np.ones(snd.shape[0], dtype=bool)
+        bw = self.channel.bandwidth
+        a = np.flatnonzero(snd >= 0)
+        if bw == 0 or a.size == 0:
+            return acc
+        order = a[np.argsort(snd[a], kind="stable")]
+        ss = snd[order]
+        first = np.empty(ss.shape[0], dtype=bool)
+        first[0] = True
+        np.not_equal(ss[1:], ss[:-1], out=first[1:])
+        pos = np.arange(ss.shape[0])
+        starts = np.flatnonzero(first)
+        rank = pos - np.repeat(starts, np.diff(np.append(starts, ss.shape[0])))
+        used = np.where(self._bw_step[ss] == step, self._bw_used[ss], 0)
+        ok = used + rank < bw
+        acc[order] = ok
+        u = ss[starts]
+        self._bw_used[u] = used[starts] + np.add.reduceat(ok.astype(np.int64), starts)
+        self._bw_step[u] = step
+        return acc
+
+    def _enqueue(self, ids, kinds, snd, tgt, wld, created, pay) -> None:  # type: ignore[no-untyped-def]
+        k = ids.shape[0]
+        if k == 0:
+            return
+        cap = self._q["msg"].shape[0]
+        if self._tail + k > cap:
+            live = self._tail - self._head
+            new_cap = max(cap, 2 * (live + k)) if live + k > cap // 2 else cap
+            for c in _QUEUE_COLUMNS:
+                a = np.empty(new_cap, dtype=self._q[c].dtype)
+                a[:live] = self._q[c][self._head:self._tail]
+                self._q[c] = a
+            p = np.empty((new_cap, self.payload_dim), dtype=np.float32)
+            p[:live] = self._qp[self._head:self._tail]
+            self._qp = p
+            self._head, self._tail = 0, live
+        due = created + self.channel.latency
+        sl = slice(self._tail, self._tail + k)
+        for c, v in zip(_QUEUE_COLUMNS, (ids, kinds, snd, tgt, wld, created, due), strict=True):
+            self._q[c][sl] = v
+        self._qp[sl] = pay
+        self._tail += k
+        if due.min() < self._last_due:
+            self._sorted = False
+        self._last_due = max(self._last_due, int(due.max()))
+
+    # ------------------------------------------------------------------ delivery
+    def deliver(self, step: int, pos: np.ndarray, online: np.ndarray, group: np.ndarray) -> DeliveryEvents:
+        """Deliver every message due at ``step`` (or earlier) and return the step's traffic.
+
+        Args:
+            step: Current step.
+            pos: Current positions ``(S, 3)`` (range check from the sender's current position).
+            online: ``(S,)`` bool; offline slots never receive.
+            group: ``(S,)`` group ids (-1 = none) used to expand GROUP messages now.
+
+        Returns:
+            The step's events (sent since the previous call, delivered and dropped).
+        """
+        s_n = self.n_slots
+        pos = np.asarray(pos)
+        online = np.asarray(online, dtype=bool)
+        group = np.asarray(group)
+        if pos.shape != (s_n, 3) or online.shape != (s_n,) or group.shape != (s_n,):
+            raise ValueError(f"pos must be ({s_n}, 3), online and group ({s_n},); got {pos.shape}, "
+                             f"{online.shape}, {group.shape}")
+        delivered: list[MessageLog] = []
+        while True:  # a second round only when latency-0 heartbeat answers became due in this call
+            batch = self._pop_due(int(step))
+            if batch is None:
+                break
+            self._deliver_batch(batch, int(step), pos, online, group, delivered)
+        ev = DeliveryEvents(int(step), MessageLog.concat(self._sent_log), MessageLog.concat(delivered),
+                            MessageLog.concat(self._drop_log))
+        self._sent_log, self._drop_log = [], []
+        return ev
+
+    def take_answers(self) -> tuple[np.ndarray, np.ndarray]:
+        """Heartbeat answers that reached the controller since the previous call.
+
+        Returns:
+            ``(slots, steps)``: the answering slots and the step each answer arrived, int64.
+        """
+        if not self._ans_slot:
+            return np.empty(0, dtype=np.int64), np.empty(0, dtype=np.int64)
+        out = np.concatenate(self._ans_slot), np.concatenate(self._ans_step)
+        self._ans_slot, self._ans_step = [], []
+        return out
+
+    def _pop_due(self, step: int) -> dict[str, np.ndarray] | None:
+        h, t = self._head, self._tail
+        if h == t:
+            return None
+        if not self._sorted:
+            order = h + np.argsort(self._q["due"][h:t], kind="stable")
+            for c in _QUEUE_COLUMNS:
+                self._q[c][h:t] = self._q[c][order]
+            self._qp[h:t] = self._qp[order]
+            self._sorted = True
+        n = int(np.searchsorted(self._q["due"][h:t], step, side="right"))
+        if n == 0:
+            return None
+        batch = {c: self._q[c][h:h + n].copy() for c in _QUEUE_COLUMNS}
+        batch["payload"] = self._qp[h:h + n].copy()
+        self._head = h + n
+        if self._head == self._tail:
+            self._head = self._tail = 0
+        return batch
+
+    def _deliver_batch(self, b, step, pos, online, group, delivered) -> None:  # type: ignore[no-untyped-def]
+        kind, snd, tgt = b["kind"], b["sender"], b["target"]
+        q = kind.shape[0]
+        is_grp = kind == GROUP
+        cnt = np.ones(q, dtype=np.int64)
+        if is_grp.any():
+            # Members of (world, group) as contiguous runs of a key-sorted slot list; a message's receivers
+            # are its run (found by binary search), so the expansion is linear in the receivers.
+            ms = np.flatnonzero(online & (group >= 0))
+            n_g = int(max(group.max(initial=-1), tgt[is_grp].max())) + 1
+            keys = self._world_of[ms] * n_g + group[ms]
+            order = np.argsort(keys, kind="stable")
+            sk, slots_sorted = keys[order], ms[order]
+            gk = b["world"][is_grp] * n_g + tgt[is_grp]
+            lo = np.searchsorted(sk, gk, side="left")
+            cnt[is_grp] = np.searchsorted(sk, gk, side="right") - lo
+            start = np.zeros(q, dtype=np.int64)
+            start[is_grp] = lo
+        rep = np.repeat(np.arange(q), cnt)
+        recv = tgt[rep]
+        if is_grp.any():
+            gm = is_grp[rep]
+            offs = np.arange(rep.shape[0]) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+            recv[gm] = slots_sorted[start[rep[gm]] + offs[gm]]
+            keep = ~(gm & (recv == snd[rep]))
+            rep, recv = rep[keep], recv[keep]
+        m = rep.shape[0]
+        s_rep = snd[rep]
+        reason = np.zeros(m, dtype=np.int8)
+        to_slot = recv >= 0
+        reason[to_slot & ~online[np.maximum(recv, 0)]] = DROP_OFFLINE
+        r_max = self.channel.max_range
+        if r_max is not None:
+            chk = np.flatnonzero(to_slot & (s_rep >= 0) & (reason == REASON_NONE))
+            d = pos[s_rep[chk]] - pos[recv[chk]]
+            far = chk[np.einsum("ij,ij->i", d, d) > r_max * r_max]
+            reason[far] = DROP_RANGE
+        if self.channel.loss > 0.0:
+            u = self.rng.random(m)
+            reason[(reason == REASON_NONE) & (u < self.channel.loss)] = DROP_LOSS
+        ok = reason == REASON_NONE
+        log_cols = (b["msg"][rep], kind[rep], s_rep, tgt[rep], recv, b["created"][rep])
+        steps = np.full(m, step, dtype=np.int64)
+        if not ok.all():
+            d = ~ok
+            self._drop_log.append(MessageLog(*(c[d] for c in log_cols), steps[d], reason[d]))
+            self.inbox.add_dropped(np.where(to_slot[d], recv[d], s_rep[d]))
+        if ok.all():
+            delivered.append(MessageLog(*log_cols, steps, reason))
+        else:
+            delivered.append(MessageLog(*(c[ok] for c in log_cols), steps[ok], reason[ok]))
+        push = np.flatnonzero(ok & to_slot)
+        if push.size:
+            rp = rep[push]
+            self.inbox.push(recv[push], kind[rp], snd[rp], 0, b["created"][rp], b["payload"][rp])
+        ans = ok & ~to_slot
+        if ans.any():
+            self._ans_slot.append(s_rep[ans])
+            self._ans_step.append(steps[ans])
+        hb = np.flatnonzero(ok & to_slot & (kind[rep] == HEARTBEAT))
+        if hb.size:  # each member that got a heartbeat answers the controller through the channel
+            k = hb.size
+            ids = np.arange(self._next_id, self._next_id + k, dtype=np.int64)
+            self._next_id += k
+            a_snd, a_tgt, a_k = recv[hb], np.full(k, -1, dtype=np.int64), np.full(k, HEARTBEAT, dtype=np.int8)
+            st = np.full(k, step, dtype=np.int64)
+            self._sent_log.append(MessageLog(ids, a_k, a_snd, a_tgt, a_tgt, st, st, np.zeros(k, dtype=np.int8)))
+            self._enqueue(ids, a_k, a_snd, a_tgt, self._world_of[a_snd], st,
+                          np.zeros((k, self.payload_dim), dtype=np.float32))
+
+
+def _int_vector(x: np.ndarray, name: str, k: int | None = None) -> np.ndarray:
+    """``x`` as a 1-D int64 array (of length ``k`` when given); ValueError naming ``name`` otherwise."""
+    a = np.asarray(x)
+    if a.ndim == 0:
+        a = a.reshape(1)
+    if a.ndim != 1 or not (np.issubdtype(a.dtype, np.integer) or a.size == 0):
+        raise ValueError(f"{name} must be a 1-D integer array, got {a.dtype} with shape {a.shape}")
+    if k is not None and a.shape[0] != k:
+        raise ValueError(f"{name} must have length {k} (one per message), got {a.shape[0]}")
+    return a.astype(np.int64, copy=False)

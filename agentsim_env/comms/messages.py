@@ -1,0 +1,311 @@
+"""Message vocabulary and the per-slot inbox.
+
+Messages are rows of arrays, never Python objects. This module owns what every producer of messages shares:
+the kind codes, the drop-reason codes, the environment (collision) payload encoding, and the :class:`Inbox`
+into which the bus (``comms.bus``) and the overlay (``comms.overlay``) push what agents receive.
+
+Inbox layout: per slot the ``M`` newest received messages, **newest first** (row 0 is the newest). A push
+shifts older rows down; a message pushed past row ``M - 1`` is forgotten (it was still *received*, so it is
+counted in ``received``; only messages lost before reaching the slot count in ``dropped``).
+
+Observation features per message (``Inbox.observe``), ``FEATURES_PER_MESSAGE + D`` float32 values:
+
+=====  =====================================================================================
+index  meaning
+=====  =====================================================================================
+0      valid (1 for a message, 0 for an empty row; an empty row is all zeros)
+1-5    kind one-hot: AGENT, GROUP, ENV, OVERLAY, HEARTBEAT
+6-8    sender position minus receiver position (x, y, z) / ``pos_scale`` (zeros for sender -1)
+9      hops: ``min(hops, hop_horizon) / hop_horizon`` in [0, 1] (0 for bus messages)
+10     age: ``clip(step - created, 0, age_horizon) / age_horizon`` in [0, 1]
+11..   payload (D values, as sent)
+=====  =====================================================================================
+
+The sender's position is read at observation time (its *current* position), as a receiver would locate a
+live transmitter; the environment and the group controller (sender ``-1``) have no position.
+"""
+
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+
+AGENT = 1
+"""Agent -> agent unicast (sender slot -> receiver slot)."""
+GROUP = 2
+"""Sender (agent or controller) -> every online member of a group in the sender's world."""
+ENV = 3
+"""Environment -> agent (e.g. a collision naming the other agent or the object)."""
+OVERLAY = 4
+"""Peer-to-peer flood delivered by the overlay (never queued on the bus)."""
+HEARTBEAT = 5
+"""Group controller -> member, and the member's automatic answer -> controller."""
+N_KINDS = 5
+KIND_NAMES = {AGENT: "AGENT", GROUP: "GROUP", ENV: "ENV", OVERLAY: "OVERLAY", HEARTBEAT: "HEARTBEAT"}
+
+FEATURES_PER_MESSAGE = 11
+"""Observation features of one message before its payload; a row has ``FEATURES_PER_MESSAGE + D`` values."""
+
+# Why a message (for one receiver) was not delivered; 0 in the rows of sent / delivered events.
+REASON_NONE = 0
+DROP_BANDWIDTH = 1  # the sender had used its messages for this step (counted at the sender)
+DROP_OFFLINE = 2  # the receiver was offline at delivery time
+DROP_RANGE = 3  # the receiver was beyond max_range of the sender's current position
+DROP_LOSS = 4  # lost on the channel (random draw)
+REASON_NAMES = {
+    REASON_NONE: "none",
+    DROP_BANDWIDTH: "bandwidth",
+    DROP_OFFLINE: "offline",
+    DROP_RANGE: "range",
+    DROP_LOSS: "loss",
+}
+
+# Environment message encoding: payload[0] says what the slot collided with, payload[1] which one
+# (the other agent's index within its world, ``slot % n_agents``, or the static object's index);
+# the remaining payload values are 0. Exact in float32 for ids below 2**24.
+ENV_COLLISION_AGENT = 1
+ENV_COLLISION_OBJECT = 2
+
+
+def env_collision_payload(what: np.ndarray | int, ident: np.ndarray, payload_dim: int) -> np.ndarray:
+    """Build environment-message payloads that name what each slot collided with.
+
+    Args:
+        what: ``ENV_COLLISION_AGENT`` or ``ENV_COLLISION_OBJECT``, a scalar or ``(k,)``.
+        ident: The other agent's index within the world (``slot % n_agents``) or the object index ``(k,)``.
+        payload_dim: Payload width D of the bus (>= 2).
+
+    Returns:
+        ``(k, D)`` float32 with ``[:, 0] = what``, ``[:, 1] = ident`` and zeros elsewhere.
+    """
+    if payload_dim < 2:
+        raise ValueError(f"payload_dim must be >= 2 to encode a collision, got {payload_dim}")
+    ident = np.asarray(ident).reshape(-1)
+    what_arr = np.broadcast_to(np.asarray(what), ident.shape)
+    if not np.all(np.isin(what_arr, (ENV_COLLISION_AGENT, ENV_COLLISION_OBJECT))):
+        raise ValueError("what must be ENV_COLLISION_AGENT (1) or ENV_COLLISION_OBJECT (2)")
+    if np.any(ident < 0):
+        raise ValueError("ident must be >= 0")
+    out = np.zeros((ident.shape[0], payload_dim), dtype=np.float32)
+    out[:, 0] = what_arr
+    out[:, 1] = ident
+    return out
+
+
+@nb.njit(cache=True)
+def _push_kernel(valid, kind, sender, hops, created, payload, received, r, k_, s_, h_, c_, p_):  # type: ignore[no-untyped-def]
+    # Pass 1 counts the new messages per receiver; pass 2 shifts each touched row once (by the number of new
+    # messages, capped at M) and writes message j of a receiver, which has `cnt - 1 - seen` newer ones after
+    # it in this call, at that row index. Cost O(k + touched * M * D).
+    n_slots, m = valid.shape
+    cnt = np.zeros(n_slots, dtype=np.int64)
+    seen = np.zeros(n_slots, dtype=np.int64)
+    for j in range(r.shape[0]):
+        cnt[r[j]] += 1
+    for j in range(r.shape[0]):
+        s = r[j]
+        if seen[s] == 0:
+            shift = min(cnt[s], m)
+            for i in range(m - 1, shift - 1, -1):
+                valid[s, i] = valid[s, i - shift]
+                kind[s, i] = kind[s, i - shift]
+                sender[s, i] = sender[s, i - shift]
+                hops[s, i] = hops[s, i - shift]
+                created[s, i] = created[s, i - shift]
+                payload[s, i, :] = payload[s, i - shift, :]
+            received[s] += cnt[s]
+        idx = cnt[s] - 1 - seen[s]
+        seen[s] += 1
+        if idx < m:
+            valid[s, idx] = True
+            kind[s, idx] = k_[j]
+            sender[s, idx] = s_[j]
+            hops[s, idx] = h_[j]
+            created[s, idx] = c_[j]
+            payload[s, idx, :] = p_[j, :]
+
+
+@nb.njit(cache=True)
+def _observe_kernel(valid, kind, sender, hops, created, payload, pos, step, pos_scale, age_h, hop_h, out):  # type: ignore[no-untyped-def]
+    n_slots, m = valid.shape
+    d = payload.shape[2]
+    for s in range(n_slots):
+        for i in range(m):
+            row = out[s, i]
+            row[:] = 0.0
+            if not valid[s, i]:
+                continue
+            row[0] = 1.0
+            row[kind[s, i]] = 1.0  # kinds 1..5 map to columns 1..5
+            q = sender[s, i]
+            if q >= 0:
+                for a in range(3):
+                    row[6 + a] = (pos[q, a] - pos[s, a]) / pos_scale
+            row[9] = min(max(hops[s, i], 0), hop_h) / hop_h
+            row[10] = min(max(step - created[s, i], 0), age_h) / age_h
+            for c in range(d):
+                row[FEATURES_PER_MESSAGE + c] = payload[s, i, c]
+
+
+class Inbox:
+    """The ``M`` newest received messages of every slot, newest first, as arrays.
+
+    Attributes:
+        n_slots: Number of slots S.
+        size: Messages kept per slot M.
+        payload_dim: Payload width D.
+        age_horizon: Age (steps) that maps to feature value 1 (older ages are clipped).
+        hop_horizon: Hop count that maps to feature value 1 (more hops are clipped).
+        pos_scale: Metres per unit of the relative-position features.
+        valid: ``(S, M)`` bool, whether the row holds a message.
+        kind: ``(S, M)`` int8 message kind.
+        sender: ``(S, M)`` int64 sender slot (-1 = environment / controller).
+        hops: ``(S, M)`` int16 hops travelled (0 on the bus, >= 1 on the overlay).
+        created: ``(S, M)`` int64 step the message was sent.
+        payload: ``(S, M, D)`` float32.
+        received: ``(S,)`` int64 messages delivered to the slot.
+        dropped: ``(S,)`` int64 messages addressed to the slot (or sent by it) that were lost.
+    """
+
+    __slots__ = (
+        "n_slots", "size", "payload_dim", "age_horizon", "hop_horizon", "pos_scale",
+        "valid", "kind", "sender", "hops", "created", "payload", "received", "dropped",
+    )
+
+    def __init__(
+        self,
+        n_slots: int,
+        size: int,
+        payload_dim: int,
+        *,
+        age_horizon: int = 100,
+        hop_horizon: int = 16,
+        pos_scale: float = 1.0,
+    ) -> None:
+        """Allocate an empty inbox.
+
+        Args:
+            n_slots: Number of slots S (>= 1).
+            size: Messages kept per slot M (>= 1).
+            payload_dim: Payload width D (>= 0).
+            age_horizon: Steps of age mapped to 1 in the age feature (>= 1).
+            hop_horizon: Hops mapped to 1 in the hops feature (>= 1).
+            pos_scale: Divisor of the relative-position features in metres (> 0).
+        """
+        for name, value, lo in (
+            ("n_slots", n_slots, 1), ("size", size, 1), ("payload_dim", payload_dim, 0),
+            ("age_horizon", age_horizon, 1), ("hop_horizon", hop_horizon, 1),
+        ):
+            if int(value) != value or int(value) < lo:
+                raise ValueError(f"{name} must be an integer >= {lo}, got {value!r}")
+        if not (np.isfinite(pos_scale) and pos_scale > 0):
+            raise ValueError(f"pos_scale must be a finite number > 0, got {pos_scale!r}")
+        s, m, d = int(n_slots), int(size), int(payload_dim)
+        self.n_slots, self.size, self.payload_dim = s, m, d
+        self.age_horizon, self.hop_horizon, self.pos_scale = int(age_horizon), int(hop_horizon), float(pos_scale)
+        self.valid = np.zeros((s, m), dtype=bool)
+        self.kind = np.zeros((s, m), dtype=np.int8)
+        self.sender = np.full((s, m), -1, dtype=np.int64)
+        self.hops = np.zeros((s, m), dtype=np.int16)
+        self.created = np.zeros((s, m), dtype=np.int64)
+        self.payload = np.zeros((s, m, d), dtype=np.float32)
+        self.received = np.zeros(s, dtype=np.int64)
+        self.dropped = np.zeros(s, dtype=np.int64)
+
+    @property
+    def n_features(self) -> int:
+        """Features per message row of ``observe``: ``FEATURES_PER_MESSAGE + D``."""
+        return FEATURES_PER_MESSAGE + self.payload_dim
+
+    def push(
+        self,
+        receiver: np.ndarray,
+        kind: np.ndarray | int,
+        sender: np.ndarray | int,
+        hops: np.ndarray | int,
+        created: np.ndarray | int,
+        payload: np.ndarray,
+    ) -> None:
+        """Deliver ``k`` messages; messages to the same receiver keep their order (the last is the newest).
+
+        Args:
+            receiver: Receiver slots ``(k,)``.
+            kind: Kind code(s), scalar or ``(k,)``.
+            sender: Sender slot(s) (-1 = environment / controller), scalar or ``(k,)``.
+            hops: Hops travelled, scalar or ``(k,)`` (clipped to the int16 range).
+            created: Step(s) the messages were sent, scalar or ``(k,)``.
+            payload: ``(k, D)`` (or ``(D,)``, shared by all ``k``).
+        """
+        r = np.asarray(receiver, dtype=np.int64).reshape(-1)
+        k = r.shape[0]
+        if k == 0:
+            return
+        if r.min() < 0 or r.max() >= self.n_slots:
+            raise ValueError(f"receiver must be slots in [0, {self.n_slots}), got min {r.min()} max {r.max()}")
+        kd = np.broadcast_to(np.asarray(kind), (k,)).astype(np.int8)
+        if kd.min() < 1 or kd.max() > N_KINDS:
+            raise ValueError(f"kind must be in 1..{N_KINDS} ({', '.join(KIND_NAMES.values())})")
+        sd = np.broadcast_to(np.asarray(sender), (k,)).astype(np.int64)
+        hd = np.clip(np.broadcast_to(np.asarray(hops), (k,)), 0, np.iinfo(np.int16).max).astype(np.int16)
+        cd = np.broadcast_to(np.asarray(created), (k,)).astype(np.int64)
+        p = np.asarray(payload, dtype=np.float32)
+        if p.ndim == 1:
+            p = np.broadcast_to(p, (k, p.shape[0]))
+        if p.shape != (k, self.payload_dim):
+            raise ValueError(f"payload must have shape ({k}, {self.payload_dim}), got {p.shape}")
+        _push_kernel(
+            self.valid, self.kind, self.sender, self.hops, self.created, self.payload, self.received,
+            r, kd, sd, hd, cd, np.ascontiguousarray(p),
+        )
+
+    def add_dropped(self, slots: np.ndarray) -> None:
+        """Count one lost message per entry of ``slots`` (repeats count several times).
+
+        Args:
+            slots: Slots to charge ``(k,)``; entries < 0 (environment / controller) are ignored.
+        """
+        s = np.asarray(slots, dtype=np.int64).reshape(-1)
+        s = s[s >= 0]
+        if s.size:
+            self.dropped += np.bincount(s, minlength=self.n_slots)
+
+    def observe(self, pos: np.ndarray, step: int, out: np.ndarray | None = None) -> np.ndarray:
+        """Feature tensor of every inbox (layout in the module docstring).
+
+        Args:
+            pos: Current positions ``(S, 3)``.
+            step: Current step (for the age feature).
+            out: Optional preallocated ``(S, M, FEATURES_PER_MESSAGE + D)`` float32 buffer, overwritten.
+
+        Returns:
+            ``out`` (or a new array) of shape ``(S, M, FEATURES_PER_MESSAGE + D)``.
+        """
+        shape = (self.n_slots, self.size, self.n_features)
+        if out is None:
+            out = np.empty(shape, dtype=np.float32)
+        elif out.shape != shape or out.dtype != np.float32:
+            raise ValueError(f"out must be a float32 array of shape {shape}, got {out.dtype} {out.shape}")
+        p = np.asarray(pos, dtype=np.float64)
+        if p.shape != (self.n_slots, 3):
+            raise ValueError(f"pos must have shape ({self.n_slots}, 3), got {p.shape}")
+        _observe_kernel(
+            self.valid, self.kind, self.sender, self.hops, self.created, self.payload, p, int(step),
+            self.pos_scale, self.age_horizon, self.hop_horizon, out,
+        )
+        return out
+
+    def clear(self, slots: np.ndarray | None = None) -> None:
+        """Empty the inboxes and zero the counters of ``slots`` (all slots when None).
+
+        Args:
+            slots: Slots to clear ``(k,)`` or None.
+        """
+        idx = slice(None) if slots is None else np.asarray(slots, dtype=np.int64).reshape(-1)
+        self.valid[idx] = False
+        self.kind[idx] = 0
+        self.sender[idx] = -1
+        self.hops[idx] = 0
+        self.created[idx] = 0
+        self.payload[idx] = 0.0
+        self.received[idx] = 0
+        self.dropped[idx] = 0

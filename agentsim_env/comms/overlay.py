@@ -1,0 +1,465 @@
+"""Peer-to-peer overlay network: range-limited multi-hop flooding (no bus).
+
+A *flood* is one overlay message: its origin slot, a hop limit, the step it was created, a payload of ``D``
+floats and the set of slots that already read it, kept as a bitset (one row of ``ceil(S / 64)`` uint64 words
+per flood). As in AgentSimJS, an agent that receives a message checks whether its id is in the list of
+readers: if not, it adds itself, keeps the message and re-sends it to the agents in range; if it is, the copy
+is discarded (counted as a duplicate).
+
+Each call of ``Overlay.advance`` moves every active flood ONE hop: every online slot joined by an edge of the
+range graph to a slot of the flood's frontier (the slots that read it at the previous hop), and that has
+not read it yet, reads it now with ``hops = frontier hops + 1`` and forms the next frontier. A flood stops
+when its frontier is empty or its hop count reaches its hop limit, and its table row is recycled at once
+(so a flood id is only meaningful while the flood is active, and in the deliveries of the call that ends
+it). With
+``full_propagation=True`` a flood runs to its hop limit within one call.
+
+The range graph of a call has an edge ``(i, j)`` when both slots are online, in the same world, and
+``dist(i, j) <= min(range_i, range_j)`` (a link needs both radios to reach). The candidate pairs come from
+``core.spatial.neighbor_pairs`` built with ``max_dist`` at least the largest range; the exact test is redone
+here, so pairs from a larger radius (e.g. the grid pairs shared with collisions) are fine. Offline slots have
+no edges, so they neither read nor relay.
+
+Cost per call: O(S + E) to build a CSR adjacency of the range graph, then work proportional to the edges
+touched by the frontiers (never a scan over floods x slots). Memory: ``capacity * ceil(S / 64) * 8`` bytes of
+bitset; the table doubles when full.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numba as nb
+import numpy as np
+
+
+@dataclass(slots=True, frozen=True)
+class Deliveries:
+    """Overlay messages read during one ``advance`` call, one row per (receiver, flood).
+
+    Attributes:
+        receiver: Slot that read the message ``(k,)`` int64.
+        flood: Flood id (table row) ``(k,)`` int64; recycled once the flood ends.
+        origin: Slot that started the flood ``(k,)`` int64.
+        hops: Hops from the origin to the receiver ``(k,)`` int32 (>= 1).
+        created: Step the flood was started ``(k,)`` int64.
+        payload: Message payload ``(k, D)`` float32 (a fresh array).
+    """
+
+    receiver: np.ndarray
+    flood: np.ndarray
+    origin: np.ndarray
+    hops: np.ndarray
+    created: np.ndarray
+    payload: np.ndarray
+
+    def __len__(self) -> int:
+        """Number of deliveries."""
+        return int(self.receiver.shape[0])
+
+
+@dataclass(slots=True, frozen=True)
+class OverlayStats:
+    """Counters of one ``advance`` call (or running totals).
+
+    Attributes:
+        started: Floods started since the previous ``advance``.
+        delivered: Messages read (new readers).
+        duplicates: Copies that reached a slot which had already read the flood, and were dropped.
+        finished: Floods that ended (empty frontier or hop limit) and were recycled.
+    """
+
+    started: int = 0
+    delivered: int = 0
+    duplicates: int = 0
+    finished: int = 0
+
+    def __add__(self, other: OverlayStats) -> OverlayStats:
+        """Field-wise sum."""
+        return OverlayStats(
+            self.started + other.started,
+            self.delivered + other.delivered,
+            self.duplicates + other.duplicates,
+            self.finished + other.finished,
+        )
+
+
+@nb.njit(cache=True)
+def _build_csr(pi, pj, pos, online, world, rng, n):  # type: ignore[no-untyped-def]
+    # Counting sort of the kept pairs by endpoint, both directions: O(S + E).
+    e = pi.shape[0]
+    keep = np.zeros(e, dtype=np.bool_)
+    indptr = np.zeros(n + 1, dtype=np.int64)
+    for q in range(e):
+        i = pi[q]
+        j = pj[q]
+        if i == j or not online[i] or not online[j] or world[i] != world[j]:
+            continue
+        r = min(rng[i], rng[j])
+        dx = pos[j, 0] - pos[i, 0]
+        dy = pos[j, 1] - pos[i, 1]
+        dz = pos[j, 2] - pos[i, 2]
+        if dx * dx + dy * dy + dz * dz <= r * r:
+            keep[q] = True
+            indptr[i + 1] += 1
+            indptr[j + 1] += 1
+    for s in range(n):
+        indptr[s + 1] += indptr[s]
+    fill = indptr[:-1].copy()
+    indices = np.empty(indptr[n], dtype=np.int64)
+    for q in range(e):
+        if keep[q]:
+            i = pi[q]
+            j = pj[q]
+            indices[fill[i]] = j
+            fill[i] += 1
+            indices[fill[j]] = i
+            fill[j] += 1
+    return indptr, indices
+
+
+@nb.njit(cache=True)
+def _grow_i64(a, n):  # type: ignore[no-untyped-def]
+    b = np.empty(max(16, 2 * a.shape[0]), dtype=np.int64)
+    b[:n] = a[:n]
+    return b
+
+
+@nb.njit(cache=True)
+def _grow_i32(a, n):  # type: ignore[no-untyped-def]
+    b = np.empty(max(16, 2 * a.shape[0]), dtype=np.int32)
+    b[:n] = a[:n]
+    return b
+
+
+@nb.njit(cache=True)
+def _spread(indptr, indices, bits, hops, limit, cur_f, cur_n, full):  # type: ignore[no-untyped-def]
+    # The frontier is kept grouped by flood (contiguous runs); expanding the runs in order keeps the next
+    # frontier grouped too, so each run is one flood's hop and its end is where the flood may stop.
+    ncur = cur_f.shape[0]
+    cap = max(16, 4 * ncur)
+    nxt_f = np.empty(cap, dtype=np.int64)
+    nxt_n = np.empty(cap, dtype=np.int64)
+    out_r = np.empty(cap, dtype=np.int64)
+    out_f = np.empty(cap, dtype=np.int64)
+    out_h = np.empty(cap, dtype=np.int32)
+    fin = np.empty(max(1, ncur), dtype=np.int64)  # each flood of the frontier ends at most once
+    nd = 0
+    nfin = 0
+    dups = 0
+    while ncur > 0:
+        nn = 0
+        a = 0
+        while a < ncur:
+            f = cur_f[a]
+            b = a
+            while b < ncur and cur_f[b] == f:
+                b += 1
+            h = hops[f] + 1
+            run0 = nn
+            for q in range(a, b):
+                u = cur_n[q]
+                for p in range(indptr[u], indptr[u + 1]):
+                    v = indices[p]
+                    w = v >> 6
+                    m = np.uint64(1) << np.uint64(v & 63)
+                    if bits[f, w] & m:
+                        dups += 1
+                    bits[f, w] |= m
+                    if nn == nxt_f.shape[0]:
+                        nxt_f = _grow_i64(nxt_f, nn)
+                        nxt_n = _grow_i64(nxt_n, nn)
+                    nxt_f[nn] = f
+                    nxt_n[nn] = v
+                    nn += 1
+                    if nd == out_r.shape[0]:
+                        out_r = _grow_i64(out_r, nd)
+                        out_f = _grow_i64(out_f, nd)
+                        out_h = _grow_i32(out_h, nd)
+                    out_r[nd] = v
+                    out_f[nd] = f
+                    out_h[nd] = h
+                    nd += 1
+            hops[f] = h
+            if nn == run0 or h >= limit[f]:
+                nn = run0  # the flood ends here: its new readers keep the message but do not relay it
+                fin[nfin] = f
+                nfin += 1
+            a = b
+        cur_f = nxt_f[:nn].copy()
+        cur_n = nxt_n[:nn].copy()
+        ncur = nn
+        if not full:
+            break
+    return cur_f, cur_n, out_r[:nd].copy(), out_f[:nd].copy(), out_h[:nd].copy(), fin[:nfin].copy(), dups
+
+
+class Overlay:
+    """Flooding over the range graph of online agents, one hop per step.
+
+    Args:
+        n_slots: Number of agent slots S (>= 1).
+        payload_dim: Payload width D (>= 0).
+        comm_range: Transmission range in metres, a scalar or one per slot ``(S,)`` (finite, >= 0). An edge
+            ``(i, j)`` exists when ``dist <= min(range_i, range_j)``.
+        full_propagation: If True, every flood spreads up to its hop limit within one ``advance`` call.
+        capacity: Initial number of flood rows (>= 1); doubles when full.
+
+    The object holds plain numpy arrays only, so it pickles and deep-copies.
+    """
+
+    __slots__ = (
+        "n_slots", "payload_dim", "full_propagation", "_words", "_range", "_bits", "_origin", "_limit",
+        "_hops", "_created", "_payload", "_active", "_free", "_n_free", "_front_f", "_front_n",
+        "_pending_started", "_last", "_totals",
+    )  # fmt: skip
+
+    def __init__(
+        self,
+        n_slots: int,
+        payload_dim: int,
+        comm_range: float | np.ndarray,
+        full_propagation: bool = False,
+        capacity: int = 1024,
+    ) -> None:
+        if int(n_slots) < 1:
+            raise ValueError(f"n_slots must be >= 1, got {n_slots}")
+        if int(payload_dim) < 0:
+            raise ValueError(f"payload_dim must be >= 0, got {payload_dim}")
+        if int(capacity) < 1:
+            raise ValueError(f"capacity must be >= 1, got {capacity}")
+        self.n_slots = int(n_slots)
+        self.payload_dim = int(payload_dim)
+        self.full_propagation = bool(full_propagation)
+        self._words = (self.n_slots + 63) // 64
+        self._range = np.zeros(self.n_slots)
+        self.set_range(comm_range)
+        self._alloc(int(capacity))
+
+    # ------------------------------------------------------------------ state
+    def _alloc(self, cap: int) -> None:
+        self._bits = np.zeros((cap, self._words), dtype=np.uint64)
+        self._origin = np.full(cap, -1, dtype=np.int64)
+        self._limit = np.zeros(cap, dtype=np.int32)
+        self._hops = np.zeros(cap, dtype=np.int32)
+        self._created = np.zeros(cap, dtype=np.int64)
+        self._payload = np.zeros((cap, self.payload_dim), dtype=np.float32)
+        self._active = np.zeros(cap, dtype=bool)
+        # LIFO free list; reversed so that a fresh table hands out ids 0, 1, 2, ...
+        self._free = np.arange(cap - 1, -1, -1, dtype=np.int64)
+        self._n_free = cap
+        self._front_f = np.empty(0, dtype=np.int64)
+        self._front_n = np.empty(0, dtype=np.int64)
+        self._pending_started = 0
+        self._last = OverlayStats()
+        self._totals = OverlayStats()
+
+    def _grow(self, need: int) -> None:
+        old = self.capacity
+        cap = old
+        while cap - old + self._n_free < need:
+            cap *= 2
+        for name in ("_bits", "_origin", "_limit", "_hops", "_created", "_payload", "_active"):
+            a = getattr(self, name)
+            pad = np.full((cap - old,) + a.shape[1:], -1 if name == "_origin" else 0, dtype=a.dtype)
+            setattr(self, name, np.concatenate([a, pad]))
+        # The free stack always has room for every row; new rows sit below the old free ids (popped after
+        # them) in descending order, so they are handed out lowest id first.
+        free = np.empty(cap, dtype=np.int64)
+        free[: cap - old] = np.arange(cap - 1, old - 1, -1, dtype=np.int64)
+        free[cap - old : cap - old + self._n_free] = self._free[: self._n_free]
+        self._free = free
+        self._n_free += cap - old
+
+    @property
+    def capacity(self) -> int:
+        """Number of flood rows currently allocated."""
+        return int(self._active.shape[0])
+
+    @property
+    def active_count(self) -> int:
+        """Number of floods still spreading."""
+        return self.capacity - self._n_free
+
+    @property
+    def stats(self) -> OverlayStats:
+        """Counters of the last ``advance`` call (``started`` counts floods started since the one before)."""
+        return self._last
+
+    @property
+    def totals(self) -> OverlayStats:
+        """Counters summed over every ``advance`` since construction or ``reset``."""
+        return self._totals
+
+    @property
+    def comm_range(self) -> np.ndarray:
+        """Per-slot transmission range ``(S,)`` (a copy)."""
+        return self._range.copy()
+
+    def set_range(self, comm_range: float | np.ndarray) -> None:
+        """Set the transmission range: a scalar for every slot or one per slot ``(S,)``, finite and >= 0."""
+        r = np.asarray(comm_range, dtype=np.float64)
+        if r.ndim == 0:
+            r = np.full(self.n_slots, float(r))
+        if r.shape != (self.n_slots,):
+            raise ValueError(f"comm_range must be a scalar or shape ({self.n_slots},), got shape {r.shape}")
+        if not np.all(np.isfinite(r)) or np.any(r < 0):
+            raise ValueError("comm_range must be finite and >= 0")
+        self._range = r.copy()
+
+    def reset(self) -> None:
+        """Drop every flood and zero the counters (the grown capacity is kept)."""
+        self._alloc(self.capacity)
+
+    def is_active(self, flood: int) -> bool:
+        """Whether flood id ``flood`` is still spreading."""
+        return 0 <= int(flood) < self.capacity and bool(self._active[int(flood)])
+
+    def readers(self, flood: int) -> np.ndarray:
+        """Slots that have read an active flood (origin included), ascending.
+
+        Raises:
+            ValueError: If ``flood`` is not an active flood id.
+        """
+        if not self.is_active(flood):
+            raise ValueError(f"flood must be an active flood id, got {flood}")
+        bits = np.unpackbits(self._bits[int(flood)].view(np.uint8), bitorder="little")
+        return np.flatnonzero(bits[: self.n_slots])
+
+    # ------------------------------------------------------------------ API
+    def start(
+        self,
+        origin: np.ndarray,
+        hop_limit: np.ndarray | int,
+        payload: np.ndarray | None,
+        step: int,
+    ) -> np.ndarray:
+        """Start one flood per origin; the origin has read its own message (hops 0).
+
+        Args:
+            origin: Origin slots ``(k,)`` in ``[0, S)``.
+            hop_limit: Hop limit per flood ``(k,)`` or a scalar, >= 1.
+            payload: Payloads ``(k, D)`` (or ``(D,)`` for all); None means zeros.
+            step: Current step, recorded as the floods' created step.
+
+        Returns:
+            The new flood ids ``(k,)`` int64.
+        """
+        origin = np.asarray(origin, dtype=np.int64).reshape(-1)
+        k = origin.shape[0]
+        if k and (origin.min() < 0 or origin.max() >= self.n_slots):
+            raise ValueError(
+                f"origin must be slots in [0, {self.n_slots}), got {origin.min()}..{origin.max()}"
+            )
+        lim = np.broadcast_to(np.asarray(hop_limit, dtype=np.int64), (k,))
+        if k and lim.min() < 1:
+            raise ValueError(f"hop_limit must be >= 1, got min {lim.min()}")
+        if payload is None:
+            pl = np.zeros((k, self.payload_dim), dtype=np.float32)
+        else:
+            pl = np.asarray(payload, dtype=np.float32)
+            if pl.ndim == 1 and pl.shape == (self.payload_dim,):
+                pl = np.broadcast_to(pl, (k, self.payload_dim))
+            if pl.shape != (k, self.payload_dim):
+                raise ValueError(f"payload must have shape ({k}, {self.payload_dim}), got {pl.shape}")
+        if k == 0:
+            return np.empty(0, dtype=np.int64)
+        if self._n_free < k:
+            self._grow(k)
+        ids = self._free[self._n_free - k : self._n_free][::-1].copy()
+        self._n_free -= k
+        self._bits[ids] = 0
+        self._bits[ids, origin >> 6] = np.uint64(1) << (origin & 63).astype(np.uint64)
+        self._origin[ids] = origin
+        self._limit[ids] = lim
+        self._hops[ids] = 0
+        self._created[ids] = int(step)
+        self._payload[ids] = pl
+        self._active[ids] = True
+        # One frontier entry per new flood keeps the frontier grouped by flood.
+        self._front_f = np.concatenate([self._front_f, ids])
+        self._front_n = np.concatenate([self._front_n, origin])
+        self._pending_started += k
+        return ids
+
+    def advance(
+        self,
+        pos: np.ndarray,
+        online: np.ndarray,
+        world: np.ndarray,
+        pairs: tuple[np.ndarray, ...],
+        step: int,
+    ) -> Deliveries:
+        """Spread every active flood one hop (to its hop limit with ``full_propagation``).
+
+        Args:
+            pos: Positions ``(S, 3)``.
+            online: Online flags ``(S,)``; offline slots neither read nor relay.
+            world: World id per slot ``(S,)``; no edge crosses worlds.
+            pairs: ``(i, j)`` or ``(i, j, d)`` from ``neighbor_pairs`` with ``max_dist`` >= the largest range;
+                distances are re-checked against ``min(range_i, range_j)``.
+            step: Current step (deliveries carry each flood's created step; the age is ``step - created``).
+
+        Returns:
+            The messages read during this call.
+        """
+        s = self.n_slots
+        pos = np.ascontiguousarray(pos)
+        if pos.shape != (s, 3):
+            raise ValueError(f"pos must have shape ({s}, 3), got {pos.shape}")
+        online = np.ascontiguousarray(online, dtype=np.bool_)
+        world = np.ascontiguousarray(world, dtype=np.int64)
+        if online.shape != (s,) or world.shape != (s,):
+            raise ValueError(f"online and world must have shape ({s},), got {online.shape} and {world.shape}")
+        if len(pairs) < 2:
+            raise ValueError("pairs must be (i, j) or (i, j, d)")
+        pi = np.ascontiguousarray(pairs[0], dtype=np.int64)
+        pj = np.ascontiguousarray(pairs[1], dtype=np.int64)
+        if pi.shape != pj.shape or pi.ndim != 1:
+            raise ValueError(f"pairs i and j must be 1-D of equal length, got {pi.shape} and {pj.shape}")
+        if pi.size and (min(pi.min(), pj.min()) < 0 or max(pi.max(), pj.max()) >= s):
+            raise ValueError(f"pairs must hold slots in [0, {s})")
+        started = self._pending_started
+        self._pending_started = 0
+        if self._front_f.shape[0] == 0:
+            self._last = OverlayStats(started=started)
+            self._totals = self._totals + self._last
+            return self._empty()
+        indptr, indices = _build_csr(pi, pj, pos, online, world, self._range, s)
+        nf, nn, rcv, fl, hp, fin, dups = _spread(
+            indptr,
+            indices,
+            self._bits,
+            self._hops,
+            self._limit,
+            self._front_f,
+            self._front_n,
+            self.full_propagation,
+        )
+        self._front_f, self._front_n = nf, nn
+        if fin.shape[0]:
+            self._active[fin] = False
+            self._free[self._n_free : self._n_free + fin.shape[0]] = fin[::-1]
+            self._n_free += fin.shape[0]
+        out = Deliveries(
+            receiver=rcv,
+            flood=fl,
+            origin=self._origin[fl],
+            hops=hp,
+            created=self._created[fl],
+            payload=self._payload[fl],
+        )
+        self._last = OverlayStats(started, len(out), int(dups), int(fin.shape[0]))
+        self._totals = self._totals + self._last
+        return out
+
+    def _empty(self) -> Deliveries:
+        e = np.empty(0, dtype=np.int64)
+        return Deliveries(
+            e,
+            e.copy(),
+            e.copy(),
+            np.empty(0, dtype=np.int32),
+            e.copy(),
+            np.empty((0, self.payload_dim), dtype=np.float32),
+        )

@@ -1,0 +1,584 @@
+"""Laser-scanner-like proximity sensor: vectorised ray casting with a per-slot range.
+
+Every online slot casts ``K = n_azimuth * len(elevations_deg)`` rays from its centre. Rays are ordered
+ring-major: ray ``k = ring * n_azimuth + a`` has azimuth ``a * 360 / n_azimuth`` degrees counter-clockwise
+from the slot's heading and elevation ``elevations_deg[ring]`` (negative looks down). A ray reports the
+nearest of: another online agent of the same world (a sphere of its radius), a static object of the same
+world (axis-aligned box, vertical cylinder with caps, sphere) and the ground plane ``z = 0``.
+
+Conventions: distances are normalised by the slot's range (``1.0`` = nothing within range; a hit exactly at
+the range counts); a ray whose origin lies inside a shape (or below the ground) reads ``0`` on that shape;
+exact ties go to the lower ``(hit_kind, hit_id)``. Offline slots scan nothing and are invisible.
+
+The grid kernel (:class:`ProximitySensor`) and the brute-force numpy reference (:func:`scan_reference`,
+used by the tests) share these conventions exactly.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numba as nb
+import numpy as np
+
+from agentsim_env.core.spatial import Grid, _cell_of
+
+HIT_NONE = 0
+HIT_AGENT = 1
+HIT_OBJECT = 2
+HIT_GROUND = 3
+
+# Shape codes inside the kernel: the scene's BOX=0, CYLINDER=1, SPHERE=2 (agents are spheres too).
+_BOX, _CYL, _SPH = 0, 1, 2
+# A direction component below this is treated as parallel to the slab / cylinder axis; the kernel and the
+# reference apply the same rule, so they take the same branch.
+_EPS = 1e-12
+
+
+@dataclass(frozen=True)
+class ProximityConfig:
+    """Ray layout and what the sensor detects.
+
+    Attributes:
+        n_azimuth: Rays per elevation ring, evenly spaced over 360 degrees; ray 0 points along the heading.
+        elevations_deg: Elevation of each ring in degrees, within [-90, 90] (negative looks down).
+        detect_agents: Whether other agents are seen.
+        detect_objects: Whether static objects are seen.
+        detect_ground: Whether the ground plane is seen (also needs the scene's ground flag).
+    """
+
+    n_azimuth: int = 32
+    elevations_deg: tuple[float, ...] = (0.0,)
+    detect_agents: bool = True
+    detect_objects: bool = True
+    detect_ground: bool = True
+
+    def __post_init__(self) -> None:
+        if isinstance(self.n_azimuth, bool) or not isinstance(self.n_azimuth, (int, np.integer)):
+            raise ValueError(f"n_azimuth must be an int >= 1, got {self.n_azimuth!r}")
+        if not 1 <= int(self.n_azimuth) <= 4096:
+            raise ValueError(f"n_azimuth must be in [1, 4096], got {self.n_azimuth}")
+        object.__setattr__(self, "n_azimuth", int(self.n_azimuth))
+        elev = tuple(float(e) for e in np.atleast_1d(np.asarray(self.elevations_deg, dtype=np.float64)))
+        if len(elev) == 0:
+            raise ValueError("elevations_deg must hold at least one elevation in [-90, 90] degrees")
+        if not all(np.isfinite(e) and -90.0 <= e <= 90.0 for e in elev):
+            raise ValueError(f"elevations_deg must be finite and in [-90, 90] degrees, got {elev}")
+        object.__setattr__(self, "elevations_deg", elev)
+        for name in ("detect_agents", "detect_objects", "detect_ground"):
+            if not isinstance(getattr(self, name), (bool, np.bool_)):
+                raise ValueError(f"{name} must be True or False, got {getattr(self, name)!r}")
+
+    @property
+    def n_rays(self) -> int:
+        """Rays per slot ``K = n_azimuth * len(elevations_deg)``."""
+        return int(self.n_azimuth) * len(self.elevations_deg)
+
+    def ray_directions(self) -> np.ndarray:
+        """Unit ray directions ``(K, 3)`` in the body yaw frame (x along the heading, z up), ring-major."""
+        az = 2.0 * np.pi * np.arange(self.n_azimuth) / self.n_azimuth
+        el = np.deg2rad(np.asarray(self.elevations_deg))
+        ce, se = np.cos(el)[:, None], np.sin(el)[:, None]
+        d = np.stack(np.broadcast_arrays(ce * np.cos(az), ce * np.sin(az), se * np.ones_like(az)), axis=-1)
+        return np.ascontiguousarray(d.reshape(-1, 3))
+
+
+@dataclass(slots=True)
+class ScanResult:
+    """One scan of every slot (buffers reused from scan to scan: copy what you keep).
+
+    Attributes:
+        distance: ``(S, K) float32`` hit distance / slot range in [0, 1]; 1.0 = nothing within range.
+        hit_kind: ``(S, K) int8``: ``HIT_NONE``, ``HIT_AGENT``, ``HIT_OBJECT`` or ``HIT_GROUND``.
+        hit_id: ``(S, K) int32``: slot of the agent hit, object index, or -1 (ground, nothing).
+    """
+
+    distance: np.ndarray
+    hit_kind: np.ndarray
+    hit_id: np.ndarray
+
+    @classmethod
+    def empty(cls, n_slots: int, n_rays: int) -> ScanResult:
+        """Allocate buffers for ``n_slots`` slots of ``n_rays`` rays (filled as 'nothing seen')."""
+        return cls(
+            np.ones((n_slots, n_rays), dtype=np.float32),
+            np.zeros((n_slots, n_rays), dtype=np.int8),
+            np.full((n_slots, n_rays), -1, dtype=np.int32),
+        )
+
+
+# ----------------------------------------------------------------------------------------------- kernel
+@nb.njit(cache=True)
+def _slab(p, d, h, lo, hi):  # type: ignore[no-untyped-def]
+    # Clip the ray interval [lo, hi] to the slab |p + t d| <= h; an empty result has lo > hi.
+    if abs(d) < _EPS:
+        if abs(p) > h:
+            return np.inf, -np.inf
+        return lo, hi
+    t1 = (-h - p) / d
+    t2 = (h - p) / d
+    if t1 > t2:
+        t1, t2 = t2, t1
+    return max(lo, t1), min(hi, t2)
+
+
+@nb.njit(cache=True)
+def _ray_shape(shape, px, py, pz, dx, dy, dz, hx, hy, hz):  # type: ignore[no-untyped-def]
+    # Nearest t >= 0 where the ray p + t d (p relative to the shape centre) is in the shape, else inf.
+    if shape == _SPH:
+        b = px * dx + py * dy + pz * dz
+        disc = b * b - (px * px + py * py + pz * pz - hx * hx)
+        if disc < 0.0:
+            return np.inf
+        sq = np.sqrt(disc)
+        if -b + sq < 0.0:
+            return np.inf
+        return max(-b - sq, 0.0)
+    lo, hi = -np.inf, np.inf
+    if shape == _BOX:
+        lo, hi = _slab(px, dx, hx, lo, hi)
+        lo, hi = _slab(py, dy, hy, lo, hi)
+    else:
+        a = dx * dx + dy * dy
+        c = px * px + py * py - hx * hx
+        if a < _EPS * _EPS:
+            if c > 0.0:
+                return np.inf
+        else:
+            b = px * dx + py * dy
+            disc = b * b - a * c
+            if disc < 0.0:
+                return np.inf
+            sq = np.sqrt(disc)
+            lo, hi = (-b - sq) / a, (-b + sq) / a
+    lo, hi = _slab(pz, dz, hz, lo, hi)
+    if lo > hi or hi < 0.0:
+        return np.inf
+    return max(lo, 0.0)
+
+
+@nb.njit(cache=True)
+def _candidate(px, py, pz, shape, hx, hy, hz, rb_h, rb_3, kind, ident, rng, psi, wd, n_az, bt, bk, bi):  # type: ignore[no-untyped-def]
+    # p = ray origin - candidate centre; rb_h / rb_3: horizontal / 3D bounding radii of the candidate.
+    d2 = px * px + py * py + pz * pz
+    reach = rng + rb_3
+    if d2 > reach * reach:  # its bounding sphere is out of range: no ray can hit it within range
+        return
+    lb = max(np.sqrt(d2) - rb_3, 0.0)  # no ray can hit it nearer than this
+    n_rings = wd.shape[0] // n_az
+    dh2 = px * px + py * py
+    k_lo, k_hi = 0, n_az - 1
+    x2 = rb_h * rb_h / dh2 if dh2 > 0.0 else 1.0
+    if x2 < 0.98:
+        # A ray's horizontal projection must cross the bounding disc, so only azimuths within
+        # asin(rb_h / dh) <= tan(asin(rb_h / dh)) of the bearing to the centre can hit (at any elevation).
+        step = 2.0 * np.pi / n_az
+        phi = np.arctan2(-py, -px) - psi
+        phi -= 2.0 * np.pi * np.floor(phi / (2.0 * np.pi))
+        delta = np.sqrt(x2 / (1.0 - x2)) + 1e-7
+        lo_i = int(np.ceil((phi - delta) / step))
+        hi_i = int(np.floor((phi + delta) / step))
+        if hi_i - lo_i + 1 < n_az:
+            k_lo, k_hi = lo_i, hi_i
+    for kk in range(k_lo, k_hi + 1):
+        a = kk % n_az
+        if a < 0:
+            a += n_az
+        for ring in range(n_rings):
+            k = ring * n_az + a
+            if lb > bt[k]:
+                continue
+            t = _ray_shape(shape, px, py, pz, wd[k, 0], wd[k, 1], wd[k, 2], hx, hy, hz)
+            b = bt[k]
+            if t < b or (t == b and (bk[k] == HIT_NONE or kind < bk[k] or (kind == bk[k] and ident < bi[k]))):
+                bt[k] = t
+                bk[k] = kind
+                bi[k] = ident
+
+
+@nb.njit(cache=True)
+def _rows(x, y, reach, ox, oy, cell, nx, ny, ca):  # type: ignore[no-untyped-def]
+    # Cell rows of column ``ca`` that meet the disc of radius ``reach`` around (x, y). Border columns
+    # extend to infinity (items outside the map are clamped into them), so the disc test stays exact.
+    lo = -np.inf if ca == 0 else ox + ca * cell
+    hi = np.inf if ca == nx - 1 else ox + (ca + 1) * cell
+    dx = max(lo - x, x - hi, 0.0)
+    hw = np.sqrt(max(reach * reach - dx * dx, 0.0)) + 1e-9 * (1.0 + reach)  # margin for rounding
+    if dx > reach + 1e-9 * (1.0 + reach):
+        return 0, -1
+    _, y0 = _cell_of(x, y - hw, ox, oy, cell, nx, ny)
+    _, y1 = _cell_of(x, y + hw, ox, oy, cell, nx, ny)
+    return y0, y1
+
+
+@nb.njit(cache=True)
+def _scan_slot(  # type: ignore[no-untyped-def]
+    i, pos, heading, srange, radius, online, world, rmax,
+    a_start, a_items, a_ox, a_oy, a_cell, a_nx, a_ny,
+    o_kind, o_centre, o_half, o_world, o_rbh, o_rb3,
+    o_start, o_items, o_ox, o_oy, o_cell, o_nx, o_ny,
+    dirs, n_az, use_agents, use_objects, use_ground, stamp, wd, bt, bk, bi, out_d, out_k, out_id,
+):
+    n_k = dirs.shape[0]
+    rng = srange[i]
+    x, y, z = pos[i, 0], pos[i, 1], pos[i, 2]
+    psi = heading[i]
+    c, s = np.cos(psi), np.sin(psi)
+    for k in range(n_k):
+        wd[k, 0] = c * dirs[k, 0] - s * dirs[k, 1]
+        wd[k, 1] = s * dirs[k, 0] + c * dirs[k, 1]
+        wd[k, 2] = dirs[k, 2]
+        bt[k] = rng
+        bk[k] = HIT_NONE
+        bi[k] = -1
+        if use_ground:
+            # The ground is the solid half-space z <= 0; its distance depends only on the elevation.
+            tg = np.inf
+            if z < 0.0:
+                tg = 0.0
+            elif wd[k, 2] < -_EPS:
+                tg = z / -wd[k, 2]
+            if tg <= rng:
+                bt[k] = tg
+                bk[k] = HIT_GROUND
+    w = world[i]
+    if use_agents:
+        # Agents are binned by centre, so the cells must reach range + the largest radius.
+        reach = rng + rmax
+        x0, _ = _cell_of(x - reach, y, a_ox, a_oy, a_cell, a_nx, a_ny)
+        x1, _ = _cell_of(x + reach, y, a_ox, a_oy, a_cell, a_nx, a_ny)
+        for ca in range(x0, x1 + 1):
+            y0, y1 = _rows(x, y, reach, a_ox, a_oy, a_cell, a_nx, a_ny, ca)
+            base = (w * a_nx + ca) * a_ny
+            # Rows of one column are consecutive cells, hence one contiguous run of items.
+            for q in range(a_start[base + y0], a_start[base + y1 + 1]):
+                j = a_items[q]
+                if j == i or not online[j] or world[j] != w:
+                    continue
+                r = radius[j]
+                _candidate(x - pos[j, 0], y - pos[j, 1], z - pos[j, 2], _SPH, r, r, r, r, r,
+                           HIT_AGENT, j, rng, psi, wd, n_az, bt, bk, bi)
+    if use_objects:
+        # Objects are registered in every cell their footprint touches, so range alone suffices.
+        x0, _ = _cell_of(x - rng, y, o_ox, o_oy, o_cell, o_nx, o_ny)
+        x1, _ = _cell_of(x + rng, y, o_ox, o_oy, o_cell, o_nx, o_ny)
+        for ca in range(x0, x1 + 1):
+            y0, y1 = _rows(x, y, rng, o_ox, o_oy, o_cell, o_nx, o_ny, ca)
+            base = (w * o_nx + ca) * o_ny
+            for q in range(o_start[base + y0], o_start[base + y1 + 1]):
+                o = o_items[q]
+                if stamp[o] == i or o_world[o] != w:  # objects span cells: visit each once per slot
+                    continue
+                stamp[o] = i
+                _candidate(x - o_centre[o, 0], y - o_centre[o, 1], z - o_centre[o, 2], o_kind[o],
+                           o_half[o, 0], o_half[o, 1], o_half[o, 2], o_rbh[o], o_rb3[o],
+                           HIT_OBJECT, o, rng, psi, wd, n_az, bt, bk, bi)
+    for k in range(n_k):
+        out_d[i, k] = bt[k] / rng
+        out_k[i, k] = bk[k]
+        out_id[i, k] = bi[k]
+
+
+@nb.njit(cache=True)
+def _scan_kernel(  # type: ignore[no-untyped-def]
+    pos, heading, srange, radius, online, world,
+    a_start, a_items, a_ox, a_oy, a_cell, a_nx, a_ny,
+    o_kind, o_centre, o_half, o_world,
+    o_start, o_items, o_ox, o_oy, o_cell, o_nx, o_ny,
+    dirs, n_az, use_agents, use_objects, use_ground, stamp, out_d, out_k, out_id,
+):
+    s_n = pos.shape[0]
+    n_k = dirs.shape[0]
+    wd = np.empty((n_k, 3))
+    bt = np.empty(n_k)
+    bk = np.empty(n_k, dtype=np.int8)
+    bi = np.empty(n_k, dtype=np.int64)
+    rmax = 0.0
+    for j in range(s_n):
+        if online[j] and radius[j] > rmax:
+            rmax = radius[j]
+    n_o = o_kind.shape[0]
+    o_rbh = np.empty(n_o)  # horizontal and 3D bounding radii, for cheap rejection
+    o_rb3 = np.empty(n_o)
+    for o in range(n_o):
+        hx, hy, hz = o_half[o, 0], o_half[o, 1], o_half[o, 2]
+        if o_kind[o] == _BOX:
+            o_rbh[o], o_rb3[o] = np.sqrt(hx * hx + hy * hy), np.sqrt(hx * hx + hy * hy + hz * hz)
+        elif o_kind[o] == _CYL:
+            o_rbh[o], o_rb3[o] = hx, np.sqrt(hx * hx + hz * hz)
+        else:
+            o_rbh[o], o_rb3[o] = hx, hx
+        stamp[o] = -1
+    # Scan in grid order (neighbours share cells, so their data stays in cache); slots the grid does not
+    # hold follow in slot order.
+    done = np.zeros(s_n, dtype=np.bool_)
+    n_grid = a_items.shape[0] if use_agents else 0
+    for q in range(n_grid + s_n):
+        i = a_items[q] if q < n_grid else q - n_grid
+        if done[i]:
+            continue
+        done[i] = True
+        if not online[i]:
+            out_d[i, :] = 1.0
+            out_k[i, :] = HIT_NONE
+            out_id[i, :] = -1
+            continue
+        _scan_slot(
+            i, pos, heading, srange, radius, online, world, rmax,
+            a_start, a_items, a_ox, a_oy, a_cell, a_nx, a_ny,
+            o_kind, o_centre, o_half, o_world, o_rbh, o_rb3,
+            o_start, o_items, o_ox, o_oy, o_cell, o_nx, o_ny,
+            dirs, n_az, use_agents, use_objects, use_ground, stamp, wd, bt, bk, bi, out_d, out_k, out_id,
+        )
+
+
+# ----------------------------------------------------------------------------------------------- sensor
+def _check_inputs(pos, heading, sensor_range, radius, online, world, kind, centre, half, obj_world):  # type: ignore[no-untyped-def]
+    pos = np.ascontiguousarray(pos, dtype=np.float64)
+    if pos.ndim != 2 or pos.shape[1] != 3:
+        raise ValueError(f"pos must have shape (S, 3), got {pos.shape}")
+    s = pos.shape[0]
+    out = [pos]
+    for name, a, dt in (("heading", heading, np.float64), ("sensor_range", sensor_range, np.float64),
+                        ("radius", radius, np.float64), ("online", online, np.bool_), ("world", world, np.int64)):
+        a = np.ascontiguousarray(a, dtype=dt)
+        if a.shape != (s,):
+            raise ValueError(f"{name} must have shape ({s},), got {a.shape}")
+        out.append(a)
+    rng, on = out[2], out[4]
+    if not np.all(((rng > 0.0) & np.isfinite(rng)) | ~on):
+        raise ValueError("sensor_range must be finite and > 0 for every online slot")
+    kind = np.ascontiguousarray(kind, dtype=np.int8)
+    o = kind.shape[0]
+    centre = np.ascontiguousarray(centre, dtype=np.float64).reshape(o, 3)
+    half = np.ascontiguousarray(half, dtype=np.float64).reshape(o, 3)
+    obj_world = np.ascontiguousarray(obj_world, dtype=np.int64)
+    if obj_world.shape != (o,):
+        raise ValueError(f"obj_world must have shape ({o},), got {obj_world.shape}")
+    if o and np.any((kind < _BOX) | (kind > _SPH)):
+        raise ValueError("kind codes must be in {0 (box), 1 (cylinder), 2 (sphere)}")
+    return (*out, kind, centre, half, obj_world)
+
+
+_NO_GRID = (np.zeros(2, dtype=np.int64), np.zeros(0, dtype=np.int64), 0.0, 0.0, 1.0, 1, 1)
+
+
+def _grid_args(grid: Grid | None, lo: int, hi: int, name: str) -> tuple:
+    # The kernel indexes cells by world id, so every id it looks up must exist in the grid.
+    if grid is None:
+        return _NO_GRID
+    sp = grid.spec
+    if lo < 0 or hi >= sp.n_worlds:
+        raise ValueError(f"world ids must be in [0, {name}.spec.n_worlds={sp.n_worlds}), got {lo}..{hi}")
+    return (grid.cell_start, grid.items, sp.origin_x, sp.origin_y, sp.cell, sp.nx, sp.ny)
+
+
+class ProximitySensor:
+    """Grid-accelerated ray caster for every slot (one numba kernel, single-threaded)."""
+
+    def __init__(self, config: ProximityConfig | None = None) -> None:
+        """Precompute the ray directions.
+
+        Args:
+            config: Ray layout and detection flags (defaults to 32 horizontal rays).
+        """
+        self.config = config if config is not None else ProximityConfig()
+        self.directions = self.config.ray_directions()
+        self._out: ScanResult | None = None
+        self._stamp = np.empty(0, dtype=np.int64)
+
+    @property
+    def n_rays(self) -> int:
+        """Rays per slot K."""
+        return self.config.n_rays
+
+    def scan(
+        self,
+        pos: np.ndarray,
+        heading: np.ndarray,
+        sensor_range: np.ndarray,
+        radius: np.ndarray,
+        online: np.ndarray,
+        world: np.ndarray,
+        agent_grid: Grid | None,
+        kind: np.ndarray,
+        centre: np.ndarray,
+        half: np.ndarray,
+        obj_world: np.ndarray,
+        object_grid: Grid | None,
+        ground: bool,
+        out: ScanResult | None = None,
+    ) -> ScanResult:
+        """Scan every online slot.
+
+        Args:
+            pos: Slot centres ``(S, 3)`` (ray origins).
+            heading: Yaw ``(S,)`` in radians; ray 0 points along it.
+            sensor_range: Range ``(S,)`` in metres (> 0 for online slots); may change every step.
+            radius: Agent radii ``(S,)`` (agents are spheres).
+            online: Which slots scan and can be seen ``(S,)``.
+            world: World id per slot ``(S,)``.
+            agent_grid: ``build_grid(spec, pos, world, online)`` of this step (every online slot indexed);
+                ``None`` sees no agents.
+            kind: Scene object kinds ``(O,)`` (``BOX``, ``CYLINDER``, ``SPHERE``).
+            centre: Object centres ``(O, 3)``.
+            half: Object half extents ``(O, 3)`` (scene convention).
+            obj_world: Object world ids ``(O,)``.
+            object_grid: ``build_object_grid(spec, centre, scene.footprint_radius(), obj_world)`` (footprints
+                must be covered); ``None`` sees no objects.
+            ground: Whether the plane ``z = 0`` is solid (the scene's flag).
+            out: Buffers to fill; by default the sensor's own, reused by the next scan.
+
+        Returns:
+            The filled :class:`ScanResult`.
+        """
+        pos, heading, srange, radius, online, world, kind, centre, half, obj_world = _check_inputs(
+            pos, heading, sensor_range, radius, online, world, kind, centre, half, obj_world
+        )
+        s, k = pos.shape[0], self.n_rays
+        if out is None:
+            if self._out is None or self._out.distance.shape != (s, k):
+                self._out = ScanResult.empty(s, k)
+            out = self._out
+        elif out.distance.shape != (s, k) or out.distance.dtype != np.float32 or out.hit_kind.dtype != np.int8 \
+                or out.hit_id.dtype != np.int32 or out.hit_kind.shape != (s, k) or out.hit_id.shape != (s, k):
+            raise ValueError(f"out must hold (S, K) = ({s}, {k}) arrays of float32 / int8 / int32")
+        use_agents = self.config.detect_agents and agent_grid is not None
+        use_objects = self.config.detect_objects and object_grid is not None and kind.shape[0] > 0
+        if self._stamp.shape[0] < kind.shape[0]:
+            self._stamp = np.empty(kind.shape[0], dtype=np.int64)
+        w_on = world[online]
+        lo, hi = (int(w_on.min()), int(w_on.max())) if w_on.size else (0, 0)
+        agent_args = _grid_args(agent_grid if use_agents else None, lo, hi, "agent_grid")
+        if use_objects:
+            lo, hi = min(lo, int(obj_world.min())), max(hi, int(obj_world.max()))
+        object_args = _grid_args(object_grid if use_objects else None, lo, hi, "object_grid")
+        _scan_kernel(
+            pos, heading, srange, radius, online, world, *agent_args,
+            kind, centre, half, obj_world, *object_args,
+            self.directions, int(self.config.n_azimuth), use_agents, use_objects,
+            bool(self.config.detect_ground and ground), self._stamp, out.distance, out.hit_kind, out.hit_id,
+        )
+        return out
+
+
+# -------------------------------------------------------------------------------------------- reference
+def _ref_slab(p: np.ndarray, d: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    par = np.abs(d) < _EPS
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t1, t2 = (-h - p) / d, (h - p) / d
+    lo, hi = np.minimum(t1, t2), np.maximum(t1, t2)
+    inside = np.abs(p) <= h
+    lo = np.where(par, np.where(inside, -np.inf, np.inf), lo)
+    hi = np.where(par, np.where(inside, np.inf, -np.inf), hi)
+    return lo, hi
+
+
+def _ref_t(shape: int, p: np.ndarray, d: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """Broadcast ray-shape distances: ``p`` origin - centre ``(..., 3)``, ``d`` ``(..., 3)``, ``h`` ``(..., 3)``."""
+    p, d, h = np.broadcast_arrays(p, d, h)
+    if shape == _SPH:
+        b = (p * d).sum(-1)
+        disc = b * b - ((p * p).sum(-1) - h[..., 0] ** 2)
+        sq = np.sqrt(np.maximum(disc, 0.0))
+        return np.where((disc >= 0.0) & (-b + sq >= 0.0), np.maximum(-b - sq, 0.0), np.inf)
+    if shape == _BOX:
+        lo, hi = _ref_slab(p[..., 0], d[..., 0], h[..., 0])
+        lo2, hi2 = _ref_slab(p[..., 1], d[..., 1], h[..., 1])
+        lo, hi = np.maximum(lo, lo2), np.minimum(hi, hi2)
+    else:
+        a = d[..., 0] ** 2 + d[..., 1] ** 2
+        b = p[..., 0] * d[..., 0] + p[..., 1] * d[..., 1]
+        c = p[..., 0] ** 2 + p[..., 1] ** 2 - h[..., 0] ** 2
+        disc = b * b - a * c
+        sq = np.sqrt(np.maximum(disc, 0.0))
+        vert = a < _EPS * _EPS
+        with np.errstate(divide="ignore", invalid="ignore"):
+            lo = np.where(vert, np.where(c > 0, np.inf, -np.inf), np.where(disc < 0, np.inf, (-b - sq) / a))
+            hi = np.where(vert, np.where(c > 0, -np.inf, np.inf), np.where(disc < 0, -np.inf, (-b + sq) / a))
+    lo3, hi3 = _ref_slab(p[..., 2], d[..., 2], h[..., 2])
+    lo, hi = np.maximum(lo, lo3), np.minimum(hi, hi3)
+    return np.where((lo <= hi) & (hi >= 0.0), np.maximum(lo, 0.0), np.inf)
+
+
+def scan_reference(
+    config: ProximityConfig,
+    pos: np.ndarray,
+    heading: np.ndarray,
+    sensor_range: np.ndarray,
+    radius: np.ndarray,
+    online: np.ndarray,
+    world: np.ndarray,
+    kind: np.ndarray,
+    centre: np.ndarray,
+    half: np.ndarray,
+    obj_world: np.ndarray,
+    ground: bool,
+    second: np.ndarray | None = None,
+) -> ScanResult:
+    """Brute-force numpy reference of :meth:`ProximitySensor.scan` (no grid; for tests only).
+
+    Args:
+        config: Ray layout and detection flags.
+        pos, heading, sensor_range, radius, online, world: As for ``scan``.
+        kind, centre, half, obj_world: Scene object arrays, as for ``scan``.
+        ground: Whether the plane ``z = 0`` is solid.
+        second: Optional ``(S, K)`` float array filled with the normalised distance of the second-nearest
+            candidate (``inf`` when none), so tests can tell near-ties apart.
+
+    Returns:
+        A fresh :class:`ScanResult`.
+    """
+    pos, heading, srange, radius, online, world, kind, centre, half, obj_world = _check_inputs(
+        pos, heading, sensor_range, radius, online, world, kind, centre, half, obj_world
+    )
+    dirs = config.ray_directions()
+    res = ScanResult.empty(pos.shape[0], config.n_rays)
+    if second is not None:
+        second[...] = np.inf
+    bound3 = np.select(
+        [kind == _BOX, kind == _CYL], [np.linalg.norm(half, axis=1), np.hypot(half[:, 0], half[:, 2])], half[:, 0]
+    )
+    for i in np.flatnonzero(online):
+        c, s = np.cos(heading[i]), np.sin(heading[i])
+        wd = np.column_stack([c * dirs[:, 0] - s * dirs[:, 1], s * dirs[:, 0] + c * dirs[:, 1], dirs[:, 2]])
+        cols, kinds, ids = [], [], []
+        if config.detect_agents:
+            js = np.flatnonzero(online & (world == world[i]))
+            js = js[js != i]
+            js = js[np.linalg.norm(pos[js] - pos[i], axis=1) - radius[js] <= srange[i]]
+            rr = np.repeat(radius[js, None], 3, axis=1)
+            cols.append(_ref_t(_SPH, (pos[i] - pos[js])[None], wd[:, None], rr[None]))
+            kinds.append(np.full(js.size, HIT_AGENT))
+            ids.append(js)
+        if config.detect_objects:
+            os_ = np.flatnonzero(obj_world == world[i])
+            os_ = os_[np.linalg.norm(centre[os_] - pos[i], axis=1) - bound3[os_] <= srange[i]]
+            t = np.full((dirs.shape[0], os_.size), np.inf)
+            for sh in (_BOX, _CYL, _SPH):
+                m = kind[os_] == sh
+                t[:, m] = _ref_t(sh, (pos[i] - centre[os_[m]])[None], wd[:, None], half[os_[m]][None])
+            cols.append(t)
+            kinds.append(np.full(os_.size, HIT_OBJECT))
+            ids.append(os_)
+        if config.detect_ground and ground:
+            with np.errstate(divide="ignore"):
+                tg = np.where(wd[:, 2] < -_EPS, pos[i, 2] / -wd[:, 2], np.inf)
+            cols.append((np.zeros_like(tg) if pos[i, 2] < 0.0 else tg)[:, None])
+            kinds.append(np.array([HIT_GROUND]))
+            ids.append(np.array([-1]))
+        if not cols:
+            continue
+        t_all = np.concatenate(cols, axis=1)
+        if t_all.shape[1] == 0:
+            continue
+        kind_all, id_all = np.concatenate(kinds), np.concatenate(ids)
+        best = np.argmin(t_all, axis=1)  # first minimum: candidates are ordered by (kind, id)
+        tb = t_all[np.arange(t_all.shape[0]), best]
+        hit = tb <= srange[i]
+        res.distance[i] = np.where(hit, tb / srange[i], 1.0)
+        res.hit_kind[i] = np.where(hit, kind_all[best], HIT_NONE)
+        res.hit_id[i] = np.where(hit, id_all[best], -1)
+        if second is not None and t_all.shape[1] > 1:
+            second[i] = np.partition(t_all, 1, axis=1)[:, 1] / srange[i]
+    return res
