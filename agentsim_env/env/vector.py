@@ -1,0 +1,142 @@
+"""Batched stepping: B independent worlds of N agents in one call, arrays in and arrays out.
+
+No per-agent dicts are built, which is what makes large-batch training fast. Observations and actions use the
+scenario's flat layout (parts concatenated in declaration order, as in the flat-Box ParallelEnv modes).
+A world whose agents are all done is reset automatically at the end of the step; the observation returned for
+it is the first of the new episode and the last one of the finished episode is in ``final_obs``.
+Agents that ended earlier in a still-running world are masked out (``alive`` is False): their actions are
+ignored and their observations are zeros (SuperSuit's "black death" convention).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from agentsim_env.env.spaces import flat_layout
+from agentsim_env.scenarios.registry import make_scenario
+
+
+@dataclass(slots=True)
+class BatchStep:
+    """The result of one batched step (B worlds x N agents).
+
+    Attributes:
+        obs: ``(B, N, obs_dim)`` float32.
+        rewards: ``(B, N)`` float32.
+        terminated: ``(B, N)`` bool: the agent's episode ended this step (goal, collision...).
+        truncated: ``(B, N)`` bool: the time limit ended it.
+        alive: ``(B, N)`` bool: the agent acts in the next step.
+        final_obs: ``(B, N, obs_dim)``: the last observation of worlds reset in this step (zeros elsewhere).
+        reset_worlds: ``(B,)`` bool: which worlds were reset.
+        info: Per-slot scenario info arrays reshaped to ``(B, N)``.
+    """
+
+    obs: np.ndarray
+    rewards: np.ndarray
+    terminated: np.ndarray
+    truncated: np.ndarray
+    alive: np.ndarray
+    final_obs: np.ndarray
+    reset_worlds: np.ndarray
+    info: dict[str, np.ndarray]
+
+
+class BatchedEnv:
+    """B worlds of one scenario stepped together.
+
+    Args:
+        name: Scenario name.
+        n_worlds: Number of worlds B.
+        **config: Scenario config keys.
+    """
+
+    def __init__(self, name: str, n_worlds: int, **config: Any) -> None:
+        if isinstance(n_worlds, bool) or not isinstance(n_worlds, int) or n_worlds < 1:
+            raise ValueError(f"n_worlds must be an integer >= 1, got {n_worlds!r}")
+        self.scenario = make_scenario(name, **config)
+        self.world = self.scenario.build(n_worlds)
+        self.n_worlds = n_worlds
+        self.n_agents = self.scenario.n_agents
+        self._obs_parts = self.scenario.obs_parts()
+        self._act_parts = self.scenario.act_parts()
+        self._act_layout = flat_layout(self._act_parts)
+        self.obs_dim = sum(p.size for p in self._obs_parts.values())
+        self.act_dim = sum(p.size for p in self._act_parts.values())
+        self.alive = np.zeros((n_worlds, self.n_agents), dtype=bool)
+        self.steps = np.zeros(n_worlds, dtype=np.int64)
+        self._rngs: list[np.random.Generator] = []
+
+    def _flat_obs(self) -> np.ndarray:
+        parts = self.scenario.observe(self.world)
+        s = self.world.state.n_slots
+        flat = np.concatenate([p.reshape(s, -1) for p in parts.values()], axis=1).astype(np.float32)
+        return flat.reshape(self.n_worlds, self.n_agents, self.obs_dim)
+
+    def _reset_worlds(self, worlds: np.ndarray) -> None:
+        for w in worlds:
+            self.scenario.reset_world(self.world, int(w), self._rngs[w])
+        self.steps[worlds] = 0
+        self.alive[worlds] = True
+        self.world.refresh()
+
+    def reset(self, seed: int | None = None) -> np.ndarray:
+        """Reset every world; world ``w`` draws from its own child generator of ``seed``.
+
+        Returns:
+            Observations ``(B, N, obs_dim)``.
+        """
+        children = np.random.SeedSequence(seed).spawn(self.n_worlds)
+        self._rngs = [np.random.default_rng(c) for c in children]
+        self._reset_worlds(np.arange(self.n_worlds))
+        return self._flat_obs()
+
+    def step(self, actions: np.ndarray) -> BatchStep:
+        """Advance every world by one step.
+
+        Args:
+            actions: ``(B, N, act_dim)`` values in [-1, 1] (clipped); rows of dead agents are ignored.
+
+        Returns:
+            The batch step result.
+
+        Raises:
+            ValueError: Wrong shape, or a NaN/inf action of a live agent (the message names world and agent).
+        """
+        if not self._rngs:
+            raise ValueError("call reset() before step()")
+        a = np.asarray(actions, dtype=np.float64)
+        if a.shape != (self.n_worlds, self.n_agents, self.act_dim):
+            raise ValueError(f"actions must have shape {(self.n_worlds, self.n_agents, self.act_dim)}, got {a.shape}")
+        bad = ~np.isfinite(a).all(axis=2) & self.alive
+        if bad.any():
+            w, i = np.argwhere(bad)[0]
+            raise ValueError(f"actions of world {w}, agent {i} contain NaN or inf")
+        a = np.clip(np.where(self.alive[:, :, None], a, 0.0), -1.0, 1.0).reshape(-1, self.act_dim)
+        acting = self.alive.reshape(-1).copy()
+        parts = {k: a[:, sl] for k, sl in self._act_layout.items()}
+        sc, world = self.scenario, self.world
+        sc.apply_actions(world, parts, acting)
+        sc.before_world_step(world)
+        events = world.step()
+        res = sc.after_world_step(world, events, acting)
+        self.steps += 1
+        term = acting & (res.terminated | ~world.state.online)
+        world.set_offline(np.flatnonzero(term))
+        trunc = acting & ~term & np.repeat(self.steps >= sc.max_steps, self.n_agents)
+        shape = (self.n_worlds, self.n_agents)
+        term, trunc = term.reshape(shape), trunc.reshape(shape)
+        self.alive &= ~(term | trunc)
+        obs = self._flat_obs()
+        obs[~self.alive & ~(term | trunc)] = 0.0
+        done_worlds = ~self.alive.any(axis=1)
+        final = np.zeros_like(obs)
+        if done_worlds.any():
+            final[done_worlds] = obs[done_worlds]
+            self._reset_worlds(np.flatnonzero(done_worlds))
+            obs[done_worlds] = self._flat_obs()[done_worlds]
+        info = {k: v.reshape(shape) for k, v in res.info.items()}
+        rewards = res.rewards.reshape(shape).astype(np.float32)
+        return BatchStep(obs, rewards, term, trunc, self.alive.copy(), final, done_worlds, info)
