@@ -34,6 +34,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, fields
 
+import numba as nb
 import numpy as np
 
 from agentsim_env.comms.messages import (
@@ -75,7 +76,11 @@ class ChannelConfig:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
                 raise ValueError(f"{name} must be an integer >= 0, got {v!r}")
-        if isinstance(self.loss, bool) or not isinstance(self.loss, (int, float)) or not 0.0 <= self.loss <= 1.0:
+        if (
+            isinstance(self.loss, bool)
+            or not isinstance(self.loss, (int, float))
+            or not 0.0 <= self.loss <= 1.0
+        ):
             raise ValueError(f"loss must be a probability in [0, 1], got {self.loss!r}")
         r = self.max_range
         if r is not None and (isinstance(r, bool) or not isinstance(r, (int, float)) or not (0 < r < np.inf)):
@@ -111,15 +116,32 @@ class MessageLog:
         return int(self.msg.shape[0])
 
     @classmethod
+    def make(cls, msg, kind, sender, target, receiver, created, step, reason=REASON_NONE) -> MessageLog:  # type: ignore[no-untyped-def]
+        """Build a log of ``len(msg)`` rows; scalar columns are broadcast (fresh arrays)."""
+        n = np.shape(msg)[0]
+        cols = (msg, kind, sender, target, receiver, created, step, reason)
+        return cls(
+            *(
+                np.full(n, c, dtype=_LOG_DTYPES[i]) if np.ndim(c) == 0 else np.array(c, _LOG_DTYPES[i])
+                for i, c in enumerate(cols)
+            )
+        )
+
+    def take(self, mask: np.ndarray) -> MessageLog:
+        """The rows selected by a boolean mask or an index array."""
+        return MessageLog(*(getattr(self, f.name)[mask] for f in fields(self)))
+
+    @classmethod
     def concat(cls, parts: list[MessageLog]) -> MessageLog:
         """Concatenate logs (an empty log when ``parts`` is empty)."""
         if not parts:
-            i64 = np.empty(0, dtype=np.int64)
-            i8 = np.empty(0, dtype=np.int8)
-            return cls(i64, i8, i64, i64, i64, i64, i64, i8.copy())
+            return cls.make(np.empty(0), 0, 0, 0, 0, 0, 0)
         if len(parts) == 1:
             return parts[0]
         return cls(*(np.concatenate([getattr(p, f.name) for p in parts]) for f in fields(cls)))
+
+
+_LOG_DTYPES = (np.int64, np.int8, np.int64, np.int64, np.int64, np.int64, np.int64, np.int8)
 
 
 @dataclass(frozen=True, slots=True)
@@ -139,7 +161,67 @@ class DeliveryEvents:
     dropped: MessageLog
 
 
-_QUEUE_COLUMNS = ("msg", "kind", "sender", "target", "world", "created", "due")
+class _Queue:
+    """Messages in flight as growable columns; the live region ``[head, tail)`` is kept sorted by due step."""
+
+    __slots__ = ("cols", "payload", "head", "tail", "last_due", "in_order")
+    NAMES = ("msg", "kind", "sender", "target", "world", "created", "due")
+
+    def __init__(self, cap: int, payload_dim: int) -> None:
+        self.cols = {c: np.empty(cap, dtype=np.int8 if c == "kind" else np.int64) for c in self.NAMES}
+        self.payload = np.empty((cap, payload_dim), dtype=np.float32)
+        self.head = self.tail = 0
+        self.last_due = -1
+        self.in_order = True
+
+    def __len__(self) -> int:
+        return self.tail - self.head
+
+    def append(self, payload: np.ndarray, **cols: np.ndarray) -> None:
+        k = payload.shape[0]
+        if k == 0:
+            return
+        cap, live = self.payload.shape[0], len(self)
+        if live == 0:
+            self.head = self.tail = 0
+            self.last_due = -1  # order only matters among live messages
+        if self.tail + k > cap:  # compact to the front, doubling when more than half full
+            new_cap = max(cap, 2 * (live + k)) if live + k > cap // 2 else cap
+            for c, a in self.cols.items():
+                self.cols[c] = np.empty(new_cap, dtype=a.dtype)
+                self.cols[c][:live] = a[self.head : self.tail]
+            p = self.payload
+            self.payload = np.empty((new_cap, p.shape[1]), dtype=np.float32)
+            self.payload[:live] = p[self.head : self.tail]
+            self.head, self.tail = 0, live
+        sl = slice(self.tail, self.tail + k)
+        for c in self.NAMES:
+            self.cols[c][sl] = cols[c]
+        self.payload[sl] = payload
+        self.tail += k
+        due = cols["due"]
+        if due.min() < self.last_due:  # appended out of step order: sort once before the next pop
+            self.in_order = False
+        self.last_due = max(self.last_due, int(due.max()))
+
+    def pop_due(self, step: int) -> dict[str, np.ndarray] | None:
+        h, t = self.head, self.tail
+        if h == t:
+            return None
+        if not self.in_order:
+            order = h + np.argsort(self.cols["due"][h:t], kind="stable")
+            for a in self.cols.values():
+                a[h:t] = a[order]
+            self.payload[h:t] = self.payload[order]
+            self.in_order = True
+        n = int(np.searchsorted(self.cols["due"][h:t], step, side="right"))
+        if n == 0:
+            return None
+        # Copies: the region may be overwritten by answers appended during this delivery.
+        batch = {c: a[h : h + n].copy() for c, a in self.cols.items()}
+        batch["payload"] = self.payload[h : h + n].copy()
+        self.head = h + n
+        return batch
 
 
 class MessageBus:
@@ -155,10 +237,9 @@ class MessageBus:
         group: Group array ``(S,)`` used to validate GROUP targets at send time (by reference), or None.
     """
 
-    __slots__ = (
-        "n_worlds", "n_agents", "payload_dim", "channel", "inbox", "rng", "group", "_world_of", "_q",
-        "_qp", "_head", "_tail", "_last_due", "_sorted", "_next_id", "_bw_used", "_bw_step", "_sent_log",
-        "_drop_log", "_ans_slot", "_ans_step",
+    __slots__ = tuple(
+        "n_worlds n_agents payload_dim channel inbox rng group _world_of _queue _next_id _bw_used _bw_step "
+        "_sent_log _drop_log _ans_slot _ans_step".split()
     )
 
     def __init__(
@@ -194,20 +275,18 @@ class MessageBus:
                 raise ValueError(f"{name} must be an integer >= 1, got {v!r}")
         if not isinstance(channel, ChannelConfig):
             raise ValueError(f"channel must be a ChannelConfig, got {type(channel).__name__}")
-        if not isinstance(rng, np.random.Generator):
-            raise ValueError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
         self.n_worlds, self.n_agents = int(n_worlds), int(n_agents)
-        self.payload_dim, self.channel, self.rng = int(payload_dim), channel, rng
+        self.payload_dim, self.channel = int(payload_dim), channel
         s = self.n_worlds * self.n_agents
         self.inbox = Inbox(s, inbox_size, payload_dim, age_horizon=age_horizon, hop_horizon=hop_horizon,
-                           pos_scale=pos_scale)
+                           pos_scale=pos_scale)  # fmt: skip
         self.group = None
         if group is not None:
             self.bind_groups(group)
         self._world_of = np.arange(s, dtype=np.int64) // self.n_agents
         self._bw_used = np.zeros(s, dtype=np.int64)
         self._bw_step = np.full(s, -1, dtype=np.int64)
-        self._clear_queue(16)
+        self.reset(rng)
 
     @property
     def n_slots(self) -> int:
@@ -216,14 +295,16 @@ class MessageBus:
 
     @property
     def n_pending(self) -> int:
-        """Messages queued and not yet due."""
-        return self._tail - self._head
+        """Messages queued and not yet delivered."""
+        return len(self._queue)
 
     def bind_groups(self, group: np.ndarray) -> None:
         """Use ``group`` (``(S,)`` ints, read by reference) to validate GROUP targets in ``send``."""
         g = np.asarray(group)
         if g.shape != (self.n_slots,) or not np.issubdtype(g.dtype, np.integer):
-            raise ValueError(f"group must be an integer array of shape ({self.n_slots},), got {g.dtype} {g.shape}")
+            raise ValueError(
+                f"group must be an integer array of shape ({self.n_slots},), got {g.dtype} {g.shape}"
+            )
         self.group = g
 
     def reset(self, rng: np.random.Generator) -> None:
@@ -234,19 +315,17 @@ class MessageBus:
         self.inbox.clear()
         self._bw_used[:] = 0
         self._bw_step[:] = -1
-        self._clear_queue(max(16, self._q["msg"].shape[0]))
-
-    def _clear_queue(self, cap: int) -> None:
-        self._q = {c: np.empty(cap, dtype=np.int8 if c == "kind" else np.int64) for c in _QUEUE_COLUMNS}
-        self._qp = np.empty((cap, self.payload_dim), dtype=np.float32)
-        self._head = self._tail = 0
-        self._last_due = -1
-        self._sorted = True
+        self._queue = _Queue(16, self.payload_dim)
         self._next_id = 0
         self._sent_log: list[MessageLog] = []
         self._drop_log: list[MessageLog] = []
         self._ans_slot: list[np.ndarray] = []
         self._ans_step: list[np.ndarray] = []
+
+    def _new_ids(self, k: int) -> np.ndarray:
+        ids = np.arange(self._next_id, self._next_id + k, dtype=np.int64)
+        self._next_id += k
+        return ids
 
     # ------------------------------------------------------------------ sending
     def send(
@@ -260,7 +339,7 @@ class MessageBus:
         world: np.ndarray | None = None,
         group: np.ndarray | None = None,
     ) -> np.ndarray:
-        """Validate and queue ``k`` messages of one kind.
+        """Validate and queue ``k`` messages of one kind (a rejected batch queues nothing).
 
         Args:
             kind: ``AGENT``, ``GROUP``, ``ENV`` or ``HEARTBEAT`` (OVERLAY goes through the overlay).
@@ -286,7 +365,6 @@ class MessageBus:
         snd = _int_vector(sender, "sender")
         k = snd.shape[0]
         tgt = _int_vector(target, "target", k)
-        s_n, n = self.n_slots, self.n_agents
         pay = np.asarray(payload, dtype=np.float32)
         if pay.shape != (k, self.payload_dim):
             raise ValueError(f"payload must have shape ({k}, {self.payload_dim}) (k, D), got {pay.shape}")
@@ -294,53 +372,18 @@ class MessageBus:
         if bad.any():
             i = int(np.flatnonzero(bad)[0])
             raise ValueError(f"payload must be finite: row {i} (sender {snd[i]}) holds NaN/inf")
-        if k and (snd.min() < -1 or snd.max() >= s_n):
-            i = int(np.flatnonzero((snd < -1) | (snd >= s_n))[0])
-            raise ValueError(f"sender must be -1 or a slot in [0, {s_n}), got {snd[i]} at row {i}")
-        if kind == ENV and np.any(snd != -1):
-            raise ValueError(f"sender of ENV messages must be -1 (the environment), got {snd[snd != -1][0]}")
-        agent = snd >= 0
-        wld = np.where(agent, snd // n, -1)
-        if world is not None:
-            w = np.broadcast_to(np.asarray(world, dtype=np.int64), (k,))
-            if np.any((w < 0) | (w >= self.n_worlds)):
-                raise ValueError(f"world must be in [0, {self.n_worlds}), got {w[(w < 0) | (w >= self.n_worlds)][0]}")
-            if np.any(agent & (w != wld)):
-                i = int(np.flatnonzero(agent & (w != wld))[0])
-                raise ValueError(f"world {w[i]} does not match the world {wld[i]} of sender agent {snd[i]}")
-            wld = np.where(agent, wld, w)
-        if kind == GROUP:
-            self._check_groups(snd, tgt, wld, agent, group)
-        else:
-            to_ctrl = agent if kind == HEARTBEAT else np.zeros(k, dtype=bool)
-            if np.any(tgt[to_ctrl] != -1):
-                raise ValueError("target of an agent's HEARTBEAT must be -1 (the controller)")
-            uni = ~to_ctrl
-            out = uni & ((tgt < 0) | (tgt >= s_n))
-            if out.any():
-                i = int(np.flatnonzero(out)[0])
-                raise ValueError(f"target receiver slot {tgt[i]} out of range [0, {s_n}) (sender {snd[i]})")
-            cross = uni & agent & (tgt // n != wld)
-            if cross.any():
-                i = int(np.flatnonzero(cross)[0])
-                raise ValueError(
-                    f"target receiver slot {tgt[i]} (world {tgt[i] // n}) is not in the world {wld[i]} of "
-                    f"sender agent {snd[i]}"
-                )
-            wld = np.where(uni & ~agent, tgt // n, wld)
+        wld = self._validate(kind, snd, tgt, world, group)
         acc = self._bandwidth(snd, step)
-        ids = np.arange(self._next_id, self._next_id + k, dtype=np.int64)
-        self._next_id += k
-        kinds = np.full(k, kind, dtype=np.int8)
-        recv = np.full(k, -1, dtype=np.int64) if kind == GROUP else tgt
-        steps = np.full(k, step, dtype=np.int64)
-        self._sent_log.append(MessageLog(ids, kinds, snd, tgt, recv, steps, steps, np.zeros(k, dtype=np.int8)))
+        log = MessageLog.make(self._new_ids(k), kind, snd, tgt, -1 if kind == GROUP else tgt, step, step)
+        self._sent_log.append(log)
         if not acc.all():
-            d = ~acc
-            self._drop_log.append(MessageLog(ids[d], kinds[d], snd[d], tgt[d], recv[d], steps[d], steps[d],
-                                             np.full(int(d.sum()), DROP_BANDWIDTH, dtype=np.int8)))
-            self.inbox.add_dropped(snd[d])
-        self._enqueue(ids[acc], kinds[acc], snd[acc], tgt[acc], wld[acc], steps[acc], pay[acc])
+            d = log.take(~acc)
+            self._drop_log.append(MessageLog.make(d.msg, kind, d.sender, d.target, d.receiver, step, step,
+                                                  DROP_BANDWIDTH))  # fmt: skip
+            self.inbox.add_dropped(d.sender)
+        a = log.take(acc)
+        self._queue.append(pay[acc], msg=a.msg, kind=a.kind, sender=a.sender, target=a.target, world=wld[acc],
+                           created=a.created, due=a.created + self.channel.latency)  # fmt: skip
         return acc
 
     def send_env(self, receiver: np.ndarray, payload: np.ndarray, step: int) -> np.ndarray:
@@ -357,9 +400,48 @@ class MessageBus:
         r = _int_vector(receiver, "receiver")
         return self.send(ENV, np.full(r.shape[0], -1, dtype=np.int64), r, payload, step)
 
+    def _validate(self, kind, snd, tgt, world, group) -> np.ndarray:  # type: ignore[no-untyped-def]
+        # Returns the world of every message; raises ValueError naming the field otherwise.
+        s_n, n, k = self.n_slots, self.n_agents, snd.shape[0]
+        if k and (snd.min() < -1 or snd.max() >= s_n):
+            i = int(np.flatnonzero((snd < -1) | (snd >= s_n))[0])
+            raise ValueError(f"sender must be -1 or a slot in [0, {s_n}), got {snd[i]} at row {i}")
+        if kind == ENV and np.any(snd != -1):
+            raise ValueError(f"sender of ENV messages must be -1 (the environment), got {snd[snd != -1][0]}")
+        agent = snd >= 0
+        wld = np.where(agent, snd // n, -1)
+        if world is not None:
+            w = np.broadcast_to(np.asarray(world, dtype=np.int64), (k,))
+            if np.any((w < 0) | (w >= self.n_worlds)):
+                raise ValueError(f"world must be in [0, {self.n_worlds}), got {w.min()}..{w.max()}")
+            if np.any(agent & (w != wld)):
+                i = int(np.flatnonzero(agent & (w != wld))[0])
+                raise ValueError(f"world {w[i]} does not match the world {wld[i]} of sender agent {snd[i]}")
+            wld = np.where(agent, wld, w)
+        if kind == GROUP:
+            self._check_groups(snd, tgt, wld, agent, group)
+            return wld
+        to_ctrl = agent if kind == HEARTBEAT else np.zeros(k, dtype=bool)
+        if np.any(tgt[to_ctrl] != -1):
+            raise ValueError("target of an agent's HEARTBEAT must be -1 (the controller)")
+        out = ~to_ctrl & ((tgt < 0) | (tgt >= s_n))
+        if out.any():
+            i = int(np.flatnonzero(out)[0])
+            raise ValueError(f"target receiver slot {tgt[i]} out of range [0, {s_n}) (sender {snd[i]})")
+        cross = ~to_ctrl & agent & (tgt // n != wld)
+        if cross.any():
+            i = int(np.flatnonzero(cross)[0])
+            raise ValueError(
+                f"target receiver slot {tgt[i]} (world {tgt[i] // n}) is not in the world {wld[i]} "
+                f"of sender agent {snd[i]}"
+            )
+        return np.where(~to_ctrl & ~agent, tgt // n, wld)
+
     def _check_groups(self, snd, tgt, wld, agent, group) -> None:  # type: ignore[no-untyped-def]
         if np.any(~agent & (wld < 0)):
-            raise ValueError("world is required for GROUP messages sent by the environment / controller (sender -1)")
+            raise ValueError(
+                "world is required for GROUP messages from the environment / controller (sender -1)"
+            )
         g = self.group if group is None else np.asarray(group)
         if g is None:
             raise ValueError("group: no group array to validate GROUP targets; bind one or pass group=")
@@ -375,54 +457,10 @@ class MessageBus:
             raise ValueError(f"target: unknown group {tgt[i]} in world {wld[i]} (sender {snd[i]})")
 
     def _bandwidth(self, snd: np.ndarray, step: int) -> np.ndarray:
-        # Rank each agent's messages within this call (stable: call order), add what it already sent this
-        # step, accept ranks below the limit.
         acc = np.ones(snd.shape[0], dtype=bool)
-        bw = self.channel.bandwidth
-        a = np.flatnonzero(snd >= 0)
-        if bw == 0 or a.size == 0:
-            return acc
-        order = a[np.argsort(snd[a], kind="stable")]
-        ss = snd[order]
-        first = np.empty(ss.shape[0], dtype=bool)
-        first[0] = True
-        np.not_equal(ss[1:], ss[:-1], out=first[1:])
-        pos = np.arange(ss.shape[0])
-        starts = np.flatnonzero(first)
-        rank = pos - np.repeat(starts, np.diff(np.append(starts, ss.shape[0])))
-        used = np.where(self._bw_step[ss] == step, self._bw_used[ss], 0)
-        ok = used + rank < bw
-        acc[order] = ok
-        u = ss[starts]
-        self._bw_used[u] = used[starts] + np.add.reduceat(ok.astype(np.int64), starts)
-        self._bw_step[u] = step
+        if self.channel.bandwidth > 0:
+            _bandwidth_kernel(snd, step, self.channel.bandwidth, self._bw_used, self._bw_step, acc)
         return acc
-
-    def _enqueue(self, ids, kinds, snd, tgt, wld, created, pay) -> None:  # type: ignore[no-untyped-def]
-        k = ids.shape[0]
-        if k == 0:
-            return
-        cap = self._q["msg"].shape[0]
-        if self._tail + k > cap:
-            live = self._tail - self._head
-            new_cap = max(cap, 2 * (live + k)) if live + k > cap // 2 else cap
-            for c in _QUEUE_COLUMNS:
-                a = np.empty(new_cap, dtype=self._q[c].dtype)
-                a[:live] = self._q[c][self._head:self._tail]
-                self._q[c] = a
-            p = np.empty((new_cap, self.payload_dim), dtype=np.float32)
-            p[:live] = self._qp[self._head:self._tail]
-            self._qp = p
-            self._head, self._tail = 0, live
-        due = created + self.channel.latency
-        sl = slice(self._tail, self._tail + k)
-        for c, v in zip(_QUEUE_COLUMNS, (ids, kinds, snd, tgt, wld, created, due), strict=True):
-            self._q[c][sl] = v
-        self._qp[sl] = pay
-        self._tail += k
-        if due.min() < self._last_due:
-            self._sorted = False
-        self._last_due = max(self._last_due, int(due.max()))
 
     # ------------------------------------------------------------------ delivery
     def deliver(self, step: int, pos: np.ndarray, online: np.ndarray, group: np.ndarray) -> DeliveryEvents:
@@ -438,22 +476,17 @@ class MessageBus:
             The step's events (sent since the previous call, delivered and dropped).
         """
         s_n = self.n_slots
-        pos = np.asarray(pos)
-        online = np.asarray(online, dtype=bool)
-        group = np.asarray(group)
+        pos, online, group = np.asarray(pos), np.asarray(online, dtype=bool), np.asarray(group)
         if pos.shape != (s_n, 3) or online.shape != (s_n,) or group.shape != (s_n,):
             raise ValueError(f"pos must be ({s_n}, 3), online and group ({s_n},); got {pos.shape}, "
-                             f"{online.shape}, {group.shape}")
+                             f"{online.shape}, {group.shape}")  # fmt: skip
         delivered: list[MessageLog] = []
-        while True:  # a second round only when latency-0 heartbeat answers became due in this call
-            batch = self._pop_due(int(step))
-            if batch is None:
-                break
-            self._deliver_batch(batch, int(step), pos, online, group, delivered)
-        ev = DeliveryEvents(int(step), MessageLog.concat(self._sent_log), MessageLog.concat(delivered),
-                            MessageLog.concat(self._drop_log))
+        while (batch := self._queue.pop_due(int(step))) is not None:
+            # a second round happens only when latency-0 heartbeat answers became due in this call
+            delivered.append(self._deliver_batch(batch, int(step), pos, online, group))
+        sent, dropped = MessageLog.concat(self._sent_log), MessageLog.concat(self._drop_log)
         self._sent_log, self._drop_log = [], []
-        return ev
+        return DeliveryEvents(int(step), sent, MessageLog.concat(delivered), dropped)
 
     def take_answers(self) -> tuple[np.ndarray, np.ndarray]:
         """Heartbeat answers that reached the controller since the previous call.
@@ -467,95 +500,89 @@ class MessageBus:
         self._ans_slot, self._ans_step = [], []
         return out
 
-    def _pop_due(self, step: int) -> dict[str, np.ndarray] | None:
-        h, t = self._head, self._tail
-        if h == t:
-            return None
-        if not self._sorted:
-            order = h + np.argsort(self._q["due"][h:t], kind="stable")
-            for c in _QUEUE_COLUMNS:
-                self._q[c][h:t] = self._q[c][order]
-            self._qp[h:t] = self._qp[order]
-            self._sorted = True
-        n = int(np.searchsorted(self._q["due"][h:t], step, side="right"))
-        if n == 0:
-            return None
-        batch = {c: self._q[c][h:h + n].copy() for c in _QUEUE_COLUMNS}
-        batch["payload"] = self._qp[h:h + n].copy()
-        self._head = h + n
-        if self._head == self._tail:
-            self._head = self._tail = 0
-        return batch
-
-    def _deliver_batch(self, b, step, pos, online, group, delivered) -> None:  # type: ignore[no-untyped-def]
+    def _expand(self, b, online, group) -> tuple[np.ndarray, np.ndarray]:  # type: ignore[no-untyped-def]
+        # Returns (message index, receiver) per pair, in queue order then slot order. A GROUP message's
+        # receivers are the online members of (world, group): a contiguous run of a key-sorted slot list,
+        # found by binary search, so the expansion is linear in the receivers.
         kind, snd, tgt = b["kind"], b["sender"], b["target"]
         q = kind.shape[0]
         is_grp = kind == GROUP
+        if not is_grp.any():
+            return np.arange(q), tgt
+        ms = np.flatnonzero(online & (group >= 0))
+        n_g = int(max(group.max(initial=-1), tgt[is_grp].max())) + 1
+        keys = self._world_of[ms] * n_g + group[ms]
+        order = np.argsort(keys, kind="stable")
+        sk, slots_sorted = keys[order], ms[order]
+        gk = b["world"][is_grp] * n_g + tgt[is_grp]
+        lo = np.searchsorted(sk, gk, side="left")
         cnt = np.ones(q, dtype=np.int64)
-        if is_grp.any():
-            # Members of (world, group) as contiguous runs of a key-sorted slot list; a message's receivers
-            # are its run (found by binary search), so the expansion is linear in the receivers.
-            ms = np.flatnonzero(online & (group >= 0))
-            n_g = int(max(group.max(initial=-1), tgt[is_grp].max())) + 1
-            keys = self._world_of[ms] * n_g + group[ms]
-            order = np.argsort(keys, kind="stable")
-            sk, slots_sorted = keys[order], ms[order]
-            gk = b["world"][is_grp] * n_g + tgt[is_grp]
-            lo = np.searchsorted(sk, gk, side="left")
-            cnt[is_grp] = np.searchsorted(sk, gk, side="right") - lo
-            start = np.zeros(q, dtype=np.int64)
-            start[is_grp] = lo
+        cnt[is_grp] = np.searchsorted(sk, gk, side="right") - lo
+        start = np.zeros(q, dtype=np.int64)
+        start[is_grp] = lo
         rep = np.repeat(np.arange(q), cnt)
         recv = tgt[rep]
-        if is_grp.any():
-            gm = is_grp[rep]
-            offs = np.arange(rep.shape[0]) - np.repeat(np.cumsum(cnt) - cnt, cnt)
-            recv[gm] = slots_sorted[start[rep[gm]] + offs[gm]]
-            keep = ~(gm & (recv == snd[rep]))
-            rep, recv = rep[keep], recv[keep]
+        gm = is_grp[rep]
+        offs = np.arange(rep.shape[0]) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+        recv[gm] = slots_sorted[start[rep[gm]] + offs[gm]]
+        keep = ~(gm & (recv == snd[rep]))
+        return rep[keep], recv[keep]
+
+    def _deliver_batch(self, b, step, pos, online, group) -> MessageLog:  # type: ignore[no-untyped-def]
+        rep, recv = self._expand(b, online, group)
         m = rep.shape[0]
-        s_rep = snd[rep]
+        kind, s_rep = b["kind"][rep], b["sender"][rep]
         reason = np.zeros(m, dtype=np.int8)
-        to_slot = recv >= 0
+        to_slot = recv >= 0  # -1: a heartbeat answer to the controller
         reason[to_slot & ~online[np.maximum(recv, 0)]] = DROP_OFFLINE
         r_max = self.channel.max_range
         if r_max is not None:
             chk = np.flatnonzero(to_slot & (s_rep >= 0) & (reason == REASON_NONE))
             d = pos[s_rep[chk]] - pos[recv[chk]]
-            far = chk[np.einsum("ij,ij->i", d, d) > r_max * r_max]
-            reason[far] = DROP_RANGE
+            reason[chk[np.einsum("ij,ij->i", d, d) > r_max * r_max]] = DROP_RANGE
         if self.channel.loss > 0.0:
             u = self.rng.random(m)
             reason[(reason == REASON_NONE) & (u < self.channel.loss)] = DROP_LOSS
+        log = MessageLog.make(
+            b["msg"][rep], kind, s_rep, b["target"][rep], recv, b["created"][rep], step, reason
+        )
         ok = reason == REASON_NONE
-        log_cols = (b["msg"][rep], kind[rep], s_rep, tgt[rep], recv, b["created"][rep])
-        steps = np.full(m, step, dtype=np.int64)
         if not ok.all():
-            d = ~ok
-            self._drop_log.append(MessageLog(*(c[d] for c in log_cols), steps[d], reason[d]))
-            self.inbox.add_dropped(np.where(to_slot[d], recv[d], s_rep[d]))
-        if ok.all():
-            delivered.append(MessageLog(*log_cols, steps, reason))
-        else:
-            delivered.append(MessageLog(*(c[ok] for c in log_cols), steps[ok], reason[ok]))
+            self._drop_log.append(log.take(~ok))
+            self.inbox.add_dropped(np.where(to_slot, recv, s_rep)[~ok])
         push = np.flatnonzero(ok & to_slot)
         if push.size:
             rp = rep[push]
-            self.inbox.push(recv[push], kind[rp], snd[rp], 0, b["created"][rp], b["payload"][rp])
+            self.inbox.push(recv[push], kind[push], s_rep[push], 0, b["created"][rp], b["payload"][rp])
         ans = ok & ~to_slot
         if ans.any():
             self._ans_slot.append(s_rep[ans])
-            self._ans_step.append(steps[ans])
-        hb = np.flatnonzero(ok & to_slot & (kind[rep] == HEARTBEAT))
+            self._ans_step.append(np.full(int(ans.sum()), step, dtype=np.int64))
+        hb = recv[ok & to_slot & (kind == HEARTBEAT)]
         if hb.size:  # each member that got a heartbeat answers the controller through the channel
-            k = hb.size
-            ids = np.arange(self._next_id, self._next_id + k, dtype=np.int64)
-            self._next_id += k
-            a_snd, a_tgt, a_k = recv[hb], np.full(k, -1, dtype=np.int64), np.full(k, HEARTBEAT, dtype=np.int8)
-            st = np.full(k, step, dtype=np.int64)
-            self._sent_log.append(MessageLog(ids, a_k, a_snd, a_tgt, a_tgt, st, st, np.zeros(k, dtype=np.int8)))
-            self._enqueue(ids, a_k, a_snd, a_tgt, self._world_of[a_snd], st,
-                          np.zeros((k, self.payload_dim), dtype=np.float32))
+            a = MessageLog.make(self._new_ids(hb.size), HEARTBEAT, hb, -1, -1, step, step)
+            self._sent_log.append(a)
+            zeros = np.zeros((hb.size, self.payload_dim), dtype=np.float32)
+            self._queue.append(zeros, msg=a.msg, kind=a.kind, sender=hb, target=a.target,
+                               world=self._world_of[hb], created=a.created,
+                               due=a.created + self.channel.latency)  # fmt: skip
+        return log if push.size == m else log.take(ok)
+
+
+@nb.njit(cache=True)
+def _bandwidth_kernel(snd, step, bw, used, stamp, acc):  # type: ignore[no-untyped-def]
+    # In call order: an agent's count restarts when its stamp is an older step; accept below the limit.
+    for i in range(snd.shape[0]):
+        s = snd[i]
+        if s < 0:
+            continue  # the environment / controller is not limited
+        if stamp[s] != step:
+            stamp[s] = step
+            used[s] = 0
+        if used[s] < bw:
+            used[s] += 1
+        else:
+            acc[i] = False
 
 
 def _int_vector(x: np.ndarray, name: str, k: int | None = None) -> np.ndarray:

@@ -6,7 +6,9 @@ into which the bus (``comms.bus``) and the overlay (``comms.overlay``) push what
 
 Inbox layout: per slot the ``M`` newest received messages, **newest first** (row 0 is the newest). A push
 shifts older rows down; a message pushed past row ``M - 1`` is forgotten (it was still *received*, so it is
-counted in ``received``; only messages lost before reaching the slot count in ``dropped``).
+counted in ``received``). ``dropped`` counts messages lost on the way: those addressed to the slot (receiver
+offline, out of range, lost) and the slot's own messages refused for bandwidth or lost on the way to the
+group controller (see ``comms.bus``).
 
 Observation features per message (``Inbox.observe``), ``FEATURES_PER_MESSAGE + D`` float32 values:
 
@@ -98,6 +100,7 @@ def _push_kernel(valid, kind, sender, hops, created, payload, received, r, k_, s
     # messages, capped at M) and writes message j of a receiver, which has `cnt - 1 - seen` newer ones after
     # it in this call, at that row index. Cost O(k + touched * M * D).
     n_slots, m = valid.shape
+    d = payload.shape[2]
     cnt = np.zeros(n_slots, dtype=np.int64)
     seen = np.zeros(n_slots, dtype=np.int64)
     for j in range(r.shape[0]):
@@ -112,7 +115,8 @@ def _push_kernel(valid, kind, sender, hops, created, payload, received, r, k_, s
                 sender[s, i] = sender[s, i - shift]
                 hops[s, i] = hops[s, i - shift]
                 created[s, i] = created[s, i - shift]
-                payload[s, i, :] = payload[s, i - shift, :]
+                for c in range(d):  # explicit loops: numba slice copies cost ~10x more for small D
+                    payload[s, i, c] = payload[s, i - shift, c]
             received[s] += cnt[s]
         idx = cnt[s] - 1 - seen[s]
         seen[s] += 1
@@ -122,7 +126,8 @@ def _push_kernel(valid, kind, sender, hops, created, payload, received, r, k_, s
             sender[s, idx] = s_[j]
             hops[s, idx] = h_[j]
             created[s, idx] = c_[j]
-            payload[s, idx, :] = p_[j, :]
+            for c in range(d):
+                payload[s, idx, c] = p_[j, c]
 
 
 @nb.njit(cache=True)
@@ -132,7 +137,8 @@ def _observe_kernel(valid, kind, sender, hops, created, payload, pos, step, pos_
     for s in range(n_slots):
         for i in range(m):
             row = out[s, i]
-            row[:] = 0.0
+            for c in range(row.shape[0]):
+                row[c] = 0.0
             if not valid[s, i]:
                 continue
             row[0] = 1.0
@@ -168,8 +174,20 @@ class Inbox:
     """
 
     __slots__ = (
-        "n_slots", "size", "payload_dim", "age_horizon", "hop_horizon", "pos_scale",
-        "valid", "kind", "sender", "hops", "created", "payload", "received", "dropped",
+        "n_slots",
+        "size",
+        "payload_dim",
+        "age_horizon",
+        "hop_horizon",
+        "pos_scale",
+        "valid",
+        "kind",
+        "sender",
+        "hops",
+        "created",
+        "payload",
+        "received",
+        "dropped",
     )
 
     def __init__(
@@ -193,8 +211,11 @@ class Inbox:
             pos_scale: Divisor of the relative-position features in metres (> 0).
         """
         for name, value, lo in (
-            ("n_slots", n_slots, 1), ("size", size, 1), ("payload_dim", payload_dim, 0),
-            ("age_horizon", age_horizon, 1), ("hop_horizon", hop_horizon, 1),
+            ("n_slots", n_slots, 1),
+            ("size", size, 1),
+            ("payload_dim", payload_dim, 0),
+            ("age_horizon", age_horizon, 1),
+            ("hop_horizon", hop_horizon, 1),
         ):
             if int(value) != value or int(value) < lo:
                 raise ValueError(f"{name} must be an integer >= {lo}, got {value!r}")
@@ -202,7 +223,11 @@ class Inbox:
             raise ValueError(f"pos_scale must be a finite number > 0, got {pos_scale!r}")
         s, m, d = int(n_slots), int(size), int(payload_dim)
         self.n_slots, self.size, self.payload_dim = s, m, d
-        self.age_horizon, self.hop_horizon, self.pos_scale = int(age_horizon), int(hop_horizon), float(pos_scale)
+        self.age_horizon, self.hop_horizon, self.pos_scale = (
+            int(age_horizon),
+            int(hop_horizon),
+            float(pos_scale),
+        )
         self.valid = np.zeros((s, m), dtype=bool)
         self.kind = np.zeros((s, m), dtype=np.int8)
         self.sender = np.full((s, m), -1, dtype=np.int64)
@@ -241,7 +266,9 @@ class Inbox:
         if k == 0:
             return
         if r.min() < 0 or r.max() >= self.n_slots:
-            raise ValueError(f"receiver must be slots in [0, {self.n_slots}), got min {r.min()} max {r.max()}")
+            raise ValueError(
+                f"receiver must be slots in [0, {self.n_slots}), got min {r.min()} max {r.max()}"
+            )
         kd = np.broadcast_to(np.asarray(kind), (k,)).astype(np.int8)
         if kd.min() < 1 or kd.max() > N_KINDS:
             raise ValueError(f"kind must be in 1..{N_KINDS} ({', '.join(KIND_NAMES.values())})")
@@ -254,8 +281,19 @@ class Inbox:
         if p.shape != (k, self.payload_dim):
             raise ValueError(f"payload must have shape ({k}, {self.payload_dim}), got {p.shape}")
         _push_kernel(
-            self.valid, self.kind, self.sender, self.hops, self.created, self.payload, self.received,
-            r, kd, sd, hd, cd, np.ascontiguousarray(p),
+            self.valid,
+            self.kind,
+            self.sender,
+            self.hops,
+            self.created,
+            self.payload,
+            self.received,
+            r,
+            kd,
+            sd,
+            hd,
+            cd,
+            np.ascontiguousarray(p),
         )
 
     def add_dropped(self, slots: np.ndarray) -> None:
@@ -289,8 +327,18 @@ class Inbox:
         if p.shape != (self.n_slots, 3):
             raise ValueError(f"pos must have shape ({self.n_slots}, 3), got {p.shape}")
         _observe_kernel(
-            self.valid, self.kind, self.sender, self.hops, self.created, self.payload, p, int(step),
-            self.pos_scale, self.age_horizon, self.hop_horizon, out,
+            self.valid,
+            self.kind,
+            self.sender,
+            self.hops,
+            self.created,
+            self.payload,
+            p,
+            int(step),
+            self.pos_scale,
+            self.age_horizon,
+            self.hop_horizon,
+            out,
         )
         return out
 

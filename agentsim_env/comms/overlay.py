@@ -11,8 +11,7 @@ range graph to a slot of the flood's frontier (the slots that read it at the pre
 not read it yet, reads it now with ``hops = frontier hops + 1`` and forms the next frontier. A flood stops
 when its frontier is empty or its hop count reaches its hop limit, and its table row is recycled at once
 (so a flood id is only meaningful while the flood is active, and in the deliveries of the call that ends
-it). With
-``full_propagation=True`` a flood runs to its hop limit within one call.
+it). With ``full_propagation=True`` a flood runs to its hop limit within one call.
 
 The range graph of a call has an edge ``(i, j)`` when both slots are online, in the same world, and
 ``dist(i, j) <= min(range_i, range_j)`` (a link needs both radios to reach). The candidate pairs come from
@@ -119,79 +118,87 @@ def _build_csr(pi, pj, pos, online, world, rng, n):  # type: ignore[no-untyped-d
 
 
 @nb.njit(cache=True)
-def _grow_i64(a, n):  # type: ignore[no-untyped-def]
-    b = np.empty(max(16, 2 * a.shape[0]), dtype=np.int64)
-    b[:n] = a[:n]
-    return b
-
-
-@nb.njit(cache=True)
-def _grow_i32(a, n):  # type: ignore[no-untyped-def]
-    b = np.empty(max(16, 2 * a.shape[0]), dtype=np.int32)
-    b[:n] = a[:n]
-    return b
-
-
-@nb.njit(cache=True)
-def _spread(indptr, indices, bits, hops, limit, cur_f, cur_n, full):  # type: ignore[no-untyped-def]
-    # The frontier is kept grouped by flood (contiguous runs); expanding the runs in order keeps the next
-    # frontier grouped too, so each run is one flood's hop and its end is where the flood may stop.
+def _hop(indptr, indices, bits, hops, limit, cur_f, cur_n, nxt_f, nxt_n, out_r, out_f, out_h, nd, fin, nfin):  # type: ignore[no-untyped-def]  # noqa: E501
+    # One hop of every flood in the frontier. The frontier is grouped by flood (contiguous runs); expanding
+    # the runs in order keeps the next frontier grouped too, so the end of a run is where its flood may stop.
+    # Buffers are sized by the caller from the frontier's degree sum, so no bounds growth happens here.
     ncur = cur_f.shape[0]
-    cap = max(16, 4 * ncur)
-    nxt_f = np.empty(cap, dtype=np.int64)
-    nxt_n = np.empty(cap, dtype=np.int64)
-    out_r = np.empty(cap, dtype=np.int64)
-    out_f = np.empty(cap, dtype=np.int64)
-    out_h = np.empty(cap, dtype=np.int32)
-    fin = np.empty(max(1, ncur), dtype=np.int64)  # each flood of the frontier ends at most once
+    nn = 0
+    dups = 0
+    a = 0
+    while a < ncur:
+        f = cur_f[a]
+        b = a
+        while b < ncur and cur_f[b] == f:
+            b += 1
+        h = hops[f] + 1
+        run0 = nn
+        for q in range(a, b):
+            u = cur_n[q]
+            for p in range(indptr[u], indptr[u + 1]):
+                v = indices[p]
+                w = v >> 6
+                m = np.uint64(1) << np.uint64(v & 63)
+                if bits[f, w] & m:
+                    dups += 1
+                    continue
+                bits[f, w] |= m
+                nxt_f[nn] = f
+                nxt_n[nn] = v
+                nn += 1
+                out_r[nd] = v
+                out_f[nd] = f
+                out_h[nd] = h
+                nd += 1
+        hops[f] = h
+        if nn == run0 or h >= limit[f]:
+            nn = run0  # the flood ends here: its new readers keep the message but do not relay it
+            fin[nfin] = f
+            nfin += 1
+        a = b
+    return nn, nd, nfin, dups
+
+
+@nb.njit(cache=True)
+def _grow(a, n, keep):  # type: ignore[no-untyped-def]
+    b = np.empty(max(n, 2 * a.shape[0]), dtype=a.dtype)
+    b[:keep] = a[:keep]
+    return b
+
+
+@nb.njit(cache=True)
+def _spread(indptr, indices, bits, hops, limit, cur_f, cur_n, full, nxt_f, nxt_n, out_r, out_f, out_h):  # type: ignore[no-untyped-def]
+    # Scratch buffers persist across calls (the caller keeps the returned ones): fresh multi-megabyte
+    # allocations each step would cost more in page faults than the flooding itself.
+    fin = np.empty(max(1, cur_f.shape[0]), dtype=np.int64)  # each flood of the frontier ends at most once
     nd = 0
     nfin = 0
     dups = 0
-    while ncur > 0:
-        nn = 0
-        a = 0
-        while a < ncur:
-            f = cur_f[a]
-            b = a
-            while b < ncur and cur_f[b] == f:
-                b += 1
-            h = hops[f] + 1
-            run0 = nn
-            for q in range(a, b):
-                u = cur_n[q]
-                for p in range(indptr[u], indptr[u + 1]):
-                    v = indices[p]
-                    w = v >> 6
-                    m = np.uint64(1) << np.uint64(v & 63)
-                    if bits[f, w] & m:
-                        dups += 1
-                    bits[f, w] |= m
-                    if nn == nxt_f.shape[0]:
-                        nxt_f = _grow_i64(nxt_f, nn)
-                        nxt_n = _grow_i64(nxt_n, nn)
-                    nxt_f[nn] = f
-                    nxt_n[nn] = v
-                    nn += 1
-                    if nd == out_r.shape[0]:
-                        out_r = _grow_i64(out_r, nd)
-                        out_f = _grow_i64(out_f, nd)
-                        out_h = _grow_i32(out_h, nd)
-                    out_r[nd] = v
-                    out_f[nd] = f
-                    out_h[nd] = h
-                    nd += 1
-            hops[f] = h
-            if nn == run0 or h >= limit[f]:
-                nn = run0  # the flood ends here: its new readers keep the message but do not relay it
-                fin[nfin] = f
-                nfin += 1
-            a = b
+    while cur_f.shape[0] > 0:
+        bound = 0  # new readers this hop <= edges leaving the frontier
+        for q in range(cur_n.shape[0]):
+            bound += indptr[cur_n[q] + 1] - indptr[cur_n[q]]
+        if nd + bound > out_r.shape[0]:
+            out_r = _grow(out_r, nd + bound, nd)
+            out_f = _grow(out_f, nd + bound, nd)
+            out_h = _grow(out_h, nd + bound, nd)
+        if bound > nxt_f.shape[0]:
+            nxt_f = _grow(nxt_f, bound, 0)
+            nxt_n = _grow(nxt_n, bound, 0)
+        nn, nd, nfin, d = _hop(
+            indptr, indices, bits, hops, limit, cur_f, cur_n, nxt_f, nxt_n, out_r, out_f, out_h, nd, fin, nfin
+        )
+        dups += d
         cur_f = nxt_f[:nn].copy()
         cur_n = nxt_n[:nn].copy()
-        ncur = nn
         if not full:
             break
-    return cur_f, cur_n, out_r[:nd].copy(), out_f[:nd].copy(), out_h[:nd].copy(), fin[:nfin].copy(), dups
+    return cur_f, cur_n, nd, fin[:nfin].copy(), dups, nxt_f, nxt_n, out_r, out_f, out_h
+
+
+def _new_scratch() -> tuple[np.ndarray, ...]:
+    # Kernel buffers reused across calls: next frontier (flood, slot) and deliveries (receiver, flood, hops).
+    return tuple(np.empty(0, dtype=np.int64) for _ in range(4)) + (np.empty(0, dtype=np.int32),)
 
 
 class Overlay:
@@ -211,7 +218,7 @@ class Overlay:
     __slots__ = (
         "n_slots", "payload_dim", "full_propagation", "_words", "_range", "_bits", "_origin", "_limit",
         "_hops", "_created", "_payload", "_active", "_free", "_n_free", "_front_f", "_front_n",
-        "_pending_started", "_last", "_totals",
+        "_pending_started", "_last", "_totals", "_scratch",
     )  # fmt: skip
 
     def __init__(
@@ -235,6 +242,17 @@ class Overlay:
         self._range = np.zeros(self.n_slots)
         self.set_range(comm_range)
         self._alloc(int(capacity))
+        self._scratch = _new_scratch()
+
+    def __getstate__(self) -> dict:
+        """Pickle the state without the kernel scratch buffers."""
+        return {k: getattr(self, k) for k in self.__slots__ if k != "_scratch"}
+
+    def __setstate__(self, state: dict) -> None:
+        """Restore a pickled state."""
+        for k, v in state.items():
+            setattr(self, k, v)
+        self._scratch = _new_scratch()
 
     # ------------------------------------------------------------------ state
     def _alloc(self, cap: int) -> None:
@@ -421,45 +439,29 @@ class Overlay:
             raise ValueError(f"pairs must hold slots in [0, {s})")
         started = self._pending_started
         self._pending_started = 0
-        if self._front_f.shape[0] == 0:
-            self._last = OverlayStats(started=started)
-            self._totals = self._totals + self._last
-            return self._empty()
-        indptr, indices = _build_csr(pi, pj, pos, online, world, self._range, s)
-        nf, nn, rcv, fl, hp, fin, dups = _spread(
-            indptr,
-            indices,
-            self._bits,
-            self._hops,
-            self._limit,
-            self._front_f,
-            self._front_n,
-            self.full_propagation,
-        )
+        if self._front_f.shape[0]:
+            indptr, indices = _build_csr(pi, pj, pos, online, world, self._range, s)
+        else:  # nothing to spread: skip the adjacency
+            indptr, indices = np.zeros(s + 1, dtype=np.int64), np.empty(0, dtype=np.int64)
+        nf, nn, nd, fin, dups, *scratch = _spread(
+            indptr, indices, self._bits, self._hops, self._limit, self._front_f, self._front_n,
+            self.full_propagation, *self._scratch,
+        )  # fmt: skip
+        self._scratch = tuple(scratch)
+        fl = scratch[3][:nd].copy()
         self._front_f, self._front_n = nf, nn
         if fin.shape[0]:
             self._active[fin] = False
             self._free[self._n_free : self._n_free + fin.shape[0]] = fin[::-1]
             self._n_free += fin.shape[0]
         out = Deliveries(
-            receiver=rcv,
+            receiver=scratch[2][:nd].copy(),
             flood=fl,
             origin=self._origin[fl],
-            hops=hp,
+            hops=scratch[4][:nd].copy(),
             created=self._created[fl],
-            payload=self._payload[fl],
+            payload=np.take(self._payload, fl, axis=0),  # much faster than fancy indexing of rows
         )
         self._last = OverlayStats(started, len(out), int(dups), int(fin.shape[0]))
         self._totals = self._totals + self._last
         return out
-
-    def _empty(self) -> Deliveries:
-        e = np.empty(0, dtype=np.int64)
-        return Deliveries(
-            e,
-            e.copy(),
-            e.copy(),
-            np.empty(0, dtype=np.int32),
-            e.copy(),
-            np.empty((0, self.payload_dim), dtype=np.float32),
-        )

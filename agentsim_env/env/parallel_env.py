@@ -126,41 +126,75 @@ class AgentSimParallelEnv(ParallelEnv):
         rewards = dict(zip(live, rew))
         terms = dict(zip(live, term))
         truncs = dict(zip(live, trunc))
-        info_cols = {k: v[idx].tolist() for k, v in res.info.items()}
-        infos = {a: {k: col[n] for k, col in info_cols.items()} for n, a in enumerate(live)}
+        keys = list(res.info)
+        cols = [res.info[k][idx].tolist() for k in keys]
+        infos = {a: dict(zip(keys, vals)) for a, vals in zip(live, zip(*cols))} if keys else {a: {} for a in live}
         self.agents = [a for a, t, u in zip(live, term, trunc) if not (t or u)]
         if self.render_mode == "human":
             self.render()
         return obs, rewards, terms, truncs, infos
 
     def _validate_actions(self, actions: dict[str, Any]) -> dict[str, np.ndarray]:
+        """Stack the actions of live agents into per-part arrays over slots (validated, clipped).
+
+        The fast path converts each part for all agents at once; only when something is wrong does the slow
+        path check agent by agent, so the error names the agent and the part.
+        """
         if not isinstance(actions, dict):
             raise ValueError(f"actions must be a dict agent id -> action, got {type(actions).__name__}")
-        live = set(self.agents)
-        for a in actions:
-            if a not in self._index:
-                raise ValueError(f"unknown agent id {a!r} in actions")
-            if a not in live:
-                raise ValueError(f"agent {a!r} is no longer live (terminated or truncated); remove it from actions")
-        missing = [a for a in self.agents if a not in actions]
-        if missing:
+        live = self.agents
+        if len(actions) != len(live) or any(a not in actions for a in live):
+            live_set = set(live)
+            for a in actions:
+                if a not in self._index:
+                    raise ValueError(f"unknown agent id {a!r} in actions")
+                if a not in live_set:
+                    raise ValueError(f"agent {a!r} is no longer live (terminated or truncated); remove it from actions")
+            missing = [a for a in live if a not in actions]
             raise ValueError(f"missing actions for live agent(s) {missing[:5]}")
         parts = self.scenario.act_parts()
+        idx = np.fromiter((self._index[a] for a in live), dtype=np.int64, count=len(live))
         s = self.world.state.n_slots
         out = {name: np.zeros((s, p.size)) for name, p in parts.items()}
-        for a, act in actions.items():
-            decoded = split_action(act, parts, self.action_format, a)
-            i = self._index[a]
-            for name, v in decoded.items():
-                out[name][i] = v
+        try:
+            if self.action_format == "flat":
+                total = sum(p.size for p in parts.values())
+                arr = np.asarray([actions[a] for a in live], dtype=np.float64)
+                if arr.shape != (len(live), total) or not np.isfinite(arr).all():
+                    raise ValueError
+                start = 0
+                for name, p in parts.items():
+                    out[name][idx] = arr[:, start : start + p.size]
+                    start += p.size
+            else:
+                names = list(parts)
+                for a in live:
+                    act = actions[a]
+                    if not isinstance(act, dict) or len(act) != len(names):
+                        raise ValueError
+                for name, p in parts.items():
+                    arr = np.asarray([actions[a][name] for a in live], dtype=np.float64).reshape(len(live), -1)
+                    if arr.shape[1] != p.size or not np.isfinite(arr).all():
+                        raise ValueError
+                    out[name][idx] = arr
+        except (ValueError, TypeError, KeyError):
+            for a in live:  # slow path: find the culprit and raise naming it
+                split_action(actions[a], parts, self.action_format, a)
+            raise ValueError("actions could not be stacked; check that every action has the same layout") from None
+        for name, p in parts.items():
+            np.clip(out[name], p.low, p.high, out=out[name])
         return out
 
     def _obs_dicts(self, parts: dict[str, np.ndarray], acting: np.ndarray) -> dict[str, Any]:
+        """Per-agent observations of the live agents, built once from the part arrays (rows of fresh arrays)."""
         s = self.world.state.n_slots
+        idx = [self._index[a] for a in self.agents]
         if self.obs_format == "flat":
             flat = np.concatenate([p.reshape(s, -1) for p in parts.values()], axis=1).astype(np.float32)
-            return {a: flat[self._index[a]] for a in self.agents}
-        return {a: {k: v[self._index[a]] for k, v in parts.items()} for a in self.agents}
+            return dict(zip(self.agents, flat[idx]))
+        keys = list(parts)
+        rows = [list(parts[k][idx]) for k in keys]
+        return {a: dict(zip(keys, vals)) for a, vals in zip(self.agents, zip(*rows))}
 
     # ------------------------------------------------------------------ extras
     def state(self) -> np.ndarray:

@@ -1,0 +1,5 @@
+"""Groups: ids, run-time reassignment, group broadcast, heartbeats and timeouts."""
+
+from agentsim_env.groups.controller import GroupController, GroupEvents
+
+__all__ = ["GroupController", "GroupEvents"]

@@ -42,8 +42,9 @@ __all__ = ["PhysicsContacts", "PymunkPlanarBackend"]
 
 _AGENT_TYPE = 1
 _OBSTACLE_TYPE = 2
-# Parking row for offline bodies: far outside any world (|y| of online agents is not limited, but no
-# sensible scene reaches 1e9 m) and spread out so the broad phase never pairs parked bodies.
+# Parking area for offline bodies: far from any sensible scene so the broad phase never pairs them with
+# online bodies (their shape filter would reject the pair anyway) and spread out so parked bodies do not
+# pair with each other.
 _PARK_Y = -1.0e9
 
 
@@ -197,8 +198,12 @@ class PymunkPlanarBackend:
             "correction": self._correction,
         }
         self._x_offset = self._world_id * float(world_spacing)
-        # Distinct parking spots (3 max radii apart) keep parked bodies out of each other's bounding boxes.
-        self._park = np.stack([self._x_offset, _PARK_Y - 3.0 * r.max() * np.arange(n)], axis=1)
+        # Parking spots 3 max radii apart keep parked bodies out of each other's bounding boxes; a square
+        # grid, since pymunk's bounding-box tree degrades to quadratic insertion time on a sorted line.
+        side = int(np.ceil(np.sqrt(n)))
+        cell = 3.0 * r.max()
+        slots = np.arange(n)
+        self._park = np.stack([(slots % side) * cell, _PARK_Y - (slots // side) * cell], axis=1)
         self._r_list: list[float] = r.tolist()
         self._z_list: list[float] = [0.0] * n
         self._touch_now: set[tuple[int, int, int]] = set()

@@ -11,7 +11,11 @@ the range counts); a ray whose origin lies inside a shape (or below the ground) 
 exact ties go to the lower ``(hit_kind, hit_id)``. Offline slots scan nothing and are invisible.
 
 The grid kernel (:class:`ProximitySensor`) and the brute-force numpy reference (:func:`scan_reference`,
-used by the tests) share these conventions exactly.
+used by the tests) share these conventions exactly. The kernel finds agents through the step's agent grid
+(``spatial.build_grid`` over the online slots, built from the same positions) and objects through the
+object grid (``spatial.build_object_grid`` with ``scene.footprint_radius()``); both are keyed by world.
+Per candidate it rejects by bounding sphere vs range, then tests only the azimuths whose horizontal
+projection can cross the candidate's bounding disc, so the cost per agent stays flat as N grows.
 """
 
 from __future__ import annotations
@@ -33,6 +37,7 @@ _BOX, _CYL, _SPH = 0, 1, 2
 # A direction component below this is treated as parallel to the slab / cylinder axis; the kernel and the
 # reference apply the same rule, so they take the same branch.
 _EPS = 1e-12
+_ATAN_ERR = 1e-5  # bound on the azimuth-window angle error (fast atan2 + rounding), in radians
 
 
 @dataclass(frozen=True)
@@ -158,14 +163,35 @@ def _ray_shape(shape, px, py, pz, dx, dy, dz, hx, hy, hz):  # type: ignore[no-un
 
 
 @nb.njit(cache=True)
-def _candidate(px, py, pz, shape, hx, hy, hz, rb_h, rb_3, kind, ident, rng, psi, wd, n_az, bt, bk, bi):  # type: ignore[no-untyped-def]
-    # p = ray origin - candidate centre; rb_h / rb_3: horizontal / 3D bounding radii of the candidate.
+def _atan2_approx(y, x):  # type: ignore[no-untyped-def]
+    # atan2 within 5e-7 rad (a fitted polynomial on [0, 1] plus octant folding): several times cheaper
+    # than libm, and the azimuth window only needs a bound (callers widen it by _ATAN_ERR).
+    ax, ay = abs(x), abs(y)
+    mx = max(ax, ay)
+    if mx == 0.0:
+        return 0.0
+    a = min(ax, ay) / mx
+    s = a * a
+    p = ((((0.00782548 * s - 0.03689863) * s + 0.08374156) * s - 0.13480406) * s + 0.19879872) * s
+    r = a * ((p - 0.33326375) * s + 0.99999933)
+    if ay > ax:
+        r = 0.5 * np.pi - r
+    if x < 0.0:
+        r = np.pi - r
+    return -r if y < 0.0 else r
+
+
+@nb.njit(cache=True, inline="always")
+def _candidate(px, py, pz, shape, h, rb_h, rb_3, kind, ident, rng, cs, dirs, n_az, bt, bk, bi):  # type: ignore[no-untyped-def]
+    # Test one candidate against the rays that can reach it; p = ray origin - candidate centre, h = its
+    # half extents, rb_h / rb_3 = its horizontal / 3D bounding radii. Keeps the nearest hit per ray in
+    # (bt, bk, bi), ties going to the lower (kind, id).
     d2 = px * px + py * py + pz * pz
     reach = rng + rb_3
     if d2 > reach * reach:  # its bounding sphere is out of range: no ray can hit it within range
         return
     lb = max(np.sqrt(d2) - rb_3, 0.0)  # no ray can hit it nearer than this
-    n_rings = wd.shape[0] // n_az
+    n_rings = dirs.shape[0] // n_az
     dh2 = px * px + py * py
     k_lo, k_hi = 0, n_az - 1
     x2 = rb_h * rb_h / dh2 if dh2 > 0.0 else 1.0
@@ -173,22 +199,26 @@ def _candidate(px, py, pz, shape, hx, hy, hz, rb_h, rb_3, kind, ident, rng, psi,
         # A ray's horizontal projection must cross the bounding disc, so only azimuths within
         # asin(rb_h / dh) <= tan(asin(rb_h / dh)) of the bearing to the centre can hit (at any elevation).
         step = 2.0 * np.pi / n_az
-        phi = np.arctan2(-py, -px) - psi
-        phi -= 2.0 * np.pi * np.floor(phi / (2.0 * np.pi))
-        delta = np.sqrt(x2 / (1.0 - x2)) + 1e-7
+        # Bearing to the centre in the body frame (rotated like the rays, so huge headings stay exact).
+        phi = _atan2_approx(cs[1] * px - cs[0] * py, -cs[0] * px - cs[1] * py)
+        if phi < 0.0:
+            phi += 2.0 * np.pi
+        delta = np.sqrt(x2 / (1.0 - x2)) + _ATAN_ERR
         lo_i = int(np.ceil((phi - delta) / step))
         hi_i = int(np.floor((phi + delta) / step))
         if hi_i - lo_i + 1 < n_az:
             k_lo, k_hi = lo_i, hi_i
     for kk in range(k_lo, k_hi + 1):
-        a = kk % n_az
-        if a < 0:
-            a += n_az
+        # The window spans less than one turn around phi in [0, 2 pi): one fold maps it into [0, n_az).
+        a = kk + n_az if kk < 0 else (kk - n_az if kk >= n_az else kk)
         for ring in range(n_rings):
             k = ring * n_az + a
             if lb > bt[k]:
                 continue
-            t = _ray_shape(shape, px, py, pz, wd[k, 0], wd[k, 1], wd[k, 2], hx, hy, hz)
+            # Rotate the body-frame ray by the heading here: only the few rays tested need it.
+            dx = cs[0] * dirs[k, 0] - cs[1] * dirs[k, 1]
+            dy = cs[1] * dirs[k, 0] + cs[0] * dirs[k, 1]
+            t = _ray_shape(shape, px, py, pz, dx, dy, dirs[k, 2], h[0], h[1], h[2])
             b = bt[k]
             if t < b or (t == b and (bk[k] == HIT_NONE or kind < bk[k] or (kind == bk[k] and ident < bi[k]))):
                 bt[k] = t
@@ -197,99 +227,18 @@ def _candidate(px, py, pz, shape, hx, hy, hz, rb_h, rb_3, kind, ident, rng, psi,
 
 
 @nb.njit(cache=True)
-def _rows(x, y, reach, ox, oy, cell, nx, ny, ca):  # type: ignore[no-untyped-def]
-    # Cell rows of column ``ca`` that meet the disc of radius ``reach`` around (x, y). Border columns
-    # extend to infinity (items outside the map are clamped into them), so the disc test stays exact.
-    lo = -np.inf if ca == 0 else ox + ca * cell
-    hi = np.inf if ca == nx - 1 else ox + (ca + 1) * cell
-    dx = max(lo - x, x - hi, 0.0)
-    hw = np.sqrt(max(reach * reach - dx * dx, 0.0)) + 1e-9 * (1.0 + reach)  # margin for rounding
-    if dx > reach + 1e-9 * (1.0 + reach):
-        return 0, -1
-    _, y0 = _cell_of(x, y - hw, ox, oy, cell, nx, ny)
-    _, y1 = _cell_of(x, y + hw, ox, oy, cell, nx, ny)
-    return y0, y1
-
-
-@nb.njit(cache=True)
-def _scan_slot(  # type: ignore[no-untyped-def]
-    i, pos, heading, srange, radius, online, world, rmax,
-    a_start, a_items, a_ox, a_oy, a_cell, a_nx, a_ny,
-    o_kind, o_centre, o_half, o_world, o_rbh, o_rb3,
-    o_start, o_items, o_ox, o_oy, o_cell, o_nx, o_ny,
-    dirs, n_az, use_agents, use_objects, use_ground, stamp, wd, bt, bk, bi, out_d, out_k, out_id,
-):
-    n_k = dirs.shape[0]
-    rng = srange[i]
-    x, y, z = pos[i, 0], pos[i, 1], pos[i, 2]
-    psi = heading[i]
-    c, s = np.cos(psi), np.sin(psi)
-    for k in range(n_k):
-        wd[k, 0] = c * dirs[k, 0] - s * dirs[k, 1]
-        wd[k, 1] = s * dirs[k, 0] + c * dirs[k, 1]
-        wd[k, 2] = dirs[k, 2]
-        bt[k] = rng
-        bk[k] = HIT_NONE
-        bi[k] = -1
-        if use_ground:
-            # The ground is the solid half-space z <= 0; its distance depends only on the elevation.
-            tg = np.inf
-            if z < 0.0:
-                tg = 0.0
-            elif wd[k, 2] < -_EPS:
-                tg = z / -wd[k, 2]
-            if tg <= rng:
-                bt[k] = tg
-                bk[k] = HIT_GROUND
-    w = world[i]
-    if use_agents:
-        # Agents are binned by centre, so the cells must reach range + the largest radius.
-        reach = rng + rmax
-        x0, _ = _cell_of(x - reach, y, a_ox, a_oy, a_cell, a_nx, a_ny)
-        x1, _ = _cell_of(x + reach, y, a_ox, a_oy, a_cell, a_nx, a_ny)
-        for ca in range(x0, x1 + 1):
-            y0, y1 = _rows(x, y, reach, a_ox, a_oy, a_cell, a_nx, a_ny, ca)
-            base = (w * a_nx + ca) * a_ny
-            # Rows of one column are consecutive cells, hence one contiguous run of items.
-            for q in range(a_start[base + y0], a_start[base + y1 + 1]):
-                j = a_items[q]
-                if j == i or not online[j] or world[j] != w:
-                    continue
-                r = radius[j]
-                _candidate(x - pos[j, 0], y - pos[j, 1], z - pos[j, 2], _SPH, r, r, r, r, r,
-                           HIT_AGENT, j, rng, psi, wd, n_az, bt, bk, bi)
-    if use_objects:
-        # Objects are registered in every cell their footprint touches, so range alone suffices.
-        x0, _ = _cell_of(x - rng, y, o_ox, o_oy, o_cell, o_nx, o_ny)
-        x1, _ = _cell_of(x + rng, y, o_ox, o_oy, o_cell, o_nx, o_ny)
-        for ca in range(x0, x1 + 1):
-            y0, y1 = _rows(x, y, rng, o_ox, o_oy, o_cell, o_nx, o_ny, ca)
-            base = (w * o_nx + ca) * o_ny
-            for q in range(o_start[base + y0], o_start[base + y1 + 1]):
-                o = o_items[q]
-                if stamp[o] == i or o_world[o] != w:  # objects span cells: visit each once per slot
-                    continue
-                stamp[o] = i
-                _candidate(x - o_centre[o, 0], y - o_centre[o, 1], z - o_centre[o, 2], o_kind[o],
-                           o_half[o, 0], o_half[o, 1], o_half[o, 2], o_rbh[o], o_rb3[o],
-                           HIT_OBJECT, o, rng, psi, wd, n_az, bt, bk, bi)
-    for k in range(n_k):
-        out_d[i, k] = bt[k] / rng
-        out_k[i, k] = bk[k]
-        out_id[i, k] = bi[k]
-
-
-@nb.njit(cache=True)
-def _scan_kernel(  # type: ignore[no-untyped-def]
-    pos, heading, srange, radius, online, world,
-    a_start, a_items, a_ox, a_oy, a_cell, a_nx, a_ny,
-    o_kind, o_centre, o_half, o_world,
-    o_start, o_items, o_ox, o_oy, o_cell, o_nx, o_ny,
-    dirs, n_az, use_agents, use_objects, use_ground, stamp, out_d, out_k, out_id,
-):
+def _scan_kernel(
+    pos, heading, srange, radius, online, world, a_grid, scene, o_grid, dirs, n_az, flags, stamp, out
+):  # type: ignore[no-untyped-def]  # noqa: E501
+    # a_grid / o_grid = (cell_start, items, origin_x, origin_y, cell, nx, ny); scene = (kind, centre, half,
+    # world); flags = (agents, objects, ground); out = (distance, hit_kind, hit_id).
+    a_start, a_items, a_ox, a_oy, a_cell, a_nx, a_ny = a_grid
+    o_start, o_items, o_ox, o_oy, o_cell, o_nx, o_ny = o_grid
+    o_kind, o_centre, o_half, o_world = scene
+    use_agents, use_objects, use_ground = flags
+    out_d, out_k, out_id = out
     s_n = pos.shape[0]
     n_k = dirs.shape[0]
-    wd = np.empty((n_k, 3))
     bt = np.empty(n_k)
     bk = np.empty(n_k, dtype=np.int8)
     bi = np.empty(n_k, dtype=np.int64)
@@ -298,23 +247,28 @@ def _scan_kernel(  # type: ignore[no-untyped-def]
         if online[j] and radius[j] > rmax:
             rmax = radius[j]
     n_o = o_kind.shape[0]
-    o_rbh = np.empty(n_o)  # horizontal and 3D bounding radii, for cheap rejection
-    o_rb3 = np.empty(n_o)
+    o_rb = np.empty((n_o, 2))  # horizontal and 3D bounding radii, for cheap rejection
     for o in range(n_o):
         hx, hy, hz = o_half[o, 0], o_half[o, 1], o_half[o, 2]
         if o_kind[o] == _BOX:
-            o_rbh[o], o_rb3[o] = np.sqrt(hx * hx + hy * hy), np.sqrt(hx * hx + hy * hy + hz * hz)
+            o_rb[o, 0], o_rb[o, 1] = np.sqrt(hx * hx + hy * hy), np.sqrt(hx * hx + hy * hy + hz * hz)
         elif o_kind[o] == _CYL:
-            o_rbh[o], o_rb3[o] = hx, np.sqrt(hx * hx + hz * hz)
+            o_rb[o, 0], o_rb[o, 1] = hx, np.sqrt(hx * hx + hz * hz)
         else:
-            o_rbh[o], o_rb3[o] = hx, hx
+            o_rb[o, 0], o_rb[o, 1] = hx, hx
         stamp[o] = -1
+    # Agent data gathered in grid order, so a cell range is read sequentially; radius -1 marks offline.
+    n_grid = a_items.shape[0] if use_agents else 0
+    packed = np.empty((n_grid, 4))
+    for q in range(n_grid):
+        j = a_items[q]
+        packed[q, 0], packed[q, 1], packed[q, 2] = pos[j, 0], pos[j, 1], pos[j, 2]
+        packed[q, 3] = radius[j] if online[j] else -1.0
     # Scan in grid order (neighbours share cells, so their data stays in cache); slots the grid does not
     # hold follow in slot order.
     done = np.zeros(s_n, dtype=np.bool_)
-    n_grid = a_items.shape[0] if use_agents else 0
-    for q in range(n_grid + s_n):
-        i = a_items[q] if q < n_grid else q - n_grid
+    for u in range(n_grid + s_n):
+        i = a_items[u] if u < n_grid else u - n_grid
         if done[i]:
             continue
         done[i] = True
@@ -323,13 +277,75 @@ def _scan_kernel(  # type: ignore[no-untyped-def]
             out_k[i, :] = HIT_NONE
             out_id[i, :] = -1
             continue
-        _scan_slot(
-            i, pos, heading, srange, radius, online, world, rmax,
-            a_start, a_items, a_ox, a_oy, a_cell, a_nx, a_ny,
-            o_kind, o_centre, o_half, o_world, o_rbh, o_rb3,
-            o_start, o_items, o_ox, o_oy, o_cell, o_nx, o_ny,
-            dirs, n_az, use_agents, use_objects, use_ground, stamp, wd, bt, bk, bi, out_d, out_k, out_id,
-        )
+        rng = srange[i]
+        x, y, z = pos[i, 0], pos[i, 1], pos[i, 2]
+        cs = (np.cos(heading[i]), np.sin(heading[i]))
+        for k0 in range(0, n_k, n_az):
+            # The ground is the solid half-space z <= 0; its distance depends only on the ring's elevation.
+            tg = np.inf
+            if use_ground:
+                if z < 0.0:
+                    tg = 0.0
+                elif dirs[k0, 2] < -_EPS:
+                    tg = z / -dirs[k0, 2]
+            ground = tg <= rng
+            for k in range(k0, k0 + n_az):
+                bt[k] = tg if ground else rng
+                bk[k] = HIT_GROUND if ground else HIT_NONE
+                bi[k] = -1
+        w = world[i]
+        if use_agents:
+            # Agents are binned by centre, so the cells must reach range + the largest radius.
+            reach = rng + rmax
+            x0, y0 = _cell_of(x - reach, y - reach, a_ox, a_oy, a_cell, a_nx, a_ny)
+            x1, y1 = _cell_of(x + reach, y + reach, a_ox, a_oy, a_cell, a_nx, a_ny)
+            for ca in range(x0, x1 + 1):
+                base = (w * a_nx + ca) * a_ny
+                # Rows of one column are consecutive cells, hence one contiguous run of items.
+                for q in range(a_start[base + y0], a_start[base + y1 + 1]):
+                    r = packed[q, 3]
+                    j = a_items[q]
+                    if r < 0.0 or j == i:
+                        continue
+                    h = (r, r, r)
+                    px, py, pz = x - packed[q, 0], y - packed[q, 1], z - packed[q, 2]
+                    _candidate(px, py, pz, _SPH, h, r, r, HIT_AGENT, j, rng, cs, dirs, n_az, bt, bk, bi)
+        if use_objects:
+            # Objects are registered in every cell their footprint touches, so the range alone suffices.
+            x0, y0 = _cell_of(x - rng, y - rng, o_ox, o_oy, o_cell, o_nx, o_ny)
+            x1, y1 = _cell_of(x + rng, y + rng, o_ox, o_oy, o_cell, o_nx, o_ny)
+            for ca in range(x0, x1 + 1):
+                base = (w * o_nx + ca) * o_ny
+                for q in range(o_start[base + y0], o_start[base + y1 + 1]):
+                    o = o_items[q]
+                    if stamp[o] == i:  # objects span cells: visit each once per slot
+                        continue
+                    stamp[o] = i
+                    h = (o_half[o, 0], o_half[o, 1], o_half[o, 2])
+                    px, py, pz = x - o_centre[o, 0], y - o_centre[o, 1], z - o_centre[o, 2]
+                    _candidate(
+                        px,
+                        py,
+                        pz,
+                        o_kind[o],
+                        h,
+                        o_rb[o, 0],
+                        o_rb[o, 1],
+                        HIT_OBJECT,
+                        o,
+                        rng,
+                        cs,
+                        dirs,
+                        n_az,
+                        bt,
+                        bk,
+                        bi,
+                    )
+        inv = 1.0 / rng
+        for k in range(n_k):
+            out_d[i, k] = min(bt[k] * inv, 1.0)
+            out_k[i, k] = bk[k]
+            out_id[i, k] = bi[k]
 
 
 # ----------------------------------------------------------------------------------------------- sensor
@@ -339,15 +355,22 @@ def _check_inputs(pos, heading, sensor_range, radius, online, world, kind, centr
         raise ValueError(f"pos must have shape (S, 3), got {pos.shape}")
     s = pos.shape[0]
     out = [pos]
-    for name, a, dt in (("heading", heading, np.float64), ("sensor_range", sensor_range, np.float64),
-                        ("radius", radius, np.float64), ("online", online, np.bool_), ("world", world, np.int64)):
+    for name, a, dt in (
+        ("heading", heading, np.float64),
+        ("sensor_range", sensor_range, np.float64),
+        ("radius", radius, np.float64),
+        ("online", online, np.bool_),
+        ("world", world, np.int64),
+    ):
         a = np.ascontiguousarray(a, dtype=dt)
         if a.shape != (s,):
             raise ValueError(f"{name} must have shape ({s},), got {a.shape}")
         out.append(a)
-    rng, on = out[2], out[4]
+    rng, rad, on = out[2], out[3], out[4]
     if not np.all(((rng > 0.0) & np.isfinite(rng)) | ~on):
         raise ValueError("sensor_range must be finite and > 0 for every online slot")
+    if not np.all(((rad >= 0.0) & np.isfinite(rad)) | ~on):
+        raise ValueError("radius must be finite and >= 0 for every online slot")
     kind = np.ascontiguousarray(kind, dtype=np.int8)
     o = kind.shape[0]
     centre = np.ascontiguousarray(centre, dtype=np.float64).reshape(o, 3)
@@ -440,8 +463,14 @@ class ProximitySensor:
             if self._out is None or self._out.distance.shape != (s, k):
                 self._out = ScanResult.empty(s, k)
             out = self._out
-        elif out.distance.shape != (s, k) or out.distance.dtype != np.float32 or out.hit_kind.dtype != np.int8 \
-                or out.hit_id.dtype != np.int32 or out.hit_kind.shape != (s, k) or out.hit_id.shape != (s, k):
+        elif (
+            out.distance.shape != (s, k)
+            or out.distance.dtype != np.float32
+            or out.hit_kind.dtype != np.int8
+            or out.hit_id.dtype != np.int32
+            or out.hit_kind.shape != (s, k)
+            or out.hit_id.shape != (s, k)
+        ):
             raise ValueError(f"out must hold (S, K) = ({s}, {k}) arrays of float32 / int8 / int32")
         use_agents = self.config.detect_agents and agent_grid is not None
         use_objects = self.config.detect_objects and object_grid is not None and kind.shape[0] > 0
@@ -453,12 +482,11 @@ class ProximitySensor:
         if use_objects:
             lo, hi = min(lo, int(obj_world.min())), max(hi, int(obj_world.max()))
         object_args = _grid_args(object_grid if use_objects else None, lo, hi, "object_grid")
-        _scan_kernel(
-            pos, heading, srange, radius, online, world, *agent_args,
-            kind, centre, half, obj_world, *object_args,
-            self.directions, int(self.config.n_azimuth), use_agents, use_objects,
-            bool(self.config.detect_ground and ground), self._stamp, out.distance, out.hit_kind, out.hit_id,
-        )
+        flags = (use_agents, use_objects, bool(self.config.detect_ground and ground))
+        scene = (kind, centre, half, obj_world)
+        _scan_kernel(pos, heading, srange, radius, online, world, agent_args, scene, object_args,
+                     self.directions, self.config.n_azimuth, flags, self._stamp,
+                     (out.distance, out.hit_kind, out.hit_id))  # fmt: skip
         return out
 
 
@@ -475,7 +503,7 @@ def _ref_slab(p: np.ndarray, d: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, 
 
 
 def _ref_t(shape: int, p: np.ndarray, d: np.ndarray, h: np.ndarray) -> np.ndarray:
-    """Broadcast ray-shape distances: ``p`` origin - centre ``(..., 3)``, ``d`` ``(..., 3)``, ``h`` ``(..., 3)``."""
+    """Ray-shape distances, broadcast: ``p`` = origin - centre, ``d`` directions, ``h`` half extents."""
     p, d, h = np.broadcast_arrays(p, d, h)
     if shape == _SPH:
         b = (p * d).sum(-1)
@@ -537,7 +565,9 @@ def scan_reference(
     if second is not None:
         second[...] = np.inf
     bound3 = np.select(
-        [kind == _BOX, kind == _CYL], [np.linalg.norm(half, axis=1), np.hypot(half[:, 0], half[:, 2])], half[:, 0]
+        [kind == _BOX, kind == _CYL],
+        [np.linalg.norm(half, axis=1), np.hypot(half[:, 0], half[:, 2])],
+        half[:, 0],
     )
     for i in np.flatnonzero(online):
         c, s = np.cos(heading[i]), np.sin(heading[i])

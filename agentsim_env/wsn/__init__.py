@@ -1,8 +1,8 @@
 """Wireless-sensor-network evaluation of a sensor deployment over circular hot zones.
 
-Coverage (binary disc, k-coverage, density-weighted), unit-disk connectivity to the sink(s), first-order radio
-energy, minimum-energy routing lifetime and per-zone density fidelity. ``evaluate_deployment`` returns all of it
-as one flat ``dict[str, float]``. Imports numpy, scipy and numba only.
+Coverage (binary disc, k-coverage, density-weighted), unit-disk connectivity to the sink(s), first-order
+radio energy, minimum-energy routing lifetime and per-zone density fidelity. ``evaluate_deployment`` returns
+all of it as one flat ``dict[str, float]``. Imports numpy, scipy and numba only.
 """
 
 from agentsim_env.wsn.connectivity import (

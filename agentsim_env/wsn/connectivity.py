@@ -123,7 +123,11 @@ class ConnectivityResult:
 
 
 def connectivity(
-    sensors: ArrayLike, r_c: float, sinks: ArrayLike | None = None, fiedler_max_n: int = 0
+    sensors: ArrayLike,
+    r_c: float,
+    sinks: ArrayLike | None = None,
+    fiedler_max_n: int = 0,
+    edges: tuple[NDArray[np.int64], NDArray[np.float64]] | None = None,
 ) -> ConnectivityResult:
     """Components, sink reachability and hop counts of the unit-disk graph.
 
@@ -133,6 +137,7 @@ def connectivity(
         sinks: ``(m, 2)`` sink positions; ``None`` means no sink (reach 0, hops NaN).
         fiedler_max_n: Compute the Fiedler value with a dense eigensolver when ``2 <= n <= fiedler_max_n``
             (O(n^3): keep it to a few hundred); otherwise it is NaN.
+        edges: Precomputed ``unit_disk_edges(sensors, r_c)`` to share with other metrics.
 
     Returns:
         The metrics.
@@ -146,7 +151,7 @@ def connectivity(
         return ConnectivityResult(
             0, math.nan, math.nan, math.nan, math.nan, math.nan, empty.astype(np.int64), empty
         )
-    pairs, _ = unit_disk_edges(p, r)
+    pairs = unit_disk_edges(p, r)[0] if edges is None else edges[0]
     adj = _adjacency(n, pairs)
     n_comp, labels = csgraph.connected_components(adj, directed=False)
     lcc = float(np.bincount(labels).max() / n)
@@ -170,7 +175,8 @@ def connectivity(
     fiedler = math.nan
     if 2 <= n <= int(fiedler_max_n):
         lap = csgraph.laplacian(adj).toarray()
-        fiedler = float(max(np.linalg.eigvalsh(lap)[1], 0.0))
+        # Exactly 0 when disconnected; otherwise clip eigensolver round-off.
+        fiedler = 0.0 if n_comp > 1 else float(max(np.linalg.eigvalsh(lap)[1], 0.0))
     return ConnectivityResult(
         int(n_comp), lcc, float(reach.mean()), hops_mean, hops_max, fiedler, labels.astype(np.int64), hops
     )

@@ -2,16 +2,18 @@
 
 A point ``q`` is covered when some sensor lies within the sensing radius ``r_s`` (``||q - p_i|| <= r_s``).
 The zones are discs; their union is sampled by the centres of a square lattice of pitch ``resolution``
-anchored at the origin (cell centres at ``(i + 1/2) * resolution``), so zones that overlap share lattice points
-and the union is counted once. Coverage is the fraction of lattice points covered, per zone and over the union.
+anchored at the origin (cell centres at ``(i + 1/2) * resolution``), so zones that overlap share lattice
+points and the union is counted once. Coverage is the fraction of lattice points covered, per zone and over
+the union.
 
-All sensor-to-point pairs within ``r_s`` come from one ``cKDTree.sparse_distance_matrix`` call; their number is
-about ``n * pi r_s^2 / resolution^2`` whatever the zone area, and the count per point gives 1-, k- and weighted
-coverage at once.
+All sensor-to-point pairs within ``r_s`` come from one ``cKDTree.sparse_distance_matrix`` call; their number
+is about ``n * pi r_s^2 / resolution^2`` whatever the zone area, and the count per point gives 1-, k- and
+weighted coverage at once.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -127,13 +129,22 @@ def zone_grid(centres: ArrayLike, radii: ArrayLike, resolution: float = 1.0) -> 
         resolution: Lattice pitch in metres (> 0).
 
     Returns:
-        The grid. A zone smaller than one cell may hold no lattice point; its coverage is then NaN.
+        The grid (read-only arrays; the last few grids are cached, since batch evaluations reuse one zone
+        layout). A zone smaller than one cell may hold no lattice point; its coverage is then NaN.
 
     Raises:
         ValueError: On bad discs, a non-positive resolution, or a lattice above 2e7 points.
     """
     c, r = check_discs(centres, radii)
     h = _check_positive(resolution, "resolution")
+    return _cached_grid(c.tobytes(), r.tobytes(), h)
+
+
+@functools.lru_cache(maxsize=4)
+def _cached_grid(centres_key: bytes, radii_key: bytes, h: float) -> ZoneGrid:
+    """Build the lattice for validated discs given as raw float64 bytes."""
+    c = np.frombuffer(centres_key, dtype=np.float64).reshape(-1, 2)
+    r = np.frombuffer(radii_key, dtype=np.float64)
     lo = np.floor((c - r[:, None]) / h).astype(np.int64)
     hi = np.ceil((c + r[:, None]) / h).astype(np.int64)
     total = int(np.prod(hi - lo, axis=1).sum())
@@ -155,6 +166,8 @@ def zone_grid(centres: ArrayLike, radii: ArrayLike, resolution: float = 1.0) -> 
         chunks.append(pts[inside])
     points = np.ascontiguousarray(np.concatenate(chunks, axis=0))
     member = np.stack([_in_disc(points, c[k], r[k]) for k in range(c.shape[0])], axis=1)
+    for arr in (points, member):
+        arr.flags.writeable = False  # shared through the cache
     return ZoneGrid(c, r, h, points, member, cKDTree(points))
 
 

@@ -36,7 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from agentsim_env.wsn.connectivity import connectivity
+from agentsim_env.wsn.connectivity import connectivity, unit_disk_edges
 from agentsim_env.wsn.coverage import (
     check_discs,
     check_points,
@@ -102,11 +102,8 @@ class WsnConfig:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
                 raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
-        if (
-            isinstance(self.fiedler_max_n, bool)
-            or not isinstance(self.fiedler_max_n, int)
-            or self.fiedler_max_n < 0
-        ):
+        fmax = self.fiedler_max_n
+        if isinstance(fmax, bool) or not isinstance(fmax, (int, np.integer)) or fmax < 0:
             raise ValueError(f"fiedler_max_n must be an integer >= 0, got {self.fiedler_max_n!r}")
         thr = self.coverage_lifetime_threshold
         if not (isinstance(thr, (int, float)) and 0.0 < thr <= 1.0):
@@ -186,8 +183,9 @@ def evaluate_deployment(
     cov_k = coverage_from_counts(grid, counts, config.k)
     cov_w = weighted_from_covered(grid, counts >= 1, profiles, config.zone_weights)
 
-    conn = connectivity(land, config.r_c, sinks, config.fiedler_max_n)
-    life = simulate_lifetime(land, sinks, config.r_c, config.radio)
+    edges = unit_disk_edges(land, config.r_c)
+    conn = connectivity(land, config.r_c, sinks, config.fiedler_max_n, edges)
+    life = simulate_lifetime(land, sinks, config.r_c, config.radio, edges=edges)
     cov_life = coverage_lifetime(
         grid, land, config.r_s, life.death_round, config.coverage_lifetime_threshold, pairs
     )

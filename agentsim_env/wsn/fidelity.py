@@ -292,7 +292,9 @@ def fidelity_per_zone(
     c, r = check_discs(centres, radii)
     if len(profiles) != c.shape[0]:
         raise ValueError(f"profiles must hold one profile per zone (K = {c.shape[0]}), got {len(profiles)}")
-    z = np.asarray(zone, dtype=np.int64)
+    z = np.asarray(zone, dtype=np.int64).reshape(-1)
+    if z.shape != (p.shape[0],):
+        raise ValueError(f"zone must have shape (n,) = ({p.shape[0]},), got {z.shape}")
     tgt = None if targets_xy is None else check_points(targets_xy, "targets_xy")
     if tgt is not None and tgt.shape != p.shape:
         raise ValueError(f"targets_xy must have shape {p.shape}, got {tgt.shape}")

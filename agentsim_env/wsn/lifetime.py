@@ -1,8 +1,8 @@
 """Network lifetime under minimum-energy multi-hop routing to the sink(s) (domain reference 2.2).
 
-Model. Node ``i`` sends one ``k``-bit packet per round and relays its descendants' packets along a shortest-path
-tree: the edge ``i -> j`` costs ``E_tx(k, d_ij) + E_rx(k)``, with ``E_rx = 0`` into a (mains-powered) sink, and
-the tree is Dijkstra from the sinks on the reversed graph. Its per-round load is
+Model. Node ``i`` sends one ``k``-bit packet per round and relays its descendants' packets along a
+shortest-path tree: the edge ``i -> j`` costs ``E_tx(k, d_ij) + E_rx(k)``, with ``E_rx = 0`` into a
+(mains-powered) sink, and the tree is Dijkstra from the sinks on the reversed graph. Its per-round load is
 ``E_i = (1 + a_i) E_tx(k, d_i,parent) + a_i E_rx(k)``, ``a_i`` being its number of descendants.
 
 Rounds and deaths (exact definitions). Loads are constant between two deaths, so the simulation jumps from
@@ -60,7 +60,7 @@ class LifetimeResult:
         fnd: First-node-dies round (0 when the population is empty).
         hnd: Half-nodes-dead round.
         lnd: Last-node-dies round.
-        fnd_static: ``min E0_i / E_i`` on the round-0 routing tree (``inf`` when the population is empty).
+        fnd_static: ``min E0_i / E_i`` on the round-0 routing tree (0 when the population is empty).
         death_round: ``(n,)`` int64 death round of each sensor (0 for sensors never connected).
         cause: ``(n,)`` int8: 0 never connected, 1 energy, 2 cut off from every sink.
         n_population: Number of sensors connected to a sink at round 0.
@@ -81,7 +81,11 @@ class LifetimeResult:
 
 # ---------------------------------------------------------------------------------------------- graph
 def _graph(
-    sensors: NDArray[np.float64], sinks: NDArray[np.float64], r_c: float, radio: RadioParams
+    sensors: NDArray[np.float64],
+    sinks: NDArray[np.float64],
+    r_c: float,
+    radio: RadioParams,
+    edges: tuple[NDArray[np.int64], NDArray[np.float64]] | None,
 ) -> tuple[
     NDArray[np.int64], NDArray[np.int64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]
 ]:
@@ -92,7 +96,7 @@ def _graph(
     added unless the receiver is a sink). Sink-to-sink links are omitted: sinks never relay.
     """
     n, m = sensors.shape[0], sinks.shape[0]
-    pairs, lengths = unit_disk_edges(sensors, r_c)
+    pairs, lengths = unit_disk_edges(sensors, r_c) if edges is None else edges
     si, sj, slen = sink_edges(sensors, sinks, r_c)
     a = np.concatenate([pairs[:, 0], si])
     b = np.concatenate([pairs[:, 1], n + sj])
@@ -100,7 +104,7 @@ def _graph(
     rows = np.concatenate([a, b])
     cols = np.concatenate([b, a])
     dd = np.concatenate([d, d])
-    order = np.lexsort((cols, rows))
+    order = np.argsort(rows, kind="stable")  # group by row; order within a row is irrelevant
     rows, cols, dd = rows[order], cols[order], dd[order]
     indptr = np.zeros(n + m + 1, dtype=np.int64)
     np.cumsum(np.bincount(rows, minlength=n + m), out=indptr[1:])
@@ -114,7 +118,7 @@ def _graph(
 
 # ---------------------------------------------------------------------------------------------- kernel
 @numba.njit(cache=True)
-def _push(keys, vals, size, key, val):  # pragma: no cover - compiled
+def _push(keys, vals, size, key, val):
     """Push onto a binary min-heap stored in two arrays; returns the new size."""
     i = size
     while i > 0:
@@ -130,7 +134,7 @@ def _push(keys, vals, size, key, val):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True)
-def _pop(keys, vals, size):  # pragma: no cover - compiled
+def _pop(keys, vals, size):
     """Pop the minimum of the heap; returns ``(key, val, new_size)``."""
     top_k, top_v = keys[0], vals[0]
     size -= 1
@@ -154,9 +158,7 @@ def _pop(keys, vals, size):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True)
-def _reroute(
-    indptr, nbr, txe, wt_in, wt_out, n, alive, affected, dist, parent, ptx, settled, hk, hv
-):  # pragma: no cover
+def _reroute(indptr, nbr, txe, wt_in, wt_out, n, alive, affected, dist, parent, ptx, settled, hk, hv):
     """Recompute shortest paths of the affected alive sensors; the others keep theirs (still optimal)."""
     size = 0
     for u in range(n):
@@ -188,7 +190,7 @@ def _reroute(
 
 
 @numba.njit(cache=True)
-def _simulate(indptr, nbr, txe, wt_in, wt_out, n, erx, e0):  # pragma: no cover - compiled
+def _simulate(indptr, nbr, txe, wt_in, wt_out, n, erx, e0):
     """Event-driven lifetime simulation; returns ``(death, cause, fnd_static, n_events, n_reroutes)``."""
     n_all = indptr.shape[0] - 1
     alive = np.ones(n, dtype=np.bool_)
@@ -287,19 +289,9 @@ def _summary(
     """FND / HND / LND from per-node death rounds."""
     pop = np.sort(death[cause != CAUSE_NEVER])
     if pop.size == 0:
-        return LifetimeResult(0.0, 0.0, 0.0, math.inf, death, cause, 0, n_events, n_reroutes)
-    hnd = float(pop[math.ceil(pop.size / 2) - 1])
-    return LifetimeResult(
-        float(pop[0]),
-        hnd,
-        float(pop[-1]),
-        float(fnd_static),
-        death,
-        cause,
-        int(pop.size),
-        n_events,
-        n_reroutes,
-    )
+        return LifetimeResult(0.0, 0.0, 0.0, 0.0, death, cause, 0, n_events, n_reroutes)
+    fnd, hnd, lnd = (float(pop[i]) for i in (0, math.ceil(pop.size / 2) - 1, -1))
+    return LifetimeResult(fnd, hnd, lnd, float(fnd_static), death, cause, int(pop.size), n_events, n_reroutes)
 
 
 def _inputs(
@@ -323,6 +315,7 @@ def simulate_lifetime(
     r_c: float,
     radio: RadioParams = _DEFAULT_RADIO,
     e0: ArrayLike | None = None,
+    edges: tuple[NDArray[np.int64], NDArray[np.float64]] | None = None,
 ) -> LifetimeResult:
     """Simulate rounds of minimum-energy convergecast until every connected sensor is dead.
 
@@ -332,12 +325,13 @@ def simulate_lifetime(
         r_c: Communication range in metres.
         radio: Radio constants (packet length and default initial energy ``radio.e0``).
         e0: Initial energy per sensor in joules (scalar or ``(n,)``); default ``radio.e0``.
+        edges: Precomputed ``unit_disk_edges(sensors, r_c)`` to share with other metrics.
 
     Returns:
         FND / HND / LND, the static FND estimate and per-sensor death rounds.
     """
     p, s, energy = _inputs(sensors, sinks, r_c, e0, radio)
-    indptr, nbr, txe, wt_in, wt_out = _graph(p, s, float(r_c), radio)
+    indptr, nbr, txe, wt_in, wt_out = _graph(p, s, float(r_c), radio, edges)
     erx = float(rx_energy(radio.packet_bits, radio))
     death, cause, fnd_static, n_events, n_reroutes = _simulate(
         indptr, nbr, txe, wt_in, wt_out, p.shape[0], erx, energy
@@ -369,12 +363,12 @@ def routing_tree(
     p, s, _ = _inputs(sensors, sinks, r_c, None, radio)
     n, m = p.shape[0], s.shape[0]
     on = np.ones(n, dtype=bool) if alive is None else np.asarray(alive, dtype=bool)
-    indptr, nbr, txe, _, wt_out = _graph(p, s, float(r_c), radio)
+    indptr, nbr, txe, _, wt_out = _graph(p, s, float(r_c), radio, None)
     rows = np.repeat(np.arange(n + m), np.diff(indptr))
     keep = (rows >= n) | on[np.minimum(rows, n - 1)] if n else np.zeros(0, dtype=bool)
     keep &= (nbr >= n) | on[np.minimum(nbr, n - 1)]
     keep &= rows < n  # edges u -> x with u a sensor; sinks never send
-    # Reversed graph: entry (x, u) carries the cost of u -> x, so Dijkstra from the sinks gives u's cost to them.
+    # Reversed graph: entry (x, u) carries the cost of u -> x, so Dijkstra from the sinks gives u's cost.
     rev = sparse.csr_matrix((wt_out[keep], (nbr[keep], rows[keep])), shape=(n + m, n + m))
     dist, pred = csgraph.dijkstra(
         rev, directed=True, indices=np.arange(n, n + m), return_predecessors=True, min_only=True

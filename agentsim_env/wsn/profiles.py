@@ -120,7 +120,9 @@ class RadialProfile:
                 x = s * np.sqrt(-2.0 * np.log1p(u * math.expm1(-0.5 / (s * s))))
             return np.minimum(x, 1.0)
         # 3x^2 - 2x^3 = u is the smoothstep cubic; its root in [0, 1] is 1/2 - sin(asin(1 - 2u) / 3).
-        return np.clip(0.5 - np.sin(np.arcsin(np.clip(1.0 - 2.0 * u, -1.0, 1.0)) / 3.0), 0.0, 1.0)
+        # Rewritten as a product, with b = (2/3) asin(sqrt(u)), so that it does not cancel near u = 0.
+        b = (2.0 / 3.0) * np.arcsin(np.sqrt(u))
+        return np.clip(2.0 * np.cos(math.pi / 6.0 - 0.5 * b) * np.sin(0.5 * b), 0.0, 1.0)
 
     # ------------------------------------------------------------------ public API
     def density(self, r: ArrayLike) -> NDArray[np.float64]:
