@@ -322,6 +322,27 @@ class MessageBus:
         self._ans_slot: list[np.ndarray] = []
         self._ans_step: list[np.ndarray] = []
 
+    def drop_world(self, world: int) -> None:
+        """Forget world ``world``'s traffic (messages in flight, answers, inboxes), e.g. when it is reset alone."""
+        n = self.n_agents
+        slots = np.arange(world * n, (world + 1) * n)
+        q = self._queue
+        h, t = q.head, q.tail
+        if t > h:
+            keep = q.cols["world"][h:t] != world
+            if not keep.all():
+                m = int(keep.sum())
+                for c in q.NAMES:
+                    q.cols[c][h : h + m] = q.cols[c][h:t][keep]
+                q.payload[h : h + m] = q.payload[h:t][keep]
+                q.tail = h + m
+        answers = list(zip(self._ans_slot, self._ans_step))
+        self._ans_slot = [a[a // n != world] for a, _ in answers]
+        self._ans_step = [b[a // n != world] for a, b in answers]
+        self.inbox.clear(slots)
+        self._bw_used[slots] = 0
+        self._bw_step[slots] = -1
+
     def _new_ids(self, k: int) -> np.ndarray:
         ids = np.arange(self._next_id, self._next_id + k, dtype=np.int64)
         self._next_id += k

@@ -329,6 +329,16 @@ class Overlay:
         """Drop every flood and zero the counters (the grown capacity is kept)."""
         self._alloc(self.capacity)
 
+    def drop_slots(self, slots: np.ndarray) -> None:
+        """Stop relaying at ``slots`` (e.g. a world being reset): frontier entries there are removed.
+
+        A flood's frontier lies in its origin's world, so dropping a whole world's slots ends its floods at the
+        next ``advance``; readers elsewhere are untouched.
+        """
+        if self._front_n.size:
+            keep = ~np.isin(self._front_n, np.asarray(slots, dtype=np.int64))
+            self._front_f, self._front_n = self._front_f[keep], self._front_n[keep]
+
     def is_active(self, flood: int) -> bool:
         """Whether flood id ``flood`` is still spreading."""
         return 0 <= int(flood) < self.capacity and bool(self._active[int(flood)])

@@ -12,9 +12,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from agentsim_env.comms.stack import CommsConfig, CommsEvents, CommsStack
 from agentsim_env.core.collisions import CollisionEvents, find_collisions
 from agentsim_env.core.scene import Scene
-from agentsim_env.core.spatial import Grid, GridSpec, build_grid, build_object_grid
+from agentsim_env.core.spatial import Grid, GridSpec, build_grid, build_object_grid, neighbor_pairs
 from agentsim_env.core.state import AgentState
 from agentsim_env.motion import MotionState, integrate
 from agentsim_env.sensors.proximity import ProximityConfig, ProximitySensor, ScanResult
@@ -68,10 +69,19 @@ class WorldConfig:
 
 @dataclass(slots=True)
 class StepEvents:
-    """What happened in one world step (arrays over all worlds)."""
+    """What happened in one world step (arrays over all worlds).
+
+    Attributes:
+        collisions: Collision events (stage 5).
+        went_offline: Slots taken offline this step by collisions (stage 5).
+        timed_out: Slots taken offline by heartbeat timeouts (stage 6).
+        comms: The step's traffic: sent, delivered and dropped messages, overlay deliveries, group changes.
+    """
 
     collisions: CollisionEvents
     went_offline: np.ndarray
+    timed_out: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    comms: CommsEvents | None = None
 
 
 class World:
@@ -82,9 +92,17 @@ class World:
         n_worlds: Number of worlds B.
         n_agents: Agents per world N.
         state: Optional pre-built state (otherwise a zeroed one is created).
+        comms: Communication settings (None: no bus, overlay or groups controller).
     """
 
-    def __init__(self, config: WorldConfig, n_worlds: int, n_agents: int, state: AgentState | None = None) -> None:
+    def __init__(
+        self,
+        config: WorldConfig,
+        n_worlds: int,
+        n_agents: int,
+        state: AgentState | None = None,
+        comms: CommsConfig | None = None,
+    ) -> None:
         self.config = config
         self.state = state if state is not None else AgentState.create(n_worlds, n_agents)
         self.motion = MotionState.create(self.state.n_slots, config.max_waypoints)
@@ -98,6 +116,10 @@ class World:
         self.physics: object | None = None
         self._physics_version = -1
         self.step_count = np.zeros(n_worlds, dtype=np.int64)
+        self.tick = 0  # global step counter (message timestamps); never reset per world
+        self.comms = (
+            CommsStack(comms, n_worlds, n_agents, self.state.group, np.random.default_rng(0)) if comms else None
+        )
         self.scan: ScanResult | None = None
         self.last_events = StepEvents(CollisionEvents.empty(), np.zeros(0, dtype=np.int64))
 
@@ -150,10 +172,33 @@ class World:
         st.vel[slots] = 0.0
 
     def refresh(self) -> None:
-        """Rebuild the neighbour grid and the scan from the current state (after a reset)."""
+        """Rebuild the neighbour grid, the comms range graph and the scan from the current state (after a reset)."""
         st = self.state
         self.agent_grid = build_grid(self.grid_spec, st.pos, st.world_id, st.online)
+        if self.comms is not None:
+            self.comms.pairs = self._comm_pairs()
         self.scan = self._scan()
+
+    def _comm_pairs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        assert self.comms is not None
+        cfg = self.comms.cfg
+        return neighbor_pairs(self.agent_grid, self.state.pos, self.state.world_id,
+                              max(cfg.overlay_range, cfg.nearest_range))  # fmt: skip
+
+    def reset_comms(self, rng: np.random.Generator, world: int | None = None) -> None:
+        """Drop in-flight traffic: of every world (``world=None``, with ``rng`` for the channel) or of one."""
+        if self.comms is None:
+            return
+        if world is None:
+            self.comms.reset(rng, self.tick)
+        else:
+            self.comms.reset_world(world, self.tick)
+
+    def apply_comm(self, comm: np.ndarray, acting: np.ndarray) -> None:
+        """Stage 1 (communication part): the acting slots' ``comm`` actions become messages and floods."""
+        if self.comms is None:
+            raise ValueError("this scenario has no communication (its config has no comms settings)")
+        self.comms.send_actions(self.tick, comm, acting, self.state.group)
 
     def _scan(self) -> ScanResult:
         st, sc = self.state, self.scene
@@ -203,9 +248,24 @@ class World:
         went = np.unique(events.agent) if cfg.collision_ends_agent else np.zeros(0, dtype=np.int64)
         if went.size:
             self.set_offline(went)
+        timed_out = np.zeros(0, dtype=np.int64)
+        comm_events = None
+        if self.comms is not None:
+            # the environment tells each hit agent what hit it
+            self.comms.on_collisions(self.tick, events.agent, events.other_agent, events.obj)
+            # 6. groups: heartbeat tick; agents silent past the timeout go offline
+            timed_out = self.comms.tick_groups(self.tick, st.online, st.pos)
+            timed_out = timed_out[st.online[timed_out]]
+            if timed_out.size:
+                self.set_offline(timed_out)
+        if went.size or timed_out.size:
             self.agent_grid = build_grid(self.grid_spec, st.pos, st.world_id, st.online)
+        if self.comms is not None:
+            # 7. comms: bus messages due this step; one overlay hop over the range graph
+            comm_events = self.comms.deliver(self.tick, st.pos, st.online, st.group, st.world_id, self._comm_pairs())
         # 8. sensors: proximity scan of every online slot
         self.scan = self._scan()
         self.step_count += 1
-        self.last_events = StepEvents(events, went)
+        self.tick += 1
+        self.last_events = StepEvents(events, went, timed_out, comm_events)
         return self.last_events

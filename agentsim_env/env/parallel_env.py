@@ -88,6 +88,7 @@ class AgentSimParallelEnv(ParallelEnv):
         if seed is not None or self._rng is None:
             self._rng = np.random.default_rng(seed)
         self.scenario.reset_world(self.world, 0, self._rng)
+        self.world.reset_comms(self._rng.spawn(1)[0])
         self.world.step_count[:] = 0
         self.world.refresh()
         self._steps = 0
@@ -109,6 +110,8 @@ class AgentSimParallelEnv(ParallelEnv):
         acting = np.zeros(world.state.n_slots, dtype=bool)
         acting[[self._index[a] for a in self.agents]] = True
         sc.apply_actions(world, parts, acting)
+        if "comm" in parts:
+            world.apply_comm(parts["comm"], acting)
         sc.before_world_step(world)
         # 2-8. the world pipeline; 9. the scenario scores
         events = world.step()

@@ -68,6 +68,7 @@ class BatchedEnv:
         self.alive = np.zeros((n_worlds, self.n_agents), dtype=bool)
         self.steps = np.zeros(n_worlds, dtype=np.int64)
         self._rngs: list[np.random.Generator] = []
+        self._comm_rng = np.random.default_rng(0)
 
     def _flat_obs(self) -> np.ndarray:
         parts = self.scenario.observe(self.world)
@@ -76,8 +77,12 @@ class BatchedEnv:
         return flat.reshape(self.n_worlds, self.n_agents, self.obs_dim)
 
     def _reset_worlds(self, worlds: np.ndarray) -> None:
+        if worlds.size == self.n_worlds:
+            self.world.reset_comms(self._comm_rng)
         for w in worlds:
             self.scenario.reset_world(self.world, int(w), self._rngs[w])
+            if worlds.size < self.n_worlds:
+                self.world.reset_comms(self._comm_rng, int(w))
         self.steps[worlds] = 0
         self.alive[worlds] = True
         self.world.refresh()
@@ -88,8 +93,9 @@ class BatchedEnv:
         Returns:
             Observations ``(B, N, obs_dim)``.
         """
-        children = np.random.SeedSequence(seed).spawn(self.n_worlds)
-        self._rngs = [np.random.default_rng(c) for c in children]
+        children = np.random.SeedSequence(seed).spawn(self.n_worlds + 1)
+        self._rngs = [np.random.default_rng(c) for c in children[:-1]]
+        self._comm_rng = np.random.default_rng(children[-1])  # channel loss, shared by the worlds' bus
         self._reset_worlds(np.arange(self.n_worlds))
         return self._flat_obs()
 
@@ -119,6 +125,8 @@ class BatchedEnv:
         parts = {k: a[:, sl] for k, sl in self._act_layout.items()}
         sc, world = self.scenario, self.world
         sc.apply_actions(world, parts, acting)
+        if "comm" in parts:
+            world.apply_comm(parts["comm"], acting)
         sc.before_world_step(world)
         events = world.step()
         res = sc.after_world_step(world, events, acting)

@@ -151,6 +151,11 @@ class GroupController:
         self._step = int(step)
         self._events = []
 
+    def reset_slots(self, slots: np.ndarray, step: int) -> None:
+        """Restart monitoring of ``slots`` (a world reset alone): last answer ``step``, not timed out."""
+        self.last_answer[slots] = int(step)
+        self.timed_out[slots] = False
+
     def assign(self, slots: np.ndarray, groups: np.ndarray | int, step: int | None = None) -> None:
         """Set the group of ``slots`` and log every actual change.
 

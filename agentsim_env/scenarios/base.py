@@ -125,6 +125,31 @@ class Scenario(ABC):
         """Scenario markers for the renderer: ``(xy (m, 2), rgb (m, 3) uint8, radius (m,))`` or ``None``."""
         return None
 
+    # -- communication (shared by every scenario whose config has ``comms`` settings) ---------------------
+    def comms_config(self) -> Any:
+        """The scenario's ``CommsConfig`` or None (no bus, overlay, groups controller or inbox)."""
+        return getattr(self.config, "comms", None)
+
+    def comm_obs_parts(self) -> dict[str, Part]:
+        """``inbox (M, F)`` (newest first; layout in ``comms.messages``) and ``comms (2,)`` counters."""
+        cfg = self.comms_config()
+        if cfg is None:
+            return {}
+        # payloads are in [-1, 1] when agents send them; environment messages carry ids (see comms.messages)
+        return {"inbox": Part((cfg.inbox_size, cfg.features), -1e4, 1e4), "comms": Part((2,), 0.0, 1.0)}
+
+    def comm_act_parts(self) -> dict[str, Part]:
+        """``comm (3 + D,)``: channel, named receiver, hop limit, payload (layout in ``comms.stack``)."""
+        cfg = self.comms_config()
+        return {} if cfg is None else {"comm": Part((cfg.action_dim,), -1.0, 1.0)}
+
+    def comm_observe(self, world: World) -> dict[str, np.ndarray]:
+        """The inbox and counters of every slot, clipped to the part bounds."""
+        if world.comms is None:
+            return {}
+        inbox, stats = world.comms.observe(world.state.pos, max(world.tick - 1, 0))
+        return {"inbox": np.clip(inbox, -1e4, 1e4, out=inbox), "comms": stats}
+
     def state(self, world: World, w: int) -> np.ndarray:
         """Global state of world ``w`` for centralised critics: per agent pos, vel, online flag, group."""
         st = world.state

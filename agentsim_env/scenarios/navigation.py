@@ -11,6 +11,8 @@ Observation (Dict; the flat Box concatenates the parts in this order):
 | self   | (8,)     | x, y in [-1, 1] over the map; altitude in [-1, 1] over the band; vx, vy, vz / max_speed; cos, sin heading |
 | lidar  | (K, 2)   | per ray: normalised distance (1 = free), hit code / 3 (0 none, 1/3 agent, 2/3 object, 1 ground) |
 | task   | (4,)     | goal minus position (dx, dy, dz) / map diagonal, distance / map diagonal                  |
+| inbox  | (M, 11+D)| only with ``comms``: received messages, newest first (layout in ``agentsim_env.comms.messages``) |
+| comms  | (2,)     | only with ``comms``: messages received and dropped this step / M                          |
 
 Rays: ``n_azimuth`` evenly spaced azimuths (ray 0 along the heading) per elevation ring in ``elevations_deg``;
 K = n_azimuth x rings (default 16 x 2 = 32: a horizontal ring and one tilted 25 degrees down).
@@ -19,6 +21,9 @@ Action (Dict with one part ``motion``; the flat Box is the same vector), values 
 - ``action_mode="velocity"`` (default): (3,) target velocity / max_speed (norm clipped to max_speed).
 - ``action_mode="primitive"``: (8,) a selector and parameters for the motion primitives (keep, velocity, linear,
   circular, parabolic, goto); layout table in ``agentsim_env.motion.actions``.
+
+With ``comms`` set, the action also has a ``comm`` part (3 + D,): channel, receiver, hop limit, payload
+(layout in ``agentsim_env.comms.stack``), and every message sent costs ``reward.message_cost``.
 
 Reward: task = progress toward the goal (metres) + ``arrival_bonus`` on arrival; composed by
 ``RewardConfig`` (group share = weight x mean task reward of the agent's group, collision penalty, energy =
@@ -33,6 +38,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from agentsim_env.comms.stack import CommsConfig
 from agentsim_env.core.world import PHYSICS_MODES, StepEvents, World, WorldConfig
 from agentsim_env.motion import MotionLimits, decode_primitive, decode_velocity, set_hold
 from agentsim_env.scenarios.base import Part, Scenario, StepResult
@@ -70,6 +76,7 @@ class NavigationConfig:
     dt: float = 0.1
     max_steps: int = 400
     reward: RewardConfig = field(default_factory=lambda: RewardConfig(group_share=0.5, energy_weight=0.001))
+    comms: CommsConfig | None = None  # None: no communication; a CommsConfig (or dict) adds inbox + comm parts
 
     def __post_init__(self) -> None:
         check_int("n_agents", self.n_agents, 1)
@@ -93,6 +100,10 @@ class NavigationConfig:
             object.__setattr__(self, "reward", build_config(RewardConfig, self.reward))
         if not isinstance(self.reward, RewardConfig):
             raise ValueError(f"reward must be a RewardConfig or a dict of its fields, got {self.reward!r}")
+        if isinstance(self.comms, dict):
+            object.__setattr__(self, "comms", build_config(CommsConfig, self.comms))
+        if self.comms is not None and not isinstance(self.comms, CommsConfig):
+            raise ValueError(f"comms must be None, a CommsConfig or a dict of its fields, got {self.comms!r}")
 
     @property
     def side(self) -> float:
@@ -113,6 +124,7 @@ class NavigationScenario(Scenario):
         {"n_agents": 4},
         {"n_agents": 5, "n_groups": 1, "action_mode": "primitive"},
         {"n_agents": 3, "physics": "pymunk"},
+        {"n_agents": 6, "n_groups": 2, "comms": {"loss": 0.2, "latency": 1, "heartbeat_period": 5}},
     )
 
     def __init__(self, config: NavigationConfig) -> None:
@@ -140,7 +152,7 @@ class NavigationScenario(Scenario):
             bounds=(0.0, s, 0.0, s), z_range=(0.0, c.altitude[1] + 5.0), dt=c.dt, physics=c.physics,
             collisions=c.collisions, lidar=self.lidar, grid_cell=max(c.sensor_range / 2, 2.0),
         )
-        world = World(wc, n_worlds, c.n_agents)
+        world = World(wc, n_worlds, c.n_agents, comms=c.comms)
         st = world.state
         st.radius[:] = c.agent_radius
         st.sensor_range[:] = c.sensor_range
@@ -184,11 +196,13 @@ class NavigationScenario(Scenario):
     def obs_parts(self) -> dict[str, Part]:
         """self (8,), lidar (K, 2), task (4,)."""
         k = self.lidar.n_rays
-        return {"self": Part((8,), -1.0, 1.0), "lidar": Part((k, 2), 0.0, 1.0), "task": Part((4,), -1.0, 1.0)}
+        parts = {"self": Part((8,), -1.0, 1.0), "lidar": Part((k, 2), 0.0, 1.0), "task": Part((4,), -1.0, 1.0)}
+        return {**parts, **self.comm_obs_parts()}
 
     def act_parts(self) -> dict[str, Part]:
         """motion (3,) in velocity mode or (8,) in primitive mode."""
-        return {"motion": Part((3 if self.config.action_mode == "velocity" else 8,), -1.0, 1.0)}
+        motion = {"motion": Part((3 if self.config.action_mode == "velocity" else 8,), -1.0, 1.0)}
+        return {**motion, **self.comm_act_parts()}
 
     def state_size(self) -> int:
         """Base state plus each goal."""
@@ -217,7 +231,7 @@ class NavigationScenario(Scenario):
         st.energy += np.where(acting, effort, 0.0)
         rewards = compose_rewards(
             c.reward, task, group=st.group, world=st.world_id, acting=acting, n_groups=c.n_groups,
-            collided=collided, energy=effort,
+            collided=collided, energy=effort, messages_sent=None if world.comms is None else world.comms.sent,
         )
         info = {"arrived": arrived.astype(np.int8), "collided": collided.astype(np.int8), "distance": dist}
         return StepResult(rewards, arrived, info)
@@ -241,6 +255,7 @@ class NavigationScenario(Scenario):
             "self": np.clip(selfp, -1, 1).astype(np.float32),
             "lidar": lidar.astype(np.float32),
             "task": np.clip(task, -1, 1).astype(np.float32),
+            **self.comm_observe(world),
         }
 
     def state(self, world: World, w: int) -> np.ndarray:
