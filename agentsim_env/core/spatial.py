@@ -121,6 +121,8 @@ def build_grid(spec: GridSpec, pos: np.ndarray, world: np.ndarray, active: np.nd
     Returns:
         The grid; items are slot indices in ascending order within each cell.
     """
+    if world.shape[0] and (int(world.min()) < 0 or int(world.max()) >= spec.n_worlds):
+        raise ValueError(f"world ids must be in [0, {spec.n_worlds}), got {int(world.min())}..{int(world.max())}")
     cs, items = _build(
         np.ascontiguousarray(pos), world, active, spec.origin_x, spec.origin_y, spec.cell, spec.nx, spec.ny,
         spec.n_cells,

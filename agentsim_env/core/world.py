@@ -203,8 +203,6 @@ class World:
     def _scan(self) -> ScanResult:
         st, sc = self.state, self.scene
         og = self.object_grid()
-        if og is None:
-            og = build_object_grid(self.grid_spec, sc.centre, sc.footprint_radius(), sc.world)
         return self.sensor.scan(
             st.pos, st.heading, st.sensor_range, st.radius, st.online, st.world_id, self.agent_grid,
             sc.kind, sc.centre, sc.half, sc.world, og, sc.ground, out=self.scan,
