@@ -200,6 +200,67 @@ class AgentSimParallelEnv(ParallelEnv):
         return {a: dict(zip(keys, vals)) for a, vals in zip(self.agents, zip(*rows))}
 
     # ------------------------------------------------------------------ extras
+    def _comms(self) -> Any:
+        if self.world.comms is None:
+            raise ValueError(f"scenario {self.scenario.name!r} has no communication: set its comms config")
+        return self.world.comms
+
+    def _live_slot(self, agent: str, what: str) -> int:
+        if agent not in self._index:
+            raise ValueError(f"{what}: unknown agent id {agent!r}")
+        slot = self._index[agent]
+        if not self.world.state.online[slot]:
+            raise ValueError(f"{what}: agent {agent!r} is offline")
+        return slot
+
+    def send_message(self, sender: str, payload: Any, *, to: str | None = None, group: int | None = None) -> bool:
+        """Send a bus message from code (besides the ``comm`` action): to one agent or to a group.
+
+        Args:
+            sender: Sending agent id (must be live).
+            payload: ``D`` finite floats.
+            to: Receiver agent id (unicast), or
+            group: Group id (the sender's world), exactly one of the two.
+
+        Returns:
+            Whether the bus accepted it (False: over the sender's bandwidth this step).
+
+        Raises:
+            ValueError: Unknown or offline agent, unknown group, wrong payload width, NaN payload.
+        """
+        from agentsim_env.comms.messages import AGENT, GROUP
+
+        comms = self._comms()
+        s = self._live_slot(sender, "sender")
+        if (to is None) == (group is None):
+            raise ValueError("give exactly one of to= (an agent id) or group= (a group id)")
+        pay = np.asarray(payload, dtype=np.float64).reshape(1, -1)
+        d = comms.cfg.payload_dim
+        if pay.shape[1] != d:
+            raise ValueError(f"payload must have {d} values (comms.payload_dim), got {pay.shape[1]}")
+        if not np.isfinite(pay).all():
+            raise ValueError(f"payload must be finite, got {pay.ravel().tolist()}")
+        if to is not None:
+            r = self._live_slot(to, "receiver") if to in self._index else None
+            if r is None:
+                raise ValueError(f"receiver: unknown agent id {to!r}")
+            acc = comms.bus.send(AGENT, np.array([s]), np.array([r]), pay, self.world.tick)
+        else:
+            known = np.unique(self.world.state.group[self.world.state.group >= 0]).tolist()
+            if group not in known:
+                raise ValueError(f"group: unknown group {group!r}; groups are {known}")
+            acc = comms.bus.send(GROUP, np.array([s]), np.array([group]), pay, self.world.tick)
+        comms.sent[s] += 1
+        return bool(acc[0])
+
+    def assign_group(self, agent: str, group: int) -> None:
+        """Move ``agent`` to ``group`` at run time (-1: no group); the change is logged as an event."""
+        comms = self._comms()
+        slot = self._live_slot(agent, "agent")
+        if isinstance(group, bool) or not isinstance(group, (int, np.integer)) or group < -1:
+            raise ValueError(f"group must be an integer >= -1, got {group!r}")
+        comms.groups.assign(np.array([slot]), int(group), self.world.tick)
+
     def state(self) -> np.ndarray:
         """Global state of the world for centralised critics (see ``state_space``)."""
         return self.scenario.state(self.world, 0)
