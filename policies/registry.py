@@ -7,9 +7,11 @@ from typing import Any
 
 from policies.base import Policy
 
-# scenario -> {policy name: "module:Class"}; the first entry is the scenario's default baseline.
-BASELINES: dict[str, dict[str, str]] = {
+# scenario -> {policy name: "module:Class" or ("module:Class", kwargs for for_env)}; the first entry is the
+# scenario's default baseline.
+BASELINES: dict[str, dict[str, str | tuple[str, dict[str, Any]]]] = {
     "navigation": {"go_to_goal": "policies.navigation:GoToGoalPolicy", "random": "policies.random:RandomPolicy"},
+    "relay": {"flood": "policies.relay:FloodPolicy", "silent": "policies.relay:SilentPolicy"},
 }
 
 
@@ -26,5 +28,7 @@ def make_policy(scenario: str, env: Any, name: str | None = None) -> Policy:
     name = name or names[0]
     if name not in BASELINES[scenario]:
         raise ValueError(f"policy must be one of {names} for {scenario!r}, got {name!r}")
-    module, cls = BASELINES[scenario][name].split(":")
-    return getattr(importlib.import_module(module), cls).for_env(env)  # type: ignore[no-any-return]
+    entry = BASELINES[scenario][name]
+    path, kwargs = (entry, {}) if isinstance(entry, str) else entry
+    module, cls = path.split(":")
+    return getattr(importlib.import_module(module), cls).for_env(env, **kwargs)  # type: ignore[no-any-return]

@@ -14,7 +14,7 @@ import numba as nb
 import numpy as np
 
 from agentsim_env.core.scene import BOX, CYLINDER
-from agentsim_env.core.spatial import Grid, _cell_of, neighbor_pairs
+from agentsim_env.core.spatial import Grid, _cell_of, _grow
 
 
 @dataclass(slots=True)
@@ -66,15 +66,58 @@ def surface_distance(px: float, py: float, pz: float, kind: int, c: np.ndarray, 
 
 
 @nb.njit(cache=True)
-def _agent_object(pos, radius, online, world, okind, ocentre, ohalf, oworld, cell_start, items,
-                  ox, oy, cell, nx, ny, margin, fill, out_a, out_o):  # type: ignore[no-untyped-def]
+def _agent_agent(pos, radius, online, world, cell_start, items, ox, oy, cell, nx, ny, margin):  # type: ignore[no-untyped-def]
+    # Pairs (i < j, found from i's side in grid order, as spatial.neighbor_pairs) whose centres are closer
+    # than r_i + r_j + margin; 2 r_max + margin bounds every threshold, so one cell range serves all.
     n = 0
+    out_i = np.empty(16, dtype=np.int64)
+    out_j = np.empty(16, dtype=np.int64)
+    rmax = -1.0
+    for i in range(pos.shape[0]):
+        if online[i] and radius[i] > rmax:
+            rmax = radius[i]
+    if rmax < 0.0:
+        return out_i[:0], out_j[:0]
+    max_dist = 2.0 * rmax + margin
+    r2 = max_dist * max_dist
+    for idx in range(items.shape[0]):
+        i = items[idx]
+        w = world[i]
+        x0, y0 = _cell_of(pos[i, 0] - max_dist, pos[i, 1] - max_dist, ox, oy, cell, nx, ny)
+        x1, y1 = _cell_of(pos[i, 0] + max_dist, pos[i, 1] + max_dist, ox, oy, cell, nx, ny)
+        for a in range(x0, x1 + 1):
+            base = (w * nx + a) * ny
+            for q in range(cell_start[base + y0], cell_start[base + y1 + 1]):
+                j = items[q]
+                if j <= i:
+                    continue
+                dx = pos[j, 0] - pos[i, 0]
+                dy = pos[j, 1] - pos[i, 1]
+                dz = pos[j, 2] - pos[i, 2]
+                d2 = dx * dx + dy * dy + dz * dz
+                if d2 <= r2 and np.sqrt(d2) < radius[i] + radius[j] + margin:
+                    if n == out_i.shape[0]:
+                        out_i, out_j = _grow(out_i, n), _grow(out_j, n)
+                    out_i[n] = i
+                    out_j[n] = j
+                    n += 1
+    return out_i[:n], out_j[:n]
+
+
+@nb.njit(cache=True)
+def _agent_object(pos, radius, online, world, okind, ocentre, ohalf, oworld, cell_start, items,
+                  ox, oy, cell, nx, ny, margin):  # type: ignore[no-untyped-def]
+    # One pass into growable buffers, agents in slot order.
+    n = 0
+    out_a = np.empty(16, dtype=np.int64)
+    out_o = np.empty(16, dtype=np.int64)
     for i in range(pos.shape[0]):
         if not online[i]:
             continue
         reach = radius[i] + margin
         x0, y0 = _cell_of(pos[i, 0] - reach, pos[i, 1] - reach, ox, oy, cell, nx, ny)
         x1, y1 = _cell_of(pos[i, 0] + reach, pos[i, 1] + reach, ox, oy, cell, nx, ny)
+        first = n  # this agent's rows start here
         last = -1
         for a in range(x0, x1 + 1):
             for b in range(y0, y1 + 1):
@@ -85,22 +128,21 @@ def _agent_object(pos, radius, online, world, okind, ocentre, ohalf, oworld, cel
                         continue
                     d = surface_distance(pos[i, 0], pos[i, 1], pos[i, 2], okind[o], ocentre[o], ohalf[o])
                     if d < reach:
-                        # An object listed in several cells is reported once: skip repeats of this agent.
-                        dup = False
-                        if fill:
-                            for r in range(n - 1, -1, -1):
-                                if out_a[r] != i:
-                                    break
-                                if out_o[r] == o:
-                                    dup = True
-                                    break
-                            if not dup:
-                                out_a[n] = i
-                                out_o[n] = o
-                        if not dup:
-                            n += 1
                         last = o
-    return n
+                        # An object listed in several cells is reported once per agent.
+                        dup = False
+                        for r in range(first, n):
+                            if out_o[r] == o:
+                                dup = True
+                                break
+                        if dup:
+                            continue
+                        if n == out_a.shape[0]:
+                            out_a, out_o = _grow(out_a, n), _grow(out_o, n)
+                        out_a[n] = i
+                        out_o[n] = o
+                        n += 1
+    return out_a[:n], out_o[:n]
 
 
 def find_collisions(
@@ -132,27 +174,24 @@ def find_collisions(
         margin: Extra distance added to every threshold.
 
     Returns:
-        Events; an agent-agent collision yields one row for each of the two agents.
+        Events; an agent-agent collision yields one row for each of the two agents (all pairs' first
+        agents, then their second agents), followed by agent-object rows in slot order.
     """
-    events = CollisionEvents.empty()
-    if online.any():
-        rmax = float(radius[online].max())
-        i, j, d = neighbor_pairs(agent_grid, pos, world, 2.0 * rmax + margin)
-        hit = d < radius[i] + radius[j] + margin
-        i, j = i[hit], j[hit]
-        if i.size:
-            neg = np.full(2 * i.size, -1, dtype=np.int64)
-            events = CollisionEvents(np.concatenate([i, j]), np.concatenate([j, i]), neg)
+    pos = np.ascontiguousarray(pos)
+    agent, other = np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    sp = agent_grid.spec
+    i, j = _agent_agent(pos, radius, online, world, agent_grid.cell_start, agent_grid.items, sp.origin_x,
+                        sp.origin_y, sp.cell, sp.nx, sp.ny, float(margin))  # fmt: skip
+    if i.size:
+        agent, other = np.concatenate([i, j]), np.concatenate([j, i])
+    obj = np.full(agent.shape[0], -1, dtype=np.int64)
     if object_grid is not None and scene_kind.shape[0] > 0:
         sp = object_grid.spec
-        args = (np.ascontiguousarray(pos), radius, online, world, scene_kind, scene_centre, scene_half,
-                scene_world, object_grid.cell_start, object_grid.items, sp.origin_x, sp.origin_y, sp.cell,
-                sp.nx, sp.ny, float(margin))
-        e = np.zeros(0, dtype=np.int64)
-        n = _agent_object(*args, False, e, e)
-        out_a = np.empty(n, dtype=np.int64)
-        out_o = np.empty(n, dtype=np.int64)
-        m = _agent_object(*args, True, out_a, out_o)
-        out_a, out_o = out_a[:m], out_o[:m]
-        events = events.concat(CollisionEvents(out_a, np.full(m, -1, dtype=np.int64), out_o))
-    return events
+        out_a, out_o = _agent_object(pos, radius, online, world, scene_kind, scene_centre, scene_half,
+                                     scene_world, object_grid.cell_start, object_grid.items, sp.origin_x,
+                                     sp.origin_y, sp.cell, sp.nx, sp.ny, float(margin))  # fmt: skip
+        if out_a.size:
+            agent = np.concatenate([agent, out_a])
+            other = np.concatenate([other, np.full(out_a.shape[0], -1, dtype=np.int64)])
+            obj = np.concatenate([obj, out_o])
+    return CollisionEvents(agent, other, obj)

@@ -86,6 +86,9 @@ def _cell_of(x: float, y: float, ox: float, oy: float, cell: float, nx: int, ny:
 
 @nb.njit(cache=True)
 def _build(pos, world, active, ox, oy, cell, nx, ny, n_cells):  # type: ignore[no-untyped-def]
+    # Counting sort in three linear passes (count, prefix sum, place); placing slots in descending order
+    # while decrementing each cell's end pointer leaves the items of a cell ascending and turns the end
+    # pointers into start pointers, so no separate copy of the offsets is needed.
     s = pos.shape[0]
     key = np.empty(s, dtype=np.int64)
     counts = np.zeros(n_cells + 1, dtype=np.int64)
@@ -96,16 +99,18 @@ def _build(pos, world, active, ox, oy, cell, nx, ny, n_cells):  # type: ignore[n
         cx, cy = _cell_of(pos[i, 0], pos[i, 1], ox, oy, cell, nx, ny)
         k = (world[i] * nx + cx) * ny + cy
         key[i] = k
-        counts[k + 1] += 1
+        counts[k] += 1
+    total = 0
     for c in range(n_cells):
-        counts[c + 1] += counts[c]
-    fill = counts[:-1].copy()
-    items = np.empty(counts[n_cells], dtype=np.int64)
-    for i in range(s):
+        total += counts[c]
+        counts[c] = total
+    counts[n_cells] = total
+    items = np.empty(total, dtype=np.int64)
+    for i in range(s - 1, -1, -1):
         k = key[i]
         if k >= 0:
-            items[fill[k]] = i
-            fill[k] += 1
+            counts[k] -= 1
+            items[counts[k]] = i
     return counts, items
 
 
@@ -175,8 +180,16 @@ def build_object_grid(spec: GridSpec, centre: np.ndarray, footprint_radius: np.n
 
 
 @nb.njit(cache=True)
-def _pairs(pos, world, cell_start, items, ox, oy, cell, nx, ny, max_dist, fill, out_i, out_j, out_d):  # type: ignore[no-untyped-def]
-    # Pass 1 (fill=False) only counts; pass 2 writes. Each pair (i < j) is found once: from i's side.
+def _grow(a, n):  # type: ignore[no-untyped-def]
+    # Double a result buffer, keeping its first n entries.
+    b = np.empty(max(2 * a.shape[0], 16), dtype=a.dtype)
+    b[:n] = a[:n]
+    return b
+
+
+@nb.njit(cache=True)
+def _pairs(pos, world, cell_start, items, ox, oy, cell, nx, ny, max_dist, out_i, out_j, out_d):  # type: ignore[no-untyped-def]
+    # One pass into growable buffers. Each pair (i < j) is found once: from i's side.
     n = 0
     r2 = max_dist * max_dist
     for idx in range(items.shape[0]):
@@ -185,23 +198,24 @@ def _pairs(pos, world, cell_start, items, ox, oy, cell, nx, ny, max_dist, fill, 
         x0, y0 = _cell_of(pos[i, 0] - max_dist, pos[i, 1] - max_dist, ox, oy, cell, nx, ny)
         x1, y1 = _cell_of(pos[i, 0] + max_dist, pos[i, 1] + max_dist, ox, oy, cell, nx, ny)
         for a in range(x0, x1 + 1):
-            for b in range(y0, y1 + 1):
-                k = (w * nx + a) * ny + b
-                for q in range(cell_start[k], cell_start[k + 1]):
-                    j = items[q]
-                    if j <= i:
-                        continue
-                    dx = pos[j, 0] - pos[i, 0]
-                    dy = pos[j, 1] - pos[i, 1]
-                    dz = pos[j, 2] - pos[i, 2]
-                    d2 = dx * dx + dy * dy + dz * dz
-                    if d2 <= r2:
-                        if fill:
-                            out_i[n] = i
-                            out_j[n] = j
-                            out_d[n] = np.sqrt(d2)
-                        n += 1
-    return n
+            base = (w * nx + a) * ny
+            # The rows of one column are consecutive cells: one contiguous run of items.
+            for q in range(cell_start[base + y0], cell_start[base + y1 + 1]):
+                j = items[q]
+                if j <= i:
+                    continue
+                dx = pos[j, 0] - pos[i, 0]
+                dy = pos[j, 1] - pos[i, 1]
+                dz = pos[j, 2] - pos[i, 2]
+                d2 = dx * dx + dy * dy + dz * dz
+                if d2 <= r2:
+                    if n == out_i.shape[0]:
+                        out_i, out_j, out_d = _grow(out_i, n), _grow(out_j, n), _grow(out_d, n)
+                    out_i[n] = i
+                    out_j[n] = j
+                    out_d[n] = np.sqrt(d2)
+                    n += 1
+    return out_i[:n], out_j[:n], out_d[:n]
 
 
 def neighbor_pairs(grid: Grid, pos: np.ndarray, world: np.ndarray, max_dist: float) -> tuple[np.ndarray, ...]:
@@ -217,12 +231,7 @@ def neighbor_pairs(grid: Grid, pos: np.ndarray, world: np.ndarray, max_dist: flo
         ``(i, j, d)``: slot arrays with ``i < j`` and their distances, each pair once.
     """
     sp = grid.spec
-    args = (np.ascontiguousarray(pos), world, grid.cell_start, grid.items, sp.origin_x, sp.origin_y, sp.cell,
-            sp.nx, sp.ny, float(max_dist))
-    e = np.empty(0, dtype=np.int64)
-    n = _pairs(*args, False, e, e, np.empty(0))
-    out_i = np.empty(n, dtype=np.int64)
-    out_j = np.empty(n, dtype=np.int64)
-    out_d = np.empty(n)
-    _pairs(*args, True, out_i, out_j, out_d)
-    return out_i, out_j, out_d
+    cap = max(16, grid.items.shape[0])
+    return _pairs(np.ascontiguousarray(pos), world, grid.cell_start, grid.items, sp.origin_x, sp.origin_y, sp.cell,
+                  sp.nx, sp.ny, float(max_dist), np.empty(cap, dtype=np.int64), np.empty(cap, dtype=np.int64),
+                  np.empty(cap))  # fmt: skip

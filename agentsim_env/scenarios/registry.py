@@ -11,6 +11,8 @@ from agentsim_env.scenarios.config import build_config
 # name -> module path; modules are imported on first use so `import agentsim_env` stays cheap.
 _SCENARIOS: dict[str, str] = {
     "navigation": "agentsim_env.scenarios.navigation",
+    "uav_release": "agentsim_env.scenarios.uav_release",
+    "relay": "agentsim_env.scenarios.relay",
 }
 
 

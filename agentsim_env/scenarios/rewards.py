@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba as nb
 import numpy as np
 
 from agentsim_env.scenarios.config import check_float
@@ -54,6 +55,46 @@ def group_mean(values: np.ndarray, group: np.ndarray, world: np.ndarray, mask: n
     return np.where(group >= 0, mean, values)
 
 
+@nb.njit(cache=True)
+def _compose_kernel(task, group, world, acting, n_groups, collided, energy, sent, w, use):  # type: ignore[no-untyped-def]
+    # One pass for the group sums, one for the terms. The sums run in slot order like np.bincount and the
+    # terms are added in the order of the numpy expression, so the result is bit-identical to it.
+    tw, gs, cp, ew, mc = w[0], w[1], w[2], w[3], w[4]
+    use_group, use_coll, use_energy, use_sent = use
+    s_n = task.shape[0]
+    ng = max(n_groups, 1)
+    key = np.empty(s_n, dtype=np.int64)
+    size = 0
+    for s in range(s_n):
+        k = world[s] * ng + (group[s] if group[s] >= 0 else 0)
+        key[s] = k
+        size = max(size, k + 1)
+    sums = np.zeros(size if use_group else 0)
+    cnt = np.zeros(size if use_group else 0)
+    if use_group:
+        for s in range(s_n):
+            m = 1.0 if acting[s] else 0.0
+            sums[key[s]] += task[s] * m
+            cnt[key[s]] += m
+    out = np.empty(s_n)
+    for s in range(s_n):
+        if not acting[s]:
+            out[s] = 0.0
+            continue
+        r = tw * task[s]
+        if use_group:
+            g = sums[key[s]] / max(cnt[key[s]], 1.0) if group[s] >= 0 else task[s]
+            r = r + gs * g
+        if use_coll:
+            r = r - cp * collided[s]
+        if use_energy:
+            r = r - ew * energy[s]
+        if use_sent:
+            r = r - mc * sent[s]
+        out[s] = r
+    return out
+
+
 def compose_rewards(
     cfg: RewardConfig,
     task: np.ndarray,
@@ -68,6 +109,9 @@ def compose_rewards(
 ) -> np.ndarray:
     """Combine the terms into one reward per slot (zero for slots that were not acting).
 
+    One numba pass (the composition runs every step); :func:`compose_rewards_reference` is the numpy
+    statement of the same formula.
+
     Args:
         cfg: The weights.
         task: Task reward per slot ``(S,)``.
@@ -80,8 +124,44 @@ def compose_rewards(
         messages_sent: Messages sent this step per slot.
 
     Returns:
-        Rewards ``(S,)`` as float64.
+        Rewards ``(S,)`` as float64 (a fresh array).
     """
+    s = task.shape[0]
+    empty = np.zeros(s)
+    use = (
+        bool(cfg.group_share) and s > 0,
+        collided is not None and bool(cfg.collision_penalty),
+        energy is not None and bool(cfg.energy_weight),
+        messages_sent is not None and bool(cfg.message_cost),
+    )
+    w = np.array([cfg.task_weight, cfg.group_share, cfg.collision_penalty, cfg.energy_weight, cfg.message_cost])
+    return _compose_kernel(
+        np.asarray(task, dtype=np.float64),
+        np.asarray(group),
+        np.asarray(world),
+        np.asarray(acting, dtype=np.bool_),
+        int(n_groups),
+        empty if collided is None else np.asarray(collided, dtype=np.float64),
+        empty if energy is None else np.asarray(energy, dtype=np.float64),
+        empty if messages_sent is None else np.asarray(messages_sent),
+        w,
+        use,
+    )
+
+
+def compose_rewards_reference(
+    cfg: RewardConfig,
+    task: np.ndarray,
+    *,
+    group: np.ndarray,
+    world: np.ndarray,
+    acting: np.ndarray,
+    n_groups: int,
+    collided: np.ndarray | None = None,
+    energy: np.ndarray | None = None,
+    messages_sent: np.ndarray | None = None,
+) -> np.ndarray:
+    """Plain numpy statement of :func:`compose_rewards` (same arguments; used by the tests)."""
     r = cfg.task_weight * task
     if cfg.group_share:
         r = r + cfg.group_share * group_mean(task, group, world, acting, n_groups)

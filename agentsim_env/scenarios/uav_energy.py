@@ -7,16 +7,17 @@ Power drawn at horizontal airspeed ``V`` by a rotorcraft of weight ``W`` (newton
             + 1/2 d0 rho s A V^3                                        fuselage (parasite) drag
             + W max(vz, 0)                                              climb
 
-with ``P0 = delta/8 rho s A Omega^3 R^3``, ``U_tip = Omega R``, ``Pi(W) = (1 + k) W^(3/2) / sqrt(2 rho A)`` and
-``v0(W) = sqrt(W / (2 rho A))`` (the mean rotor induced velocity in hover). With the default primitives (the
-paper's table) ``P0 = 79.86 W``, ``Pi = 88.63 W``, ``U_tip = 120 m/s`` and ``v0 = 4.03 m/s`` at ``W = 20 N``.
+with ``P0 = delta/8 rho s A Omega^3 R^3``, ``U_tip = Omega R``, ``Pi(W) = (1 + k) W^(3/2) / sqrt(2 rho A)``
+and ``v0(W) = sqrt(W / (2 rho A))`` (the mean rotor induced velocity in hover). With the default primitives
+(the paper's table) ``P0 = 79.86 W``, ``Pi = 88.63 W``, ``U_tip = 120 m/s`` and ``v0 = 4.03 m/s`` at
+``W = 20 N``.
 
 Payload effect: ``Pi`` grows as ``W^(3/2)`` and ``v0`` as ``W^(1/2)``, so both are recomputed from the current
 weight (airframe plus the sensors still on board) at every call; releasing sensors lowers the power.
 
 Climb term: raising the weight at ``vz`` m/s costs ``m g vz = W vz`` watts of potential energy (the induced
-power correction for axial flight is neglected). Descending gives no credit: the rotors still have to carry the
-weight and no energy is recovered, so the term is ``W max(vz, 0)``.
+power correction for axial flight is neglected). Descending gives no credit: the rotors still have to carry
+the weight and no energy is recovered, so the term is ``W max(vz, 0)``.
 
 Reference operating points at 20 N (computed from the formula): hover 168.5 W; 5 m/s 143.6 W; 10.2 m/s
 126.0 W (minimum power, maximum endurance); 15 m/s 138.5 W; 18.3 m/s 161.6 W (maximum range, 8.83 J/m).
@@ -289,7 +290,10 @@ def min_power_speed(
     w = _check_weight(weight_N, params)
     check_float("v_max", v_max, 0.0, lo_open=True)
     res = minimize_scalar(
-        lambda x: float(power(x, w, params=params)), bounds=(0.0, v_max), method="bounded", options={"xatol": 1e-6}
+        lambda x: float(power(x, w, params=params)),
+        bounds=(0.0, v_max),
+        method="bounded",
+        options={"xatol": 1e-6},
     )
     return float(res.x)
 

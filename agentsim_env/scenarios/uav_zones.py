@@ -31,8 +31,9 @@ altitude     number   null     release altitude (m AGL), 0 < altitude <= 120; nu
 name         string   null     label used in messages, logs and plots
 ============ ======== ======== ======================================================================
 
-Unknown fields, missing required fields, wrong types (a boolean is not a number; an integer is accepted for a
-number) and out-of-range values raise ``ValueError`` naming the zone (``zones[i]`` and its name) and the field.
+Unknown fields, missing required fields, wrong types (a boolean is not a number; an integer is accepted for
+a number) and out-of-range values raise ``ValueError`` naming the zone (``zones[i]`` and its name) and the
+field.
 Overlapping zones are allowed (see ``overlaps``); the payload check is separate (``validate_against_payload``)
 because the fleet is part of the scenario config, not of the zone file.
 """
@@ -243,8 +244,8 @@ def _check_inside(label: str, z: Zone, width: float, height: float) -> None:
     bad = [f"{d:.3g} m beyond the {side}" for side, d in excess.items() if d > 1e-9]
     if bad:
         raise ValueError(
-            f"{label}: field 'centre'/'radius': the disc (centre ({cx:g}, {cy:g}), radius {z.radius:g}) is not "
-            f"fully inside the {width:g} x {height:g} m map: it extends {', '.join(bad)}"
+            f"{label}: field 'centre'/'radius': the disc (centre ({cx:g}, {cy:g}), radius {z.radius:g}) "
+            f"is not fully inside the {width:g} x {height:g} m map: it extends {', '.join(bad)}"
         )
 
 
@@ -392,7 +393,7 @@ def overlaps(zs: ZoneSet) -> list[tuple[int, int]]:
     dist = np.linalg.norm(c[:, None, :] - c[None, :, :], axis=2)
     hit = dist < (r[:, None] + r[None, :]) * (1.0 - 1e-12)
     i, j = np.nonzero(np.triu(hit, k=1))
-    return [(int(a), int(b)) for a, b in zip(i, j)]
+    return [(int(a), int(b)) for a, b in zip(i, j, strict=True)]
 
 
 def _data_path(name: str) -> Path:

@@ -1,0 +1,343 @@
+"""relay: in each group one scout sees the group's target; the others reach it only through messages.
+
+Agents (``agent_0`` ... ``agent_{N-1}``, N = ``n_groups x group_size``; slot i is in group ``i % n_groups``)
+start strung out along a corridor (a map ``length x corridor_width``): the N start points form a chain along x
+with gaps drawn from ``gap`` (default 12-22 m), a lateral offset of at most ``lateral_spread`` and an altitude
+in ``altitude``; which agent takes which point is a random permutation. Each episode draws one **scout** per
+group; the group's **target** (a ground marker) lies ``target_offset`` metres from its scout in a random
+direction. Only the scout perceives the target; the others see zeros in their ``task`` part.
+
+Geometry and why messages must relay: the chain spans about 190 m at the defaults while the bus reaches
+``comms.max_range`` = 35 m and the overlay ``comms.overlay_range`` = 35 m per hop, so most non-scouts start
+beyond one bus hop of their scout (about 3 in 4 over seeds 0-19, see ``tests/test_relay.py``), yet the chain is
+connected (consecutive points are at most sqrt(22^2 + 16^2 + 6^2) = 28 m apart), so an overlay flood with
+hop limit ``comms.max_hops`` = 8, relayed by agents of any group, reaches most of it.
+
+Observation (Dict; the flat Box concatenates the parts in this order):
+
+| part   | shape    | content                                                                                 |
+|--------|----------|-----------------------------------------------------------------------------------------|
+| self   | (9,)     | x, y in [-1, 1] over the map; altitude in [-1, 1] over the band; vx, vy, vz / max_speed; cos, sin heading; group code ``2 g / (G - 1) - 1`` (0 when G = 1) |
+| lidar  | (K, 2)   | per ray: normalised distance (1 = free), hit code / 3 (0 none, 1/3 agent, 2/3 object, 1 ground) |
+| task   | (4,)     | scout: 1, target minus position (dx, dy) / map diagonal, horizontal distance / diagonal; others: zeros |
+| inbox  | (M, 11+D)| received messages, newest first (layout in ``agentsim_env.comms.messages``)              |
+| comms  | (2,)     | messages received and dropped this step / M                                              |
+
+Rays: ``n_azimuth`` evenly spaced azimuths (ray 0 along the heading) per ring in ``elevations_deg``
+(default 12 x 1 = 12 horizontal rays).
+
+Action (Dict; the flat Box concatenates ``motion`` then ``comm``), values in [-1, 1]:
+
+| part   | shape  | content                                                                               |
+|--------|--------|---------------------------------------------------------------------------------------|
+| motion | (3,)   | target velocity / max_speed (norm clipped to max_speed)                                 |
+| comm   | (3+D,) | channel, receiver, hop limit, payload (layout in ``agentsim_env.comms.stack``)          |
+
+Reward (composed by ``RewardConfig``): task = progress toward the group's target (horizontal metres) plus
+``arrival_bonus`` on arrival for non-scouts, 0 for scouts (they earn through the group share); collision
+penalty; energy = speed^2 x dt; ``reward.message_cost`` per message sent.
+
+Episode: a non-scout within ``arrival_radius`` of its target (horizontally) terminates with success; a
+collision terminates an agent; a scout terminates once none of its group's non-scouts is still live (all
+arrived or out); everyone left is truncated at ``max_steps``. ``group_success`` scores an episode.
+
+Version history: v0, first release.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from agentsim_env.comms.stack import CommsConfig
+from agentsim_env.core.world import PHYSICS_MODES, StepEvents, World, WorldConfig
+from agentsim_env.motion import decode_velocity, set_hold
+from agentsim_env.scenarios.base import Part, Scenario, StepResult
+from agentsim_env.scenarios.config import build_config, check_choice, check_float, check_int
+from agentsim_env.scenarios.placement import obstacle_layout
+from agentsim_env.scenarios.rewards import RewardConfig, compose_rewards
+from agentsim_env.sensors.proximity import ProximityConfig
+
+RELAY_COMMS = CommsConfig(payload_dim=4, inbox_size=8, max_range=35.0, overlay_range=35.0, max_hops=8,
+                          nearest_range=35.0)  # fmt: skip
+"""The default communication settings (a ``comms`` dict overrides some of these fields)."""
+
+
+@dataclass(frozen=True)
+class RelayConfig:
+    """Configuration of ``relay`` (every field validated at construction)."""
+
+    n_groups: int = 3
+    group_size: int = 4  # the scout plus group_size - 1 members that must reach the target
+    corridor_width: float = 40.0
+    gap: tuple[float, float] = (12.0, 22.0)  # distance along x between consecutive start points
+    lateral_spread: float = 8.0  # start points lie within this distance of the corridor's centre line
+    altitude: tuple[float, float] = (4.0, 10.0)
+    target_offset: tuple[float, float] = (4.0, 10.0)  # distance scout -> target
+    obstacle_density: float = 1.0 / 1000.0
+    obstacle_size: tuple[float, float] = (1.0, 2.5)
+    obstacle_height: tuple[float, float] = (4.0, 20.0)
+    agent_radius: float = 0.5
+    max_speed: float = 6.0
+    max_accel: float = 10.0
+    sensor_range: float = 8.0
+    n_azimuth: int = 12
+    elevations_deg: tuple[float, ...] = (0.0,)
+    arrival_radius: float = 3.0
+    arrival_bonus: float = 10.0
+    physics: str = "kinematic"
+    collisions: bool = True
+    dt: float = 0.1
+    max_steps: int = 400
+    reward: RewardConfig = field(
+        default_factory=lambda: RewardConfig(group_share=0.5, energy_weight=0.001, message_cost=0.01)
+    )
+    comms: CommsConfig = RELAY_COMMS  # a dict overrides fields of RELAY_COMMS
+
+    def __post_init__(self) -> None:
+        check_int("n_groups", self.n_groups, 1, 64)
+        check_int("group_size", self.group_size, 2, 256)
+        for name in ("corridor_width", "agent_radius", "max_speed", "max_accel", "sensor_range",
+                     "arrival_radius", "dt"):  # fmt: skip
+            check_float(name, getattr(self, name), 0.0, lo_open=True)
+        check_float("lateral_spread", self.lateral_spread, 0.0)
+        check_float("corridor_width", self.corridor_width, 2.0 * self.lateral_spread + 4.0)
+        check_float("obstacle_density", self.obstacle_density, 0.0, 0.01)
+        check_float("arrival_bonus", self.arrival_bonus, 0.0)
+        check_int("n_azimuth", self.n_azimuth, 1, 1024)
+        check_int("max_steps", self.max_steps, 1)
+        check_choice("physics", self.physics, PHYSICS_MODES)
+        for name in ("gap", "altitude", "target_offset", "obstacle_size", "obstacle_height"):
+            pair = getattr(self, name)
+            if not isinstance(pair, (tuple, list)) or len(pair) != 2:
+                raise ValueError(f"{name} must be a pair (low, high), got {pair!r}")
+            check_float(f"{name}[0]", pair[0], 0.0, lo_open=name == "gap")
+            check_float(f"{name}[1]", pair[1], pair[0])
+        if isinstance(self.reward, dict):
+            object.__setattr__(self, "reward", build_config(RewardConfig, self.reward))
+        if not isinstance(self.reward, RewardConfig):
+            raise ValueError(f"reward must be a RewardConfig or a dict of its fields, got {self.reward!r}")
+        if isinstance(self.comms, dict):
+            unknown = sorted(set(self.comms) - set(asdict(RELAY_COMMS)))
+            if unknown:
+                raise ValueError(f"unknown comms key(s) {unknown}; allowed keys: {sorted(asdict(RELAY_COMMS))}")
+            object.__setattr__(self, "comms", build_config(CommsConfig, {**asdict(RELAY_COMMS), **self.comms}))
+        if not isinstance(self.comms, CommsConfig):
+            raise ValueError(f"comms must be a CommsConfig or a dict of its fields (relay needs comms), got {self.comms!r}")
+
+    @property
+    def n_agents(self) -> int:
+        """Agents per world."""
+        return self.n_groups * self.group_size
+
+    @property
+    def margin(self) -> float:
+        """Free space at each end of the corridor (room for targets beyond the end points)."""
+        return float(self.target_offset[1]) + 5.0
+
+    @property
+    def length(self) -> float:
+        """Corridor length in metres: the longest possible chain plus a margin at both ends."""
+        return (self.n_agents - 1) * float(self.gap[1]) + 2.0 * self.margin
+
+
+class RelayScenario(Scenario):
+    """Scouts see targets, members reach them through relayed messages; see the module docstring."""
+
+    name = "relay"
+    config_cls = RelayConfig
+    version = 0
+    agent_prefix = "agent"
+    test_configs = (
+        {"n_groups": 2, "group_size": 3},
+        {"n_groups": 2, "group_size": 2, "max_steps": 120,
+         "comms": {"loss": 0.3, "latency": 2, "heartbeat_period": 5}},
+        {"n_groups": 1, "group_size": 3, "obstacle_density": 0.0, "comms": {"overlay_full": True}},
+    )  # fmt: skip
+
+    def __init__(self, config: RelayConfig) -> None:
+        super().__init__(config)
+        self.lidar = ProximityConfig(n_azimuth=config.n_azimuth, elevations_deg=tuple(config.elevations_deg))
+        self.target = np.zeros((0, 2))  # per slot: its group's target (x, y)
+        self.scout = np.zeros(0, dtype=bool)
+        self.prev_dist = np.zeros(0)
+        self.arrived = np.zeros(0, dtype=bool)
+
+    @property
+    def n_agents(self) -> int:
+        """Agents per world."""
+        return self.config.n_agents
+
+    def build(self, n_worlds: int) -> World:
+        """World sized for the corridor and the band; per-slot target, scout and arrival arrays."""
+        c = self.config
+        wc = WorldConfig(
+            bounds=(0.0, c.length, 0.0, c.corridor_width), z_range=(0.0, c.altitude[1] + 5.0), dt=c.dt,
+            physics=c.physics, collisions=c.collisions, lidar=self.lidar, grid_cell=max(c.sensor_range / 2, 2.0),
+        )
+        world = World(wc, n_worlds, c.n_agents, comms=c.comms)
+        st = world.state
+        st.radius[:] = c.agent_radius
+        st.sensor_range[:] = c.sensor_range
+        st.max_speed[:] = c.max_speed
+        st.max_accel[:] = c.max_accel
+        st.group[:] = np.tile(np.arange(c.n_agents) % c.n_groups, n_worlds)
+        self.target = np.zeros((st.n_slots, 2))
+        self.scout = np.zeros(st.n_slots, dtype=bool)
+        self.prev_dist = np.zeros(st.n_slots)
+        self.arrived = np.zeros(st.n_slots, dtype=bool)
+        return world
+
+    def reset_world(self, world: World, w: int, rng: np.random.Generator) -> None:
+        """New chain of start points, scouts, targets and obstacles for world ``w``."""
+        c, st = self.config, world.state
+        sl = st.slots_of_world(w)
+        n, g_n, length, width = c.n_agents, c.n_groups, c.length, c.corridor_width
+        gaps = rng.uniform(c.gap[0], c.gap[1], n - 1)
+        x0 = c.margin + rng.uniform(0.0, length - 2.0 * c.margin - gaps.sum())
+        chain = np.column_stack([
+            x0 + np.concatenate([[0.0], np.cumsum(gaps)]),
+            width / 2.0 + rng.uniform(-c.lateral_spread, c.lateral_spread, n),
+            rng.uniform(c.altitude[0], c.altitude[1], n),
+        ])
+        st.pos[sl] = chain[rng.permutation(n)]
+        st.vel[sl] = 0.0
+        st.heading[sl] = rng.uniform(-np.pi, np.pi, n)
+        st.online[sl] = True
+        st.energy[sl] = 0.0
+        scout_slot = np.arange(g_n) + g_n * rng.integers(0, c.group_size, g_n)  # slot i is in group i % G
+        ang = rng.uniform(-np.pi, np.pi, g_n)
+        r = rng.uniform(c.target_offset[0], c.target_offset[1], g_n)
+        tgt = st.pos[sl][scout_slot, :2] + r[:, None] * np.column_stack([np.cos(ang), np.sin(ang)])
+        tgt = np.clip(tgt, [2.0, 2.0], [length - 2.0, width - 2.0])
+        self.target[sl] = tgt[np.arange(n) % g_n]
+        self.scout[sl] = False
+        self.scout[sl[scout_slot]] = True
+        self.prev_dist[sl] = np.linalg.norm(self.target[sl] - st.pos[sl, :2], axis=1)
+        self.arrived[sl] = False
+        set_hold(world.motion, sl)
+        world.remove_objects_of_world(w)
+        n_obs = int(round(c.obstacle_density * length * width))
+        kind, centre, half = obstacle_layout(
+            rng, n_obs, (0.0, length, 0.0, width), c.obstacle_size, c.obstacle_height,
+            np.vstack([chain[:, :2], tgt]), keep_clear_radius=max(c.agent_radius + 2.0, c.arrival_radius + 1.0),
+        )
+        if kind.size:
+            world.scene.add(kind, centre, half, w)
+
+    def obs_parts(self) -> dict[str, Part]:
+        """self (9,), lidar (K, 2), task (4,), inbox (M, 11 + D), comms (2,)."""
+        parts = {"self": Part((9,), -1.0, 1.0), "lidar": Part((self.lidar.n_rays, 2), 0.0, 1.0),
+                 "task": Part((4,), -1.0, 1.0)}  # fmt: skip
+        return {**parts, **self.comm_obs_parts()}
+
+    def act_parts(self) -> dict[str, Part]:
+        """motion (3,) velocity, comm (3 + D,)."""
+        return {"motion": Part((3,), -1.0, 1.0), **self.comm_act_parts()}
+
+    def state_size(self) -> int:
+        """Base state, a scout flag per agent and every target."""
+        return self.n_agents * 9 + self.n_groups * 2
+
+    def apply_actions(self, world: World, actions: dict[str, np.ndarray], acting: np.ndarray) -> None:
+        """Set each acting slot's velocity from its ``motion`` action."""
+        slots = np.flatnonzero(acting)
+        decode_velocity(world.motion, slots, actions["motion"][slots], world.state.max_speed[slots])
+
+    def after_world_step(self, world: World, events: StepEvents, acting: np.ndarray) -> StepResult:
+        """Progress and arrival of non-scouts, scouts' end, collisions, energy and messages -> rewards."""
+        c, st = self.config, world.state
+        dist = np.linalg.norm(self.target - st.pos[:, :2], axis=1)
+        member = acting & ~self.scout
+        arrived = member & st.online & (dist <= c.arrival_radius)
+        task = np.where(member, self.prev_dist - dist, 0.0) + c.arrival_bonus * arrived
+        self.prev_dist = dist
+        self.arrived |= arrived
+        # a scout is done once no member of its (world, group) is still live
+        key = st.world_id.astype(np.int64) * c.n_groups + st.group
+        pending = ~self.scout & st.online & ~self.arrived
+        left = np.bincount(key[pending], minlength=st.n_slots // c.group_size)
+        scout_done = acting & self.scout & (left[key] == 0)
+        collided = np.zeros(st.n_slots)
+        collided[events.went_offline] = 1.0
+        effort = np.einsum("ij,ij->i", st.vel, st.vel) * world.config.dt
+        st.energy += np.where(acting, effort, 0.0)
+        assert world.comms is not None
+        rewards = compose_rewards(
+            c.reward, task, group=st.group, world=st.world_id, acting=acting, n_groups=c.n_groups,
+            collided=collided, energy=effort, messages_sent=world.comms.sent,
+        )
+        info = {"arrived": arrived.astype(np.int8), "collided": collided.astype(np.int8), "distance": dist,
+                "scout": self.scout.astype(np.int8)}  # fmt: skip
+        return StepResult(rewards, arrived | scout_done, info)
+
+    def observe(self, world: World) -> dict[str, np.ndarray]:
+        """Observation parts for every slot (see the module docstring)."""
+        c, st = self.config, world.state
+        lo, hi = c.altitude
+        code = st.group / max(c.n_groups - 1, 1) * 2.0 - 1.0 if c.n_groups > 1 else np.zeros(st.n_slots)
+        selfp = np.column_stack([
+            st.pos[:, 0] / c.length * 2 - 1, st.pos[:, 1] / c.corridor_width * 2 - 1,
+            (st.pos[:, 2] - lo) / max(hi - lo, 1e-9) * 2 - 1, st.vel / c.max_speed,
+            np.cos(st.heading), np.sin(st.heading), code,
+        ])
+        scan = world.scan
+        assert scan is not None
+        diag = float(np.hypot(c.length, c.corridor_width))
+        d = self.target - st.pos[:, :2]
+        task = np.column_stack([np.ones(st.n_slots), d / diag, np.linalg.norm(d, axis=1) / diag])
+        task[~self.scout] = 0.0  # only the scout perceives the target
+        return {
+            "self": np.clip(selfp, -1, 1).astype(np.float32),
+            "lidar": np.stack([scan.distance, scan.hit_kind / 3.0], axis=-1).astype(np.float32),
+            "task": np.clip(task, -1, 1).astype(np.float32),
+            **self.comm_observe(world),
+        }
+
+    def state(self, world: World, w: int) -> np.ndarray:
+        """Base state, scout flags, then each group's target / 100 m."""
+        sl = slice(w * self.n_agents, (w + 1) * self.n_agents)
+        tgt = self.target[sl][: self.n_groups]
+        extra = np.concatenate([self.scout[sl].astype(np.float64), np.clip(tgt.ravel() / 100.0, -10, 10)])
+        return np.concatenate([super().state(world, w), extra]).astype(np.float32)
+
+    def markers(self, world: World, w: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Targets as discs, one colour per group."""
+        sl = slice(w * self.n_agents, (w + 1) * self.n_agents)
+        g = np.arange(self.n_groups)
+        rgb = np.column_stack([40 + 70 * (g % 3), 170 - 50 * (g % 2), 60 + 60 * ((g + 1) % 3)]).astype(np.uint8)
+        return self.target[sl][: self.n_groups].copy(), rgb, np.full(self.n_groups, self.config.arrival_radius)
+
+    def group_success(self, w: int = 0, fraction: float = 0.5) -> np.ndarray:
+        """Per group of world ``w``: whether at least ``fraction`` of its non-scouts arrived (so far).
+
+        Args:
+            w: World index.
+            fraction: Share of the group's non-scouts that must have arrived.
+
+        Returns:
+            ``(n_groups,)`` bool.
+        """
+        c = self.config
+        sl = slice(w * c.n_agents, (w + 1) * c.n_agents)
+        g = np.arange(c.n_agents) % c.n_groups
+        hits = np.bincount(g, weights=self.arrived[sl] & ~self.scout[sl], minlength=c.n_groups)
+        return hits >= fraction * (c.group_size - 1) - 1e-9
+
+
+SCENARIO = RelayScenario
+
+
+def parallel_env(**config: object):  # type: ignore[no-untyped-def]
+    """The ``relay`` ParallelEnv (``render_mode``, ``obs_format``, ``action_format`` plus config keys)."""
+    from agentsim_env import make
+
+    return make("relay", **config)
+
+
+def env(**config: object):  # type: ignore[no-untyped-def]
+    """The ``relay`` env in PettingZoo's AEC form."""
+    from agentsim_env.env.parallel_env import to_aec
+
+    return to_aec(parallel_env(**config))
