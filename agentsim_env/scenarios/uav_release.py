@@ -133,7 +133,10 @@ class UavReleaseConfig:
         named = {None: default_zones_path, "default": default_zones_path, "tiny": tiny_zones_path}
         if z in named:
             return load_zones(named[z]())
-        return load_zones(z)
+        try:
+            return load_zones(z)
+        except OSError as exc:
+            raise ValueError(f"zones: cannot read zones file {str(z)!r}: {exc.strerror or exc}") from None
 
 
 class UavReleaseScenario(Scenario):
