@@ -87,7 +87,10 @@ def test_collision_env_message_names_object() -> None:
     rows = _rows(obs, "agent_2")
     env_rows = rows[rows[:, KIND_COL[ENV]] == 1]
     assert len(env_rows) == 1
-    assert env_rows[0, FEATURES_PER_MESSAGE] == ENV_COLLISION_OBJECT and env_rows[0, FEATURES_PER_MESSAGE + 1] == oid
+    assert (
+        env_rows[0, FEATURES_PER_MESSAGE] == ENV_COLLISION_OBJECT
+        and env_rows[0, FEATURES_PER_MESSAGE + 1] == oid
+    )
 
 
 def test_heartbeat_timeouts_on_dead_channel() -> None:
@@ -109,8 +112,13 @@ def test_heartbeats_keep_agents_on_clean_channel() -> None:
 
 
 def test_message_cost_and_events() -> None:
-    env = agentsim_env.make("navigation", n_agents=4, obstacle_density=0.0, comms={},
-                            reward={"message_cost": 1.0, "group_share": 0.0})
+    env = agentsim_env.make(
+        "navigation",
+        n_agents=4,
+        obstacle_density=0.0,
+        comms={},
+        reward={"message_cost": 1.0, "group_share": 0.0},
+    )
     env.reset(seed=0)
     d = env.scenario.comms_config().action_dim
     quiet = {a: {"motion": np.zeros(3, np.float32), "comm": np.full(d, -1.0, np.float32)} for a in env.agents}
@@ -154,7 +162,12 @@ def test_code_api_and_bad_inputs() -> None:
 
 
 def test_comms_config_errors_name_field() -> None:
-    for bad, field in [({"loss": 1.5}, "loss"), ({"latency": -1}, "latency"), ({"inbox_size": 0}, "inbox_size"),
-                       ({"heartbeat_period": 5, "heartbeat_timeout": 2}, "heartbeat_timeout"), ({"foo": 1}, "foo")]:
+    for bad, field in [
+        ({"loss": 1.5}, "loss"),
+        ({"latency": -1}, "latency"),
+        ({"inbox_size": 0}, "inbox_size"),
+        ({"heartbeat_period": 5, "heartbeat_timeout": 2}, "heartbeat_timeout"),
+        ({"foo": 1}, "foo"),
+    ]:
         with pytest.raises(ValueError, match=field):
             agentsim_env.make("navigation", comms=bad)

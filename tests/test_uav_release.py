@@ -125,11 +125,19 @@ def test_zones_file_errors_name_zone_and_field(tmp_path) -> None:  # type: ignor
         agentsim_env.make("uav_release", n_uavs=3, payload=40)  # 150 sensors > 120
 
 
-@pytest.mark.parametrize(("key", "value", "field"), [
-    ("n_uavs", 0, "n_uavs"), ("sensor_mass", -0.1, "sensor_mass"), ("wind", {"mean_speed": -2}, "mean_speed"),
-    ("scatter", {"sigma_gnss": -1}, "sigma_gnss"), ("comms", {"loss": 2.0}, "loss"), ("w_lcc", -1.0, "w_lcc"),
-    ("zones", "/no/such/file.json", "file.json"), ("action_mode", "fly", "action_mode"),
-])
+@pytest.mark.parametrize(
+    ("key", "value", "field"),
+    [
+        ("n_uavs", 0, "n_uavs"),
+        ("sensor_mass", -0.1, "sensor_mass"),
+        ("wind", {"mean_speed": -2}, "mean_speed"),
+        ("scatter", {"sigma_gnss": -1}, "sigma_gnss"),
+        ("comms", {"loss": 2.0}, "loss"),
+        ("w_lcc", -1.0, "w_lcc"),
+        ("zones", "/no/such/file.json", "file.json"),
+        ("action_mode", "fly", "action_mode"),
+    ],
+)
 def test_bad_config_names_field(key: str, value: object, field: str) -> None:
     with pytest.raises(ValueError, match=field):
         agentsim_env.make("uav_release", **{key: value})

@@ -49,12 +49,18 @@ def test_collisions_match_brute_force(seed: int, n: int, n_worlds: int) -> None:
     world = np.repeat(np.arange(n_worlds, dtype=np.int32), n)
     scene = Scene()
     k = rng.integers(0, 3, 6)
-    scene.add(k, np.column_stack([rng.uniform(0, 30, (6, 2)), rng.uniform(0, 4, 6)]),
-              rng.uniform(0.5, 3.0, (6, 3)), rng.integers(0, n_worlds, 6))
+    scene.add(
+        k,
+        np.column_stack([rng.uniform(0, 30, (6, 2)), rng.uniform(0, 4, 6)]),
+        rng.uniform(0.5, 3.0, (6, 3)),
+        rng.integers(0, n_worlds, 6),
+    )
     spec = GridSpec.for_bounds((0, 30, 0, 30), 3.0, n_worlds)
     grid = build_grid(spec, pos, world, online)
     og = build_object_grid(spec, scene.centre, scene.footprint_radius(), scene.world)
-    ev = find_collisions(pos, radius, online, world, grid, scene.kind, scene.centre, scene.half, scene.world, og)
+    ev = find_collisions(
+        pos, radius, online, world, grid, scene.kind, scene.centre, scene.half, scene.world, og
+    )
     got = set(zip(ev.agent.tolist(), ev.other_agent.tolist(), ev.obj.tolist()))
     assert got == _collide_brute(pos, radius, online, world, scene)
     assert len(got) == len(ev)  # no duplicate rows
@@ -75,8 +81,13 @@ def test_neighbor_pairs_symmetric_and_complete(seed: int, r: float) -> None:
 
 def test_scene_random_placement_no_overlap_and_runtime_add() -> None:
     sc = Scene()
-    ids = sc.place_random(np.random.default_rng(0), 15, (0, 100, 0, 100), keep_clear=np.array([[50.0, 50.0]]),
-                          keep_clear_radius=5.0)
+    ids = sc.place_random(
+        np.random.default_rng(0),
+        15,
+        (0, 100, 0, 100),
+        keep_clear=np.array([[50.0, 50.0]]),
+        keep_clear_radius=5.0,
+    )
     assert len(ids) == 15
     fr = sc.footprint_radius()
     d = np.linalg.norm(sc.centre[:, None, :2] - sc.centre[None, :, :2], axis=2)
@@ -84,8 +95,13 @@ def test_scene_random_placement_no_overlap_and_runtime_add() -> None:
     assert np.all(d >= fr[:, None] + fr[None, :])
     assert np.all(np.linalg.norm(sc.centre[:, :2] - 50.0, axis=1) >= fr + 5.0)
     again = Scene()
-    again.place_random(np.random.default_rng(0), 15, (0, 100, 0, 100), keep_clear=np.array([[50.0, 50.0]]),
-                       keep_clear_radius=5.0)
+    again.place_random(
+        np.random.default_rng(0),
+        15,
+        (0, 100, 0, 100),
+        keep_clear=np.array([[50.0, 50.0]]),
+        keep_clear_radius=5.0,
+    )
     np.testing.assert_array_equal(sc.centre, again.centre)
     v = sc.version
     new = sc.add("sphere", [[10.0, 10.0, 3.0]], [[2.0, 1.0, 1.0]])

@@ -142,7 +142,9 @@ class CommsStack:
                               pos_scale=cfg.overlay_range)  # fmt: skip
         self.overlay = Overlay(s, cfg.payload_dim, cfg.overlay_range, full_propagation=cfg.overlay_full)
         period = cfg.heartbeat_period
-        self.groups = GroupController(n_worlds, n_agents, period, max(cfg.heartbeat_timeout, period), group=group)
+        self.groups = GroupController(
+            n_worlds, n_agents, period, max(cfg.heartbeat_timeout, period), group=group
+        )
         self.sent = np.zeros(s, dtype=np.int64)
         self._received0 = np.zeros(s, dtype=np.int64)
         self._dropped0 = np.zeros(s, dtype=np.int64)
@@ -239,7 +241,12 @@ class CommsStack:
         return self.groups.tick(step, self.bus, online, pos)
 
     def deliver(
-        self, step: int, pos: np.ndarray, online: np.ndarray, group: np.ndarray, world: np.ndarray,
+        self,
+        step: int,
+        pos: np.ndarray,
+        online: np.ndarray,
+        group: np.ndarray,
+        world: np.ndarray,
         pairs: tuple[np.ndarray, np.ndarray, np.ndarray],
     ) -> CommsEvents:
         """Deliver the bus messages due now and advance every overlay flood by one hop (or fully)."""

@@ -62,7 +62,9 @@ class WorldConfig:
         if self.physics_substeps < 1:
             raise ValueError(f"physics_substeps must be >= 1, got {self.physics_substeps}")
         if len(self.bounds) != 4 or not (self.bounds[1] > self.bounds[0] and self.bounds[3] > self.bounds[2]):
-            raise ValueError(f"bounds must be (xmin, xmax, ymin, ymax) with xmin < xmax, ymin < ymax, got {self.bounds}")
+            raise ValueError(
+                f"bounds must be (xmin, xmax, ymin, ymax) with xmin < xmax, ymin < ymax, got {self.bounds}"
+            )
         if len(self.z_range) != 2 or not self.z_range[1] > self.z_range[0]:
             raise ValueError(f"z_range must be (zmin, zmax) with zmin < zmax, got {self.z_range}")
 
@@ -110,7 +112,9 @@ class World:
         self.sensor = ProximitySensor(config.lidar)
         cell = config.grid_cell or max(float(self.state.sensor_range.max()) / 2.0, 2.0)
         self.grid_spec = GridSpec.for_bounds(config.bounds, cell, n_worlds)
-        self.agent_grid: Grid = build_grid(self.grid_spec, self.state.pos, self.state.world_id, self.state.online)
+        self.agent_grid: Grid = build_grid(
+            self.grid_spec, self.state.pos, self.state.world_id, self.state.online
+        )
         self._object_grid: Grid | None = None
         self._object_grid_version = -1
         self.physics: object | None = None
@@ -118,7 +122,9 @@ class World:
         self.step_count = np.zeros(n_worlds, dtype=np.int64)
         self.tick = 0  # global step counter (message timestamps); never reset per world
         self.comms = (
-            CommsStack(comms, n_worlds, n_agents, self.state.group, np.random.default_rng(0)) if comms else None
+            CommsStack(comms, n_worlds, n_agents, self.state.group, np.random.default_rng(0))
+            if comms
+            else None
         )
         self.scan: ScanResult | None = None
         self.last_events = StepEvents(CollisionEvents.empty(), np.zeros(0, dtype=np.int64))
@@ -150,7 +156,13 @@ class World:
         sc = self.scene
         if self.physics is None or self._physics_version != sc.version:
             self.physics = PymunkPlanarBackend(
-                self.state.radius, self.state.world_id, self.n_worlds, sc.kind, sc.centre, sc.half, sc.world,
+                self.state.radius,
+                self.state.world_id,
+                self.n_worlds,
+                sc.kind,
+                sc.centre,
+                sc.half,
+                sc.world,
                 substeps=self.config.physics_substeps,
             )
             self._physics_version = sc.version
@@ -204,8 +216,20 @@ class World:
         st, sc = self.state, self.scene
         og = self.object_grid()
         return self.sensor.scan(
-            st.pos, st.heading, st.sensor_range, st.radius, st.online, st.world_id, self.agent_grid,
-            sc.kind, sc.centre, sc.half, sc.world, og, sc.ground, out=self.scan,
+            st.pos,
+            st.heading,
+            st.sensor_range,
+            st.radius,
+            st.online,
+            st.world_id,
+            self.agent_grid,
+            sc.kind,
+            sc.centre,
+            sc.half,
+            sc.world,
+            og,
+            sc.ground,
+            out=self.scan,
         )
 
     # ------------------------------------------------------------------ pipeline
@@ -240,8 +264,17 @@ class World:
         if cfg.collisions:
             sc = self.scene
             events = find_collisions(
-                st.pos, st.radius, st.online, st.world_id, self.agent_grid, sc.kind, sc.centre, sc.half,
-                sc.world, self.object_grid(), cfg.collision_margin,
+                st.pos,
+                st.radius,
+                st.online,
+                st.world_id,
+                self.agent_grid,
+                sc.kind,
+                sc.centre,
+                sc.half,
+                sc.world,
+                self.object_grid(),
+                cfg.collision_margin,
             ).concat(contact_events)
         went = np.unique(events.agent) if cfg.collision_ends_agent else np.zeros(0, dtype=np.int64)
         if went.size:
@@ -260,7 +293,9 @@ class World:
             self.agent_grid = build_grid(self.grid_spec, st.pos, st.world_id, st.online)
         if self.comms is not None:
             # 7. comms: bus messages due this step; one overlay hop over the range graph
-            comm_events = self.comms.deliver(self.tick, st.pos, st.online, st.group, st.world_id, self._comm_pairs())
+            comm_events = self.comms.deliver(
+                self.tick, st.pos, st.online, st.group, st.world_id, self._comm_pairs()
+            )
         # 8. sensors: proximity scan of every online slot
         self.scan = self._scan()
         self.step_count += 1

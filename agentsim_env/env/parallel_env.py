@@ -56,8 +56,12 @@ class AgentSimParallelEnv(ParallelEnv):
         }
         self.possible_agents = scenario.agent_names()
         self._index = {a: i for i, a in enumerate(self.possible_agents)}
-        self._obs_spaces = {a: observation_space_for(scenario.obs_parts(), obs_format) for a in self.possible_agents}
-        self._act_spaces = {a: action_space_for(scenario.act_parts(), action_format) for a in self.possible_agents}
+        self._obs_spaces = {
+            a: observation_space_for(scenario.obs_parts(), obs_format) for a in self.possible_agents
+        }
+        self._act_spaces = {
+            a: action_space_for(scenario.act_parts(), action_format) for a in self.possible_agents
+        }
         n = scenario.state_size()
         self.state_space = spaces.Box(-10.0, 10.0, shape=(n,), dtype=np.float32)
         self.agents: list[str] = []
@@ -76,8 +80,10 @@ class AgentSimParallelEnv(ParallelEnv):
 
     def _check_known(self, agent: str) -> str:
         if agent not in self._index:
-            raise ValueError(f"unknown agent id {agent!r}; agents are {self.possible_agents[0]!r}..."
-                             f"{self.possible_agents[-1]!r}")
+            raise ValueError(
+                f"unknown agent id {agent!r}; agents are {self.possible_agents[0]!r}..."
+                f"{self.possible_agents[-1]!r}"
+            )
         return agent
 
     # ------------------------------------------------------------------ episode
@@ -102,7 +108,9 @@ class AgentSimParallelEnv(ParallelEnv):
         """Advance one step with an action for every live agent (see the scenario docstring for layouts)."""
         if not self.agents:
             if actions:
-                raise ValueError(f"the episode is over (no live agents); got actions for {sorted(actions)[:3]}; call reset()")
+                raise ValueError(
+                    f"the episode is over (no live agents); got actions for {sorted(actions)[:3]}; call reset()"
+                )
             return {}, {}, {}, {}, {}
         sc, world = self.scenario, self.world
         # 1. validate everything before any state changes, then decode actions into motion commands
@@ -131,7 +139,9 @@ class AgentSimParallelEnv(ParallelEnv):
         truncs = dict(zip(live, trunc))
         keys = list(res.info)
         cols = [res.info[k][idx].tolist() for k in keys]
-        infos = {a: dict(zip(keys, vals)) for a, vals in zip(live, zip(*cols))} if keys else {a: {} for a in live}
+        infos = (
+            {a: dict(zip(keys, vals)) for a, vals in zip(live, zip(*cols))} if keys else {a: {} for a in live}
+        )
         self.agents = [a for a, t, u in zip(live, term, trunc) if not (t or u)]
         if self.render_mode == "human":
             self.render()
@@ -152,7 +162,9 @@ class AgentSimParallelEnv(ParallelEnv):
                 if a not in self._index:
                     raise ValueError(f"unknown agent id {a!r} in actions")
                 if a not in live_set:
-                    raise ValueError(f"agent {a!r} is no longer live (terminated or truncated); remove it from actions")
+                    raise ValueError(
+                        f"agent {a!r} is no longer live (terminated or truncated); remove it from actions"
+                    )
             missing = [a for a in live if a not in actions]
             raise ValueError(f"missing actions for live agent(s) {missing[:5]}")
         parts = self.scenario.act_parts()
@@ -176,14 +188,18 @@ class AgentSimParallelEnv(ParallelEnv):
                     if not isinstance(act, dict) or len(act) != len(names):
                         raise ValueError
                 for name, p in parts.items():
-                    arr = np.asarray([actions[a][name] for a in live], dtype=np.float64).reshape(len(live), -1)
+                    arr = np.asarray([actions[a][name] for a in live], dtype=np.float64).reshape(
+                        len(live), -1
+                    )
                     if arr.shape[1] != p.size or not np.isfinite(arr).all():
                         raise ValueError
                     out[name][idx] = arr
         except (ValueError, TypeError, KeyError):
             for a in live:  # slow path: find the culprit and raise naming it
                 split_action(actions[a], parts, self.action_format, a)
-            raise ValueError("actions could not be stacked; check that every action has the same layout") from None
+            raise ValueError(
+                "actions could not be stacked; check that every action has the same layout"
+            ) from None
         for name, p in parts.items():
             np.clip(out[name], p.low, p.high, out=out[name])
         return out
@@ -213,7 +229,9 @@ class AgentSimParallelEnv(ParallelEnv):
             raise ValueError(f"{what}: agent {agent!r} is offline")
         return slot
 
-    def send_message(self, sender: str, payload: Any, *, to: str | None = None, group: int | None = None) -> bool:
+    def send_message(
+        self, sender: str, payload: Any, *, to: str | None = None, group: int | None = None
+    ) -> bool:
         """Send a bus message from code (besides the ``comm`` action): to one agent or to a group.
 
         Args:

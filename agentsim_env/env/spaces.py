@@ -45,7 +45,9 @@ def split_action(action: Any, parts: dict[str, Part], fmt: str, agent: str) -> d
     """
     if fmt == "dict":
         if not isinstance(action, dict):
-            raise ValueError(f"action of {agent!r} must be a dict with keys {list(parts)}, got {type(action).__name__}")
+            raise ValueError(
+                f"action of {agent!r} must be a dict with keys {list(parts)}, got {type(action).__name__}"
+            )
         unknown = set(action) - set(parts)
         missing = set(parts) - set(action)
         if unknown or missing:

@@ -115,7 +115,9 @@ class BatchedEnv:
             raise ValueError("call reset() before step()")
         a = np.asarray(actions, dtype=np.float64)
         if a.shape != (self.n_worlds, self.n_agents, self.act_dim):
-            raise ValueError(f"actions must have shape {(self.n_worlds, self.n_agents, self.act_dim)}, got {a.shape}")
+            raise ValueError(
+                f"actions must have shape {(self.n_worlds, self.n_agents, self.act_dim)}, got {a.shape}"
+            )
         bad = ~np.isfinite(a).all(axis=2) & self.alive
         if bad.any():
             w, i = np.argwhere(bad)[0]

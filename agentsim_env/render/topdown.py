@@ -55,7 +55,9 @@ def render_topdown(world: World, w: int = 0, markers: Markers | None = None, siz
         cx, cy = px(sc.centre[o, 0], sc.centre[o, 1])
         if sc.kind[o] == BOX:
             hx, hy = sc.half[o, 0] * scale, sc.half[o, 1] * scale
-            img[max(int(cy - hy), 0) : max(int(cy + hy), 0), max(int(cx - hx), 0) : max(int(cx + hx), 0)] = color
+            img[max(int(cy - hy), 0) : max(int(cy + hy), 0), max(int(cx - hx), 0) : max(int(cx + hx), 0)] = (
+                color
+            )
         else:
             _disc(img, cx, cy, sc.half[o, 0] * scale, color)
     if markers is not None:

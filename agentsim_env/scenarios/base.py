@@ -110,7 +110,7 @@ class Scenario(ABC):
     def apply_actions(self, world: World, actions: dict[str, np.ndarray], acting: np.ndarray) -> None:
         """Stage 1: decode actions ``{part: (S, size)}`` for the acting slots into motion commands."""
 
-    def before_world_step(self, world: World) -> None:
+    def before_world_step(self, world: World) -> None:  # noqa: B027 - an optional hook
         """Hook run right before ``World.step`` (after actions are applied)."""
 
     @abstractmethod

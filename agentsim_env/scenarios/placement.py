@@ -72,10 +72,14 @@ def obstacle_layout(
     smax = size_range[1]
     sep = 2.0 * smax * np.sqrt(2.0) + clearance
     try:
-        xy = jittered_points(rng, n, (xmin + smax * 1.5, xmax - smax * 1.5, ymin + smax * 1.5, ymax - smax * 1.5), sep)
+        xy = jittered_points(
+            rng, n, (xmin + smax * 1.5, xmax - smax * 1.5, ymin + smax * 1.5, ymax - smax * 1.5), sep
+        )
     except ValueError:
         n = max(1, int((xmax - xmin) * (ymax - ymin) / (1.3 * sep * sep)) // 2)
-        xy = jittered_points(rng, n, (xmin + smax * 1.5, xmax - smax * 1.5, ymin + smax * 1.5, ymax - smax * 1.5), sep)
+        xy = jittered_points(
+            rng, n, (xmin + smax * 1.5, xmax - smax * 1.5, ymin + smax * 1.5, ymax - smax * 1.5), sep
+        )
     kind = rng.integers(0, 2, n).astype(np.int8)  # 0 box, 1 cylinder
     hs = rng.uniform(size_range[0], size_range[1], n)
     hh = rng.uniform(height_range[0], height_range[1], n) / 2.0

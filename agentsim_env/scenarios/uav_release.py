@@ -34,109 +34,20 @@ Version history: v0, first release.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from typing import Any
-
 import numpy as np
 
-from agentsim_env.comms.stack import CommsConfig
-from agentsim_env.core.world import PHYSICS_MODES, StepEvents, World, WorldConfig
+from agentsim_env.core.world import StepEvents, World, WorldConfig
 from agentsim_env.motion import MotionLimits, decode_primitive, decode_velocity, set_hold
-from agentsim_env.payloads import FallParams, PayloadSet, ScatterConfig, WindConfig, WindModel
+from agentsim_env.payloads import FallParams, PayloadSet, WindModel
 from agentsim_env.scenarios.base import Part, Scenario, StepResult
-from agentsim_env.scenarios.config import build_config, check_choice, check_float, check_int
 from agentsim_env.scenarios.landed_grid import local_counts
-from agentsim_env.scenarios.rewards import RewardConfig, compose_rewards
+from agentsim_env.scenarios.rewards import compose_rewards
+from agentsim_env.scenarios.uav_config import UavReleaseConfig
 from agentsim_env.scenarios.uav_energy import DEFAULT_ROTOR, energy_step
 from agentsim_env.scenarios.uav_outcome import final_bonus, oracle_fnd
 from agentsim_env.scenarios.uav_tracking import DeploymentTracker
-from agentsim_env.scenarios.uav_zones import ZoneSet, load_zones, validate_against_payload, zones_from_dict
+from agentsim_env.scenarios.uav_zones import ZoneSet
 from agentsim_env.sensors.proximity import ProximityConfig
-from agentsim_env.wsn.evaluate import WsnConfig
-
-_NESTED = {"wind": WindConfig, "scatter": ScatterConfig, "wsn": WsnConfig, "reward": RewardConfig, "comms": CommsConfig}
-
-
-@dataclass(frozen=True)
-class UavReleaseConfig:
-    """Configuration of ``uav_release`` (validated; nested parts accept dicts of their fields)."""
-
-    zones: Any = None  # a zones JSON path, a dict in that format, a ZoneSet, "tiny", or None / "default" (shipped)
-    n_uavs: int = 4
-    payload: int = 40
-    sensor_mass: float = 0.05
-    sensor_cd: float = 1.05
-    sensor_area: float = 0.0025
-    battery_j: float = 321_000.0
-    max_speed: float = 15.0
-    max_accel: float = 4.0
-    altitude: tuple[float, float] = (5.0, 60.0)
-    uav_radius: float = 0.6
-    sensor_range: float = 20.0
-    n_azimuth: int = 8
-    elevations_deg: tuple[float, ...] = (0.0, -45.0)
-    target_scale: float = 60.0
-    grid_cells: int = 8
-    grid_extent: float = 80.0
-    action_mode: str = "velocity"
-    physics: str = "kinematic"
-    collisions: bool = True
-    dt: float = 0.1
-    max_steps: int = 6000
-    wind: WindConfig = field(default_factory=lambda: WindConfig(mean_speed=2.0))
-    scatter: ScatterConfig = field(default_factory=lambda: ScatterConfig(1.0, 0.05, 0.5))
-    wsn: WsnConfig = field(default_factory=WsnConfig)
-    reward: RewardConfig = field(default_factory=lambda: RewardConfig(collision_penalty=20.0, message_cost=0.001))
-    comms: CommsConfig = field(default_factory=lambda: CommsConfig(payload_dim=6, inbox_size=8, overlay_range=150.0))
-    w_coverage: float = 10.0
-    w_fidelity: float = 1.0
-    w_energy: float = 1.0
-    w_miss: float = 0.1
-    w_out: float = 1.0
-    w_lcc: float = 5.0
-    w_lifetime: float = 5.0
-
-    def __post_init__(self) -> None:
-        check_int("n_uavs", self.n_uavs, 1, 1024)
-        check_int("payload", self.payload, 1)
-        for name in ("sensor_mass", "sensor_cd", "sensor_area", "battery_j", "max_speed", "max_accel",
-                     "uav_radius", "sensor_range", "target_scale", "grid_extent", "dt"):
-            check_float(name, getattr(self, name), 0.0, lo_open=True)
-        for name in ("w_coverage", "w_fidelity", "w_energy", "w_miss", "w_out", "w_lcc", "w_lifetime"):
-            check_float(name, getattr(self, name), 0.0)
-        check_int("n_azimuth", self.n_azimuth, 1, 1024)
-        check_int("grid_cells", self.grid_cells, 1, 64)
-        check_int("max_steps", self.max_steps, 1)
-        check_choice("action_mode", self.action_mode, ("velocity", "primitive"))
-        check_choice("physics", self.physics, PHYSICS_MODES)
-        check_float("altitude[0]", self.altitude[0], 0.0)
-        check_float("altitude[1]", self.altitude[1], self.altitude[0], lo_open=True)
-        for name, cls in _NESTED.items():
-            v = getattr(self, name)
-            if isinstance(v, dict):
-                object.__setattr__(self, name, build_config(cls, v))
-            elif not isinstance(v, cls):
-                raise ValueError(f"{name} must be a {cls.__name__} or a dict of its fields, got {v!r}")
-        zs = self.zone_set()
-        object.__setattr__(self, "zones", zs)
-        validate_against_payload(zs, self.n_uavs, self.payload)
-
-    def zone_set(self) -> ZoneSet:
-        """The zones, loaded and validated."""
-        z = self.zones
-        if isinstance(z, ZoneSet):
-            return z
-        if isinstance(z, dict):
-            return zones_from_dict(z)
-        from agentsim_env.scenarios.uav_zones import default_zones_path, tiny_zones_path
-
-        named = {None: default_zones_path, "default": default_zones_path, "tiny": tiny_zones_path}
-        if z in named:
-            return load_zones(named[z]())
-        try:
-            return load_zones(z)
-        except OSError as exc:
-            raise ValueError(f"zones: cannot read zones file {str(z)!r}: {exc.strerror or exc}") from None
 
 
 class UavReleaseScenario(Scenario):
@@ -148,8 +59,14 @@ class UavReleaseScenario(Scenario):
     agent_prefix = "uav"
     test_configs = (
         {"zones": "tiny", "n_uavs": 2, "payload": 12, "max_steps": 400},
-        {"zones": "tiny", "n_uavs": 3, "payload": 8, "max_steps": 300, "action_mode": "primitive",
-         "comms": {"payload_dim": 6, "loss": 0.3, "latency": 1}},
+        {
+            "zones": "tiny",
+            "n_uavs": 3,
+            "payload": 8,
+            "max_steps": 300,
+            "action_mode": "primitive",
+            "comms": {"payload_dim": 6, "loss": 0.3, "latency": 1},
+        },
     )
 
     def __init__(self, config: UavReleaseConfig) -> None:
@@ -271,7 +188,9 @@ class UavReleaseScenario(Scenario):
         # mission complete in a world: nothing left on board of a live UAV and nothing falling
         n = c.n_uavs
         left = (self.payload_left * st.online).reshape(-1, n).sum(axis=1)
-        falling = np.bincount(self.payloads.get("world")[self.payloads.get("falling")], minlength=world.n_worlds)
+        falling = np.bincount(
+            self.payloads.get("world")[self.payloads.get("falling")], minlength=world.n_worlds
+        )
         done_now = ~self.finished & (((left == 0) & (falling == 0)) | (world.step_count >= c.max_steps))
         terminated = empty_battery.copy()
         for w in np.flatnonzero(done_now):
@@ -293,11 +212,18 @@ class UavReleaseScenario(Scenario):
         c, st = self.config, world.state
         w, h = self.zones.map_size
         lo, hi = c.altitude
-        selfp = np.column_stack([
-            st.pos[:, 0] / w * 2 - 1, st.pos[:, 1] / h * 2 - 1, (st.pos[:, 2] - lo) / (hi - lo) * 2 - 1,
-            st.vel / c.max_speed, np.cos(st.heading), np.sin(st.heading),
-            self.payload_left / c.payload, 1.0 - st.energy / c.battery_j,
-        ])
+        selfp = np.column_stack(
+            [
+                st.pos[:, 0] / w * 2 - 1,
+                st.pos[:, 1] / h * 2 - 1,
+                (st.pos[:, 2] - lo) / (hi - lo) * 2 - 1,
+                st.vel / c.max_speed,
+                np.cos(st.heading),
+                np.sin(st.heading),
+                self.payload_left / c.payload,
+                1.0 - st.energy / c.battery_j,
+            ]
+        )
         scan = world.scan
         assert scan is not None
         rel = self.zones.centres()[None, :, :] - st.pos[:, None, :2]
