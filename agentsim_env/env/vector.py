@@ -65,6 +65,7 @@ class BatchedEnv:
         self._act_layout = flat_layout(self._act_parts)
         self.obs_dim = sum(p.size for p in self._obs_parts.values())
         self.act_dim = sum(p.size for p in self._act_parts.values())
+        self.render_mode: str | None = None  # batched worlds are not rendered (read by vector-env adapters)
         self.alive = np.zeros((n_worlds, self.n_agents), dtype=bool)
         self.steps = np.zeros(n_worlds, dtype=np.int64)
         self._rngs: list[np.random.Generator] = []
