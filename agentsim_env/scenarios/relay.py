@@ -1,145 +1,62 @@
 """relay: in each group one scout sees the group's target; the others reach it only through messages.
 
-Agents (``agent_0`` ... ``agent_{N-1}``, N = ``n_groups x group_size``; slot i is in group ``i % n_groups``)
-start strung out along a corridor (a map ``length x corridor_width``): the N start points form a chain along x
-with gaps drawn from ``gap`` (default 12-22 m), a lateral offset of at most ``lateral_spread`` and an altitude
-in ``altitude``; which agent takes which point is a random permutation. Each episode draws one **scout** per
-group; the group's **target** (a ground marker) lies ``target_offset`` metres from its scout in a random
-direction. Only the scout perceives the target; the others see zeros in their ``task`` part.
+Agents (``agent_0`` ... ``agent_{N-1}``, N = ``n_groups x group_size``, slot i in group ``i % n_groups``)
+start strung out along a corridor (``length x corridor_width``): N start points form a chain along x with
+gaps drawn from ``gap``, lateral offsets up to ``lateral_spread`` and altitudes in ``altitude``, taken by the
+agents in a random order. Each episode draws one **scout** per group; the group's **target** (a ground
+marker) lies ``target_offset`` metres from its scout. Only the scout perceives the target; the others'
+``task`` part is zeros.
 
-Geometry and why messages must relay: the chain spans about 190 m at the defaults while the bus reaches
-``comms.max_range`` = 35 m and the overlay ``comms.overlay_range`` = 35 m per hop, so most non-scouts start
-beyond one bus hop of their scout (about 3 in 4 over seeds 0-19, see ``tests/test_relay.py``), yet the chain is
-connected (consecutive points are at most sqrt(22^2 + 16^2 + 6^2) = 28 m apart), so an overlay flood with
-hop limit ``comms.max_hops`` = 8, relayed by agents of any group, reaches most of it.
+Why messages must relay: at the defaults the chain spans about 190 m while the bus reaches
+``comms.max_range`` = 35 m, so about 4 in 5 non-scouts start beyond one bus hop of their scout (seeds 0-19);
+the chain is connected for the overlay (consecutive points at most sqrt(22^2 + 16^2 + 6^2) = 28 m apart,
+``comms.overlay_range`` = 35 m), so a flood with hop limit ``comms.max_hops`` = 8, relayed by agents of any
+group, reaches most of it.
 
 Observation (Dict; the flat Box concatenates the parts in this order):
 
-| part   | shape    | content                                                                                 |
-|--------|----------|-----------------------------------------------------------------------------------------|
-| self   | (9,)     | x, y in [-1, 1] over the map; altitude in [-1, 1] over the band; vx, vy, vz / max_speed; cos, sin heading; group code ``2 g / (G - 1) - 1`` (0 when G = 1) |
-| lidar  | (K, 2)   | per ray: normalised distance (1 = free), hit code / 3 (0 none, 1/3 agent, 2/3 object, 1 ground) |
-| task   | (4,)     | scout: 1, target minus position (dx, dy) / map diagonal, horizontal distance / diagonal; others: zeros |
-| inbox  | (M, 11+D)| received messages, newest first (layout in ``agentsim_env.comms.messages``)              |
-| comms  | (2,)     | messages received and dropped this step / M                                              |
+| part  | shape     | content                                                                               |
+|-------|-----------|---------------------------------------------------------------------------------------|
+| self  | (9,)      | x, y in [-1, 1] over the map; altitude in [-1, 1] over the band; velocity / max_speed |
+|       |           | (3); cos, sin heading; group code ``2 g / (G - 1) - 1`` (0 when G = 1)                |
+| lidar | (K, 2)    | per ray: distance / range (1 = free), hit code / 3 (1/3 agent, 2/3 object, 1 ground)  |
+| task  | (4,)      | scout: 1, (target - position) x, y / map diagonal, distance / diagonal; others: zeros |
+| inbox | (M, 11+D) | received messages, newest first (layout in ``agentsim_env.comms.messages``)           |
+| comms | (2,)      | messages received and dropped this step / M                                           |
 
-Rays: ``n_azimuth`` evenly spaced azimuths (ray 0 along the heading) per ring in ``elevations_deg``
-(default 12 x 1 = 12 horizontal rays).
+Rays: ``n_azimuth`` azimuths (ray 0 along the heading) per ring of ``elevations_deg`` (default 12 x 1).
 
-Action (Dict; the flat Box concatenates ``motion`` then ``comm``), values in [-1, 1]:
+Action (Dict; the flat Box is ``motion`` then ``comm``), values in [-1, 1]:
 
-| part   | shape  | content                                                                               |
-|--------|--------|---------------------------------------------------------------------------------------|
-| motion | (3,)   | target velocity / max_speed (norm clipped to max_speed)                                 |
-| comm   | (3+D,) | channel, receiver, hop limit, payload (layout in ``agentsim_env.comms.stack``)          |
+| part   | shape  | content                                                                            |
+|--------|--------|------------------------------------------------------------------------------------|
+| motion | (3,)   | target velocity / max_speed (norm clipped to max_speed)                            |
+| comm   | (3+D,) | channel, receiver, hop limit, payload (layout in ``agentsim_env.comms.stack``)     |
 
-Reward (composed by ``RewardConfig``): task = progress toward the group's target (horizontal metres) plus
+Reward (``RewardConfig``): task = progress toward the group's target (horizontal metres) plus
 ``arrival_bonus`` on arrival for non-scouts, 0 for scouts (they earn through the group share); collision
 penalty; energy = speed^2 x dt; ``reward.message_cost`` per message sent.
 
-Episode: a non-scout within ``arrival_radius`` of its target (horizontally) terminates with success; a
-collision terminates an agent; a scout terminates once none of its group's non-scouts is still live (all
-arrived or out); everyone left is truncated at ``max_steps``. ``group_success`` scores an episode.
+Episode: a non-scout within ``arrival_radius`` of its target (horizontally) ends with success; a collision
+ends an agent; a scout ends once none of its group's non-scouts is still live (all arrived or out); the rest
+are truncated at ``max_steps``. ``RelayScenario.group_success`` scores an episode.
 
 Version history: v0, first release.
 """
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
-
 import numpy as np
 
-from agentsim_env.comms.stack import CommsConfig
-from agentsim_env.core.world import PHYSICS_MODES, StepEvents, World, WorldConfig
+from agentsim_env.core.world import StepEvents, World, WorldConfig
 from agentsim_env.motion import decode_velocity, set_hold
 from agentsim_env.scenarios.base import Part, Scenario, StepResult
-from agentsim_env.scenarios.config import build_config, check_choice, check_float, check_int
 from agentsim_env.scenarios.placement import obstacle_layout
-from agentsim_env.scenarios.rewards import RewardConfig, compose_rewards
+from agentsim_env.scenarios.relay_config import RELAY_COMMS, RelayConfig
+from agentsim_env.scenarios.rewards import compose_rewards
 from agentsim_env.sensors.proximity import ProximityConfig
 
-RELAY_COMMS = CommsConfig(payload_dim=4, inbox_size=8, max_range=35.0, overlay_range=35.0, max_hops=8,
-                          nearest_range=35.0)  # fmt: skip
-"""The default communication settings (a ``comms`` dict overrides some of these fields)."""
-
-
-@dataclass(frozen=True)
-class RelayConfig:
-    """Configuration of ``relay`` (every field validated at construction)."""
-
-    n_groups: int = 3
-    group_size: int = 4  # the scout plus group_size - 1 members that must reach the target
-    corridor_width: float = 40.0
-    gap: tuple[float, float] = (12.0, 22.0)  # distance along x between consecutive start points
-    lateral_spread: float = 8.0  # start points lie within this distance of the corridor's centre line
-    altitude: tuple[float, float] = (4.0, 10.0)
-    target_offset: tuple[float, float] = (4.0, 10.0)  # distance scout -> target
-    obstacle_density: float = 1.0 / 1000.0
-    obstacle_size: tuple[float, float] = (1.0, 2.5)
-    obstacle_height: tuple[float, float] = (4.0, 20.0)
-    agent_radius: float = 0.5
-    max_speed: float = 6.0
-    max_accel: float = 10.0
-    sensor_range: float = 8.0
-    n_azimuth: int = 12
-    elevations_deg: tuple[float, ...] = (0.0,)
-    arrival_radius: float = 3.0
-    arrival_bonus: float = 10.0
-    physics: str = "kinematic"
-    collisions: bool = True
-    dt: float = 0.1
-    max_steps: int = 400
-    reward: RewardConfig = field(
-        default_factory=lambda: RewardConfig(group_share=0.5, energy_weight=0.001, message_cost=0.01)
-    )
-    comms: CommsConfig = RELAY_COMMS  # a dict overrides fields of RELAY_COMMS
-
-    def __post_init__(self) -> None:
-        check_int("n_groups", self.n_groups, 1, 64)
-        check_int("group_size", self.group_size, 2, 256)
-        for name in ("corridor_width", "agent_radius", "max_speed", "max_accel", "sensor_range",
-                     "arrival_radius", "dt"):  # fmt: skip
-            check_float(name, getattr(self, name), 0.0, lo_open=True)
-        check_float("lateral_spread", self.lateral_spread, 0.0)
-        check_float("corridor_width", self.corridor_width, 2.0 * self.lateral_spread + 4.0)
-        check_float("obstacle_density", self.obstacle_density, 0.0, 0.01)
-        check_float("arrival_bonus", self.arrival_bonus, 0.0)
-        check_int("n_azimuth", self.n_azimuth, 1, 1024)
-        check_int("max_steps", self.max_steps, 1)
-        check_choice("physics", self.physics, PHYSICS_MODES)
-        for name in ("gap", "altitude", "target_offset", "obstacle_size", "obstacle_height"):
-            pair = getattr(self, name)
-            if not isinstance(pair, (tuple, list)) or len(pair) != 2:
-                raise ValueError(f"{name} must be a pair (low, high), got {pair!r}")
-            check_float(f"{name}[0]", pair[0], 0.0, lo_open=name == "gap")
-            check_float(f"{name}[1]", pair[1], pair[0])
-        if isinstance(self.reward, dict):
-            object.__setattr__(self, "reward", build_config(RewardConfig, self.reward))
-        if not isinstance(self.reward, RewardConfig):
-            raise ValueError(f"reward must be a RewardConfig or a dict of its fields, got {self.reward!r}")
-        if isinstance(self.comms, dict):
-            unknown = sorted(set(self.comms) - set(asdict(RELAY_COMMS)))
-            if unknown:
-                raise ValueError(f"unknown comms key(s) {unknown}; allowed keys: {sorted(asdict(RELAY_COMMS))}")
-            object.__setattr__(self, "comms", build_config(CommsConfig, {**asdict(RELAY_COMMS), **self.comms}))
-        if not isinstance(self.comms, CommsConfig):
-            raise ValueError(f"comms must be a CommsConfig or a dict of its fields (relay needs comms), got {self.comms!r}")
-
-    @property
-    def n_agents(self) -> int:
-        """Agents per world."""
-        return self.n_groups * self.group_size
-
-    @property
-    def margin(self) -> float:
-        """Free space at each end of the corridor (room for targets beyond the end points)."""
-        return float(self.target_offset[1]) + 5.0
-
-    @property
-    def length(self) -> float:
-        """Corridor length in metres: the longest possible chain plus a margin at both ends."""
-        return (self.n_agents - 1) * float(self.gap[1]) + 2.0 * self.margin
+__all__ = ["RELAY_COMMS", "SCENARIO", "RelayConfig", "RelayScenario", "env", "parallel_env"]
 
 
 class RelayScenario(Scenario):
@@ -173,8 +90,13 @@ class RelayScenario(Scenario):
         """World sized for the corridor and the band; per-slot target, scout and arrival arrays."""
         c = self.config
         wc = WorldConfig(
-            bounds=(0.0, c.length, 0.0, c.corridor_width), z_range=(0.0, c.altitude[1] + 5.0), dt=c.dt,
-            physics=c.physics, collisions=c.collisions, lidar=self.lidar, grid_cell=max(c.sensor_range / 2, 2.0),
+            bounds=(0.0, c.length, 0.0, c.corridor_width),
+            z_range=(0.0, c.altitude[1] + 5.0),
+            dt=c.dt,
+            physics=c.physics,
+            collisions=c.collisions,
+            lidar=self.lidar,
+            grid_cell=max(c.sensor_range / 2, 2.0),
         )
         world = World(wc, n_worlds, c.n_agents, comms=c.comms)
         st = world.state
@@ -196,11 +118,13 @@ class RelayScenario(Scenario):
         n, g_n, length, width = c.n_agents, c.n_groups, c.length, c.corridor_width
         gaps = rng.uniform(c.gap[0], c.gap[1], n - 1)
         x0 = c.margin + rng.uniform(0.0, length - 2.0 * c.margin - gaps.sum())
-        chain = np.column_stack([
-            x0 + np.concatenate([[0.0], np.cumsum(gaps)]),
-            width / 2.0 + rng.uniform(-c.lateral_spread, c.lateral_spread, n),
-            rng.uniform(c.altitude[0], c.altitude[1], n),
-        ])
+        chain = np.column_stack(
+            [
+                x0 + np.concatenate([[0.0], np.cumsum(gaps)]),
+                width / 2.0 + rng.uniform(-c.lateral_spread, c.lateral_spread, n),
+                rng.uniform(c.altitude[0], c.altitude[1], n),
+            ]
+        )
         st.pos[sl] = chain[rng.permutation(n)]
         st.vel[sl] = 0.0
         st.heading[sl] = rng.uniform(-np.pi, np.pi, n)
@@ -220,8 +144,13 @@ class RelayScenario(Scenario):
         world.remove_objects_of_world(w)
         n_obs = int(round(c.obstacle_density * length * width))
         kind, centre, half = obstacle_layout(
-            rng, n_obs, (0.0, length, 0.0, width), c.obstacle_size, c.obstacle_height,
-            np.vstack([chain[:, :2], tgt]), keep_clear_radius=max(c.agent_radius + 2.0, c.arrival_radius + 1.0),
+            rng,
+            n_obs,
+            (0.0, length, 0.0, width),
+            c.obstacle_size,
+            c.obstacle_height,
+            np.vstack([chain[:, :2], tgt]),
+            keep_clear_radius=max(c.agent_radius + 2.0, c.arrival_radius + 1.0),
         )
         if kind.size:
             world.scene.add(kind, centre, half, w)
@@ -255,9 +184,9 @@ class RelayScenario(Scenario):
         self.prev_dist = dist
         self.arrived |= arrived
         # a scout is done once no member of its (world, group) is still live
-        key = st.world_id.astype(np.int64) * c.n_groups + st.group
+        key = st.world_id.astype(np.int64) * c.n_groups + np.clip(st.group, 0, c.n_groups - 1)
         pending = ~self.scout & st.online & ~self.arrived
-        left = np.bincount(key[pending], minlength=st.n_slots // c.group_size)
+        left = np.bincount(key[pending], minlength=st.n_slots)
         scout_done = acting & self.scout & (left[key] == 0)
         collided = np.zeros(st.n_slots)
         collided[events.went_offline] = 1.0
@@ -265,8 +194,15 @@ class RelayScenario(Scenario):
         st.energy += np.where(acting, effort, 0.0)
         assert world.comms is not None
         rewards = compose_rewards(
-            c.reward, task, group=st.group, world=st.world_id, acting=acting, n_groups=c.n_groups,
-            collided=collided, energy=effort, messages_sent=world.comms.sent,
+            c.reward,
+            task,
+            group=st.group,
+            world=st.world_id,
+            acting=acting,
+            n_groups=c.n_groups,
+            collided=collided,
+            energy=effort,
+            messages_sent=world.comms.sent,
         )
         info = {"arrived": arrived.astype(np.int8), "collided": collided.astype(np.int8), "distance": dist,
                 "scout": self.scout.astype(np.int8)}  # fmt: skip
@@ -277,11 +213,17 @@ class RelayScenario(Scenario):
         c, st = self.config, world.state
         lo, hi = c.altitude
         code = st.group / max(c.n_groups - 1, 1) * 2.0 - 1.0 if c.n_groups > 1 else np.zeros(st.n_slots)
-        selfp = np.column_stack([
-            st.pos[:, 0] / c.length * 2 - 1, st.pos[:, 1] / c.corridor_width * 2 - 1,
-            (st.pos[:, 2] - lo) / max(hi - lo, 1e-9) * 2 - 1, st.vel / c.max_speed,
-            np.cos(st.heading), np.sin(st.heading), code,
-        ])
+        selfp = np.column_stack(
+            [
+                st.pos[:, 0] / c.length * 2 - 1,
+                st.pos[:, 1] / c.corridor_width * 2 - 1,
+                (st.pos[:, 2] - lo) / max(hi - lo, 1e-9) * 2 - 1,
+                st.vel / c.max_speed,
+                np.cos(st.heading),
+                np.sin(st.heading),
+                code,
+            ]
+        )
         scan = world.scan
         assert scan is not None
         diag = float(np.hypot(c.length, c.corridor_width))
@@ -306,8 +248,14 @@ class RelayScenario(Scenario):
         """Targets as discs, one colour per group."""
         sl = slice(w * self.n_agents, (w + 1) * self.n_agents)
         g = np.arange(self.n_groups)
-        rgb = np.column_stack([40 + 70 * (g % 3), 170 - 50 * (g % 2), 60 + 60 * ((g + 1) % 3)]).astype(np.uint8)
-        return self.target[sl][: self.n_groups].copy(), rgb, np.full(self.n_groups, self.config.arrival_radius)
+        rgb = np.column_stack([40 + 70 * (g % 3), 170 - 50 * (g % 2), 60 + 60 * ((g + 1) % 3)]).astype(
+            np.uint8
+        )
+        return (
+            self.target[sl][: self.n_groups].copy(),
+            rgb,
+            np.full(self.n_groups, self.config.arrival_radius),
+        )
 
     def group_success(self, w: int = 0, fraction: float = 0.5) -> np.ndarray:
         """Per group of world ``w``: whether at least ``fraction`` of its non-scouts arrived (so far).
