@@ -25,6 +25,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba as nb
 import numpy as np
 
 from agentsim_env.comms.bus import ChannelConfig, DeliveryEvents, MessageBus
@@ -43,6 +44,24 @@ from agentsim_env.groups.controller import GroupController, GroupEvents
 from agentsim_env.scenarios.config import check_float, check_int
 
 CHANNELS = ("none", "group", "nearest", "named", "overlay")
+
+
+@nb.njit(cache=True)
+def _nearest_kernel(i, j, d, n_slots, max_d):  # type: ignore[no-untyped-def]
+    """Nearest neighbour of every slot over the range-graph pairs (ties: the lower slot); -1 when none."""
+    best = np.full(n_slots, np.inf)
+    out = np.full(n_slots, -1, dtype=np.int64)
+    for k in range(i.shape[0]):
+        if d[k] > max_d:
+            continue
+        a, b = i[k], j[k]
+        if d[k] < best[a] or (d[k] == best[a] and b < out[a]):
+            best[a], out[a] = d[k], b
+        if d[k] < best[b] or (d[k] == best[b] and a < out[b]):
+            best[b], out[b] = d[k], a
+    return out
+
+
 COMM_HEADER = 3
 
 
@@ -210,19 +229,7 @@ class CommsStack:
 
     def _nearest(self) -> np.ndarray:
         i, j, d = self.pairs
-        s = self.sent.shape[0]
-        out = np.full(s, -1, dtype=np.int64)
-        ok = d <= self.cfg.nearest_range
-        a = np.concatenate([i[ok], j[ok]])
-        b = np.concatenate([j[ok], i[ok]])
-        dd = np.concatenate([d[ok], d[ok]])
-        if a.size:
-            order = np.lexsort((b, dd, a))  # per sender: nearest first, ties by slot
-            a, b = a[order], b[order]
-            first = np.ones(a.size, dtype=bool)
-            first[1:] = a[1:] != a[:-1]
-            out[a[first]] = b[first]
-        return out
+        return _nearest_kernel(i, j, d, self.sent.shape[0], float(self.cfg.nearest_range))
 
     # ------------------------------------------------------------------ stages 5-7
     def on_collisions(self, step: int, agent: np.ndarray, other_agent: np.ndarray, obj: np.ndarray) -> None:
