@@ -4,6 +4,8 @@ Subcommands:
     run        roll out a scenario's scripted baseline (batch, or live with --render), print a summary table,
                write the last frame as PNG
     scenarios  list the registered scenarios
+    evaluate   batch evaluation of the UAV sensor-release strategies (zone files x strategies x seeds):
+               sensors.csv, runs.csv, summary.md (ranking) and PNG plots
 """
 
 from __future__ import annotations
@@ -88,6 +90,48 @@ def cmd_scenarios(args: argparse.Namespace) -> int:
     return 0
 
 
+def _parse_seeds(tokens: list[str]) -> list[int]:
+    """``N`` (one number: seeds 0..N-1) or an explicit list (``0,4,9``, ``0 4 9``, or ``7,`` for one seed)."""
+    explicit = len(tokens) > 1 or any("," in t for t in tokens)
+    parts = [p for t in tokens for p in t.split(",") if p.strip()]
+    try:
+        values = [int(p) for p in parts]
+    except ValueError:
+        raise ValueError(f"--seeds must be a count N or a list of integers (e.g. 0,4,9), got {' '.join(tokens)!r}") from None
+    if not values:
+        raise ValueError("--seeds must be a count N >= 1 or a list of integers, got nothing")
+    if explicit:
+        return list(dict.fromkeys(values))
+    if values[0] < 1:
+        raise ValueError(f"--seeds N must be >= 1 (or give a list such as 0,4,9), got {values[0]}")
+    return list(range(values[0]))
+
+
+def cmd_evaluate(args: argparse.Namespace) -> int:
+    """Fly every strategy over every zone file and seed; write CSVs, plots and the Markdown ranking.
+
+    Nothing is written unless every run succeeds (see ``agentsim_env.evaluation.report``).
+    """
+    from agentsim_env.evaluation.report import rank_strategies, ranking_table, run_rows, write_outputs
+    from agentsim_env.evaluation.runner import resolve_strategies, resolve_zones, run_grid
+
+    overrides = _parse_config(args.set or [])
+    seeds = _parse_seeds(args.seeds)
+    # validate the cheap inputs before the first (slow) run
+    resolve_zones(args.zones)
+    resolve_strategies(args.strategies)
+    grid = run_grid(args.zones, args.strategies, seeds, overrides, progress=not args.quiet)
+    paths, _ = write_outputs(grid, args.out, plots=not args.no_plots)
+    rows = run_rows(grid.runs)
+    for src in grid.sources:
+        print(f"\nRanking, zone file {src.label!r} ({len(seeds)} seed(s)):\n")
+        print(ranking_table(rank_strategies(rows, src.label)))
+    print("\nwritten:")
+    for p in paths:
+        print(f"  {p}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``agentsim``."""
     p = argparse.ArgumentParser(prog="agentsim", description="agentsim-env command line")
@@ -104,6 +148,18 @@ def build_parser() -> argparse.ArgumentParser:
     r.set_defaults(func=cmd_run)
     s = sub.add_parser("scenarios", help="list the registered scenarios")
     s.set_defaults(func=cmd_scenarios)
+    e = sub.add_parser("evaluate", help="batch evaluation of the UAV sensor-release strategies")
+    e.add_argument("--zones", nargs="+", default=["default"], metavar="ZONES",
+                   help="zone files: 'default', 'tiny' or JSON paths (several allowed)")
+    e.add_argument("--strategies", nargs="+", default=["all"], metavar="NAME",
+                   help="release strategies, or 'all' (the B8 teleport reference is always added)")
+    e.add_argument("--seeds", nargs="+", default=["3"], metavar="SEED",
+                   help="a count N (seeds 0..N-1) or a list: 0,4,9 or 0 4 9 (one seed: 7,)")
+    e.add_argument("--set", nargs="*", metavar="KEY=VALUE", help="uav_release config values for every run")
+    e.add_argument("--out", default="outputs/evaluation", help="output folder")
+    e.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    e.add_argument("--quiet", action="store_true", help="no progress bar")
+    e.set_defaults(func=cmd_evaluate)
     return p
 
 

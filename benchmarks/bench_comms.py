@@ -16,9 +16,8 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import Case, fmt_num, machine_description, markdown_table, measure_interleaved  # noqa: E402
-
 import numpy as np  # noqa: E402
+from common import Case, fmt_num, machine_description, markdown_table, measure_interleaved  # noqa: E402
 
 CHANNEL_VALUES = np.array([-0.4, 0.0, 0.4, 0.8])  # bin centres of group, nearest, named, overlay
 

@@ -36,11 +36,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import numba as nb
 import numpy as np
 
 from agentsim_env.comms.stack import CommsConfig
 from agentsim_env.core.world import PHYSICS_MODES, StepEvents, World, WorldConfig
-from agentsim_env.motion import MotionLimits, decode_primitive, decode_velocity, set_hold
+from agentsim_env.motion import MotionLimits, decode_primitive, set_hold
+from agentsim_env.motion.actions import decode_velocity_unchecked
 from agentsim_env.scenarios.base import Part, Scenario, StepResult
 from agentsim_env.scenarios.config import build_config, check_choice, check_float, check_int
 from agentsim_env.scenarios.placement import jittered_points, obstacle_layout
@@ -48,6 +50,59 @@ from agentsim_env.scenarios.rewards import RewardConfig, compose_rewards
 from agentsim_env.sensors.proximity import ProximityConfig
 
 ACTION_MODES = ("velocity", "primitive")
+SELF_DIM, TASK_DIM = 8, 4
+
+
+# The two kernels below replace a few dozen small numpy passes per step (the fixed cost that dominated small
+# worlds). They evaluate the same float64 expressions in the same order as the numpy statements they replace
+# (error_model="numpy": x / 0 gives inf like numpy), so observations and rewards are unchanged bit for bit.
+@nb.njit(cache=True, error_model="numpy")
+def _score_kernel(goal, pos, vel, prev_dist, arrived_acc, energy, acting, online, went, goal_radius, bonus, dt):  # type: ignore[no-untyped-def]
+    s_n = pos.shape[0]
+    dist = np.empty(s_n)
+    arrived = np.zeros(s_n, dtype=np.bool_)
+    task = np.empty(s_n)
+    collided = np.zeros(s_n)
+    effort = np.empty(s_n)
+    for s in range(s_n):
+        dx, dy, dz = goal[s, 0] - pos[s, 0], goal[s, 1] - pos[s, 1], goal[s, 2] - pos[s, 2]
+        d = np.sqrt(dx * dx + dy * dy + dz * dz)
+        dist[s] = d
+        arr = acting[s] and online[s] and d <= goal_radius
+        arrived[s] = arr
+        task[s] = (prev_dist[s] - d if acting[s] else 0.0) + bonus * (1.0 if arr else 0.0)
+        arrived_acc[s] |= arr
+        # |v|^2 associated as numpy's einsum does it (x + z first), so energy stays bit-identical
+        e = ((vel[s, 0] * vel[s, 0] + vel[s, 2] * vel[s, 2]) + vel[s, 1] * vel[s, 1]) * dt
+        effort[s] = e
+        energy[s] += e if acting[s] else 0.0
+    for q in range(went.shape[0]):
+        collided[went[q]] = 1.0
+    return dist, arrived, task, collided, effort
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _observe_kernel(pos, vel, heading, goal, distance, hit_kind, side, lo, hi, vmax, out):  # type: ignore[no-untyped-def]
+    # out (S, 8 + 2K + 4) float32: self | lidar (distance, kind / 3 interleaved) | task.
+    n_k = distance.shape[1]
+    diag = side * np.sqrt(2.0)
+    t0 = SELF_DIM + 2 * n_k
+    for s in range(pos.shape[0]):
+        out[s, 0] = min(max(pos[s, 0] / side * 2 - 1, -1.0), 1.0)
+        out[s, 1] = min(max(pos[s, 1] / side * 2 - 1, -1.0), 1.0)
+        out[s, 2] = min(max((pos[s, 2] - lo) / (hi - lo) * 2 - 1, -1.0), 1.0)
+        for a in range(3):
+            out[s, 3 + a] = min(max(vel[s, a] / vmax, -1.0), 1.0)
+        out[s, 6] = min(max(np.cos(heading[s]), -1.0), 1.0)
+        out[s, 7] = min(max(np.sin(heading[s]), -1.0), 1.0)
+        for k in range(n_k):
+            out[s, SELF_DIM + 2 * k] = distance[s, k]
+            out[s, SELF_DIM + 2 * k + 1] = hit_kind[s, k] / 3.0
+        dx, dy, dz = goal[s, 0] - pos[s, 0], goal[s, 1] - pos[s, 1], goal[s, 2] - pos[s, 2]
+        out[s, t0] = min(max(dx / diag, -1.0), 1.0)
+        out[s, t0 + 1] = min(max(dy / diag, -1.0), 1.0)
+        out[s, t0 + 2] = min(max(dz / diag, -1.0), 1.0)
+        out[s, t0 + 3] = min(max(np.sqrt(dx * dx + dy * dy + dz * dz) / diag, -1.0), 1.0)
 
 
 @dataclass(frozen=True)
@@ -138,6 +193,7 @@ class NavigationScenario(Scenario):
         self.goal = np.zeros((0, 3))
         self.prev_dist = np.zeros(0)
         self.arrived = np.zeros(0, dtype=bool)
+        self._obs = np.zeros((0, SELF_DIM + 2 * self.lidar.n_rays + TASK_DIM), dtype=np.float32)
 
     @property
     def n_agents(self) -> int:
@@ -162,6 +218,7 @@ class NavigationScenario(Scenario):
         self.goal = np.zeros((st.n_slots, 3))
         self.prev_dist = np.zeros(st.n_slots)
         self.arrived = np.zeros(st.n_slots, dtype=bool)
+        self._obs = np.zeros((st.n_slots, self._obs.shape[1]), dtype=np.float32)
         return world
 
     def reset_world(self, world: World, w: int, rng: np.random.Generator) -> None:
@@ -210,25 +267,21 @@ class NavigationScenario(Scenario):
 
     def apply_actions(self, world: World, actions: dict[str, np.ndarray], acting: np.ndarray) -> None:
         """Set each acting slot's motion primitive from its ``motion`` action."""
-        slots = np.flatnonzero(acting)
-        a = actions["motion"][slots]
         if self.config.action_mode == "velocity":
-            decode_velocity(world.motion, slots, a, world.state.max_speed[slots])
+            # the env has validated and clipped the actions: the unchecked one-kernel decoder is safe here
+            decode_velocity_unchecked(world.motion, acting, actions["motion"], world.state.max_speed)
         else:
-            decode_primitive(world.motion, slots, a, world.state.pos, self.limits)
+            slots = np.flatnonzero(acting)
+            decode_primitive(world.motion, slots, actions["motion"][slots], world.state.pos, self.limits)
 
     def after_world_step(self, world: World, events: StepEvents, acting: np.ndarray) -> StepResult:
         """Progress, arrival, collisions and energy -> rewards and terminations."""
         c, st = self.config, world.state
-        dist = np.linalg.norm(self.goal - st.pos, axis=1)
-        arrived = acting & st.online & (dist <= c.goal_radius)
-        task = np.where(acting, self.prev_dist - dist, 0.0) + c.arrival_bonus * arrived
-        self.prev_dist = dist
-        self.arrived |= arrived
-        collided = np.zeros(st.n_slots)
-        collided[events.went_offline] = 1.0
-        effort = np.einsum("ij,ij->i", st.vel, st.vel) * world.config.dt
-        st.energy += np.where(acting, effort, 0.0)
+        dist, arrived, task, collided, effort = _score_kernel(
+            self.goal, st.pos, st.vel, self.prev_dist, self.arrived, st.energy, acting, st.online,
+            events.went_offline, float(c.goal_radius), float(c.arrival_bonus), float(world.config.dt),
+        )
+        self.prev_dist = dist  # dist is fresh each step: the info array handed out below is never mutated
         rewards = compose_rewards(
             c.reward, task, group=st.group, world=st.world_id, acting=acting, n_groups=c.n_groups,
             collided=collided, energy=effort, messages_sent=None if world.comms is None else world.comms.sent,
@@ -239,22 +292,16 @@ class NavigationScenario(Scenario):
     def observe(self, world: World) -> dict[str, np.ndarray]:
         """Observation parts for every slot (see the module docstring)."""
         c, st = self.config, world.state
-        s = c.side
-        lo, hi = c.altitude
-        selfp = np.column_stack([
-            st.pos[:, 0] / s * 2 - 1, st.pos[:, 1] / s * 2 - 1, (st.pos[:, 2] - lo) / (hi - lo) * 2 - 1,
-            st.vel / c.max_speed, np.cos(st.heading), np.sin(st.heading),
-        ])
         scan = world.scan
         assert scan is not None
-        lidar = np.stack([scan.distance, scan.hit_kind / 3.0], axis=-1)
-        diag = s * np.sqrt(2.0)
-        d = self.goal - st.pos
-        task = np.column_stack([d / diag, np.linalg.norm(d, axis=1) / diag])
+        out, k = self._obs, self.lidar.n_rays
+        _observe_kernel(st.pos, st.vel, st.heading, self.goal, scan.distance, scan.hit_kind, float(c.side),
+                        float(c.altitude[0]), float(c.altitude[1]), float(c.max_speed), out)  # fmt: skip
+        # Views of one reused buffer: the envs copy them into the fresh arrays they return.
         return {
-            "self": np.clip(selfp, -1, 1).astype(np.float32),
-            "lidar": lidar.astype(np.float32),
-            "task": np.clip(task, -1, 1).astype(np.float32),
+            "self": out[:, :SELF_DIM],
+            "lidar": out[:, SELF_DIM : SELF_DIM + 2 * k].reshape(-1, k, 2),
+            "task": out[:, SELF_DIM + 2 * k :],
             **self.comm_observe(world),
         }
 
