@@ -16,8 +16,9 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-import numpy as np  # noqa: E402
-from common import Case, fmt_num, machine_description, markdown_table, measure_interleaved  # noqa: E402
+from common import Case, fmt_num, machine_description, markdown_table, measure_interleaved  # noqa: E402, I001
+
+import numpy as np  # noqa: E402  (after common: it pins the thread pools before numpy loads)
 
 CHANNEL_VALUES = np.array([-0.4, 0.0, 0.4, 0.8])  # bin centres of group, nearest, named, overlay
 
