@@ -14,7 +14,7 @@ from pettingzoo import ParallelEnv
 from pettingzoo.utils.conversions import parallel_to_aec
 
 from agentsim_env.env.spaces import FORMATS, action_space_for, observation_space_for, split_action
-from agentsim_env.scenarios.base import Scenario
+from agentsim_env.scenarios.base import Scenario, run_step
 from agentsim_env.scenarios.config import check_choice
 
 RENDER_MODES = ("human", "rgb_array")
@@ -117,16 +117,9 @@ class AgentSimParallelEnv(ParallelEnv):
         parts = self._validate_actions(actions)
         acting = np.zeros(world.state.n_slots, dtype=bool)
         acting[[self._index[a] for a in self.agents]] = True
-        sc.apply_actions(world, parts, acting)
-        if "comm" in parts:
-            world.apply_comm(parts["comm"], acting)
-        sc.before_world_step(world)
-        # 2-8. the world pipeline; 9. the scenario scores
-        events = world.step()
-        res = sc.after_world_step(world, events, acting)
+        # 1. decode; 2-8. the world pipeline; 9. the scenario scores
+        res, terminated = run_step(sc, world, parts, acting)
         self._steps += 1
-        terminated = acting & (res.terminated | ~world.state.online)
-        world.set_offline(np.flatnonzero(terminated))
         truncated = acting & ~terminated & (self._steps >= sc.max_steps)
         obs = self._obs_dicts(sc.observe(world), acting)
         live = self.agents

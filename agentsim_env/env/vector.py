@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from agentsim_env.env.spaces import flat_layout
+from agentsim_env.scenarios.base import run_step
 from agentsim_env.scenarios.registry import make_scenario
 
 
@@ -127,15 +128,8 @@ class BatchedEnv:
         acting = self.alive.reshape(-1).copy()
         parts = {k: a[:, sl] for k, sl in self._act_layout.items()}
         sc, world = self.scenario, self.world
-        sc.apply_actions(world, parts, acting)
-        if "comm" in parts:
-            world.apply_comm(parts["comm"], acting)
-        sc.before_world_step(world)
-        events = world.step()
-        res = sc.after_world_step(world, events, acting)
+        res, term = run_step(sc, world, parts, acting)
         self.steps += 1
-        term = acting & (res.terminated | ~world.state.online)
-        world.set_offline(np.flatnonzero(term))
         trunc = acting & ~term & np.repeat(self.steps >= sc.max_steps, self.n_agents)
         shape = (self.n_worlds, self.n_agents)
         term, trunc = term.reshape(shape), trunc.reshape(shape)

@@ -158,3 +158,25 @@ class Scenario(ABC):
             [st.pos[sl] / 100.0, st.vel[sl] / 10.0, st.online[sl].astype(np.float64), st.group[sl] / 10.0]
         )
         return np.clip(per.ravel(), -10.0, 10.0).astype(np.float32)
+
+
+def run_step(
+    scenario: Scenario, world: World, parts: dict[str, np.ndarray], acting: np.ndarray
+) -> tuple[StepResult, np.ndarray]:
+    """One step of the pipeline (DESIGN §4) shared by every env front end.
+
+    Stage 1 decodes the validated action parts of the acting slots (motion, scenario parts, ``comm``), stages
+    2-8 run in ``World.step``, stage 9 is the scenario's scoring; slots that ended leave the simulation.
+
+    Returns:
+        The scenario's result and the mask of slots that terminated this step.
+    """
+    scenario.apply_actions(world, parts, acting)
+    if "comm" in parts:
+        world.apply_comm(parts["comm"], acting)
+    scenario.before_world_step(world)
+    events = world.step()
+    res = scenario.after_world_step(world, events, acting)
+    terminated = acting & (res.terminated | ~world.state.online)
+    world.set_offline(np.flatnonzero(terminated))
+    return res, terminated
