@@ -149,3 +149,17 @@ def test_render_shows_zones_and_sensors() -> None:
     img = env.render()
     assert img.ndim == 3 and img.dtype == np.uint8
     assert len(np.unique(img.reshape(-1, 3), axis=0)) >= 3  # background, zone tint, UAVs
+
+
+def test_mission_ends_when_zones_are_served_with_spares_on_board() -> None:
+    env = _tiny(payload=12, n_uavs=2)  # 24 on board for the tiny zone's 20 sensors
+    st = env.world.state
+    st.pos[:, 2] = 10.0
+    st.pos[0, :2], st.pos[1, :2] = [95.0, 100.0], [105.0, 100.0]
+    for k in range(200):
+        trigger = 1.0 if k < 10 else -1.0  # 10 releases each, then wait
+        _, _, term, _, _ = env.step(_idle(env, {a: [trigger, 0.0, 0.0] for a in env.agents}))
+        if not env.agents:
+            break
+    assert not env.agents and all(term.values())
+    assert env.scenario.payload_left.tolist() == [2, 2]

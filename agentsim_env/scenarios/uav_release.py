@@ -3,7 +3,8 @@
 K UAVs (``uav_0`` ...) take off from the base with ``payload`` sensors each and a battery (rotary-wing power
 model, the mass falling as sensors leave). A released sensor falls with quadratic drag and wind (log-law
 mean per episode plus gusts) and lands with scatter (GNSS, timing jitter, bounce). Zones come from a zone
-designer JSON file (``docs/zones.md``). The episode ends when every sensor has landed (or at ``max_steps``);
+designer JSON file (``docs/zones.md``). The episode ends when the zones' sensors have all landed (or nothing is left on board
+and nothing is falling, or at ``max_steps``);
 a collision or an empty battery ends a UAV.
 
 Observation (Dict; flat Box = parts in this order):
@@ -185,13 +186,14 @@ class UavReleaseScenario(Scenario):
         empty_battery = acting & (st.energy >= c.battery_j)
         collided = np.zeros(s)
         collided[events.went_offline] = 1.0
-        # mission complete in a world: nothing left on board of a live UAV and nothing falling
+        # mission complete in a world, nothing falling and: every zone's sensors landed, or nothing left on board
         n = c.n_uavs
         left = (self.payload_left * st.online).reshape(-1, n).sum(axis=1)
-        falling = np.bincount(
-            self.payloads.get("world")[self.payloads.get("falling")], minlength=world.n_worlds
-        )
-        done_now = ~self.finished & (((left == 0) & (falling == 0)) | (world.step_count >= c.max_steps))
+        ps_world = self.payloads.get("world")
+        falling = np.bincount(ps_world[self.payloads.get("falling")], minlength=world.n_worlds)
+        down = np.bincount(ps_world[self.payloads.get("landed")], minlength=world.n_worlds)
+        complete = (falling == 0) & ((left == 0) | (down >= self.zones.n_sensors))
+        done_now = ~self.finished & (complete | (world.step_count >= c.max_steps))
         terminated = empty_battery.copy()
         for w in np.flatnonzero(done_now):
             self.finished[w] = True
