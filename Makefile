@@ -22,7 +22,7 @@ $(STAMP): pyproject.toml constraints.txt
 install: $(STAMP)
 
 run: $(STAMP)
-	$(VENV)/bin/agentsim run navigation --episodes 20 --out outputs/navigation
+	$(VENV)/bin/agentsim evaluate --zones default --strategies all --seeds 3 --out outputs/evaluation
 
 test: $(STAMP)
 	$(PY) -m pytest -n 2 -q tests

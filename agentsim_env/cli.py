@@ -97,7 +97,9 @@ def _parse_seeds(tokens: list[str]) -> list[int]:
     try:
         values = [int(p) for p in parts]
     except ValueError:
-        raise ValueError(f"--seeds must be a count N or a list of integers (e.g. 0,4,9), got {' '.join(tokens)!r}") from None
+        raise ValueError(
+            f"--seeds must be a count N or a list of integers (e.g. 0,4,9), got {' '.join(tokens)!r}"
+        ) from None
     if not values:
         raise ValueError("--seeds must be a count N >= 1 or a list of integers, got nothing")
     if explicit:
@@ -149,14 +151,29 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("scenarios", help="list the registered scenarios")
     s.set_defaults(func=cmd_scenarios)
     e = sub.add_parser("evaluate", help="batch evaluation of the UAV sensor-release strategies")
-    e.add_argument("--zones", nargs="+", default=["default"], metavar="ZONES",
-                   help="zone files: 'default', 'tiny' or JSON paths (several allowed)")
-    e.add_argument("--strategies", nargs="+", default=["all"], metavar="NAME",
-                   help="release strategies, or 'all' (the B8 teleport reference is always added)")
-    e.add_argument("--seeds", nargs="+", default=["3"], metavar="SEED",
-                   help="a count N (seeds 0..N-1) or a list: 0,4,9 or 0 4 9 (one seed: 7,)")
+    e.add_argument(
+        "--zones",
+        nargs="+",
+        default=["default"],
+        metavar="ZONES",
+        help="zone files: 'default', 'tiny' or JSON paths (several allowed; default: default)",
+    )
+    e.add_argument(
+        "--strategies",
+        nargs="+",
+        default=["all"],
+        metavar="NAME",
+        help="release strategies, or 'all' (default); the B8 teleport reference is always added",
+    )
+    e.add_argument(
+        "--seeds",
+        nargs="+",
+        default=["3"],
+        metavar="SEED",
+        help="a count N (seeds 0..N-1; default 3) or a list: 0,4,9 or 0 4 9 (one seed: 7,)",
+    )
     e.add_argument("--set", nargs="*", metavar="KEY=VALUE", help="uav_release config values for every run")
-    e.add_argument("--out", default="outputs/evaluation", help="output folder")
+    e.add_argument("--out", default="outputs/evaluation", help="output folder (default: outputs/evaluation)")
     e.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     e.add_argument("--quiet", action="store_true", help="no progress bar")
     e.set_defaults(func=cmd_evaluate)

@@ -16,6 +16,9 @@ import numpy as np
 from agentsim_env.core.scene import BOX, CYLINDER
 from agentsim_env.core.spatial import Grid, _cell_of, _grow
 
+# Kernels compile with error_model="numpy": every division in them is guarded or by a validated positive
+# value, and dropping the per-division zero check of the default model made the scan ~20 % faster.
+
 
 @dataclass(slots=True)
 class CollisionEvents:
@@ -49,7 +52,7 @@ class CollisionEvents:
         )
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def surface_distance(px: float, py: float, pz: float, kind: int, c: np.ndarray, h: np.ndarray) -> float:
     """Distance from a point to an object's surface (0 inside)."""
     if kind == BOX:
@@ -65,7 +68,7 @@ def surface_distance(px: float, py: float, pz: float, kind: int, c: np.ndarray, 
     return max(d, 0.0)
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def _agent_agent(pos, radius, online, world, cell_start, items, ox, oy, cell, nx, ny, margin):  # type: ignore[no-untyped-def]
     # Pairs (i < j, found from i's side in grid order, as spatial.neighbor_pairs) whose centres are closer
     # than r_i + r_j + margin; 2 r_max + margin bounds every threshold, so one cell range serves all.
@@ -104,9 +107,10 @@ def _agent_agent(pos, radius, online, world, cell_start, items, ox, oy, cell, nx
     return out_i[:n], out_j[:n]
 
 
-@nb.njit(cache=True)
-def _agent_object(pos, radius, online, world, okind, ocentre, ohalf, oworld, cell_start, items,
-                  ox, oy, cell, nx, ny, margin):  # type: ignore[no-untyped-def]
+@nb.njit(cache=True, error_model="numpy")
+def _agent_object(
+    pos, radius, online, world, okind, ocentre, ohalf, oworld, cell_start, items, ox, oy, cell, nx, ny, margin
+):  # type: ignore[no-untyped-def]
     # One pass into growable buffers, agents in slot order.
     n = 0
     out_a = np.empty(16, dtype=np.int64)
@@ -178,20 +182,18 @@ def find_collisions(
         agents, then their second agents), followed by agent-object rows in slot order.
     """
     pos = np.ascontiguousarray(pos)
-    agent, other = np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
     sp = agent_grid.spec
     i, j = _agent_agent(pos, radius, online, world, agent_grid.cell_start, agent_grid.items, sp.origin_x,
                         sp.origin_y, sp.cell, sp.nx, sp.ny, float(margin))  # fmt: skip
-    if i.size:
-        agent, other = np.concatenate([i, j]), np.concatenate([j, i])
-    obj = np.full(agent.shape[0], -1, dtype=np.int64)
+    a_obj = o_obj = i[:0]
     if object_grid is not None and scene_kind.shape[0] > 0:
         sp = object_grid.spec
-        out_a, out_o = _agent_object(pos, radius, online, world, scene_kind, scene_centre, scene_half,
+        a_obj, o_obj = _agent_object(pos, radius, online, world, scene_kind, scene_centre, scene_half,
                                      scene_world, object_grid.cell_start, object_grid.items, sp.origin_x,
                                      sp.origin_y, sp.cell, sp.nx, sp.ny, float(margin))  # fmt: skip
-        if out_a.size:
-            agent = np.concatenate([agent, out_a])
-            other = np.concatenate([other, np.full(out_a.shape[0], -1, dtype=np.int64)])
-            obj = np.concatenate([obj, out_o])
-    return CollisionEvents(agent, other, obj)
+    if not i.size and not a_obj.size:  # the common step: nothing hit, no concatenation
+        return CollisionEvents.empty()
+    none_a = np.full(i.shape[0] * 2, -1, dtype=np.int64)
+    none_o = np.full(a_obj.shape[0], -1, dtype=np.int64)
+    return CollisionEvents(np.concatenate([i, j, a_obj]), np.concatenate([j, i, none_o]),
+                           np.concatenate([none_a, o_obj]))  # fmt: skip

@@ -17,6 +17,9 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
+# Kernels compile with error_model="numpy": every division in them is guarded or by a validated positive
+# value, and dropping the per-division zero check of the default model made the scan ~20 % faster.
+
 
 @dataclass(slots=True, frozen=True)
 class GridSpec:
@@ -75,7 +78,7 @@ class Grid:
     items: np.ndarray
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def _cell_of(x: float, y: float, ox: float, oy: float, cell: float, nx: int, ny: int) -> tuple[int, int]:
     cx = int(np.floor((x - ox) / cell))
     cy = int(np.floor((y - oy) / cell))
@@ -84,7 +87,7 @@ def _cell_of(x: float, y: float, ox: float, oy: float, cell: float, nx: int, ny:
     return cx, cy
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def _build(pos, world, active, ox, oy, cell, nx, ny, n_cells):  # type: ignore[no-untyped-def]
     # Counting sort in three linear passes (count, prefix sum, place); placing slots in descending order
     # while decrementing each cell's end pointer leaves the items of a cell ascending and turns the end
@@ -135,7 +138,7 @@ def build_grid(spec: GridSpec, pos: np.ndarray, world: np.ndarray, active: np.nd
     return Grid(spec, cs, items)
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def _build_objects(cx, cy, rad, world, ox, oy, cell, nx, ny, n_cells):  # type: ignore[no-untyped-def]
     o = cx.shape[0]
     counts = np.zeros(n_cells + 1, dtype=np.int64)
@@ -179,7 +182,7 @@ def build_object_grid(spec: GridSpec, centre: np.ndarray, footprint_radius: np.n
     return Grid(spec, cs, items)
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def _grow(a, n):  # type: ignore[no-untyped-def]
     # Double a result buffer, keeping its first n entries.
     b = np.empty(max(2 * a.shape[0], 16), dtype=a.dtype)
@@ -187,7 +190,7 @@ def _grow(a, n):  # type: ignore[no-untyped-def]
     return b
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def _pairs(pos, world, cell_start, items, ox, oy, cell, nx, ny, max_dist, out_i, out_j, out_d):  # type: ignore[no-untyped-def]
     # One pass into growable buffers. Each pair (i < j) is found once: from i's side.
     n = 0

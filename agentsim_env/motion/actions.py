@@ -165,7 +165,7 @@ def decode_velocity(
     set_velocity(ms, idx, _clip_norm(a * vmax[:, None], vmax))
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")  # its one division is by a norm > max_speed >= 0
 def _velocity_kernel(kind, params, t, n_waypoints, wp_index, loop, done, acting, actions, max_speed):  # type: ignore[no-untyped-def]
     # Same arithmetic, in the same order, as decode_velocity: clip to [-1, 1], scale by max_speed, then
     # scale back onto the max_speed ball; so both paths give bit-identical targets.

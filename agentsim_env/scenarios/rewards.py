@@ -40,7 +40,9 @@ class RewardConfig:
             check_float(f"reward.{name}", getattr(self, name), 0.0)
 
 
-def group_mean(values: np.ndarray, group: np.ndarray, world: np.ndarray, mask: np.ndarray, n_groups: int) -> np.ndarray:
+def group_mean(
+    values: np.ndarray, group: np.ndarray, world: np.ndarray, mask: np.ndarray, n_groups: int
+) -> np.ndarray:
     """Mean of ``values`` over the masked members of each (world, group), broadcast back to every slot.
 
     Slots with group -1 (no group) get their own value.
@@ -55,7 +57,10 @@ def group_mean(values: np.ndarray, group: np.ndarray, world: np.ndarray, mask: n
     return np.where(group >= 0, mean, values)
 
 
-@nb.njit(cache=True)
+_NONE = np.zeros(0)  # stands in for an absent term (the kernel never reads it)
+
+
+@nb.njit(cache=True, error_model="numpy")
 def _compose_kernel(task, group, world, acting, n_groups, collided, energy, sent, w, use):  # type: ignore[no-untyped-def]
     # One pass for the group sums, one for the terms. The sums run in slot order like np.bincount and the
     # terms are added in the order of the numpy expression, so the result is bit-identical to it.
@@ -126,24 +131,23 @@ def compose_rewards(
     Returns:
         Rewards ``(S,)`` as float64 (a fresh array).
     """
-    s = task.shape[0]
-    empty = np.zeros(s)
     use = (
-        bool(cfg.group_share) and s > 0,
+        bool(cfg.group_share) and task.shape[0] > 0,
         collided is not None and bool(cfg.collision_penalty),
         energy is not None and bool(cfg.energy_weight),
         messages_sent is not None and bool(cfg.message_cost),
     )
-    w = np.array([cfg.task_weight, cfg.group_share, cfg.collision_penalty, cfg.energy_weight, cfg.message_cost])
+    w = (float(cfg.task_weight), float(cfg.group_share), float(cfg.collision_penalty), float(cfg.energy_weight),
+         float(cfg.message_cost))  # fmt: skip
     return _compose_kernel(
         np.asarray(task, dtype=np.float64),
         np.asarray(group),
         np.asarray(world),
         np.asarray(acting, dtype=np.bool_),
         int(n_groups),
-        empty if collided is None else np.asarray(collided, dtype=np.float64),
-        empty if energy is None else np.asarray(energy, dtype=np.float64),
-        empty if messages_sent is None else np.asarray(messages_sent),
+        _NONE if collided is None else np.asarray(collided, dtype=np.float64),
+        _NONE if energy is None else np.asarray(energy, dtype=np.float64),
+        _NONE if messages_sent is None else np.asarray(messages_sent),
         w,
         use,
     )

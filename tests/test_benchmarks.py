@@ -1,0 +1,194 @@
+"""Smoke test of the step benchmark: a --quick run at tiny sizes prints complete tables (no timing checks)."""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+import common  # noqa: E402
+import run_all  # noqa: E402
+
+MAIN_TEXT_COLUMNS = {"size BxN", "target", "array", "dict"}
+PASS_VALUES = {"PASS", "FAIL", "skipped", "-"}
+
+
+def _tables(out: str) -> list[tuple[list[str], list[list[str]]]]:
+    """Markdown tables in ``out`` as (header, rows), the separator line dropped."""
+    tables, block = [], []
+    for line in [*out.splitlines(), ""]:
+        if line.startswith("|"):
+            block.append([c.strip() for c in line.strip().strip("|").split("|")])
+        elif block:
+            tables.append((block[0], block[2:]))
+            block = []
+    return tables
+
+
+def _number_or_skipped(cell: str) -> bool:
+    if cell.startswith("skipped"):
+        return True
+    try:
+        return math.isfinite(float(cell.replace(",", "")))
+    except ValueError:
+        return False
+
+
+@pytest.fixture(scope="module")
+def quick_run() -> str:
+    # 1x4 follows 1x2, and --max-step-s is tiny: VMAS and mpe2 are skipped at 1x4 (estimate from 1x2), so the
+    # run shows measured cells and skipped cells side by side.
+    cmd = [sys.executable, str(ROOT / "benchmarks" / "bench_step.py"), "--quick", "--sizes", "1x2", "1x4", "2x3",
+           "--pymunk-size", "1x2", "--ratio-sizes", "1x2", "1x4", "--rounds", "2", "--block-s", "0.005",
+           "--max-step-s", "1e-9"]  # fmt: skip
+    res = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stderr[-3000:]
+    return res.stdout
+
+
+def test_quick_run_prints_both_tables_with_every_cell_filled(quick_run: str) -> None:
+    assert quick_run.startswith("machine: ")
+    tables = _tables(quick_run)
+    assert len(tables) == 2
+    (head, rows), (check_head, checks) = tables
+    assert head[0] == "size BxN" and [r[0] for r in rows] == ["1x2", "1x4", "2x3"]
+    for row in rows:
+        assert len(row) == len(head)
+        for name, cell in zip(head, row):
+            if name in MAIN_TEXT_COLUMNS:
+                assert cell, (row[0], name)
+            else:
+                assert _number_or_skipped(cell), (row[0], name, cell)
+        assert row[-2] in PASS_VALUES and row[-1] in PASS_VALUES
+    measured = {r[0]: r for r in rows}
+    vmas = head.index("VMAS ag-st/s")
+    assert measured["1x4"][vmas].startswith("skipped")  # the tiny --max-step-s at work
+    assert _number_or_skipped(measured["1x2"][head.index("array API ag-st/s")])
+    assert not measured["1x2"][head.index("array API ag-st/s")].startswith("skipped")
+    assert check_head == ["check", "value", "target", "result"] and len(checks) == 2
+    for check in checks:
+        assert _number_or_skipped(check[1]) and check[3] in PASS_VALUES
+        assert not check[1].startswith("skipped")  # both checks had their sizes measured
+
+
+def test_markdown_table_and_number_cells() -> None:
+    table = common.markdown_table(["a", "bb"], [["1", "22,000"], ["skipped (x)", "3.5"]])
+    lines = table.splitlines()
+    assert len(lines) == 4 and all(line.startswith("|") and line.endswith("|") for line in lines)
+    assert len({len(line) for line in lines}) == 1  # columns padded to one width
+    assert common.fmt_num(123456.7) == "123,457" and common.fmt_num(0.01234) == "0.0123"
+    with pytest.raises(ValueError, match="finite"):
+        common.fmt_num(float("nan"))
+
+
+def test_measure_interleaved_counts_agent_steps() -> None:
+    calls = {"a": 0, "b": 0}
+
+    def step_a() -> int:
+        calls["a"] += 1
+        return 3
+
+    def step_b() -> int:
+        calls["b"] += 1
+        return 0
+
+    stats = common.measure_interleaved(
+        {"a": common.Case(step_a), "b": common.Case(step_b)}, rounds=3, block_s=0.0, warmup=1
+    )
+    assert calls == {"a": 1 + 1 + 3, "b": 1 + 1 + 3}  # warm-up, calibration, then one step per round
+    assert stats["a"].rounds == 3 and stats["a"].steps_per_block == 1
+    assert stats["a"].agent_steps_per_s > 0 and stats["b"].agent_steps_per_s == 0
+
+
+def test_run_all_finds_benchmarks_with_main() -> None:
+    names = [p.stem for p in run_all.benchmarks()]
+    assert "bench_step" in names
+    assert [p.stem for p in run_all.benchmarks(["step"])] == ["bench_step"]
+    assert all(run_all.has_main(p) for p in run_all.benchmarks())
+
+
+# ---- the hot-path kernels written for throughput must give exactly what their plain versions give ----
+@given(st.integers(0, 2**32 - 1))
+@settings(max_examples=40, deadline=None)
+def test_compose_rewards_kernel_equals_numpy_reference(seed: int) -> None:
+    from agentsim_env.scenarios.rewards import RewardConfig, compose_rewards, compose_rewards_reference
+
+    rng = np.random.default_rng(seed)
+    s, b, g = int(rng.integers(0, 40)), int(rng.integers(1, 4)), int(rng.integers(1, 4))
+    cfg = RewardConfig(*(rng.uniform(0, 2, 5) * (rng.random(5) < 0.7)))
+    kw = {
+        "group": rng.integers(-1, g, s).astype(np.int32),
+        "world": rng.integers(0, b, s).astype(np.int32),
+        "acting": rng.random(s) < 0.8,
+        "n_groups": g,
+        "collided": (rng.random(s) < 0.2) * 1.0 if rng.random() < 0.7 else None,
+        "energy": rng.random(s),
+        "messages_sent": rng.integers(0, 3, s) if rng.random() < 0.5 else None,
+    }
+    task = rng.normal(size=s)
+    np.testing.assert_array_equal(
+        compose_rewards(cfg, task, **kw), compose_rewards_reference(cfg, task, **kw)
+    )
+
+
+@given(st.integers(0, 2**32 - 1))
+@settings(max_examples=40, deadline=None)
+def test_unchecked_velocity_decoder_equals_validated_one(seed: int) -> None:
+    from agentsim_env.motion import MotionState, decode_velocity, set_circular
+    from agentsim_env.motion.actions import decode_velocity_unchecked
+
+    rng = np.random.default_rng(seed)
+    s = int(rng.integers(1, 20))
+    a, b = MotionState.create(s), MotionState.create(s)
+    pos = rng.uniform(0, 10, (s, 3))
+    for ms in (a, b):  # a running primitive with parameters the decoder must clear
+        set_circular(ms, np.arange(s), pos, pos[:, :2] + 1.0, 2.0, 0.5, 3.0)
+    acting = rng.random(s) < 0.7
+    actions = rng.uniform(-1.5, 1.5, (s, 3))
+    vmax = rng.uniform(0, 6, s)
+    slots = np.flatnonzero(acting)
+    decode_velocity(a, slots, actions[slots], vmax[slots])
+    decode_velocity_unchecked(b, acting, actions, vmax)
+    for name in ("kind", "params", "t", "n_waypoints", "wp_index", "loop", "done"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
+
+
+def test_navigation_observe_kernel_equals_numpy_statement() -> None:
+    from agentsim_env.env.vector import BatchedEnv
+
+    env = BatchedEnv("navigation", 3, n_agents=5)
+    env.reset(seed=1)
+    rng = np.random.default_rng(2)
+    for _ in range(15):
+        env.step(rng.uniform(-1, 1, (3, 5, env.act_dim)))
+    sc, world = env.scenario, env.world
+    c, stt, scan = sc.config, world.state, world.scan
+    s, (lo, hi) = c.side, c.altitude
+    selfp = np.column_stack(
+        [stt.pos[:, 0] / s * 2 - 1, stt.pos[:, 1] / s * 2 - 1, (stt.pos[:, 2] - lo) / (hi - lo) * 2 - 1,
+         stt.vel / c.max_speed, np.cos(stt.heading), np.sin(stt.heading)]
+    )  # fmt: skip
+    diag = s * np.sqrt(2.0)
+    d = sc.goal - stt.pos
+    expected = {
+        "self": np.clip(selfp, -1, 1).astype(np.float32),
+        "lidar": np.stack([scan.distance, scan.hit_kind / 3.0], axis=-1).astype(np.float32),
+        "task": np.clip(np.column_stack([d / diag, np.linalg.norm(d, axis=1) / diag]), -1, 1).astype(
+            np.float32
+        ),
+    }
+    got = sc.observe(world)
+    assert list(got) == list(expected)
+    for k, v in expected.items():
+        assert got[k].dtype == np.float32 and got[k].shape == v.shape
+        # cos / sin may differ in the last float64 bit between numpy builds and libm: 1 float32 ulp at most
+        np.testing.assert_allclose(got[k], v, rtol=0, atol=1.2e-7 if k == "self" else 0, err_msg=k)
