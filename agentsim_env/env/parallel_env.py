@@ -6,6 +6,9 @@ let the scenario score (9), then build the per-agent dicts once from arrays.
 
 from __future__ import annotations
 
+import functools
+import operator
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -18,6 +21,21 @@ from agentsim_env.scenarios.base import Scenario, run_step
 from agentsim_env.scenarios.config import check_choice
 
 RENDER_MODES = ("human", "rgb_array")
+
+
+@functools.lru_cache(maxsize=64)
+def _dict_builder(keys: tuple[str, ...]) -> Callable[..., dict[str, Any]]:
+    """A function ``f(v0, v1, ...) -> {keys[0]: v0, ...}`` compiled once per key tuple.
+
+    A dict display is about twice as fast as ``dict(zip(keys, values))``, which matters when thousands of
+    per-agent dicts are built every step. Keys are the scenario's part and info names (identifiers).
+    """
+    for k in keys:
+        if not k.replace(".", "_").isidentifier():
+            raise ValueError(f"observation/info names must be identifiers, got {k!r}")
+    args = ", ".join(f"v{i}" for i in range(len(keys)))
+    body = ", ".join(f"{k!r}: v{i}" for i, k in enumerate(keys))
+    return eval(f"lambda {args}: {{{body}}}")  # noqa: S307 - built from validated identifiers only
 
 
 class AgentSimParallelEnv(ParallelEnv):
@@ -64,7 +82,7 @@ class AgentSimParallelEnv(ParallelEnv):
         }
         n = scenario.state_size()
         self.state_space = spaces.Box(-10.0, 10.0, shape=(n,), dtype=np.float32)
-        self.agents: list[str] = []
+        self._set_agents([])
         self._rng: np.random.Generator | None = None
         self._steps = 0
         self._window: Any = None
@@ -98,7 +116,7 @@ class AgentSimParallelEnv(ParallelEnv):
         self.world.step_count[:] = 0
         self.world.refresh()
         self._steps = 0
-        self.agents = list(self.possible_agents)
+        self._set_agents(list(self.possible_agents))
         parts = self.scenario.observe(self.world)
         if self.render_mode == "human":
             self.render()
@@ -116,77 +134,82 @@ class AgentSimParallelEnv(ParallelEnv):
         # 1. validate everything before any state changes, then decode actions into motion commands
         parts = self._validate_actions(actions)
         acting = np.zeros(world.state.n_slots, dtype=bool)
-        acting[[self._index[a] for a in self.agents]] = True
+        acting[self._live_idx] = True
         # 1. decode; 2-8. the world pipeline; 9. the scenario scores
         res, terminated = run_step(sc, world, parts, acting)
         self._steps += 1
         truncated = acting & ~terminated & (self._steps >= sc.max_steps)
         obs = self._obs_dicts(sc.observe(world), acting)
         live = self.agents
-        idx = [self._index[a] for a in live]
+        idx = self._live_idx
         rew = res.rewards[idx].astype(float).tolist()
         term = terminated[idx].tolist()
         trunc = truncated[idx].tolist()
         rewards = dict(zip(live, rew))
         terms = dict(zip(live, term))
         truncs = dict(zip(live, trunc))
-        keys = list(res.info)
+        keys = tuple(res.info)
         cols = [res.info[k][idx].tolist() for k in keys]
-        infos = (
-            {a: dict(zip(keys, vals)) for a, vals in zip(live, zip(*cols))} if keys else {a: {} for a in live}
-        )
-        self.agents = [a for a, t, u in zip(live, term, trunc) if not (t or u)]
+        infos = dict(zip(live, map(_dict_builder(keys), *cols))) if keys else {a: {} for a in live}
+        if any(term) or any(trunc):
+            self._set_agents([a for a, t, u in zip(live, term, trunc) if not (t or u)])
         if self.render_mode == "human":
             self.render()
         return obs, rewards, terms, truncs, infos
 
+    def _set_agents(self, agents: list[str]) -> None:
+        """Set the live agents and the lookups derived from them (rebuilt only when the list changes)."""
+        self.agents = agents
+        self._live_set = frozenset(agents)
+        self._live_idx = np.fromiter((self._index[a] for a in agents), dtype=np.int64, count=len(agents))
+        self._getter = operator.itemgetter(*agents) if len(agents) > 1 else None
+
     def _validate_actions(self, actions: dict[str, Any]) -> dict[str, np.ndarray]:
         """Stack the actions of live agents into per-part arrays over slots (validated, clipped).
 
-        The fast path converts each part for all agents at once; only when something is wrong does the slow
+        The fast path gathers each part for all agents at once; only when something is wrong does the slow
         path check agent by agent, so the error names the agent and the part.
         """
         if not isinstance(actions, dict):
             raise ValueError(f"actions must be a dict agent id -> action, got {type(actions).__name__}")
         live = self.agents
-        if len(actions) != len(live) or any(a not in actions for a in live):
-            live_set = set(live)
+        if actions.keys() != self._live_set:
             for a in actions:
                 if a not in self._index:
                     raise ValueError(f"unknown agent id {a!r} in actions")
-                if a not in live_set:
+                if a not in self._live_set:
                     raise ValueError(
                         f"agent {a!r} is no longer live (terminated or truncated); remove it from actions"
                     )
             missing = [a for a in live if a not in actions]
             raise ValueError(f"missing actions for live agent(s) {missing[:5]}")
         parts = self.scenario.act_parts()
-        idx = np.fromiter((self._index[a] for a in live), dtype=np.int64, count=len(live))
+        idx = self._live_idx
+        n = len(live)
+        acts = self._getter(actions) if self._getter is not None else (actions[live[0]],)
         s = self.world.state.n_slots
         out = {name: np.zeros((s, p.size)) for name, p in parts.items()}
         try:
             if self.action_format == "flat":
                 total = sum(p.size for p in parts.values())
-                arr = np.asarray([actions[a] for a in live], dtype=np.float64)
-                if arr.shape != (len(live), total) or not np.isfinite(arr).all():
+                if set(map(len, acts)) != {total}:
                     raise ValueError
+                arr = np.concatenate(acts).astype(np.float64, copy=False).reshape(n, total)
                 start = 0
                 for name, p in parts.items():
                     out[name][idx] = arr[:, start : start + p.size]
                     start += p.size
             else:
-                names = list(parts)
-                for a in live:
-                    act = actions[a]
-                    if not isinstance(act, dict) or len(act) != len(names):
-                        raise ValueError
+                if set(map(len, acts)) != {len(parts)}:
+                    raise ValueError
                 for name, p in parts.items():
-                    arr = np.asarray([actions[a][name] for a in live], dtype=np.float64).reshape(
-                        len(live), -1
-                    )
-                    if arr.shape[1] != p.size or not np.isfinite(arr).all():
+                    vals = list(map(operator.itemgetter(name), acts))
+                    if set(map(len, vals)) != {p.size}:
                         raise ValueError
-                    out[name][idx] = arr
+                    out[name][idx] = np.concatenate(vals).astype(np.float64, copy=False).reshape(n, p.size)
+            for name in parts:
+                if not np.isfinite(out[name]).all():
+                    raise ValueError
         except (ValueError, TypeError, KeyError):
             for a in live:  # slow path: find the culprit and raise naming it
                 split_action(actions[a], parts, self.action_format, a)
@@ -200,13 +223,13 @@ class AgentSimParallelEnv(ParallelEnv):
     def _obs_dicts(self, parts: dict[str, np.ndarray], acting: np.ndarray) -> dict[str, Any]:
         """Per-agent observations of the live agents, built once from the part arrays (rows of fresh arrays)."""
         s = self.world.state.n_slots
-        idx = [self._index[a] for a in self.agents]
+        idx = self._live_idx
         if self.obs_format == "flat":
-            flat = np.concatenate([p.reshape(s, -1) for p in parts.values()], axis=1).astype(np.float32)
+            flat = np.concatenate([p.reshape(s, -1) for p in parts.values()], axis=1, dtype=np.float32)
             return dict(zip(self.agents, flat[idx]))
-        keys = list(parts)
-        rows = [list(parts[k][idx]) for k in keys]
-        return {a: dict(zip(keys, vals)) for a, vals in zip(self.agents, zip(*rows))}
+        keys = tuple(parts)
+        rows = [parts[k][idx] for k in keys]  # fancy indexing: fresh arrays, never views of live state
+        return dict(zip(self.agents, map(_dict_builder(keys), *rows)))
 
     # ------------------------------------------------------------------ extras
     def _comms(self) -> Any:

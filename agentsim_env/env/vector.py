@@ -75,7 +75,7 @@ class BatchedEnv:
     def _flat_obs(self) -> np.ndarray:
         parts = self.scenario.observe(self.world)
         s = self.world.state.n_slots
-        flat = np.concatenate([p.reshape(s, -1) for p in parts.values()], axis=1).astype(np.float32)
+        flat = np.concatenate([p.reshape(s, -1) for p in parts.values()], axis=1, dtype=np.float32)
         return flat.reshape(self.n_worlds, self.n_agents, self.obs_dim)
 
     def _reset_worlds(self, worlds: np.ndarray) -> None:
@@ -137,7 +137,7 @@ class BatchedEnv:
         obs = self._flat_obs()
         obs[~self.alive & ~(term | trunc)] = 0.0
         done_worlds = ~self.alive.any(axis=1)
-        final = np.zeros_like(obs)
+        final = np.zeros(obs.shape, dtype=obs.dtype)  # calloc: pages stay untouched unless a world resets
         if done_worlds.any():
             final[done_worlds] = obs[done_worlds]
             self._reset_worlds(np.flatnonzero(done_worlds))
