@@ -52,6 +52,10 @@ def cmd_run(args: argparse.Namespace) -> int:
 
     config = _parse_config(args.set or [])
     env = agentsim_env.make(args.scenario, render_mode="human" if args.render else "rgb_array", **config)
+    if args.fps is not None:
+        if args.fps <= 0:
+            raise ValueError(f"--fps must be > 0, got {args.fps}")
+        env.metadata["render_fps"] = args.fps  # the live window paces itself with this rate
     policy = make_policy(args.scenario, env, args.policy)
     rows = []
     frame = None
@@ -145,6 +149,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--policy", default=None, help="baseline name (default: the scenario's first)")
     r.add_argument("--set", nargs="*", metavar="KEY=VALUE", help="scenario config values")
     r.add_argument("--render", action="store_true", help="show a live window (graphical mode)")
+    r.add_argument("--fps", type=int, default=None, help="frames per second of the live window (default: real time)")
     r.add_argument("--out", default="outputs", help="folder for the PNG frame")
     r.add_argument("--quiet", action="store_true", help="no progress bar")
     r.set_defaults(func=cmd_run)
