@@ -35,7 +35,7 @@ bench: $(STAMP)
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check agentsim_env policies train tests benchmarks
-	$(VENV)/bin/mypy agentsim_env policies
+	$(VENV)/bin/mypy agentsim_env policies train
 
 clean:
 	rm -rf $(VENV) outputs .pytest_cache .hypothesis

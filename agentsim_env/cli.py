@@ -73,7 +73,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     print(f"| mean return | {np.mean([r[2] for r in rows]):.2f} | {np.std([r[2] for r in rows]):.2f} |")
     for key in keys:
         frac = np.array([r[3].get(key, 0.0) / n for r in rows])
-        print(f"| {key} (fraction of agents) | {frac.mean():.3f} | {frac.std():.3f} |")
+        print(f"| {key} per agent | {frac.mean():.3f} | {frac.std():.3f} |")
     if frame is not None and args.out:
         out = Path(args.out)
         out.mkdir(parents=True, exist_ok=True)

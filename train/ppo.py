@@ -49,7 +49,7 @@ def train(
 
     torch.set_num_threads(1)
     vec = AgentSimVecEnv(scenario, worlds, seed=seed, **(config or {}))
-    kw = {
+    kw: dict[str, Any] = {
         "n_steps": 64,
         "batch_size": 512,
         "learning_rate": 3e-4,
@@ -86,7 +86,8 @@ def evaluate(
     import agentsim_env
 
     env = agentsim_env.make(scenario, obs_format="flat", action_format="flat", **(config or {}))
-    returns, counts = [], {}
+    returns: list[float] = []
+    counts: dict[str, int] = {}
     for s in seeds:
         obs, _ = env.reset(seed=s)
         total = dict.fromkeys(env.possible_agents, 0.0)
@@ -100,7 +101,7 @@ def evaluate(
                 for k, v in info.items():
                     if isinstance(v, int):
                         counts[k] = counts.get(k, 0) + v
-        returns.append(np.mean(list(total.values())))
+        returns.append(float(np.mean(list(total.values()))))
     n = len(seeds) * len(env.possible_agents)
     return {"mean_return": float(np.mean(returns)), **{k: v / n for k, v in counts.items()}}
 

@@ -221,7 +221,9 @@ def _pairs(pos, world, cell_start, items, ox, oy, cell, nx, ny, max_dist, out_i,
     return out_i[:n], out_j[:n], out_d[:n]
 
 
-def neighbor_pairs(grid: Grid, pos: np.ndarray, world: np.ndarray, max_dist: float) -> tuple[np.ndarray, ...]:
+def neighbor_pairs(
+    grid: Grid, pos: np.ndarray, world: np.ndarray, max_dist: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """All pairs of indexed slots within ``max_dist`` (3D distance) of each other, in the same world.
 
     Args:

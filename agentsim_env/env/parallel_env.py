@@ -66,7 +66,7 @@ class AgentSimParallelEnv(ParallelEnv):
         self.obs_format = obs_format
         self.action_format = action_format
         self.world = scenario.build(1)
-        self.metadata = {
+        self.metadata: dict[str, Any] = {
             "name": f"{scenario.name}_v{scenario.version}",
             "render_modes": list(RENDER_MODES),
             "render_fps": max(1, int(round(1.0 / self.world.config.dt))),

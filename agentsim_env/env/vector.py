@@ -136,7 +136,8 @@ class BatchedEnv:
         self.alive &= ~(term | trunc)
         obs = self._flat_obs()
         obs[~self.alive & ~(term | trunc)] = 0.0
-        done_worlds = ~self.alive.any(axis=1)
+        # asarray: numpy's stubs type a reduction over an axis as scalar-or-array; on (B, N) it is (B,)
+        done_worlds = np.asarray(~self.alive.any(axis=1))
         final = np.zeros(obs.shape, dtype=obs.dtype)  # calloc: pages stay untouched unless a world resets
         if done_worlds.any():
             final[done_worlds] = obs[done_worlds]

@@ -191,7 +191,7 @@ class PayloadSet:
             raise ValueError("pos and vel must be finite")
         if not math.isfinite(t):
             raise ValueError(f"t must be finite, got {t!r}")
-        k = p.shape[0]
+        k = int(p.shape[0])
         cols = {}
         for name, value in (("owner", owner), ("world", world), ("zone", zone)):
             try:

@@ -20,18 +20,22 @@ continuous collision detection: an agent does not tunnel while ``speed * dt / su
 radius plus the obstacle's half thickness. Offline agents are parked far away with a shape filter that
 rejects every contact; they are reported unchanged and produce no contacts.
 
-Arrays cross into pymunk with ``pymunk.batch`` (one call to set, one to get, no per-body Python); the only
-per-contact Python is the altitude filter callback (pymunk calls it for each touching pair and sub-step).
-Pickling and :meth:`PymunkPlanarBackend.reset` rebuild the space from arrays (see their docstrings for
-what pymunk state that drops).
+Arrays cross into pymunk with ``pymunk.batch`` (one call to set, one to get, no per-body Python, buffers
+preallocated); the only per-contact Python is the altitude filter callback (pymunk calls it for each touching
+pair and sub-step). :meth:`PymunkPlanarBackend.step` validates its input; the world calls
+:meth:`PymunkPlanarBackend.step_unchecked`, which trusts it and writes in place (same arithmetic, same
+results). Pickling and :meth:`PymunkPlanarBackend.reset` rebuild the space from arrays (see their docstrings
+for what pymunk state that drops).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cache
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numba import njit
 
 from ..core.scene import BOX, CYLINDER, SPHERE
 
@@ -62,6 +66,82 @@ def _import_pymunk() -> Any:
     return pymunk
 
 
+@cache
+def _cffi_shape_getter() -> tuple[Any, Any] | None:
+    """``(ffi, lib)`` of pymunk's C layer if reading an arbiter's shapes through it works, else None.
+
+    ``Arbiter.shapes`` allocates two C arrays and resolves two Python handles per call (about 1 us, most of
+    the filter callback); reading the two ``cpShape *`` into preallocated arrays and mapping them to slots by
+    pointer costs about a third of that. It relies on pymunk internals (``pymunk._chipmunk_cffi``,
+    ``Arbiter._arbiter``, ``Shape._shape``), so a tiny space checks it once per process against the public
+    API; any difference falls back to ``Arbiter.shapes``.
+    """
+    pm = _import_pymunk()
+    try:
+        from pymunk._chipmunk_cffi import ffi, lib
+
+        pa, pb = ffi.new("cpShape *[1]"), ffi.new("cpShape *[1]")
+        space = pm.Space()
+        bodies = [pm.Body(1.0, float("inf")) for _ in range(2)]
+        bodies[1].position = (0.5, 0.0)
+        shapes = [pm.Circle(b, 0.5) for b in bodies]
+        shapes[0].collision_type, shapes[1].collision_type = 7, 8
+        key = {shapes[0]._shape: shapes[0], shapes[1]._shape: shapes[1]}
+        seen: list[bool] = []
+
+        def check(arbiter: pymunk.Arbiter, space: pymunk.Space, data: Any) -> None:
+            lib.cpArbiterGetShapes(arbiter._arbiter, pa, pb)
+            seen.append((key[pa[0]], key[pb[0]]) == tuple(arbiter.shapes) == (shapes[1], shapes[0]))
+
+        space.add(*bodies, *shapes)
+        space.on_collision(8, 7, pre_solve=check)  # handler order (8, 7): the shapes come back swapped
+        space.step(0.01)
+        return (ffi, lib) if seen == [True] else None
+    except Exception:  # noqa: BLE001  (any internal change means: use the public API)
+        return None
+
+
+# Row copies between the caller's arrays and the batch layout (x, y, vx, vy per body). One pass per side: numpy
+# needs three masked copies, and the (S, 2) strided ones are slow (about 10 us for 1,000 rows).
+@njit(cache=True)
+def _pack(
+    pos: np.ndarray, vel: np.ndarray, online: np.ndarray, x_offset: np.ndarray, body: np.ndarray
+) -> None:
+    for i in range(online.shape[0]):
+        if online[i]:  # offline rows keep their parking spot (and may hold NaN in pos)
+            body[i, 0] = pos[i, 0] + x_offset[i]
+            body[i, 1] = pos[i, 1]
+            body[i, 2] = vel[i, 0]
+            body[i, 3] = vel[i, 1]
+
+
+@njit(cache=True)
+def _unpack(
+    body: np.ndarray, online: np.ndarray, x_offset: np.ndarray, out_xy: np.ndarray, out_vel: np.ndarray
+) -> None:
+    for i in range(online.shape[0]):
+        if online[i]:
+            out_xy[i, 0] = body[i, 0] - x_offset[i]
+            out_xy[i, 1] = body[i, 1]
+            out_vel[i, 0] = body[i, 2]
+            out_vel[i, 1] = body[i, 3]
+
+
+@njit(cache=True)
+def _bad_online_row(pos: np.ndarray, vel: np.ndarray, online: np.ndarray, half_band: float) -> int:
+    """0 if every online row is valid, 1 if one is not finite, 2 if one's x is out of its band."""
+    for i in range(online.shape[0]):
+        if online[i] and not (
+            np.isfinite(pos[i, 0]) and np.isfinite(pos[i, 1]) and np.isfinite(pos[i, 2])
+            and np.isfinite(vel[i, 0]) and np.isfinite(vel[i, 1])
+        ):  # fmt: skip
+            return 1
+    for i in range(online.shape[0]):
+        if online[i] and abs(pos[i, 0]) >= half_band:
+            return 2
+    return 0
+
+
 @dataclass(frozen=True, slots=True)
 class PhysicsContacts:
     """Contacts that began during one step, one row per unordered pair.
@@ -78,6 +158,16 @@ class PhysicsContacts:
 
     def __len__(self) -> int:
         return int(self.agent.shape[0])
+
+
+def _frozen_empty() -> np.ndarray:
+    a = np.zeros(0, dtype=np.int64)
+    a.flags.writeable = False
+    return a
+
+
+# Most steps begin no contact: they all return this (read-only) instance instead of three new arrays.
+_NO_CONTACTS = PhysicsContacts(_frozen_empty(), _frozen_empty(), _frozen_empty())
 
 
 def _float_array(name: str, a: Any, shape: tuple[int, ...], finite: bool = True) -> np.ndarray:
@@ -148,9 +238,10 @@ class PymunkPlanarBackend:
 
     # All state is declared here; nothing is added on the fly.
     __slots__ = tuple(
-        "_agent_shapes _args _bottom _correction _get_buf _obj_centre _obj_half _obj_kind _obj_of_shape"
-        " _obj_world _online _park _pm _r_list _radius _set_arr _set_buf _slot_of_shape _space _top"
-        " _touch_now _touch_prev _world_id _x_offset _z_list".split()
+        "_agent_shapes _args _bottom _correction _dt _fields _get_buf _key _obj_centre _obj_half _obj_kind"
+        " _obj_of_shape _obj_world _online _online_key _pa _park _pb _pm _pos _r_list _radius _read_shapes"
+        " _set_arr _set_buf _slot_of_shape _space _substep _top _touch_now _touch_prev _world_id"
+        " _x_offset".split()
     )
 
     def __init__(
@@ -205,10 +296,15 @@ class PymunkPlanarBackend:
         slots = np.arange(n)
         self._park = np.stack([(slots % side) * cell, _PARK_Y - (slots // side) * cell], axis=1)
         self._r_list: list[float] = r.tolist()
-        self._z_list: list[float] = [0.0] * n
+        # The step's ``pos``, for the filter callbacks (``pos.item(slot, 2)``: a float without converting
+        # the whole column, since most steps have few touching pairs or none).
+        self._pos = np.zeros((n, 3))
         self._touch_now: set[tuple[int, int, int]] = set()
         self._touch_prev: set[tuple[int, int, int]] = set()
         self._online = np.zeros(n, dtype=bool)
+        self._online_key = self._online.tobytes()
+        self._dt = -1.0  # the dt the sub-step and collision bias were derived from (none yet)
+        self._substep = 0.0
 
         pm = _import_pymunk()
         self._pm = pm
@@ -231,7 +327,21 @@ class PymunkPlanarBackend:
         space.add(*bodies)
         space.add(*shapes)
         self._agent_shapes = shapes
-        self._slot_of_shape = {shape: s for s, shape in enumerate(shapes)}
+        # The callbacks map an arbiter's shapes to slots / obstacles through these dicts, keyed by the C
+        # pointer where the fast reader works (see _cffi_shape_getter), by the Shape otherwise.
+        fast = _cffi_shape_getter()
+        if fast is None:
+            self._pa: list[Any] = [None]
+            self._pb: list[Any] = [None]
+            self._key = lambda shape: shape
+            self._read_shapes = self._read_shapes_public
+        else:
+            ffi, lib = fast
+            self._pa, self._pb = ffi.new("cpShape *[1]"), ffi.new("cpShape *[1]")
+            self._key = lambda shape: shape._shape
+            get, pa, pb = lib.cpArbiterGetShapes, self._pa, self._pb
+            self._read_shapes = lambda arbiter: get(arbiter._arbiter, pa, pb)
+        self._slot_of_shape = {self._key(shape): s for s, shape in enumerate(shapes)}
         self._obj_of_shape: dict[Any, int] = {}
         space.on_collision(_AGENT_TYPE, _AGENT_TYPE, pre_solve=self._pre_solve_agents)
         space.on_collision(_AGENT_TYPE, _OBSTACLE_TYPE, pre_solve=self._pre_solve_obstacle)
@@ -243,10 +353,15 @@ class PymunkPlanarBackend:
         ids = np.frombuffer(self._get_buf.int_buf(), dtype=np.uintp)
         if ids.shape[0] != n + 1 or ids[:n].tolist() != [b.id for b in bodies]:
             raise RuntimeError("pymunk.batch does not walk bodies in insertion order; unsupported pymunk")
-        # The set buffer wraps our array (it is read, never grown); the get buffer is owned by pymunk.
+        # The set buffer wraps our array (it is read, never grown); the get buffer is owned by pymunk (its
+        # push reallocates before the array is full, so it cannot wrap ours). Rows: x, y, vx, vy; offline
+        # rows hold their parking spot at rest (written when the online set changes, never per step) and
+        # the static body's row stays zero (at the origin, at rest).
         self._set_arr = np.zeros((n + 1, 4), dtype=np.float64)
+        self._set_arr[:n, :2] = self._park
         self._set_buf = pm.batch.Buffer()
         self._set_buf.set_float_buf(self._set_arr)
+        self._fields = pm.batch.BodyFields.POSITION | pm.batch.BodyFields.VELOCITY
 
         self._obj_kind = np.zeros(0, dtype=np.int8)
         self._obj_centre = np.zeros((0, 3))
@@ -296,7 +411,7 @@ class PymunkPlanarBackend:
             else:
                 shape = pm.Circle(static, float(half[i, 0]), (cx, cy))
             shape.collision_type = _OBSTACLE_TYPE
-            self._obj_of_shape[shape] = first + i
+            self._obj_of_shape[self._key(shape)] = first + i
             shapes.append(shape)
         half_z = np.where(kind == SPHERE, half[:, 0], half[:, 2])
         self._bottom.extend((centre[:, 2] - half_z).tolist())
@@ -309,22 +424,57 @@ class PymunkPlanarBackend:
             self._space.add(*shapes)
         return np.arange(first, first + kind.shape[0], dtype=np.int64)
 
+    def extend_obstacles(
+        self, obj_kind: np.ndarray, obj_centre: np.ndarray, obj_half: np.ndarray, obj_world: np.ndarray
+    ) -> bool:
+        """Catch up with a scene that may only have gained obstacles since this backend saw it.
+
+        Args:
+            obj_kind: All obstacle kinds of the scene ``(O',)``.
+            obj_centre: All centres ``(O', 3)``.
+            obj_half: All half extents ``(O', 3)``.
+            obj_world: All worlds ``(O',)``.
+
+        Returns:
+            True if this backend's obstacles are an unchanged prefix of the given ones (the rest are added
+            with :meth:`add_obstacles`); False if not, in which case nothing changed and the caller must
+            build a new backend.
+        """
+        k = self.n_obstacles
+        kind, centre = np.asarray(obj_kind), np.asarray(obj_centre, dtype=np.float64)
+        half, world = np.asarray(obj_half, dtype=np.float64), np.asarray(obj_world)
+        if kind.ndim != 1 or kind.shape[0] < k:
+            return False
+        same = (
+            np.array_equal(kind[:k], self._obj_kind)
+            and np.array_equal(centre[:k], self._obj_centre)
+            and np.array_equal(half[:k], self._obj_half)
+            and np.array_equal(world[:k], self._obj_world)
+        )
+        if same and kind.shape[0] > k:
+            self.add_obstacles(kind[k:], centre[k:], half[k:], world[k:])
+        return bool(same)
+
     # Collision callbacks: pymunk calls them for every touching pair in every sub-step. The flag persists on
     # the arbiter between steps, so it is set explicitly both ways.
+    def _read_shapes_public(self, arbiter: pymunk.Arbiter) -> None:
+        self._pa[0], self._pb[0] = arbiter.shapes
+
     def _pre_solve_agents(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data: Any) -> None:
-        sa, sb = arbiter.shapes
-        a = self._slot_of_shape[sa]
-        b = self._slot_of_shape[sb]
-        ok = abs(self._z_list[a] - self._z_list[b]) < self._r_list[a] + self._r_list[b]
+        self._read_shapes(arbiter)
+        a = self._slot_of_shape[self._pa[0]]
+        b = self._slot_of_shape[self._pb[0]]
+        r = self._r_list
+        ok = abs(self._pos.item(a, 2) - self._pos.item(b, 2)) < r[a] + r[b]
         arbiter.process_collision = ok
         if ok:
             self._touch_now.add((a, b, -1) if a < b else (b, a, -1))
 
     def _pre_solve_obstacle(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data: Any) -> None:
-        sa, sb = arbiter.shapes
-        a = self._slot_of_shape[sa]
-        o = self._obj_of_shape[sb]
-        z = self._z_list[a]
+        self._read_shapes(arbiter)
+        a = self._slot_of_shape[self._pa[0]]
+        o = self._obj_of_shape[self._pb[0]]
+        z = self._pos.item(a, 2)
         r = self._r_list[a]
         ok = z - r < self._top[o] and z + r > self._bottom[o]
         arbiter.process_collision = ok
@@ -332,13 +482,18 @@ class PymunkPlanarBackend:
             self._touch_now.add((a, -1, o))
 
     def _set_online(self, online: np.ndarray) -> None:
-        changed = np.flatnonzero(online != self._online)
+        on = np.array(online, dtype=bool)  # own copy: the caller may change its array
+        changed = np.flatnonzero(on != self._online)
         if changed.size:
-            on = self._pm.ShapeFilter()
-            off = self._pm.ShapeFilter(categories=0, mask=0)
+            on_f = self._pm.ShapeFilter()
+            off_f = self._pm.ShapeFilter(categories=0, mask=0)
             for s in changed.tolist():  # only slots whose status changed, which is rare
-                self._agent_shapes[s].filter = on if online[s] else off
-            self._online = online.copy()
+                self._agent_shapes[s].filter = on_f if on[s] else off_f
+        went_off = changed[~on[changed]]  # their batch rows go back to the parking spot, at rest
+        self._set_arr[went_off, :2] = self._park[went_off]
+        self._set_arr[went_off, 2:] = 0.0
+        self._online = on
+        self._online_key = on.tobytes()
 
     def step(
         self, pos: np.ndarray, desired_vel: np.ndarray, online: np.ndarray, dt: float
@@ -364,43 +519,75 @@ class PymunkPlanarBackend:
             raise ValueError(f"online must be a bool array of shape ({n},), got {on.dtype} {on.shape}")
         if not (np.isfinite(dt) and dt > 0.0):
             raise ValueError(f"dt must be finite and positive, got {dt!r}")
-        if not (np.all(np.isfinite(pos[on])) and np.all(np.isfinite(vel[on, :2]))):
-            raise ValueError("pos and desired_vel must be finite for online slots")
         half_band = 0.5 * self._args["world_spacing"]
-        if on.any() and np.abs(pos[on, 0]).max() >= half_band:
+        bad = _bad_online_row(pos, vel, on, half_band)
+        if bad == 1:
+            raise ValueError("pos and desired_vel must be finite for online slots")
+        if bad == 2:
             raise ValueError(f"pos x of online slots must stay within +-{half_band} m (world_spacing / 2)")
-        self._set_online(on)
-        self._z_list = pos[:, 2].tolist()
-        onc = on[:, None]
-        body = self._set_arr[:n]
-        body[:, 0] = np.where(on, pos[:, 0] + self._x_offset, self._park[:, 0])
-        body[:, 1] = np.where(on, pos[:, 1], self._park[:, 1])
-        body[:, 2:] = np.where(onc, vel[:, :2], 0.0)
-        self._set_arr[n] = 0.0  # the static body stays at the origin at rest
-        batch = self._pm.batch
-        fields = batch.BodyFields.POSITION | batch.BodyFields.VELOCITY
-        batch.set_space_bodies(self._space, fields, self._set_buf)
+        new_xy = pos[:, :2].copy()
+        new_vel = vel[:, :2].copy()
+        contacts = self.step_unchecked(pos, vel, on, float(dt), new_xy, new_vel)
+        return new_xy, new_vel, contacts
 
-        self._touch_now = set()
-        substeps = self._args["substeps"]
-        h = float(dt) / substeps
-        # pymunk's bias is the fraction of overlap left after one second; derive it from the sub-step.
-        self._space.collision_bias = (1.0 - self._correction) ** (1.0 / h)
-        for _ in range(substeps):
-            self._space.step(h)
+    def step_unchecked(
+        self,
+        pos: np.ndarray,
+        desired_vel: np.ndarray,
+        online: np.ndarray,
+        dt: float,
+        out_xy: np.ndarray,
+        out_vel: np.ndarray,
+    ) -> PhysicsContacts:
+        """:meth:`step` without input checks, writing the online rows' results in place (the world's path).
+
+        The caller guarantees what :meth:`step` checks: float64 ``pos (S, 3)`` and ``desired_vel (S, >= 2)``
+        finite on online rows, ``online (S,) bool``, ``dt > 0`` and ``|x| < world_spacing / 2`` online.
+        Results equal :meth:`step`'s bit for bit.
+
+        Args:
+            pos: Positions ``(S, 3)``; x, y start the step, z filters contacts.
+            desired_vel: Commanded velocities ``(S, >= 2)``; columns 0 and 1 are used.
+            online: Which slots take part ``(S,) bool``.
+            dt: Step length in s.
+            out_xy: Receives the new x, y in columns 0 and 1 of the online rows ``(S, >= 2)``; other entries
+                are left alone. May be ``pos`` itself.
+            out_vel: Receives the new vx, vy likewise ``(S, >= 2)``.
+
+        Returns:
+            The pairs that began touching during this step (as in :meth:`step`); the shared empty instance
+            (read-only arrays) when there are none.
+        """
+        if online.tobytes() != self._online_key:  # a byte compare: cheaper than an array compare
+            self._set_online(online)
+        _pack(pos, desired_vel, self._online, self._x_offset, self._set_arr)
+        self._pos = pos
+        batch, space = self._pm.batch, self._space
+        batch.set_space_bodies(space, self._fields, self._set_buf)
+
+        if dt != self._dt:
+            self._dt = dt
+            self._substep = float(dt) / self._args["substeps"]
+            # pymunk's bias is the fraction of overlap left after one second; derive it from the sub-step.
+            space.collision_bias = (1.0 - self._correction) ** (1.0 / self._substep)
+        h = self._substep
+        for _ in range(self._args["substeps"]):
+            space.step(h)
 
         self._get_buf.clear()
-        batch.get_space_bodies(self._space, fields, self._get_buf)
-        out = np.frombuffer(self._get_buf.float_buf(), dtype=np.float64).reshape(-1, 4)[:n]
-        new_xy = np.where(onc, out[:, :2], pos[:, :2])
-        new_xy[:, 0] -= np.where(on, self._x_offset, 0.0)
-        new_vel = np.where(onc, out[:, 2:], vel[:, :2])
+        batch.get_space_bodies(space, self._fields, self._get_buf)
+        body = np.frombuffer(self._get_buf.float_buf(), dtype=np.float64).reshape(-1, 4)
+        _unpack(body, self._online, self._x_offset, out_xy, out_vel)
 
-        began = sorted(self._touch_now - self._touch_prev)
-        self._touch_prev = self._touch_now
-        rows = np.array(began, dtype=np.int64).reshape(-1, 3)
-        contacts = PhysicsContacts(rows[:, 0].copy(), rows[:, 1].copy(), rows[:, 2].copy())
-        return new_xy, new_vel, contacts
+        now, prev = self._touch_now, self._touch_prev
+        began = now - prev if now else None
+        self._touch_prev = now
+        prev.clear()
+        self._touch_now = prev  # reused as next step's (empty) set
+        if not began:
+            return _NO_CONTACTS
+        rows = np.array(sorted(began), dtype=np.int64)
+        return PhysicsContacts(rows[:, 0].copy(), rows[:, 1].copy(), rows[:, 2].copy())
 
     def reset(self) -> None:
         """Forget all contact history (call on episode reset for reproducible episodes).

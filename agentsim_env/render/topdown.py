@@ -42,8 +42,8 @@ def render_topdown(world: World, w: int = 0, markers: Markers | None = None, siz
     width, height = max(1, int((xmax - xmin) * scale)), max(1, int((ymax - ymin) * scale))
     img = np.full((height, width, 3), 236, dtype=np.uint8)
 
-    def px(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        return (x - xmin) * scale, (ymax - y) * scale
+    def px(x: float, y: float) -> tuple[float, float]:
+        return float((x - xmin) * scale), float((ymax - y) * scale)
 
     sc = world.scene
     mine = np.flatnonzero(sc.world == w)

@@ -230,8 +230,9 @@ class NavigationScenario(Scenario):
         sep = 4.0 * c.agent_radius + 2.0
         start = jittered_points(rng, n, bounds, sep)
         goal = jittered_points(rng, n, bounds, sep)
-        z0 = rng.uniform(*c.altitude, n)
-        zg = rng.uniform(*c.altitude, n)
+        z_lo, z_hi = c.altitude
+        z0 = rng.uniform(z_lo, z_hi, n)
+        zg = rng.uniform(z_lo, z_hi, n)
         st.pos[sl] = np.column_stack([start, z0])
         st.vel[sl] = 0.0
         st.heading[sl] = rng.uniform(-np.pi, np.pi, n)

@@ -195,7 +195,7 @@ class UavReleaseScenario(Scenario):
         complete = (falling == 0) & ((left == 0) | (down >= self.zones.n_sensors))
         done_now = ~self.finished & (complete | (world.step_count >= c.max_steps))
         terminated = empty_battery.copy()
-        for w in np.flatnonzero(done_now):
+        for w in np.flatnonzero(done_now).tolist():
             self.finished[w] = True
             sl = st.slots_of_world(w)
             task[sl] += final_bonus(self.payloads, w, self.zones, c, self.fnd_oracle)
@@ -205,8 +205,10 @@ class UavReleaseScenario(Scenario):
         released = np.zeros(s, dtype=np.int8)
         released[self._released] = 1
         cov = np.repeat([self.tracker.weighted_coverage(w) for w in range(world.n_worlds)], n)
-        info = {"released": released, "landed": n_landed.astype(np.int8), "payload_left": self.payload_left.copy(),
-                "energy_j": st.energy.copy(), "coverage_weighted": cov}  # fmt: skip
+        info: dict[str, np.ndarray] = {
+            "released": released, "landed": n_landed.astype(np.int8), "payload_left": self.payload_left.copy(),
+            "energy_j": st.energy.copy(), "coverage_weighted": cov,
+        }  # fmt: skip
         return StepResult(rewards, terminated & acting, info)
 
     def observe(self, world: World) -> dict[str, np.ndarray]:

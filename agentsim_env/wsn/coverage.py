@@ -17,6 +17,7 @@ import functools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -36,6 +37,15 @@ __all__ = [
     "weighted_from_covered",
     "zone_grid",
 ]
+
+
+class DensityProfile(Protocol):
+    """Anything with a vectorised radial density ``density(r)`` (e.g. ``RadialProfile``)."""
+
+    def density(self, r: ArrayLike, /) -> ArrayLike:
+        """Density at distances ``r`` from the centre."""
+        ...
+
 
 # A lattice larger than this is almost certainly a unit mistake (e.g. km radii at 1 m pitch).
 _MAX_GRID_POINTS = 20_000_000
@@ -308,7 +318,7 @@ def k_coverage(
 def weighted_from_covered(
     grid: ZoneGrid,
     covered: NDArray[np.bool_],
-    profiles: Sequence[object],
+    profiles: Sequence[DensityProfile],
     weights: ArrayLike | None = None,
 ) -> CoverageResult:
     """Importance-weighted coverage ``int phi 1[covered] / int phi`` per zone, from a per-point flag.
@@ -355,7 +365,7 @@ def weighted_coverage(
     sensors: ArrayLike,
     centres: ArrayLike,
     radii: ArrayLike,
-    profiles: Sequence[object],
+    profiles: Sequence[DensityProfile],
     r_s: float,
     resolution: float = 1.0,
     weights: ArrayLike | None = None,

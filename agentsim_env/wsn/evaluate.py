@@ -32,12 +32,14 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from agentsim_env.wsn.connectivity import connectivity, unit_disk_edges
 from agentsim_env.wsn.coverage import (
+    DensityProfile,
     check_discs,
     check_points,
     cover_pairs,
@@ -45,11 +47,15 @@ from agentsim_env.wsn.coverage import (
     weighted_from_covered,
     zone_grid,
 )
-from agentsim_env.wsn.fidelity import assign_zones, fidelity_per_zone
+from agentsim_env.wsn.fidelity import CdfProfile, assign_zones, fidelity_per_zone
 from agentsim_env.wsn.lifetime import coverage_lifetime, simulate_lifetime
 from agentsim_env.wsn.radio import RadioParams
 
 __all__ = ["WsnConfig", "evaluate_deployment", "sink_positions"]
+
+
+class ZoneProfile(DensityProfile, CdfProfile, Protocol):
+    """A target profile with a vectorised ``density(r)`` and ``cdf(r)`` (e.g. ``RadialProfile``)."""
 
 
 def _positive(value: float, name: str) -> None:
@@ -149,7 +155,7 @@ def evaluate_deployment(
     zone_of: ArrayLike | None,
     centres: ArrayLike,
     radii: ArrayLike,
-    profiles: Sequence[object],
+    profiles: Sequence[ZoneProfile],
     config: WsnConfig = WsnConfig(),  # noqa: B008 - frozen, immutable default
     targets_xy: ArrayLike | None = None,
 ) -> dict[str, float]:

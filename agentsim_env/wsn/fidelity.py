@@ -23,6 +23,7 @@ import math
 import warnings
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -42,6 +43,15 @@ __all__ = [
     "target_density_ratio",
     "zone_fidelity",
 ]
+
+
+class CdfProfile(Protocol):
+    """Anything with a vectorised radial CDF ``cdf(r)`` that is 1 beyond the zone radius (e.g. ``RadialProfile``)."""
+
+    def cdf(self, r: ArrayLike, /) -> ArrayLike:
+        """Fraction of the mass within distances ``r`` of the centre."""
+        ...
+
 
 # Quadrature nodes for W1 between sample radii: |F_hat - F| is smooth there, so the trapezoid rule on this
 # many extra nodes is accurate to ~1e-7.
@@ -86,7 +96,7 @@ def _radii(points: NDArray[np.float64], centre: NDArray[np.float64]) -> NDArray[
     return np.hypot(points[:, 0] - centre[0], points[:, 1] - centre[1])
 
 
-def radial_ks(r: NDArray[np.float64], profile: object) -> tuple[float, float]:
+def radial_ks(r: NDArray[np.float64], profile: CdfProfile) -> tuple[float, float]:
     """Kolmogorov-Smirnov distance between the empirical radial CDF and ``profile.cdf``.
 
     Args:
@@ -106,7 +116,7 @@ def radial_ks(r: NDArray[np.float64], profile: object) -> tuple[float, float]:
     return stat, pvalue
 
 
-def radial_w1(r: NDArray[np.float64], profile: object, radius: float) -> float:
+def radial_w1(r: NDArray[np.float64], profile: CdfProfile, radius: float) -> float:
     """``int_0^inf |F_hat(s) - F(s)| ds / radius``, F being ``profile.cdf``.
 
     Args:
@@ -148,7 +158,7 @@ def density_ratio(r: NDArray[np.float64], radius: float) -> float:
     return float(inner / outer)
 
 
-def target_density_ratio(profile: object, radius: float) -> float:
+def target_density_ratio(profile: CdfProfile, radius: float) -> float:
     """The inner/outer density ratio of the target profile itself (from its radial CDF).
 
     Args:
@@ -219,7 +229,7 @@ def zone_fidelity(
     points: ArrayLike,
     centre: ArrayLike,
     radius: float,
-    profile: object,
+    profile: CdfProfile,
     targets: ArrayLike | None = None,
     knn_k: int = 5,
 ) -> ZoneFidelity:
@@ -270,7 +280,7 @@ def fidelity_per_zone(
     zone: ArrayLike,
     centres: ArrayLike,
     radii: ArrayLike,
-    profiles: Sequence[object],
+    profiles: Sequence[CdfProfile],
     targets_xy: ArrayLike | None = None,
     knn_k: int = 5,
 ) -> list[ZoneFidelity]:

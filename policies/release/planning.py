@@ -16,6 +16,7 @@ local direction.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 
@@ -429,15 +430,15 @@ def assemble_plan(
     tgt = np.ascontiguousarray(targets, dtype=np.float64).reshape(-1, 2)
     n = tgt.shape[0]
     start = np.asarray(start_xy, dtype=np.float64).reshape(2)
-    common = dict(
-        strategy=strategy, mode=mode, centre=np.asarray(centre, dtype=np.float64).reshape(2),
+    make_plan = functools.partial(
+        ReleasePlan, strategy=strategy, mode=mode, centre=np.asarray(centre, dtype=np.float64).reshape(2),
         radius=float(radius), sector=sector, start_xy=start, altitude=float(altitude),
         info=dict(info or {}),
     )  # fmt: skip
     if mode == "teleport":
         pts = np.hstack([tgt, np.zeros((n, 1))])
-        return ReleasePlan(
-            **common, waypoints=np.zeros((0, 3)), release_wp=np.full(n, -1, dtype=np.int64),
+        return make_plan(
+            waypoints=np.zeros((0, 3)), release_wp=np.full(n, -1, dtype=np.int64),
             release_xy=tgt, release_points=pts, release_vel=np.zeros((n, 3)), release_speed=0.0,
             path_length=0.0,
         )  # fmt: skip
@@ -479,8 +480,8 @@ def assemble_plan(
         wp_xy[release_wp[lead] - 1] = lead_pts[lead]
     waypoints = np.hstack([wp_xy, np.full((wp_xy.shape[0], 1), float(altitude))])
     release_points = np.hstack([rel, np.full((n, 1), float(altitude))])
-    return ReleasePlan(
-        **common, waypoints=waypoints, release_wp=release_wp.astype(np.int64), release_xy=tgt,
+    return make_plan(
+        waypoints=waypoints, release_wp=release_wp.astype(np.int64), release_xy=tgt,
         release_points=release_points, release_vel=vel, release_speed=v_rel,
         path_length=path_length(wp_xy, start), n_lead_in=int(lead.sum()), residual=residual,
     )  # fmt: skip
