@@ -12,6 +12,7 @@ import pytest
 
 pytest.importorskip("pymunk")
 
+from agentsim_env.physics import pymunk_backend  # noqa: E402
 from agentsim_env.physics.pymunk_backend import PhysicsContacts, PymunkPlanarBackend  # noqa: E402
 
 DT = 0.1
@@ -251,6 +252,14 @@ def test_bad_constructor_input_names_argument(kwargs, name):
         (np.zeros((2, 3)), np.zeros((2, 3)), np.ones(2), DT, "online"),
         (np.zeros((2, 3)), np.zeros((2, 3)), np.ones(2, bool), 0.0, "dt"),
         (np.full((2, 3), 6.0e4), np.zeros((2, 3)), np.ones(2, bool), DT, "pos"),
+        (np.array([[0.0, 0.0, 1.0], [0.0, np.nan, 1.0]]), np.zeros((2, 3)), np.ones(2, bool), DT, "pos"),
+        (
+            np.zeros((2, 3)),
+            np.array([[0.0, 0.0, 0.0], [np.inf, 0.0, 0.0]]),
+            np.ones(2, bool),
+            DT,
+            "desired_vel",
+        ),
     ],
 )
 def test_bad_step_input_names_argument(pos, vel, online, dt, name):
@@ -261,6 +270,111 @@ def test_bad_step_input_names_argument(pos, vel, online, dt, name):
 def test_empty_contacts_type():
     _, _, c = make(obstacles=NO_OBJ).step(np.zeros((1, 3)), np.zeros((1, 3)), np.ones(1, bool), DT)
     assert isinstance(c, PhysicsContacts) and len(c) == 0 and c.obj.dtype == np.int64
+    assert not c.agent.flags.writeable  # the shared empty instance cannot be corrupted by a caller
+
+
+def _crowd(seed: int, steps: int = 40):
+    """Three worlds of 30 agents around a wall and a cylinder, pulled to the centre at spread altitudes; slots
+    toggle online every 8 steps and offline rows hold NaN. Yields each step's inputs."""
+    rng = np.random.default_rng(seed)
+    n, n_w = 90, 3
+    obstacles = ([0, 1, 1], [[4.0, 0.0, 3.0], [-3.0, 2.0, 2.0], [0.0, -3.0, 2.0]],
+                 [[0.2, 3.0, 3.0], [1.0, 1.0, 2.0], [1.0, 1.0, 2.0]], [0, 1, 2])  # fmt: skip
+    be_args = (np.full(n, R), np.repeat(np.arange(n_w), n // n_w), n_w, *obstacles)
+    pos = np.zeros((n, 3))
+    pos[:, :2] = rng.uniform(-8.0, 8.0, (n, 2))
+    pos[:, 2] = rng.uniform(0.0, 6.0, n)
+    online = np.ones(n, bool)
+    inputs = []
+    for t in range(steps):
+        if t % 8 == 7:
+            online = rng.random(n) < 0.8
+        d = -pos[:, :2]
+        vel = np.zeros((n, 3))
+        vel[:, :2] = 3.0 * d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-9)
+        p = pos.copy()
+        p[~online] = np.nan
+        inputs.append((p, vel, online.copy()))
+        pos[:, :2] += vel[:, :2] * DT  # the inputs do not depend on the backend's answers
+    return be_args, inputs
+
+
+def _run_crowd(be_args, inputs):
+    be = PymunkPlanarBackend(*be_args)
+    out = []
+    for p, vel, on in inputs:
+        xy, v, c = be.step(p, vel, on, DT)
+        out.append((xy, v, c.agent, c.other_agent, c.obj))
+    return out
+
+
+def test_step_unchecked_matches_step_and_writes_online_rows_only():
+    be_args, inputs = _crowd(5)
+    ref = _run_crowd(be_args, inputs)
+    assert sum(len(r[2]) for r in ref) >= 5  # agent and obstacle contacts do begin
+    be = PymunkPlanarBackend(*be_args)
+    for (p, vel, on), (xy, v, a, b, o) in zip(inputs, ref, strict=True):
+        pos = p.copy()  # the output aliases the input, as in the world
+        out_vel = np.full((len(on), 3), 7.0)
+        c = be.step_unchecked(pos, vel[:, :2].copy(), on, DT, pos, out_vel)
+        np.testing.assert_array_equal(pos[on, :2], xy[on])
+        np.testing.assert_array_equal(out_vel[on, :2], v[on])
+        assert np.isnan(pos[~on]).all() and (out_vel[~on] == 7.0).all() and (out_vel[:, 2] == 7.0).all()
+        np.testing.assert_array_equal(pos[:, 2], p[:, 2])
+        for got, want in zip((c.agent, c.other_agent, c.obj), (a, b, o), strict=True):
+            np.testing.assert_array_equal(got, want)
+
+
+def test_public_arbiter_api_gives_identical_results(monkeypatch):
+    # The callbacks read an arbiter's shapes through pymunk's C layer when its self-check passes (it should
+    # on pymunk 7.3); the public Arbiter.shapes fallback must give the same trajectories and contacts.
+    assert pymunk_backend._cffi_shape_getter() is not None
+    be_args, inputs = _crowd(6, steps=24)
+    fast = _run_crowd(be_args, inputs)
+    monkeypatch.setattr(pymunk_backend, "_cffi_shape_getter", lambda: None)
+    public = _run_crowd(be_args, inputs)
+    for f, p in zip(fast, public, strict=True):
+        for x, y in zip(f, p, strict=True):
+            np.testing.assert_array_equal(x, y)
+    assert sum(len(f[2]) for f in fast) >= 1
+
+
+def test_extend_obstacles_only_appends():
+    be = make(obstacles=WALL)
+    kind, centre, half, world = (
+        [0, 1],
+        [[5.0, 0.0, 5.0], [2.0, 0.0, 1.0]],
+        [[0.2, 20.0, 5.0], [0.5, 0.5, 1.0]],
+        [0, 0],
+    )
+    assert be.extend_obstacles(kind[:1], centre[:1], half[:1], world[:1]) and be.n_obstacles == 1  # no change
+    assert be.extend_obstacles(kind, centre, half, world) and be.n_obstacles == 2
+    track, rows = run(be, [[0.0, 0.0, 1.0]], np.array([[2.0, 0.0, 0.0]]), 20)
+    assert track[-1, 0, 0] == pytest.approx(1.0, abs=0.03) and rows == [(0, -1, 1)]  # the new cylinder blocks
+    moved = [[5.5, 0.0, 5.0], [2.0, 0.0, 1.0], [9.0, 0.0, 1.0]]
+    assert not be.extend_obstacles([0, 1, 1], moved, half + [[0.5, 0.5, 1.0]], [0, 0, 0])
+    assert not be.extend_obstacles(kind[:1], centre[:1], half[:1], world[:1])  # fewer: one was removed
+    assert be.n_obstacles == 2
+
+
+def test_dt_may_change_between_steps():
+    be = make(obstacles=NO_OBJ)
+    pos, vel, on = np.array([[0.0, 0.0, 1.0]]), np.array([[2.0, 0.0, 0.0]]), np.ones(1, bool)
+    for dt in (0.1, 0.05, 0.05, 0.2):
+        xy, _, _ = be.step(pos, vel, on, dt)
+        assert xy[0, 0] == pytest.approx(pos[0, 0] + 2.0 * dt)
+        pos[0, :2] = xy[0]
+
+
+def test_slot_going_offline_is_parked_at_rest():
+    be = make(2, obstacles=NO_OBJ)
+    pos, vel = np.array([[0.0, 0.0, 1.0], [3.0, 0.0, 1.0]]), np.array([[1.0, 0.0, 0.0], [-1.0, 0.5, 0.0]])
+    be.step(pos, vel, np.array([True, True]), DT)
+    be.step(pos, vel, np.array([True, False]), DT)
+    body = be._agent_shapes[1].body  # white box: where pymunk keeps the offline body
+    assert body.position.y < -1.0e8 and tuple(body.velocity) == (0.0, 0.0)
+    xy, _, _ = be.step(pos, vel, np.array([True, True]), DT)  # back online, from the given position
+    np.testing.assert_allclose(xy[1], [2.9, 0.05])
 
 
 def test_package_import_does_not_import_pymunk():

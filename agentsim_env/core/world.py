@@ -67,6 +67,10 @@ class WorldConfig:
             )
         if len(self.z_range) != 2 or not self.z_range[1] > self.z_range[0]:
             raise ValueError(f"z_range must be (zmin, zmax) with zmin < zmax, got {self.z_range}")
+        # pymunk steps every world in one space, world w shifted by w * 1e5 m along x, and the world calls its
+        # step without per-step input checks: keep the map well inside the +-5e4 m each world may use
+        if self.physics == "pymunk" and max(abs(self.bounds[0]), abs(self.bounds[1])) >= 2.5e4:
+            raise ValueError(f"bounds x must lie within +-25000 m with physics='pymunk', got {self.bounds}")
 
 
 @dataclass(slots=True)
@@ -155,16 +159,21 @@ class World:
 
         sc = self.scene
         if self.physics is None or self._physics_version != sc.version:
-            self.physics = PymunkPlanarBackend(
-                self.state.radius,
-                self.state.world_id,
-                self.n_worlds,
-                sc.kind,
-                sc.centre,
-                sc.half,
-                sc.world,
-                substeps=self.config.physics_substeps,
-            )
+            # Objects only added: the backend takes the new ones and keeps its contact state. Anything else
+            # (objects removed or changed, as on a world reset) rebuilds it, which also drops pymunk's hidden
+            # contact state, so that a reset episode replays exactly.
+            be = self.physics
+            if be is None or not be.extend_obstacles(sc.kind, sc.centre, sc.half, sc.world):
+                self.physics = PymunkPlanarBackend(
+                    self.state.radius,
+                    self.state.world_id,
+                    self.n_worlds,
+                    sc.kind,
+                    sc.centre,
+                    sc.half,
+                    sc.world,
+                    substeps=self.config.physics_substeps,
+                )
             self._physics_version = sc.version
         return self.physics
 
@@ -189,6 +198,8 @@ class World:
         self.agent_grid = build_grid(self.grid_spec, st.pos, st.world_id, st.online)
         if self.comms is not None:
             self.comms.pairs = self._comm_pairs()
+        if self.config.physics == "pymunk":
+            self._physics_backend()  # a reset's new scene: rebuild now rather than inside the next step
         self.scan = self._scan()
 
     def _comm_pairs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -236,21 +247,21 @@ class World:
     def step(self) -> StepEvents:
         """Advance every world by one ``dt`` (pipeline stages 2, 3, 5 and 8; see DESIGN §4)."""
         cfg, st = self.config, self.state
-        prev = st.pos.copy() if cfg.physics == "pymunk" else None
+        prev_xy = st.pos[:, :2].copy() if cfg.physics == "pymunk" else None
         # 2. motion: every primitive of every online slot, in one kernel
         integrate(self.motion, st.pos, st.vel, st.heading, st.max_speed, st.max_accel, st.online, cfg.dt)
         # 3. physics: pymunk resolves horizontal contacts; altitude stays with motion
         contact_events = CollisionEvents.empty()
         if cfg.physics == "pymunk":
-            assert prev is not None
-            desired = (st.pos - prev) / cfg.dt
-            st.pos[:, :2] = prev[:, :2]
-            xy, vxy, contacts = self._physics_backend().step(
-                np.column_stack([prev[:, :2], st.pos[:, 2]]), desired, st.online, cfg.dt
+            assert prev_xy is not None
+            # motion's horizontal displacement becomes the commanded velocity; pymunk moves x, y from the
+            # step's start and writes the online rows' x, y and vx, vy back in place (the new z stays)
+            desired = st.pos[:, :2] - prev_xy
+            desired /= cfg.dt
+            st.pos[:, :2] = prev_xy
+            contacts = self._physics_backend().step_unchecked(
+                st.pos, desired, st.online, cfg.dt, st.pos, st.vel
             )
-            on = st.online
-            st.pos[on, :2] = xy[on]
-            st.vel[on, :2] = vxy[on]
             if cfg.collisions and len(contacts.agent):
                 contact_events = CollisionEvents(contacts.agent, contacts.other_agent, contacts.obj)
         # keep agents inside the map and the altitude band

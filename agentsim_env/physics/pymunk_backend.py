@@ -30,6 +30,7 @@ for what pymunk state that drops).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cache
 from typing import TYPE_CHECKING, Any
@@ -97,8 +98,26 @@ def _cffi_shape_getter() -> tuple[Any, Any] | None:
         space.on_collision(8, 7, pre_solve=check)  # handler order (8, 7): the shapes come back swapped
         space.step(0.01)
         return (ffi, lib) if seen == [True] else None
-    except Exception:  # noqa: BLE001  (any internal change means: use the public API)
+    except Exception:  # any change in those internals means: use the public API
         return None
+
+
+def _shape_reader() -> tuple[Callable[[Any], None], Any, Any, Callable[[Any], Any]]:
+    """``(read, pa, pb, key)``: ``read(arbiter)`` puts the keys of its two shapes in ``pa[0]`` and ``pb[0]``;
+    ``key(shape)`` is the key of a shape (its C pointer on the fast path, the Shape itself otherwise)."""
+    fast = _cffi_shape_getter()
+    if fast is None:
+        pa: Any = [None]
+        pb: Any = [None]
+
+        def read_public(arbiter: Any) -> None:
+            pa[0], pb[0] = arbiter.shapes
+
+        return read_public, pa, pb, lambda shape: shape
+    ffi, lib = fast
+    get = lib.cpArbiterGetShapes
+    pa, pb = ffi.new("cpShape *[1]"), ffi.new("cpShape *[1]")
+    return (lambda arbiter: get(arbiter._arbiter, pa, pb)), pa, pb, lambda shape: shape._shape
 
 
 # Row copies between the caller's arrays and the batch layout (x, y, vx, vy per body). One pass per side: numpy
@@ -327,20 +346,8 @@ class PymunkPlanarBackend:
         space.add(*bodies)
         space.add(*shapes)
         self._agent_shapes = shapes
-        # The callbacks map an arbiter's shapes to slots / obstacles through these dicts, keyed by the C
-        # pointer where the fast reader works (see _cffi_shape_getter), by the Shape otherwise.
-        fast = _cffi_shape_getter()
-        if fast is None:
-            self._pa: list[Any] = [None]
-            self._pb: list[Any] = [None]
-            self._key = lambda shape: shape
-            self._read_shapes = self._read_shapes_public
-        else:
-            ffi, lib = fast
-            self._pa, self._pb = ffi.new("cpShape *[1]"), ffi.new("cpShape *[1]")
-            self._key = lambda shape: shape._shape
-            get, pa, pb = lib.cpArbiterGetShapes, self._pa, self._pb
-            self._read_shapes = lambda arbiter: get(arbiter._arbiter, pa, pb)
+        # The callbacks map an arbiter's shapes to slots and obstacles through dicts keyed by self._key.
+        self._read_shapes, self._pa, self._pb, self._key = _shape_reader()
         self._slot_of_shape = {self._key(shape): s for s, shape in enumerate(shapes)}
         self._obj_of_shape: dict[Any, int] = {}
         space.on_collision(_AGENT_TYPE, _AGENT_TYPE, pre_solve=self._pre_solve_agents)
@@ -457,9 +464,6 @@ class PymunkPlanarBackend:
 
     # Collision callbacks: pymunk calls them for every touching pair in every sub-step. The flag persists on
     # the arbiter between steps, so it is set explicitly both ways.
-    def _read_shapes_public(self, arbiter: pymunk.Arbiter) -> None:
-        self._pa[0], self._pb[0] = arbiter.shapes
-
     def _pre_solve_agents(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data: Any) -> None:
         self._read_shapes(arbiter)
         a = self._slot_of_shape[self._pa[0]]
