@@ -40,9 +40,6 @@ import numpy as np
 from agentsim_env.comms.messages import (
     AGENT,
     DROP_BANDWIDTH,
-    DROP_LOSS,
-    DROP_OFFLINE,
-    DROP_RANGE,
     ENV,
     GROUP,
     HEARTBEAT,
@@ -50,8 +47,13 @@ from agentsim_env.comms.messages import (
     REASON_NONE,
     Inbox,
 )
+from agentsim_env.comms.routing import expand, group_members, route
 
 BUS_KINDS = (AGENT, GROUP, ENV, HEARTBEAT)
+# Read-only inputs of the delivery kernels when a batch has no GROUP message / the channel no loss.
+_NO_SLOTS = np.zeros(0, dtype=np.int64)
+_NO_DRAWS = np.zeros(0)
+_ZERO_HOPS = np.zeros(1, dtype=np.int16)
 
 
 @dataclass(frozen=True, slots=True)
@@ -239,7 +241,7 @@ class MessageBus:
 
     __slots__ = tuple(
         "n_worlds n_agents payload_dim channel inbox rng group _world_of _queue _next_id _bw_used _bw_step "
-        "_sent_log _drop_log _ans_slot _ans_step".split()
+        "_sent_log _drop_log _ans_slot _ans_step _pushes".split()
     )
 
     def __init__(
@@ -321,6 +323,7 @@ class MessageBus:
         self._drop_log: list[MessageLog] = []
         self._ans_slot: list[np.ndarray] = []
         self._ans_step: list[np.ndarray] = []
+        self._pushes: list[tuple[np.ndarray, ...]] = []
 
     def drop_world(self, world: int) -> None:
         """Forget world ``world``'s traffic (messages in flight, answers, inboxes), e.g. when it is reset alone."""
@@ -394,16 +397,43 @@ class MessageBus:
             i = int(np.flatnonzero(bad)[0])
             raise ValueError(f"payload must be finite: row {i} (sender {snd[i]}) holds NaN/inf")
         wld = self._validate(kind, snd, tgt, world, group)
-        acc = self._bandwidth(snd, step)
-        log = MessageLog.make(self._new_ids(k), kind, snd, tgt, -1 if kind == GROUP else tgt, step, step)
+        return self.enqueue(np.full(k, kind, dtype=np.int8), snd, tgt, wld, pay, step)
+
+    def enqueue(
+        self, kind: np.ndarray, sender: np.ndarray, target: np.ndarray, world: np.ndarray, payload: np.ndarray,
+        step: int,
+    ) -> np.ndarray:  # fmt: skip
+        """Unchecked ``send`` for producers whose rows are valid by construction (the comms stack).
+
+        Rows may mix kinds; they are accepted (bandwidth), logged and queued in the given order, exactly as
+        consecutive ``send`` calls of the same rows would.
+
+        Args:
+            kind: ``(k,)`` int8 kind per row.
+            sender: ``(k,)`` int64 sender slots (-1 = environment / controller).
+            target: ``(k,)`` int64 targets (receiver slot, group id, or -1), as in ``send``.
+            world: ``(k,)`` int64 world per row.
+            payload: ``(k, D)`` float32, finite.
+            step: Current step (>= 0).
+
+        Returns:
+            ``(k,)`` bool: accepted (False = dropped for bandwidth, counted and logged).
+        """
+        k = sender.shape[0]
+        acc = self._bandwidth(sender, step)
+        created = np.full(k, step, dtype=np.int64)
+        log = MessageLog(self._new_ids(k), kind, sender, target, np.where(kind == GROUP, -1, target), created,
+                         created.copy(), np.zeros(k, dtype=np.int8))  # fmt: skip
         self._sent_log.append(log)
-        if not acc.all():
+        if acc.all():
+            a, pay, wld = log, payload, world
+        else:
             d = log.take(~acc)
-            self._drop_log.append(MessageLog.make(d.msg, kind, d.sender, d.target, d.receiver, step, step,
-                                                  DROP_BANDWIDTH))  # fmt: skip
+            self._drop_log.append(MessageLog(d.msg, d.kind, d.sender, d.target, d.receiver, d.created, d.step,
+                                             np.full(len(d), DROP_BANDWIDTH, dtype=np.int8)))  # fmt: skip
             self.inbox.add_dropped(d.sender)
-        a = log.take(acc)
-        self._queue.append(pay[acc], msg=a.msg, kind=a.kind, sender=a.sender, target=a.target, world=wld[acc],
+            a, pay, wld = log.take(acc), payload[acc], world[acc]
+        self._queue.append(pay, msg=a.msg, kind=a.kind, sender=a.sender, target=a.target, world=wld,
                            created=a.created, due=a.created + self.channel.latency)  # fmt: skip
         return acc
 
@@ -484,7 +514,9 @@ class MessageBus:
         return acc
 
     # ------------------------------------------------------------------ delivery
-    def deliver(self, step: int, pos: np.ndarray, online: np.ndarray, group: np.ndarray) -> DeliveryEvents:
+    def deliver(
+        self, step: int, pos: np.ndarray, online: np.ndarray, group: np.ndarray, *, push: bool = True
+    ) -> DeliveryEvents:
         """Deliver every message due at ``step`` (or earlier) and return the step's traffic.
 
         Args:
@@ -492,22 +524,33 @@ class MessageBus:
             pos: Current positions ``(S, 3)`` (range check from the sender's current position).
             online: ``(S,)`` bool; offline slots never receive.
             group: ``(S,)`` group ids (-1 = none) used to expand GROUP messages now.
+            push: Write the deliveries into the inboxes now; False leaves them to the caller (``take_pushes``),
+                who pushes them with its own (one pass over the inboxes instead of two).
 
         Returns:
             The step's events (sent since the previous call, delivered and dropped).
         """
         s_n = self.n_slots
-        pos, online, group = np.asarray(pos), np.asarray(online, dtype=bool), np.asarray(group)
+        pos = np.ascontiguousarray(pos, dtype=np.float64)
+        online, group = np.ascontiguousarray(online, dtype=bool), np.asarray(group)
         if pos.shape != (s_n, 3) or online.shape != (s_n,) or group.shape != (s_n,):
             raise ValueError(f"pos must be ({s_n}, 3), online and group ({s_n},); got {pos.shape}, "
                              f"{online.shape}, {group.shape}")  # fmt: skip
         delivered: list[MessageLog] = []
+        self._pushes = []
         while (batch := self._queue.pop_due(int(step))) is not None:
             # a second round happens only when latency-0 heartbeat answers became due in this call
             delivered.append(self._deliver_batch(batch, int(step), pos, online, group))
+        if push:
+            self.inbox.push_batches(self.take_pushes())
         sent, dropped = MessageLog.concat(self._sent_log), MessageLog.concat(self._drop_log)
         self._sent_log, self._drop_log = [], []
         return DeliveryEvents(int(step), sent, MessageLog.concat(delivered), dropped)
+
+    def take_pushes(self) -> list[tuple[np.ndarray, ...]]:
+        """The deliveries of the latest ``deliver(..., push=False)`` as ``Inbox.push_batches`` batches (once)."""
+        out, self._pushes = self._pushes, []
+        return out
 
     def take_answers(self) -> tuple[np.ndarray, np.ndarray]:
         """Heartbeat answers that reached the controller since the previous call.
@@ -521,73 +564,43 @@ class MessageBus:
         self._ans_slot, self._ans_step = [], []
         return out
 
-    def _expand(self, b, online, group) -> tuple[np.ndarray, np.ndarray]:  # type: ignore[no-untyped-def]
-        # Returns (message index, receiver) per pair, in queue order then slot order. A GROUP message's
-        # receivers are the online members of (world, group): a contiguous run of a key-sorted slot list,
-        # found by binary search, so the expansion is linear in the receivers.
-        kind, snd, tgt = b["kind"], b["sender"], b["target"]
-        q = kind.shape[0]
-        is_grp = kind == GROUP
-        if not is_grp.any():
-            return np.arange(q), tgt
-        ms = np.flatnonzero(online & (group >= 0))
-        n_g = int(max(group.max(initial=-1), tgt[is_grp].max())) + 1
-        keys = self._world_of[ms] * n_g + group[ms]
-        order = np.argsort(keys, kind="stable")
-        sk, slots_sorted = keys[order], ms[order]
-        gk = b["world"][is_grp] * n_g + tgt[is_grp]
-        lo = np.searchsorted(sk, gk, side="left")
-        cnt = np.ones(q, dtype=np.int64)
-        cnt[is_grp] = np.searchsorted(sk, gk, side="right") - lo
-        start = np.zeros(q, dtype=np.int64)
-        start[is_grp] = lo
-        rep = np.repeat(np.arange(q), cnt)
-        recv = tgt[rep]
-        gm = is_grp[rep]
-        offs = np.arange(rep.shape[0]) - np.repeat(np.cumsum(cnt) - cnt, cnt)
-        recv[gm] = slots_sorted[start[rep[gm]] + offs[gm]]
-        keep = ~(gm & (recv == snd[rep]))
-        return rep[keep], recv[keep]
-
     def _deliver_batch(self, b, step, pos, online, group) -> MessageLog:  # type: ignore[no-untyped-def]
-        rep, recv = self._expand(b, online, group)
-        m = rep.shape[0]
-        kind, s_rep = b["kind"][rep], b["sender"][rep]
-        reason = np.zeros(m, dtype=np.int8)
-        to_slot = recv >= 0  # -1: a heartbeat answer to the controller
-        reason[to_slot & ~online[np.maximum(recv, 0)]] = DROP_OFFLINE
+        kind, snd, tgt = b["kind"], b["sender"], b["target"]
+        kid, offsets, slots = _NO_SLOTS, _NO_SLOTS, _NO_SLOTS
+        grp = kind == GROUP
+        if grp.any():
+            n_g = int(max(group.max(initial=-1), tgt[grp].max())) + 1
+            kid, offsets, slots = group_members(online, group, self._world_of, self.n_worlds, n_g,
+                                                b["world"] * n_g + tgt)  # fmt: skip
+        rep, recv = expand(kind, snd, tgt, kid, offsets, slots)
+        loss = float(self.channel.loss)
+        u = self.rng.random(rep.shape[0]) if loss > 0.0 else _NO_DRAWS
         r_max = self.channel.max_range
-        if r_max is not None:
-            chk = np.flatnonzero(to_slot & (s_rep >= 0) & (reason == REASON_NONE))
-            d = pos[s_rep[chk]] - pos[recv[chk]]
-            reason[chk[np.einsum("ij,ij->i", d, d) > r_max * r_max]] = DROP_RANGE
-        if self.channel.loss > 0.0:
-            u = self.rng.random(m)
-            reason[(reason == REASON_NONE) & (u < self.channel.loss)] = DROP_LOSS
-        log = MessageLog.make(
-            b["msg"][rep], kind, s_rep, b["target"][rep], recv, b["created"][rep], step, reason
-        )
-        ok = reason == REASON_NONE
-        if not ok.all():
-            self._drop_log.append(log.take(~ok))
-            self.inbox.add_dropped(np.where(to_slot, recv, s_rep)[~ok])
-        push = np.flatnonzero(ok & to_slot)
-        if push.size:
-            rp = rep[push]
-            self.inbox.push(recv[push], kind[push], s_rep[push], 0, b["created"][rp], b["payload"][rp])
-        ans = ok & ~to_slot
-        if ans.any():
-            self._ans_slot.append(s_rep[ans])
-            self._ans_step.append(np.full(int(ans.sum()), step, dtype=np.int64))
-        hb = recv[ok & to_slot & (kind == HEARTBEAT)]
-        if hb.size:  # each member that got a heartbeat answers the controller through the channel
-            a = MessageLog.make(self._new_ids(hb.size), HEARTBEAT, hb, -1, -1, step, step)
-            self._sent_log.append(a)
-            zeros = np.zeros((hb.size, self.payload_dim), dtype=np.float32)
-            self._queue.append(zeros, msg=a.msg, kind=a.kind, sender=hb, target=a.target,
-                               world=self._world_of[hb], created=a.created,
-                               due=a.created + self.channel.latency)  # fmt: skip
-        return log if push.size == m else log.take(ok)
+        ok, dr, n_hb, n_ans = route(rep, recv, b["msg"], kind, snd, tgt, b["created"], online, pos,
+                                    -1.0 if r_max is None else r_max * r_max, u, loss, self.inbox.dropped)  # fmt: skip
+        if dr[0].shape[0]:
+            self._drop_log.append(MessageLog(*dr[:6], np.full(dr[0].shape[0], step, dtype=np.int64), dr[6]))
+        d_msg, d_kind, d_snd, d_tgt, d_rcv, d_cre, d_row = ok
+        n_ok = d_msg.shape[0]
+        if n_ok > n_ans:  # rows with receiver -1 (answers to the controller) are skipped by the push
+            hops = np.broadcast_to(_ZERO_HOPS, (n_ok,))  # bus messages travel no hops
+            self._pushes.append((d_rcv, d_kind, d_snd, hops, d_cre, b["payload"], d_row))
+        if n_ans:
+            ans = d_rcv < 0
+            self._ans_slot.append(d_snd[ans])
+            self._ans_step.append(np.full(n_ans, step, dtype=np.int64))
+        if n_hb:  # each member that got a heartbeat answers the controller through the channel
+            hb = d_rcv[(d_rcv >= 0) & (d_kind == HEARTBEAT)]
+            ids = self._new_ids(n_hb)
+            created = np.full(n_hb, step, dtype=np.int64)
+            minus = np.full(n_hb, -1, dtype=np.int64)
+            self._sent_log.append(MessageLog(ids, np.full(n_hb, HEARTBEAT, dtype=np.int8), hb, minus, minus.copy(),
+                                             created, created.copy(), np.zeros(n_hb, dtype=np.int8)))  # fmt: skip
+            self._queue.append(np.zeros((n_hb, self.payload_dim), dtype=np.float32), msg=ids,
+                               kind=np.full(n_hb, HEARTBEAT, dtype=np.int8), sender=hb, target=minus,
+                               world=self._world_of[hb], created=created, due=created + self.channel.latency)  # fmt: skip
+        return MessageLog(d_msg, d_kind, d_snd, d_tgt, d_rcv, d_cre, np.full(n_ok, step, dtype=np.int64),
+                          np.zeros(n_ok, dtype=np.int8))  # fmt: skip
 
 
 @nb.njit(cache=True)

@@ -45,6 +45,10 @@ HEARTBEAT = 5
 N_KINDS = 5
 KIND_NAMES = {AGENT: "AGENT", GROUP: "GROUP", ENV: "ENV", OVERLAY: "OVERLAY", HEARTBEAT: "HEARTBEAT"}
 
+_SAME_ROWS = np.zeros(0, dtype=np.int64)  # push_rows: message j takes payload row j
+_EMPTY_BATCH = (_SAME_ROWS, np.zeros(0, dtype=np.int8), _SAME_ROWS, np.zeros(0, dtype=np.int16), _SAME_ROWS,
+                np.zeros((0, 0), dtype=np.float32), _SAME_ROWS)  # fmt: skip
+
 FEATURES_PER_MESSAGE = 11
 """Observation features of one message before its payload; a row has ``FEATURES_PER_MESSAGE + D`` values."""
 
@@ -95,62 +99,80 @@ def env_collision_payload(what: np.ndarray | int, ident: np.ndarray, payload_dim
 
 
 @nb.njit(cache=True)
-def _push_kernel(valid, kind, sender, hops, created, payload, received, r, k_, s_, h_, c_, p_):  # type: ignore[no-untyped-def]
-    # Pass 1 counts the new messages per receiver; pass 2 shifts each touched row once (by the number of new
-    # messages, capped at M) and writes message j of a receiver, which has `cnt - 1 - seen` newer ones after
-    # it in this call, at that row index. Cost O(k + touched * M * D).
+def _push_kernel(valid, kind, sender, hops, created, payload, received, newest, taken,  # type: ignore[no-untyped-def]
+                 ra, ka, sa, ha, ca, pa, qa, rb, kb, sb, hb, cb, pb, qb):  # fmt: skip
+    # Two batches a then b, as one push of their concatenation. Message j of a batch goes to slot r[j] (skipped
+    # when < 0) with payload row p[q[j]] (row j when q is empty) and hops clipped to [0, 32767]; the inputs may
+    # be stride-0 broadcasts of one value. Pass 1 walks the messages newest first and keeps, per receiver, the
+    # M newest (index into a ++ b) and the count; pass 2 walks the receivers in slot order (the inbox arrays
+    # stream through the cache once): shift the old rows down by min(count, M), write the new ones on top.
     n_slots, m = valid.shape
     d = payload.shape[2]
-    cnt = np.zeros(n_slots, dtype=np.int64)
-    seen = np.zeros(n_slots, dtype=np.int64)
-    for j in range(r.shape[0]):
-        cnt[r[j]] += 1
-    for j in range(r.shape[0]):
-        s = r[j]
-        if seen[s] == 0:
-            shift = min(cnt[s], m)
-            for i in range(m - 1, shift - 1, -1):
-                valid[s, i] = valid[s, i - shift]
-                kind[s, i] = kind[s, i - shift]
-                sender[s, i] = sender[s, i - shift]
-                hops[s, i] = hops[s, i - shift]
-                created[s, i] = created[s, i - shift]
-                for c in range(d):  # explicit loops: numba slice copies cost ~10x more for small D
-                    payload[s, i, c] = payload[s, i - shift, c]
-            received[s] += cnt[s]
-        idx = cnt[s] - 1 - seen[s]
-        seen[s] += 1
-        if idx < m:
-            valid[s, idx] = True
-            kind[s, idx] = k_[j]
-            sender[s, idx] = s_[j]
-            hops[s, idx] = h_[j]
-            created[s, idx] = c_[j]
-            for c in range(d):
-                payload[s, idx, c] = p_[j, c]
+    na = ra.shape[0]
+    for g in range(na + rb.shape[0] - 1, -1, -1):
+        s = ra[g] if g < na else rb[g - na]
+        if s < 0:
+            continue
+        t = taken[s]
+        if t < m:
+            newest[s, t] = g
+        taken[s] = t + 1
+    for s in range(n_slots):
+        c = taken[s]
+        if c == 0:
+            continue
+        taken[s] = 0
+        received[s] += c
+        shift = min(c, m)
+        for i in range(m - 1, shift - 1, -1):
+            valid[s, i] = valid[s, i - shift]
+            kind[s, i] = kind[s, i - shift]
+            sender[s, i] = sender[s, i - shift]
+            hops[s, i] = hops[s, i - shift]
+            created[s, i] = created[s, i - shift]
+            for x in range(d):  # explicit loops: numba slice copies cost ~10x more for small D
+                payload[s, i, x] = payload[s, i - shift, x]
+        for i in range(shift):
+            g = newest[s, i]
+            valid[s, i] = True
+            if g < na:
+                kind[s, i], sender[s, i], created[s, i] = ka[g], sa[g], ca[g]
+                hops[s, i] = min(max(ha[g], 0), 32767)
+                row = g if qa.shape[0] == 0 else qa[g]
+                for x in range(d):
+                    payload[s, i, x] = pa[row, x]
+            else:
+                g -= na
+                kind[s, i], sender[s, i], created[s, i] = kb[g], sb[g], cb[g]
+                hops[s, i] = min(max(hb[g], 0), 32767)
+                row = g if qb.shape[0] == 0 else qb[g]
+                for x in range(d):
+                    payload[s, i, x] = pb[row, x]
 
 
 @nb.njit(cache=True)
 def _observe_kernel(valid, kind, sender, hops, created, payload, pos, step, pos_scale, age_h, hop_h, out):  # type: ignore[no-untyped-def]
+    # Every output value is written once (the buffer may be reused: nothing is assumed zero).
     n_slots, m = valid.shape
     d = payload.shape[2]
+    f = out.shape[2]
     for s in range(n_slots):
         for i in range(m):
-            row = out[s, i]
-            for c in range(row.shape[0]):
-                row[c] = 0.0
             if not valid[s, i]:
+                for c in range(f):
+                    out[s, i, c] = 0.0
                 continue
-            row[0] = 1.0
-            row[kind[s, i]] = 1.0  # kinds 1..5 map to columns 1..5
+            out[s, i, 0] = 1.0
+            k = kind[s, i]
+            for c in range(1, 6):  # kinds 1..5 map to columns 1..5
+                out[s, i, c] = 1.0 if c == k else 0.0
             q = sender[s, i]
-            if q >= 0:
-                for a in range(3):
-                    row[6 + a] = (pos[q, a] - pos[s, a]) / pos_scale
-            row[9] = min(max(hops[s, i], 0), hop_h) / hop_h
-            row[10] = min(max(step - created[s, i], 0), age_h) / age_h
+            for a in range(3):
+                out[s, i, 6 + a] = (pos[q, a] - pos[s, a]) / pos_scale if q >= 0 else 0.0
+            out[s, i, 9] = min(max(hops[s, i], 0), hop_h) / hop_h
+            out[s, i, 10] = min(max(step - created[s, i], 0), age_h) / age_h
             for c in range(d):
-                row[FEATURES_PER_MESSAGE + c] = payload[s, i, c]
+                out[s, i, FEATURES_PER_MESSAGE + c] = payload[s, i, c]
 
 
 class Inbox:
@@ -188,6 +210,8 @@ class Inbox:
         "payload",
         "received",
         "dropped",
+        "_newest",
+        "_taken",
     )
 
     def __init__(
@@ -236,6 +260,9 @@ class Inbox:
         self.payload = np.zeros((s, m, d), dtype=np.float32)
         self.received = np.zeros(s, dtype=np.int64)
         self.dropped = np.zeros(s, dtype=np.int64)
+        # push scratch: the M newest new messages of each slot and how many it got (all 0 between pushes)
+        self._newest = np.zeros((s, m), dtype=np.int64)
+        self._taken = np.zeros(s, dtype=np.int64)
 
     @property
     def n_features(self) -> int:
@@ -280,21 +307,44 @@ class Inbox:
             p = np.broadcast_to(p, (k, p.shape[0]))
         if p.shape != (k, self.payload_dim):
             raise ValueError(f"payload must have shape ({k}, {self.payload_dim}), got {p.shape}")
-        _push_kernel(
-            self.valid,
-            self.kind,
-            self.sender,
-            self.hops,
-            self.created,
-            self.payload,
-            self.received,
-            r,
-            kd,
-            sd,
-            hd,
-            cd,
-            np.ascontiguousarray(p),
-        )
+        self.push_rows(r, kd, sd, hd, cd, np.ascontiguousarray(p), _SAME_ROWS)
+
+    def push_rows(
+        self,
+        receiver: np.ndarray,
+        kind: np.ndarray,
+        sender: np.ndarray,
+        hops: np.ndarray,
+        created: np.ndarray,
+        payload: np.ndarray,
+        rows: np.ndarray,
+    ) -> None:
+        """Unchecked ``push`` for producers whose rows are valid by construction (the bus, the overlay).
+
+        Message ``j`` goes to ``receiver[j]`` (entries < 0 are skipped) with payload ``payload[rows[j]]``.
+
+        Args:
+            receiver: Receiver slots ``(k,)`` int64, each < S.
+            kind: ``(k,)`` int8 kinds in 1..5 (a stride-0 broadcast of one value is fine, as for the others).
+            sender: ``(k,)`` int64 sender slots.
+            hops: ``(k,)`` integer hops (clipped to the int16 range).
+            created: ``(k,)`` int64 created steps.
+            payload: ``(n, D)`` float32 payload table.
+            rows: ``(k,)`` int64 row of ``payload`` for each message, or empty: row ``j`` for message ``j``.
+        """
+        self.push_batches([(receiver, kind, sender, hops, created, payload, rows)])
+
+    def push_batches(self, batches: list[tuple[np.ndarray, ...]]) -> None:
+        """``push_rows`` of several batches in one pass (as one batch of their concatenation, in order).
+
+        Args:
+            batches: ``(receiver, kind, sender, hops, created, payload, rows)`` tuples, as for ``push_rows``.
+        """
+        for k in range(0, len(batches), 2):  # pairs in turn: the same as one push of everything, in order
+            a = batches[k]
+            b = batches[k + 1] if k + 1 < len(batches) else _EMPTY_BATCH
+            _push_kernel(self.valid, self.kind, self.sender, self.hops, self.created, self.payload, self.received,
+                         self._newest, self._taken, *a, *b)  # fmt: skip
 
     def add_dropped(self, slots: np.ndarray) -> None:
         """Count one lost message per entry of ``slots`` (repeats count several times).

@@ -1,8 +1,7 @@
 """Peer-to-peer overlay network: range-limited multi-hop flooding (no bus).
 
 A *flood* is one overlay message: its origin slot, a hop limit, the step it was created, a payload of ``D``
-floats and the set of slots that already read it, kept as a bitset (one row of ``ceil(S / 64)`` uint64 words
-per flood). As in AgentSimJS, an agent that receives a message checks whether its id is in the list of
+floats and the set of slots that already read it (a list per flood; see ``comms.flooding``). As in AgentSimJS, an agent that receives a message checks whether its id is in the list of
 readers: if not, it adds itself, keeps the message and re-sends it to the agents in range; if it is, the copy
 is discarded (counted as a duplicate).
 
@@ -19,17 +18,20 @@ The range graph of a call has an edge ``(i, j)`` when both slots are online, in 
 here, so pairs from a larger radius (e.g. the grid pairs shared with collisions) are fine. Offline slots have
 no edges, so they neither read nor relay.
 
-Cost per call: O(S + E) to build a CSR adjacency of the range graph, then work proportional to the edges
-touched by the frontiers (never a scan over floods x slots). Memory: ``capacity * ceil(S / 64) * 8`` bytes of
-bitset; the table doubles when full.
+Cost per call: O(S + E) to build a CSR adjacency of the range graph (``advance``; the comms stack passes its
+own, see ``advance_graph``), then work proportional to the edges touched by the frontiers and the readers of
+the floods that spread (never a scan over floods x slots). Memory: the readers of the active floods, and a
+table of floods that doubles when full.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numba as nb
 import numpy as np
+
+from agentsim_env.comms.flooding import spread
+from agentsim_env.comms.rangegraph import _links_from_pairs
 
 
 @dataclass(slots=True, frozen=True)
@@ -83,122 +85,12 @@ class OverlayStats:
         )
 
 
-@nb.njit(cache=True)
-def _build_csr(pi, pj, pos, online, world, rng, n):  # type: ignore[no-untyped-def]
-    # Counting sort of the kept pairs by endpoint, both directions: O(S + E).
-    e = pi.shape[0]
-    keep = np.zeros(e, dtype=np.bool_)
-    indptr = np.zeros(n + 1, dtype=np.int64)
-    for q in range(e):
-        i = pi[q]
-        j = pj[q]
-        if i == j or not online[i] or not online[j] or world[i] != world[j]:
-            continue
-        r = min(rng[i], rng[j])
-        dx = pos[j, 0] - pos[i, 0]
-        dy = pos[j, 1] - pos[i, 1]
-        dz = pos[j, 2] - pos[i, 2]
-        if dx * dx + dy * dy + dz * dz <= r * r:
-            keep[q] = True
-            indptr[i + 1] += 1
-            indptr[j + 1] += 1
-    for s in range(n):
-        indptr[s + 1] += indptr[s]
-    fill = indptr[:-1].copy()
-    indices = np.empty(indptr[n], dtype=np.int64)
-    for q in range(e):
-        if keep[q]:
-            i = pi[q]
-            j = pj[q]
-            indices[fill[i]] = j
-            fill[i] += 1
-            indices[fill[j]] = i
-            fill[j] += 1
-    return indptr, indices
-
-
-@nb.njit(cache=True)
-def _hop(indptr, indices, bits, hops, limit, cur_f, cur_n, nxt_f, nxt_n, out_r, out_f, out_h, nd, fin, nfin):  # type: ignore[no-untyped-def]  # noqa: E501
-    # One hop of every flood in the frontier. The frontier is grouped by flood (contiguous runs); expanding
-    # the runs in order keeps the next frontier grouped too, so the end of a run is where its flood may stop.
-    # Buffers are sized by the caller from the frontier's degree sum, so no bounds growth happens here.
-    ncur = cur_f.shape[0]
-    nn = 0
-    dups = 0
-    a = 0
-    while a < ncur:
-        f = cur_f[a]
-        b = a
-        while b < ncur and cur_f[b] == f:
-            b += 1
-        h = hops[f] + 1
-        run0 = nn
-        for q in range(a, b):
-            u = cur_n[q]
-            for p in range(indptr[u], indptr[u + 1]):
-                v = indices[p]
-                w = v >> 6
-                m = np.uint64(1) << np.uint64(v & 63)
-                if bits[f, w] & m:
-                    dups += 1
-                    continue
-                bits[f, w] |= m
-                nxt_f[nn] = f
-                nxt_n[nn] = v
-                nn += 1
-                out_r[nd] = v
-                out_f[nd] = f
-                out_h[nd] = h
-                nd += 1
-        hops[f] = h
-        if nn == run0 or h >= limit[f]:
-            nn = run0  # the flood ends here: its new readers keep the message but do not relay it
-            fin[nfin] = f
-            nfin += 1
-        a = b
-    return nn, nd, nfin, dups
-
-
-@nb.njit(cache=True)
-def _grow(a, n, keep):  # type: ignore[no-untyped-def]
-    b = np.empty(max(n, 2 * a.shape[0]), dtype=a.dtype)
-    b[:keep] = a[:keep]
-    return b
-
-
-@nb.njit(cache=True)
-def _spread(indptr, indices, bits, hops, limit, cur_f, cur_n, full, nxt_f, nxt_n, out_r, out_f, out_h):  # type: ignore[no-untyped-def]
-    # Scratch buffers persist across calls (the caller keeps the returned ones): fresh multi-megabyte
-    # allocations each step would cost more in page faults than the flooding itself.
-    fin = np.empty(max(1, cur_f.shape[0]), dtype=np.int64)  # each flood of the frontier ends at most once
-    nd = 0
-    nfin = 0
-    dups = 0
-    while cur_f.shape[0] > 0:
-        bound = 0  # new readers this hop <= edges leaving the frontier
-        for q in range(cur_n.shape[0]):
-            bound += indptr[cur_n[q] + 1] - indptr[cur_n[q]]
-        if nd + bound > out_r.shape[0]:
-            out_r = _grow(out_r, nd + bound, nd)
-            out_f = _grow(out_f, nd + bound, nd)
-            out_h = _grow(out_h, nd + bound, nd)
-        if bound > nxt_f.shape[0]:
-            nxt_f = _grow(nxt_f, bound, 0)
-            nxt_n = _grow(nxt_n, bound, 0)
-        nn, nd, nfin, d = _hop(
-            indptr, indices, bits, hops, limit, cur_f, cur_n, nxt_f, nxt_n, out_r, out_f, out_h, nd, fin, nfin
-        )
-        dups += d
-        cur_f = nxt_f[:nn].copy()
-        cur_n = nxt_n[:nn].copy()
-        if not full:
-            break
-    return cur_f, cur_n, nd, fin[:nfin].copy(), dups, nxt_f, nxt_n, out_r, out_f, out_h
-
-
-def _new_scratch() -> tuple[np.ndarray, ...]:
-    # Kernel buffers reused across calls: next frontier (flood, slot) and deliveries (receiver, flood, hops).
-    return tuple(np.empty(0, dtype=np.int64) for _ in range(4)) + (np.empty(0, dtype=np.int32),)
+def _new_scratch(n_slots: int) -> tuple:
+    # Kernel state reused across calls: the stamp array and its last token, the spare reader pool, and the
+    # delivery buffers (receiver, flood, hops); fresh multi-megabyte buffers each step would cost more in
+    # page faults than the flooding itself.
+    e = np.empty(0, dtype=np.int64)
+    return np.zeros(n_slots, dtype=np.int32), 0, e, e.copy(), e.copy(), np.empty(0, dtype=np.int32)
 
 
 class Overlay:
@@ -216,9 +108,9 @@ class Overlay:
     """
 
     __slots__ = (
-        "n_slots", "payload_dim", "full_propagation", "_words", "_range", "_bits", "_origin", "_limit",
-        "_hops", "_created", "_payload", "_active", "_free", "_n_free", "_front_f", "_front_n",
-        "_pending_started", "_last", "_totals", "_scratch",
+        "n_slots", "payload_dim", "full_propagation", "_range", "_rd_start", "_rd_len", "_pool", "_n_pool",
+        "_origin", "_limit", "_hops", "_created", "_payload", "_active", "_free", "_n_free", "_front_f",
+        "_front_n", "_pending_started", "_last", "_totals", "_scratch",
     )  # fmt: skip
 
     def __init__(
@@ -238,11 +130,10 @@ class Overlay:
         self.n_slots = int(n_slots)
         self.payload_dim = int(payload_dim)
         self.full_propagation = bool(full_propagation)
-        self._words = (self.n_slots + 63) // 64
         self._range = np.zeros(self.n_slots)
         self.set_range(comm_range)
         self._alloc(int(capacity))
-        self._scratch = _new_scratch()
+        self._scratch = _new_scratch(self.n_slots)
 
     def __getstate__(self) -> dict:
         """Pickle the state without the kernel scratch buffers."""
@@ -252,11 +143,15 @@ class Overlay:
         """Restore a pickled state."""
         for k, v in state.items():
             setattr(self, k, v)
-        self._scratch = _new_scratch()
+        self._scratch = _new_scratch(self.n_slots)
 
     # ------------------------------------------------------------------ state
     def _alloc(self, cap: int) -> None:
-        self._bits = np.zeros((cap, self._words), dtype=np.uint64)
+        # flood f has been read by _pool[_rd_start[f] : _rd_start[f] + _rd_len[f]]
+        self._rd_start = np.zeros(cap, dtype=np.int64)
+        self._rd_len = np.zeros(cap, dtype=np.int64)
+        self._pool = np.empty(0, dtype=np.int64)
+        self._n_pool = 0
         self._origin = np.full(cap, -1, dtype=np.int64)
         self._limit = np.zeros(cap, dtype=np.int32)
         self._hops = np.zeros(cap, dtype=np.int32)
@@ -277,7 +172,7 @@ class Overlay:
         cap = old
         while cap - old + self._n_free < need:
             cap *= 2
-        for name in ("_bits", "_origin", "_limit", "_hops", "_created", "_payload", "_active"):
+        for name in ("_rd_start", "_rd_len", "_origin", "_limit", "_hops", "_created", "_payload", "_active"):
             a = getattr(self, name)
             pad = np.full((cap - old,) + a.shape[1:], -1 if name == "_origin" else 0, dtype=a.dtype)
             setattr(self, name, np.concatenate([a, pad]))
@@ -308,6 +203,16 @@ class Overlay:
     def totals(self) -> OverlayStats:
         """Counters summed over every ``advance`` since construction or ``reset``."""
         return self._totals
+
+    @property
+    def frontier_size(self) -> int:
+        """(flood, slot) entries that relay at the next ``advance`` (0: that call has nothing to spread)."""
+        return int(self._front_f.shape[0])
+
+    @property
+    def link_range(self) -> np.ndarray:
+        """Per-slot transmission range ``(S,)``: the internal array, for building range graphs (do not write)."""
+        return self._range
 
     @property
     def comm_range(self) -> np.ndarray:
@@ -351,8 +256,8 @@ class Overlay:
         """
         if not self.is_active(flood):
             raise ValueError(f"flood must be an active flood id, got {flood}")
-        bits = np.unpackbits(self._bits[int(flood)].view(np.uint8), bitorder="little")
-        return np.flatnonzero(bits[: self.n_slots])
+        f = int(flood)
+        return np.sort(self._pool[self._rd_start[f] : self._rd_start[f] + self._rd_len[f]])
 
     # ------------------------------------------------------------------ API
     def start(
@@ -396,8 +301,14 @@ class Overlay:
             self._grow(k)
         ids = self._free[self._n_free - k : self._n_free][::-1].copy()
         self._n_free -= k
-        self._bits[ids] = 0
-        self._bits[ids, origin >> 6] = np.uint64(1) << (origin & 63).astype(np.uint64)
+        if self._n_pool + k > self._pool.shape[0]:
+            pool = np.empty(max(2 * self._pool.shape[0], self._n_pool + k, 64), dtype=np.int64)
+            pool[: self._n_pool] = self._pool[: self._n_pool]
+            self._pool = pool
+        self._pool[self._n_pool : self._n_pool + k] = origin
+        self._rd_start[ids] = np.arange(self._n_pool, self._n_pool + k)
+        self._rd_len[ids] = 1
+        self._n_pool += k
         self._origin[ids] = origin
         self._limit[ids] = lim
         self._hops[ids] = 0
@@ -447,28 +358,44 @@ class Overlay:
             raise ValueError(f"pairs i and j must be 1-D of equal length, got {pi.shape} and {pj.shape}")
         if pi.size and (min(pi.min(), pj.min()) < 0 or max(pi.max(), pj.max()) >= s):
             raise ValueError(f"pairs must hold slots in [0, {s})")
-        started = self._pending_started
-        self._pending_started = 0
         if self._front_f.shape[0]:
-            indptr, indices = _build_csr(pi, pj, pos, online, world, self._range, s)
+            indptr, indices = _links_from_pairs(pi, pj, pos, online, world, self._range, s)
         else:  # nothing to spread: skip the adjacency
             indptr, indices = np.zeros(s + 1, dtype=np.int64), np.empty(0, dtype=np.int64)
-        nf, nn, nd, fin, dups, *scratch = _spread(
-            indptr, indices, self._bits, self._hops, self._limit, self._front_f, self._front_n,
-            self.full_propagation, *self._scratch,
+        return self.advance_graph(indptr[:-1], indptr[1:], indices)
+
+    def advance_graph(self, start: np.ndarray, end: np.ndarray, indices: np.ndarray) -> Deliveries:
+        """``advance`` over a prebuilt range graph (unchecked; the comms stack builds one per step).
+
+        Args:
+            start: ``(S,)`` int64 row starts: slot ``s`` links to ``indices[start[s]:end[s]]``.
+            end: ``(S,)`` int64 row ends.
+            indices: Linked slots, int64; the links must follow the rule of ``advance`` (online, same world,
+                ``dist <= min(range_i, range_j)``), in the row order that ``advance`` would build.
+
+        Returns:
+            The messages read during this call.
+        """
+        started = self._pending_started
+        self._pending_started = 0
+        stamp, token, spare, out_r, out_f, out_h = self._scratch
+        nf, nn, nd, fin, dups, token, n_pool, pool, out_r, out_f, out_h = spread(
+            start, end, indices, self._hops, self._limit, self._active, self._rd_start, self._rd_len, self._pool,
+            self._front_f, self._front_n, self.full_propagation, stamp, token, spare, out_r, out_f, out_h,
         )  # fmt: skip
-        self._scratch = tuple(scratch)
-        fl = scratch[3][:nd].copy()
+        self._scratch = (stamp, token, self._pool, out_r, out_f, out_h)  # the old pool is the next spare
+        self._pool, self._n_pool = pool, n_pool
+        fl = out_f[:nd].copy()
         self._front_f, self._front_n = nf, nn
         if fin.shape[0]:
             self._active[fin] = False
             self._free[self._n_free : self._n_free + fin.shape[0]] = fin[::-1]
             self._n_free += fin.shape[0]
         out = Deliveries(
-            receiver=scratch[2][:nd].copy(),
+            receiver=out_r[:nd].copy(),
             flood=fl,
             origin=self._origin[fl],
-            hops=scratch[4][:nd].copy(),
+            hops=out_h[:nd].copy(),
             created=self._created[fl],
             payload=np.take(self._payload, fl, axis=0),  # much faster than fancy indexing of rows
         )

@@ -40,29 +40,90 @@ from agentsim_env.comms.messages import (
     env_collision_payload,
 )
 from agentsim_env.comms.overlay import Deliveries, Overlay
+from agentsim_env.comms.rangegraph import RangeGraph
+from agentsim_env.core.spatial import Grid
 from agentsim_env.groups.controller import GroupController, GroupEvents
 from agentsim_env.scenarios.config import check_float, check_int
 
 CHANNELS = ("none", "group", "nearest", "named", "overlay")
+N_CHANNELS = len(CHANNELS)
+COMM_HEADER = 3
 
 
 @nb.njit(cache=True)
-def _nearest_kernel(i, j, d, n_slots, max_d):  # type: ignore[no-untyped-def]
-    """Nearest neighbour of every slot over the range-graph pairs (ties: the lower slot); -1 when none."""
-    best = np.full(n_slots, np.inf)
-    out = np.full(n_slots, -1, dtype=np.int64)
-    for k in range(i.shape[0]):
-        if d[k] > max_d:
+def _decode(comm, acting, n_agents, max_hops):  # type: ignore[no-untyped-def]
+    # The header columns of float64 actions, with the float64 operations of the numpy path in ``send_actions``
+    # (same order and rounding: the same bins, receivers and hop limits bit for bit).
+    s_n = comm.shape[0]
+    sel = np.zeros(s_n, dtype=np.int64)
+    named = np.empty(s_n, dtype=np.int64)
+    hops = np.empty(s_n, dtype=np.int64)
+    any_near = False
+    for s in range(s_n):
+        if acting[s]:
+            sel[s] = min(np.int64((comm[s, 0] + 1.0) * (N_CHANNELS / 2.0)), N_CHANNELS - 1)
+            any_near |= sel[s] == 2
+        named[s] = (s // n_agents) * n_agents + np.int64(np.rint((comm[s, 1] + 1.0) * 0.5 * (n_agents - 1)))
+        hops[s] = 1 + np.int64(np.rint((comm[s, 2] + 1.0) * 0.5 * (max_hops - 1)))
+    return sel, named, hops, any_near
+
+
+@nb.njit(cache=True)
+def _comm_rows(sel, group, near, named, hops, comm, n_agents, sent):  # type: ignore[no-untyped-def]
+    # All bus rows of a step's comm actions in one pass, in the order of three consecutive sends: GROUP rows,
+    # then "nearest" unicasts, then "named" unicasts (slot order within each), plus the overlay floods.
+    s_n = sel.shape[0]
+    d = comm.shape[1] - COMM_HEADER
+    n_g = n_n = n_m = n_o = 0
+    for s in range(s_n):
+        c = sel[s]
+        if c == 1 and group[s] >= 0:
+            n_g += 1
+        elif c == 2 and near[s] >= 0:
+            n_n += 1
+        elif c == 3 and named[s] != s:
+            n_m += 1
+        elif c == 4:
+            n_o += 1
+    k = n_g + n_n + n_m
+    kind = np.empty(k, dtype=np.int8)
+    snd = np.empty(k, dtype=np.int64)
+    tgt = np.empty(k, dtype=np.int64)
+    wld = np.empty(k, dtype=np.int64)
+    pay = np.empty((k, d), dtype=np.float32)
+    o_org = np.empty(n_o, dtype=np.int64)
+    o_hops = np.empty(n_o, dtype=np.int64)
+    o_pay = np.empty((n_o, d), dtype=np.float32)
+    nxt = np.array([0, n_g, n_g + n_n])  # next free row of each channel's block
+    o = 0
+    for s in range(s_n):
+        c = sel[s]
+        if c == 4:
+            o_org[o] = s
+            o_hops[o] = hops[s]
+            for q in range(d):
+                o_pay[o, q] = np.float32(comm[s, COMM_HEADER + q])
+            o += 1
+            sent[s] += 1
             continue
-        a, b = i[k], j[k]
-        if d[k] < best[a] or (d[k] == best[a] and b < out[a]):
-            best[a], out[a] = d[k], b
-        if d[k] < best[b] or (d[k] == best[b] and a < out[b]):
-            best[b], out[b] = d[k], a
-    return out
-
-
-COMM_HEADER = 3
+        if c == 1 and group[s] >= 0:
+            b, kd, t = 0, GROUP, group[s]
+        elif c == 2 and near[s] >= 0:
+            b, kd, t = 1, AGENT, near[s]
+        elif c == 3 and named[s] != s:
+            b, kd, t = 2, AGENT, named[s]
+        else:
+            continue
+        r = nxt[b]
+        nxt[b] += 1
+        kind[r] = kd
+        snd[r] = s
+        tgt[r] = t
+        wld[r] = s // n_agents
+        for q in range(d):
+            pay[r, q] = np.float32(comm[s, COMM_HEADER + q])
+        sent[s] += 1
+    return kind, snd, tgt, wld, pay, o_org, o_hops, o_pay
 
 
 @dataclass(frozen=True)
@@ -140,6 +201,11 @@ class CommsEvents:
     sent: np.ndarray
 
 
+_OVERLAY_KIND = np.full(1, OVERLAY, dtype=np.int8)
+_NO_LINKS = (np.zeros(0, dtype=np.int64),) * 3
+_NO_ROWS = np.zeros(0, dtype=np.int64)  # push_rows: delivery j takes payload row j
+
+
 class CommsStack:
     """Bus, overlay and group controller of B worlds, sharing the state's group array.
 
@@ -167,8 +233,42 @@ class CommsStack:
         self.sent = np.zeros(s, dtype=np.int64)
         self._received0 = np.zeros(s, dtype=np.int64)
         self._dropped0 = np.zeros(s, dtype=np.int64)
-        self.pairs: tuple[np.ndarray, np.ndarray, np.ndarray] = (np.zeros(0, np.int64),) * 2 + (np.zeros(0),)
+        self.graph = RangeGraph(s, max(cfg.overlay_range, cfg.nearest_range), cfg.nearest_range)
+        self._no_near = np.full(s, -1, dtype=np.int64)
+        self._inbox_out = np.zeros((s, cfg.inbox_size, cfg.features), dtype=np.float32)
         self.events = CommsEvents(None, None, None, self.sent.copy())
+
+    @property
+    def pairs(self) -> tuple[np.ndarray, ...]:
+        """Neighbour pairs ``(i, j, d)`` of the latest range graph (empty when it came from a grid)."""
+        return self.graph.pairs
+
+    @pairs.setter
+    def pairs(self, pairs: tuple[np.ndarray, ...]) -> None:
+        # The world sets the pairs of the current positions after a reset; "nearest" reads them.
+        self.graph.set_pairs(pairs, np.zeros((0, 3)), np.zeros(0, dtype=bool), np.zeros(0, dtype=np.int64))
+
+    def update_graph(
+        self,
+        neighbours: Grid | tuple[np.ndarray, ...],
+        pos: np.ndarray,
+        online: np.ndarray,
+        world: np.ndarray,
+    ) -> None:
+        """Range graph of the current positions, which "nearest" sends and the overlay use.
+
+        Args:
+            neighbours: The step's neighbour grid (built over the online slots), or the pairs ``(i, j, d)`` of
+                ``neighbor_pairs`` within ``max(overlay_range, nearest_range)``.
+            pos: Positions ``(S, 3)``.
+            online: ``(S,)`` bool.
+            world: ``(S,)`` world ids.
+        """
+        if isinstance(neighbours, Grid):
+            links = self.overlay.frontier_size > 0  # only a flood's next hop reads the links
+            self.graph.set_grid(neighbours, pos, online, world, self.overlay.link_range, links)
+        else:
+            self.graph.set_pairs(neighbours, pos, online, world)
 
     # ------------------------------------------------------------------ lifecycle
     def reset(self, rng: np.random.Generator, step: int) -> None:
@@ -191,45 +291,26 @@ class CommsStack:
         """Turn the acting slots' ``comm`` actions ``(S, 3 + D)`` into bus messages and overlay floods."""
         n, cfg = self.n_agents, self.cfg
         self.sent[:] = 0
-        self._received0 = self.bus.inbox.received.copy()
-        self._dropped0 = self.bus.inbox.dropped.copy()
-        sel = np.minimum(((comm[:, 0] + 1.0) * (len(CHANNELS) / 2.0)).astype(np.int64), len(CHANNELS) - 1)
-        sel[~acting] = 0
-        payload = comm[:, COMM_HEADER:].astype(np.float32)
-        u = (comm + 1.0) * 0.5
-        slots = np.arange(comm.shape[0])
-        # group
-        g = np.flatnonzero((sel == 1) & (group >= 0))
-        if g.size:
-            self.bus.send(GROUP, g, group[g], payload[g], step)
-            self.sent[g] += 1
-        # nearest (from the pairs of the positions the agents act on)
-        m = np.flatnonzero(sel == 2)
-        if m.size:
-            near = self._nearest()
-            m = m[near[m] >= 0]
-            if m.size:
-                self.bus.send(AGENT, m, near[m], payload[m], step)
-                self.sent[m] += 1
-        # named
-        m = np.flatnonzero(sel == 3)
-        if m.size:
-            tgt = (m // n) * n + np.rint(u[m, 1] * (n - 1)).astype(np.int64)
-            keep = tgt != m
-            m, tgt = m[keep], tgt[keep]
-            if m.size:
-                self.bus.send(AGENT, m, tgt, payload[m], step)
-                self.sent[m] += 1
-        # overlay flood
-        m = slots[sel == 4]
-        if m.size:
-            hops = 1 + np.rint(u[m, 2] * (cfg.max_hops - 1)).astype(np.int64)
-            self.overlay.start(m, hops, payload[m], step)
-            self.sent[m] += 1
-
-    def _nearest(self) -> np.ndarray:
-        i, j, d = self.pairs
-        return _nearest_kernel(i, j, d, self.sent.shape[0], float(self.cfg.nearest_range))
+        np.copyto(self._received0, self.bus.inbox.received)
+        np.copyto(self._dropped0, self.bus.inbox.dropped)
+        if comm.dtype == np.float64:
+            sel, named, hops, any_near = _decode(np.ascontiguousarray(comm), acting, n, cfg.max_hops)
+        else:  # the same arithmetic in numpy, in the comm array's own precision
+            sel = np.minimum(((comm[:, 0] + 1.0) * (N_CHANNELS / 2.0)).astype(np.int64), N_CHANNELS - 1)
+            sel[~acting] = 0
+            slots = np.arange(comm.shape[0])
+            named = (slots // n) * n + np.rint((comm[:, 1] + 1.0) * 0.5 * (n - 1)).astype(np.int64)
+            hops = 1 + np.rint((comm[:, 2] + 1.0) * 0.5 * (cfg.max_hops - 1)).astype(np.int64)
+            any_near = bool((sel == 2).any())
+        # nearest from the range graph of the positions the agents act on
+        near = self.graph.nearest() if any_near else self._no_near
+        kind, snd, tgt, wld, pay, o_org, o_hops, o_pay = _comm_rows(
+            sel, group, near, named, hops, np.ascontiguousarray(comm), n, self.sent
+        )
+        if snd.shape[0]:
+            self.bus.enqueue(kind, snd, tgt, wld, pay, step)
+        if o_org.shape[0]:
+            self.overlay.start(o_org, o_hops, o_pay, step)
 
     # ------------------------------------------------------------------ stages 5-7
     def on_collisions(self, step: int, agent: np.ndarray, other_agent: np.ndarray, obj: np.ndarray) -> None:
@@ -254,22 +335,35 @@ class CommsStack:
         online: np.ndarray,
         group: np.ndarray,
         world: np.ndarray,
-        pairs: tuple[np.ndarray, np.ndarray, np.ndarray],
+        pairs: Grid | tuple[np.ndarray, ...],
     ) -> CommsEvents:
-        """Deliver the bus messages due now and advance every overlay flood by one hop (or fully)."""
-        self.pairs = pairs
-        bus_ev = self.bus.deliver(step, pos, online, group)
-        ov = self.overlay.advance(pos, online, world, pairs, step)
-        if len(ov):
-            self.bus.inbox.push(ov.receiver, np.full(len(ov), OVERLAY, np.int8), ov.origin,
-                                np.minimum(ov.hops, 32767).astype(np.int16), ov.created, ov.payload)  # fmt: skip
+        """Deliver the bus messages due now and advance every overlay flood by one hop (or fully).
+
+        ``pairs`` is the step's neighbour grid or its pairs (see ``update_graph``).
+        """
+        self.update_graph(pairs, pos, online, world)
+        bus_ev = self.bus.deliver(step, pos, online, group, push=False)
+        pushes = self.bus.take_pushes()
+        if self.overlay.frontier_size:
+            ov = self.overlay.advance_graph(*self.graph.links(self.overlay.link_range))
+        else:
+            ov = self.overlay.advance_graph(*_NO_LINKS)
+        k = len(ov)
+        if k:
+            pushes.append((ov.receiver, np.broadcast_to(_OVERLAY_KIND, (k,)), ov.origin, ov.hops, ov.created,
+                           ov.payload, _NO_ROWS))  # fmt: skip
+        self.bus.inbox.push_batches(pushes)  # bus deliveries, then the overlay's: one pass over the inboxes
         self.events = CommsEvents(bus_ev, ov, self.groups.take_events(), self.sent.copy())
         return self.events
 
     # ------------------------------------------------------------------ observation
     def observe(self, pos: np.ndarray, step: int) -> tuple[np.ndarray, np.ndarray]:
-        """Inbox features ``(S, M, F)`` and per-step counters ``(S, 2)``: received and dropped / inbox size."""
-        inbox = self.bus.inbox.observe(pos, step)
+        """Inbox features ``(S, M, F)`` and per-step counters ``(S, 2)``: received and dropped / inbox size.
+
+        The inbox features are written into a buffer reused by the next call (copy them to keep them); the
+        counters are a fresh array.
+        """
+        inbox = self.bus.inbox.observe(pos, step, out=self._inbox_out)
         m = float(self.cfg.inbox_size)
         rec = (self.bus.inbox.received - self._received0) / m
         drop = (self.bus.inbox.dropped - self._dropped0) / m

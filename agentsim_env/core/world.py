@@ -15,7 +15,7 @@ import numpy as np
 from agentsim_env.comms.stack import CommsConfig, CommsEvents, CommsStack
 from agentsim_env.core.collisions import CollisionEvents, find_collisions
 from agentsim_env.core.scene import Scene
-from agentsim_env.core.spatial import Grid, GridSpec, build_grid, build_object_grid, neighbor_pairs
+from agentsim_env.core.spatial import Grid, GridSpec, build_grid, build_object_grid
 from agentsim_env.core.state import AgentState
 from agentsim_env.motion import MotionState, integrate
 from agentsim_env.sensors.proximity import ProximityConfig, ProximitySensor, ScanResult
@@ -197,16 +197,10 @@ class World:
         st = self.state
         self.agent_grid = build_grid(self.grid_spec, st.pos, st.world_id, st.online)
         if self.comms is not None:
-            self.comms.pairs = self._comm_pairs()
+            self.comms.update_graph(self.agent_grid, st.pos, st.online, st.world_id)
         if self.config.physics == "pymunk":
             self._physics_backend()  # a reset's new scene: rebuild now rather than inside the next step
         self.scan = self._scan()
-
-    def _comm_pairs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        assert self.comms is not None
-        cfg = self.comms.cfg
-        return neighbor_pairs(self.agent_grid, self.state.pos, self.state.world_id,
-                              max(cfg.overlay_range, cfg.nearest_range))  # fmt: skip
 
     def reset_comms(self, rng: np.random.Generator, world: int | None = None) -> None:
         """Drop in-flight traffic: of every world (``world=None``, with ``rng`` for the channel) or of one."""
@@ -305,7 +299,7 @@ class World:
         if self.comms is not None:
             # 7. comms: bus messages due this step; one overlay hop over the range graph
             comm_events = self.comms.deliver(
-                self.tick, st.pos, st.online, st.group, st.world_id, self._comm_pairs()
+                self.tick, st.pos, st.online, st.group, st.world_id, self.agent_grid
             )
         # 8. sensors: proximity scan of every online slot
         self.scan = self._scan()

@@ -1,0 +1,225 @@
+"""The overlay's flooding kernel (numba): one call spreads every flood of the frontier by one hop (or fully).
+
+Reader sets are lists, not bitsets: flood ``f`` has read by ``pool[rd_start[f]:rd_start[f] + rd_len[f]]``.
+To spread a flood, the kernel stamps its readers into a per-slot ``stamp`` array with a fresh token, so
+"already read" is one look-up in an array of S int32 (cache resident at any S), instead of a bit in a row of
+``S / 64`` words per flood (a cold row per flood at large S). The lists are rewritten into a second pool each
+call (double buffering), which drops the lists of floods that ended.
+
+Floods are processed one at a time, every hop of a flood in turn; the outputs are then put in the order the
+hop-by-hop formulation gives them (hop round first, then the frontier's flood order), so deliveries, ended
+floods and the next frontier are the same as spreading all floods hop by hop.
+"""
+
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+
+_TOKEN_MAX = np.iinfo(np.int32).max
+
+
+@nb.njit(cache=True)
+def _room(a, need, keep):  # type: ignore[no-untyped-def]
+    # ``a`` with room for ``need`` entries (doubling), its first ``keep`` entries kept.
+    if need <= a.shape[0]:
+        return a
+    b = np.empty(max(need, 2 * a.shape[0], 64), dtype=a.dtype)
+    b[:keep] = a[:keep]
+    return b
+
+
+@nb.njit(cache=True)
+def _hop(
+    start, end, indices, src, q_lo, q_hi, f, h, stamp, token, out_r, out_f, out_h, nd, pool, npool, keep
+):  # type: ignore[no-untyped-def]  # noqa: E501
+    # One hop of flood f from the frontier slots src[q_lo:q_hi]. Branch free: every neighbour is written at the
+    # end of the output and kept only if it had not read the flood (about 4 in 5 have at hop 2, so a branch
+    # would mispredict often). Its own function, so the buffers are not rebound inside the loop.
+    first = nd
+    n_edges = 0
+    for q in range(q_lo, q_hi):
+        u = src[q]
+        n_edges += end[u] - start[u]
+        for p in range(start[u], end[u]):
+            v = indices[p]
+            fresh = stamp[v] != token
+            stamp[v] = token
+            out_r[nd] = v
+            nd += fresh
+    for k in range(first, nd):
+        out_f[k] = f
+        out_h[k] = h
+    if keep:  # the flood goes on: its new readers join its reader list
+        for k in range(first, nd):
+            pool[npool] = out_r[k]
+            npool += 1
+    return nd, npool, n_edges - (nd - first)
+
+
+@nb.njit(cache=True)
+def spread(start, end, indices, hops, limit, active, rd_start, rd_len, pool, cur_f, cur_n, full, stamp, token,  # type: ignore[no-untyped-def]  # noqa: E501
+           new_pool, out_r, out_f, out_h):  # fmt: skip
+    """Spread the floods of the frontier ``(cur_f, cur_n)`` (grouped by flood) over the links.
+
+    Returns:
+        ``(nxt_f, nxt_n, nd, fin, dups, token, n_pool, new_pool, out_r, out_f, out_h)``: the next frontier,
+        the number of deliveries (the first ``nd`` entries of ``out_*``), the floods that ended (in order),
+        duplicate copies, the last token used, the live length of ``new_pool`` (which now holds every
+        active flood's readers; ``rd_start`` / ``rd_len`` point into it), and the (possibly grown) buffers.
+    """
+    ncur = cur_f.shape[0]
+    cap = active.shape[0]
+    seen = np.zeros(cap, dtype=np.bool_)
+    fin = np.empty(max(1, ncur), dtype=np.int64)
+    fin_round = np.empty(max(1, ncur), dtype=np.int64)
+    # (round, first delivery, count, relays) of every hop of every flood: the order of full mode and the
+    # next frontier of one-hop mode are put together from them at the end
+    seg = np.empty((max(1, ncur), 4), dtype=np.int64)
+    n_seg = 0
+    max_round = 0
+    nd = 0
+    nfin = 0
+    dups = 0
+    npool = 0
+    # room for the first hop of every flood (new readers <= edges leaving the frontier) and every reader list
+    # (enough in one-hop mode; full mode checks again before each flood, whose later hops take room too)
+    bound = 0
+    for q in range(ncur):
+        bound += end[cur_n[q]] - start[cur_n[q]]
+    live = 0
+    for f in range(cap):
+        if active[f]:
+            live += rd_len[f]
+    if bound > out_r.shape[0]:
+        out_r, out_f, out_h = _room(out_r, bound, 0), _room(out_f, bound, 0), _room(out_h, bound, 0)
+    if live + bound > new_pool.shape[0]:
+        new_pool = _room(new_pool, live + bound, 0)
+    a = 0
+    while a < ncur:
+        f = cur_f[a]
+        b = a
+        while b < ncur and cur_f[b] == f:
+            b += 1
+        seen[f] = True
+        token += 1
+        if token == _TOKEN_MAX:  # start the tokens over rather than overflow
+            stamp[:] = 0
+            token = 1
+        tok = np.int32(token)
+        if full:  # earlier floods' later hops may have used the room reserved above: check this one's
+            b0 = 0
+            for q in range(a, b):
+                b0 += end[cur_n[q]] - start[cur_n[q]]
+            if nd + b0 > out_r.shape[0]:
+                out_r, out_f, out_h = (
+                    _room(out_r, nd + b0, nd),
+                    _room(out_f, nd + b0, nd),
+                    _room(out_h, nd + b0, nd),
+                )
+            if npool + rd_len[f] + b0 + live > new_pool.shape[0]:
+                new_pool = _room(new_pool, npool + rd_len[f] + b0 + live, npool)
+        s0 = rd_start[f]
+        p0 = npool
+        for k in range(rd_len[f]):
+            x = pool[s0 + k]
+            new_pool[npool] = x
+            npool += 1
+            stamp[x] = tok
+        rnd = 0
+        lo = hi = 0
+        while True:
+            h = hops[f] + 1
+            first = nd
+            if rnd == 0:
+                nd, npool, d = _hop(start, end, indices, cur_n, a, b, f, h, stamp, tok, out_r, out_f, out_h, nd,
+                                    new_pool, npool, h < limit[f])  # fmt: skip
+            else:
+                nd, npool, d = _hop(start, end, indices, out_r, lo, hi, f, h, stamp, tok, out_r, out_f, out_h, nd,
+                                    new_pool, npool, h < limit[f])  # fmt: skip
+            dups += d
+            hops[f] = h
+            if n_seg == seg.shape[0]:
+                grown = np.empty((2 * n_seg, 4), dtype=np.int64)
+                grown[:n_seg] = seg
+                seg = grown
+            ends = nd == first or h >= limit[f]
+            seg[n_seg, 0], seg[n_seg, 1], seg[n_seg, 2], seg[n_seg, 3] = rnd, first, nd - first, not ends
+            n_seg += 1
+            max_round = max(max_round, rnd)
+            if ends:
+                # the flood ends here: its new readers keep the message but do not relay it
+                fin[nfin] = f
+                fin_round[nfin] = rnd
+                nfin += 1
+                npool = p0  # its reader list is no longer needed
+                break
+            if not full:
+                break
+            # full mode: room for the next hop (new readers <= edges leaving this hop's readers)
+            lo, hi = first, nd
+            more = 0
+            for q in range(lo, hi):
+                more += end[out_r[q]] - start[out_r[q]]
+            if nd + more > out_r.shape[0]:
+                out_r, out_f, out_h = (
+                    _room(out_r, nd + more, nd),
+                    _room(out_f, nd + more, nd),
+                    _room(out_h, nd + more, nd),
+                )
+            if npool + more + live > new_pool.shape[0]:
+                new_pool = _room(new_pool, npool + more + live, npool)
+            rnd += 1
+        rd_start[f] = p0
+        rd_len[f] = npool - p0
+        a = b
+    rest = 0
+    for f in range(cap):
+        if active[f] and not seen[f]:
+            rest += rd_len[f]
+    if npool + rest > new_pool.shape[0]:
+        new_pool = _room(new_pool, npool + rest, npool)
+    for f in range(cap):  # active floods without a frontier entry keep their readers
+        if active[f] and not seen[f]:
+            s0 = rd_start[f]
+            rd_start[f] = npool
+            for k in range(rd_len[f]):
+                new_pool[npool] = pool[s0 + k]
+                npool += 1
+    # one-hop mode: the new readers of the floods that go on relay at the next call
+    nn = 0
+    if not full:
+        for k in range(n_seg):
+            nn += seg[k, 2] * seg[k, 3]
+    nxt_f = np.empty(nn, dtype=np.int64)
+    nxt_n = np.empty(nn, dtype=np.int64)
+    if not full:
+        nn = 0
+        for k in range(n_seg):
+            if seg[k, 3]:
+                for q in range(seg[k, 1], seg[k, 1] + seg[k, 2]):
+                    nxt_f[nn] = out_f[q]
+                    nxt_n[nn] = out_r[q]
+                    nn += 1
+    if max_round > 0:  # full mode: hop-major order (a stable counting sort by round)
+        cnt = np.zeros(max_round + 2, dtype=np.int64)
+        for k in range(n_seg):
+            cnt[seg[k, 0] + 1] += seg[k, 2]
+        for r in range(max_round + 1):
+            cnt[r + 1] += cnt[r]
+        r2 = np.empty(nd, dtype=out_r.dtype)
+        f2 = np.empty(nd, dtype=out_f.dtype)
+        h2 = np.empty(nd, dtype=out_h.dtype)
+        for k in range(n_seg):
+            r = seg[k, 0]
+            for q in range(seg[k, 1], seg[k, 1] + seg[k, 2]):
+                r2[cnt[r]] = out_r[q]
+                f2[cnt[r]] = out_f[q]
+                h2[cnt[r]] = out_h[q]
+                cnt[r] += 1
+        out_r[:nd] = r2
+        out_f[:nd] = f2
+        out_h[:nd] = h2
+        order = np.argsort(fin_round[:nfin], kind="mergesort")
+        fin[:nfin] = fin[:nfin][order]
+    return nxt_f, nxt_n, nd, fin[:nfin].copy(), dups, token, npool, new_pool, out_r, out_f, out_h

@@ -1,0 +1,283 @@
+"""The range graph of a step: overlay links (an adjacency by slot) and every slot's nearest neighbour.
+
+Both come from the slots indexed in the step's neighbour grid (the online ones) within ``max_dist`` of each
+other (3D distance, same world):
+
+- **links**: the overlay's edges, ``dist <= min(range_i, range_j)`` between two online slots, stored as rows
+  ``indices[start[s]:end[s]]`` per slot;
+- **nearest**: the closest other slot within ``nearest_range`` (ties: the lower slot), or -1.
+
+Two sources give identical results. ``set_pairs`` takes the pairs ``(i, j, d)`` of
+``core.spatial.neighbor_pairs`` (``i < j``, each once) and builds the rows by a counting sort (lazily: only what
+is asked for). ``set_grid`` takes the grid itself and scans each slot's window once, with the window's
+coordinates gathered in grid order so candidates are read sequentially; it needs no pair list and computes
+links and nearest in the same pass. Its rows list a slot's neighbours in the order the pairs path produces
+(the pairs' order, in which a slot's row holds first the lower slots found before it in grid order, then its
+own higher neighbours, then the lower slots found after it). That order matters: the overlay reads neighbours
+in row order, which orders a step's deliveries and so decides which messages an inbox of M rows keeps.
+"""
+
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+
+from agentsim_env.core.spatial import Grid, _cell_of
+
+
+@nb.njit(cache=True)
+def _nearest_from_pairs(i, j, d, n_slots, max_d):  # type: ignore[no-untyped-def]
+    # Nearest neighbour of every slot over the pairs (ties: the lower slot); -1 when none within max_d.
+    best = np.full(n_slots, np.inf)
+    out = np.full(n_slots, -1, dtype=np.int64)
+    for k in range(i.shape[0]):
+        if d[k] > max_d:
+            continue
+        a, b = i[k], j[k]
+        if d[k] < best[a] or (d[k] == best[a] and b < out[a]):
+            best[a], out[a] = d[k], b
+        if d[k] < best[b] or (d[k] == best[b] and a < out[b]):
+            best[b], out[b] = d[k], a
+    return out
+
+
+@nb.njit(cache=True)
+def _links_from_pairs(pi, pj, pos, online, world, rng, n):  # type: ignore[no-untyped-def]
+    # Counting sort of the kept pairs by endpoint, both directions: O(S + E).
+    e = pi.shape[0]
+    keep = np.zeros(e, dtype=np.bool_)
+    indptr = np.zeros(n + 1, dtype=np.int64)
+    for q in range(e):
+        i = pi[q]
+        j = pj[q]
+        if i == j or not online[i] or not online[j] or world[i] != world[j]:
+            continue
+        r = min(rng[i], rng[j])
+        dx = pos[j, 0] - pos[i, 0]
+        dy = pos[j, 1] - pos[i, 1]
+        dz = pos[j, 2] - pos[i, 2]
+        if dx * dx + dy * dy + dz * dz <= r * r:
+            keep[q] = True
+            indptr[i + 1] += 1
+            indptr[j + 1] += 1
+    for s in range(n):
+        indptr[s + 1] += indptr[s]
+    fill = indptr[:-1].copy()
+    indices = np.empty(indptr[n], dtype=np.int64)
+    for q in range(e):
+        if keep[q]:
+            i = pi[q]
+            j = pj[q]
+            indices[fill[i]] = j
+            fill[i] += 1
+            indices[fill[j]] = i
+            fill[j] += 1
+    return indptr, indices
+
+
+@nb.njit(cache=True)
+def _grown(a, need, keep):  # type: ignore[no-untyped-def]
+    b = np.empty(max(need, 2 * a.shape[0], 64), dtype=a.dtype)
+    b[:keep] = a[:keep]
+    return b
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _graph_kernel(pos, online, world, cell_start, items, ox, oy, cell, nx, ny, max_dist, rng, near_r, links,  # type: ignore[no-untyped-def]  # noqa: E501
+                  start, end, near, indices, cand, sp, ok_link):  # fmt: skip
+    # One window scan per indexed slot u (every pair is seen from both ends), in two phases. Phase 1 keeps
+    # the grid positions q of the candidates within max_dist, branch free (whether a candidate is in range is
+    # data, not something to predict) with one store each. Phase 2 walks those few: nearest, then the links in
+    # the order of the pairs path: lower slots found before u in grid order (A), every higher slot (B), then
+    # lower slots found after u (C), each in grid order.
+    m = items.shape[0]
+    # coordinates, range and link eligibility in grid order: a window's candidates are read sequentially
+    for q in range(m):
+        s = items[q]
+        sp[q, 0], sp[q, 1], sp[q, 2], sp[q, 3] = pos[s, 0], pos[s, 1], pos[s, 2], rng[s]
+        ok_link[q] = links and online[s]
+    start[:] = 0
+    end[:] = 0
+    near[:] = -1
+    r2 = max_dist * max_dist
+    # sqrt is monotone and correctly rounded: d2 above (1 + 1e-9) times a bound cannot round to within it
+    near_hi = near_r * near_r * (1.0 + 1e-9)
+    n = 0
+    for idx in range(m):
+        u = items[idx]
+        xu, yu, zu, ru = sp[idx, 0], sp[idx, 1], sp[idx, 2], sp[idx, 3]
+        x0, y0 = _cell_of(xu - max_dist, yu - max_dist, ox, oy, cell, nx, ny)
+        x1, y1 = _cell_of(xu + max_dist, yu + max_dist, ox, oy, cell, nx, ny)
+        base0 = world[u] * nx
+        n_cand = 0
+        for a in range(x0, x1 + 1):
+            base = (base0 + a) * ny
+            n_cand += cell_start[base + y1 + 1] - cell_start[base + y0]
+        if n_cand > cand.shape[0]:
+            cand = _grown(cand, n_cand, 0)
+        k = 0
+        for a in range(x0, x1 + 1):
+            base = (base0 + a) * ny
+            for q in range(cell_start[base + y0], cell_start[base + y1 + 1]):
+                dx = sp[q, 0] - xu
+                dy = sp[q, 1] - yu
+                dz = sp[q, 2] - zu
+                cand[k] = q
+                k += dx * dx + dy * dy + dz * dz <= r2
+        # phase 2 over the k candidates in range (u itself among them, at q == idx); A goes straight to the
+        # row, B and C to cand[k:2k] and cand[2k:3k], branch free as well
+        if n + k > indices.shape[0]:
+            indices = _grown(indices, n + k, n)
+        if 3 * k > cand.shape[0]:
+            cand = _grown(cand, 3 * k, k)
+        lu = ok_link[idx]
+        m2 = np.inf  # smallest squared distance to another slot
+        row0 = n
+        nb_ = k
+        nc = 2 * k
+        for c in range(k):
+            q = cand[c]
+            v = items[q]
+            dx = sp[q, 0] - xu
+            dy = sp[q, 1] - yu
+            dz = sp[q, 2] - zu
+            d2 = dx * dx + dy * dy + dz * dz
+            other = v != u
+            m2 = min(m2, d2 if other else np.inf)
+            r = min(ru, sp[q, 3])
+            link = other & lu & ok_link[q] & (d2 <= r * r)
+            higher = v > u
+            indices[n] = v
+            cand[nb_] = v
+            cand[nc] = v
+            n += link & ~higher & (q < idx)
+            nb_ += link & higher
+            nc += link & ~higher & (q > idx)
+        # nearest: the pairs path's rule (smallest sqrt distance, then lowest slot) among the few candidates
+        # whose d2 is within 1e-9 of the minimum; sqrt is monotone and correctly rounded, so no other candidate
+        # can round to the same or a smaller distance
+        bslot = -1
+        if m2 <= near_hi:
+            lim = m2 * (1.0 + 1e-9)
+            best = np.inf
+            for c in range(k):
+                q = cand[c]
+                v = items[q]
+                dx = sp[q, 0] - xu
+                dy = sp[q, 1] - yu
+                dz = sp[q, 2] - zu
+                d2 = dx * dx + dy * dy + dz * dz
+                if d2 <= lim and v != u:
+                    d = np.sqrt(d2)
+                    if d <= near_r and (d < best or (d == best and v < bslot)):
+                        best = d
+                        bslot = v
+        for c in range(k, nb_):
+            indices[n] = cand[c]
+            n += 1
+        for c in range(2 * k, nc):
+            indices[n] = cand[c]
+            n += 1
+        start[u] = row0
+        near[u] = bslot
+        end[u] = n
+    return indices, cand
+
+
+class RangeGraph:
+    """Links and nearest neighbours of the current positions (see the module docstring).
+
+    Args:
+        n_slots: Slots S.
+        max_dist: Pair radius in metres: nothing farther is a link or a nearest neighbour.
+        nearest_range: Largest distance of a nearest neighbour in metres (<= ``max_dist`` to matter).
+    """
+
+    __slots__ = ("n_slots", "max_dist", "nearest_range", "_grid", "_pairs", "_pos", "_online", "_world",
+                 "_near", "_near_ok", "_links", "_links_ok", "_buf")  # fmt: skip
+
+    def __init__(self, n_slots: int, max_dist: float, nearest_range: float) -> None:
+        self.n_slots = int(n_slots)
+        self.max_dist, self.nearest_range = float(max_dist), float(nearest_range)
+        empty = np.zeros(0, dtype=np.int64)
+        self._grid: Grid | None = None
+        self._pairs: tuple[np.ndarray, ...] = (empty, empty, np.zeros(0))
+        self._pos, self._online, self._world = np.zeros((0, 3)), np.zeros(0, dtype=bool), empty
+        self._near = np.full(self.n_slots, -1, dtype=np.int64)
+        self._links = (np.zeros(self.n_slots, dtype=np.int64), np.zeros(self.n_slots, dtype=np.int64), empty)
+        # grid scan buffers, reused: row starts, row ends, nearest, links, two row scratch lists, and the
+        # grid-ordered copies of (x, y, z, range) and of the link eligibility
+        s = self.n_slots
+        self._buf = (np.zeros(s, dtype=np.int64), np.zeros(s, dtype=np.int64), np.full(s, -1, dtype=np.int64),
+                     empty, empty, np.zeros((s, 4)), np.zeros(s, dtype=bool))  # fmt: skip
+        self._near_ok = self._links_ok = False
+
+    @property
+    def pairs(self) -> tuple[np.ndarray, ...]:
+        """The pairs given to the latest ``set_pairs`` (empty after ``set_grid``)."""
+        return self._pairs
+
+    def set_pairs(
+        self, pairs: tuple[np.ndarray, ...], pos: np.ndarray, online: np.ndarray, world: np.ndarray
+    ) -> None:
+        """Use the pairs ``(i, j, d)`` of ``neighbor_pairs(..., max_dist)``; links and nearest follow lazily."""
+        empty = np.zeros(0, dtype=np.int64)
+        self._grid = None
+        self._pairs = tuple(pairs) if len(pairs) == 3 else (empty, empty, np.zeros(0))
+        self._pos, self._online, self._world = pos, online, world
+        self._near_ok = self._links_ok = False
+
+    def set_grid(
+        self, grid: Grid, pos: np.ndarray, online: np.ndarray, world: np.ndarray, link_range: np.ndarray,
+        links: bool,
+    ) -> None:  # fmt: skip
+        """Scan the step's grid (built from ``pos`` over the online slots): nearest now, links if ``links``."""
+        empty = np.zeros(0, dtype=np.int64)
+        self._grid, self._pairs = grid, (empty, empty, np.zeros(0))
+        self._pos, self._online, self._world = pos, online, world
+        self._scan(link_range, links)
+
+    def _scan(self, link_range: np.ndarray, links: bool) -> None:
+        g = self._grid
+        assert g is not None
+        sp = g.spec
+        start, end, near, indices, cand, sp4, ok_link = self._buf
+        indices, cand = _graph_kernel(
+            np.ascontiguousarray(self._pos, dtype=np.float64), np.ascontiguousarray(self._online, dtype=np.bool_),
+            np.ascontiguousarray(self._world, dtype=np.int64), g.cell_start, g.items, sp.origin_x, sp.origin_y,
+            sp.cell, sp.nx, sp.ny, self.max_dist, link_range, self.nearest_range, links, start, end, near, indices,
+            cand, sp4, ok_link,
+        )  # fmt: skip
+        self._buf = (start, end, near, indices, cand, sp4, ok_link)
+        self._near, self._near_ok = near, True
+        if links:
+            self._links, self._links_ok = (start, end, indices), True
+
+    def nearest(self) -> np.ndarray:
+        """``(S,)`` int64: each slot's nearest neighbour within ``nearest_range``, or -1 (an internal buffer)."""
+        if not self._near_ok:
+            i, j, d = self._pairs
+            self._near = _nearest_from_pairs(i, j, d, self.n_slots, self.nearest_range)
+            self._near_ok = True
+        return self._near
+
+    def links(self, link_range: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(start, end, indices)``: slot ``s`` links to ``indices[start[s]:end[s]]`` (internal buffers).
+
+        Args:
+            link_range: ``(S,)`` per-slot transmission range (a link needs ``dist <= min`` of both ends').
+        """
+        if not self._links_ok:
+            if self._grid is not None:
+                self._scan(link_range, True)
+            else:
+                if self._pos.shape[0] != self.n_slots:
+                    raise ValueError("links need the positions of the pairs: pass them with set_pairs")
+                indptr, indices = _links_from_pairs(
+                    np.ascontiguousarray(self._pairs[0], dtype=np.int64),
+                    np.ascontiguousarray(self._pairs[1], dtype=np.int64), np.ascontiguousarray(self._pos),
+                    np.ascontiguousarray(self._online, dtype=np.bool_),
+                    np.ascontiguousarray(self._world, dtype=np.int64), link_range, self.n_slots,
+                )  # fmt: skip
+                self._links, self._links_ok = (indptr[:-1], indptr[1:], indices), True
+        return self._links

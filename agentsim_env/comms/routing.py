@@ -1,0 +1,179 @@
+"""Delivery kernels of the message bus: group membership, expansion of a batch into (message, receiver) pairs,
+the channel filters and the event columns, each a linear pass (numba).
+
+``comms.bus`` owns the rules (its module docstring); this module only computes them on arrays:
+
+- ``group_members``: the online members of every (world, group) addressed, slot order within a group, as
+  runs of one list (a counting sort when the key space is small, a stable argsort otherwise).
+- ``expand``: one pair per unicast; one pair per online member of the target group for a GROUP message,
+  the sender excluded; in queue order, then slot order.
+- ``route``: the drop reason of each pair (offline receiver, range from the sender's current position, loss
+  from pre-drawn uniforms), the drop counters, and the delivered / dropped event columns (fresh arrays).
+"""
+
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+
+from agentsim_env.comms.messages import DROP_LOSS, DROP_OFFLINE, DROP_RANGE, GROUP, HEARTBEAT, REASON_NONE
+
+
+@nb.njit(cache=True)
+def _members_counting(online, group, world_of, n_g, n_keys):  # type: ignore[no-untyped-def]
+    # Counting sort of the online members by key world * n_g + group; slots ascending within a key.
+    s_n = online.shape[0]
+    offsets = np.zeros(n_keys + 1, dtype=np.int64)
+    for s in range(s_n):
+        if online[s] and group[s] >= 0:
+            offsets[world_of[s] * n_g + group[s] + 1] += 1
+    for k in range(n_keys):
+        offsets[k + 1] += offsets[k]
+    fill = offsets[:-1].copy()
+    slots = np.empty(offsets[n_keys], dtype=np.int64)
+    for s in range(s_n):
+        if online[s] and group[s] >= 0:
+            k = world_of[s] * n_g + group[s]
+            slots[fill[k]] = s
+            fill[k] += 1
+    return offsets, slots
+
+
+def group_members(
+    online: np.ndarray, group: np.ndarray, world_of: np.ndarray, n_worlds: int, n_g: int, keys: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Online members of the groups that messages address, as runs of a slot list.
+
+    Args:
+        online: ``(S,)`` bool.
+        group: ``(S,)`` group ids (-1 = none), all ``< n_g``.
+        world_of: ``(S,)`` int64 world of each slot.
+        n_worlds: Worlds B.
+        n_g: Group-id bound (larger than every group id in use and addressed).
+        keys: ``(q,)`` int64 ``world * n_g + group`` of each message (any value for non-GROUP rows).
+
+    Returns:
+        ``(kid, offsets, slots)``: message ``i``'s group members are ``slots[offsets[kid[i]]:offsets[kid[i] + 1]]``,
+        ascending (none when ``kid[i]`` is -1).
+    """
+    n_keys = n_worlds * n_g
+    if n_keys <= 4 * online.shape[0] + 1024:  # a dense key space: one counting sort, O(S + keys)
+        offsets, slots = _members_counting(online, group, world_of, n_g, n_keys)
+        return np.where((keys >= 0) & (keys < n_keys), keys, -1), offsets, slots
+    ms = np.flatnonzero(online & (group >= 0))
+    mk = world_of[ms] * n_g + group[ms]
+    order = np.argsort(mk, kind="stable")
+    uk, first = np.unique(mk[order], return_index=True)
+    at = np.minimum(np.searchsorted(uk, keys), max(uk.size - 1, 0))
+    found = (uk.size > 0) & (uk[at] == keys) if uk.size else np.zeros(keys.shape, dtype=bool)
+    return np.where(found, at, -1), np.append(first, mk.size), ms[order]
+
+
+@nb.njit(cache=True)
+def expand(kind, snd, tgt, kid, offsets, slots):  # type: ignore[no-untyped-def]
+    """(message row, receiver) pairs of a batch: GROUP messages fan out to their members, sender excluded."""
+    q = kind.shape[0]
+    total = 0
+    for k in range(q):
+        if kind[k] == GROUP:
+            if kid[k] >= 0:
+                for p in range(offsets[kid[k]], offsets[kid[k] + 1]):
+                    total += slots[p] != snd[k]
+        else:
+            total += 1
+    rep = np.empty(total, dtype=np.int64)
+    recv = np.empty(total, dtype=np.int64)
+    n = 0
+    for k in range(q):
+        if kind[k] == GROUP:
+            if kid[k] >= 0:
+                for p in range(offsets[kid[k]], offsets[kid[k] + 1]):
+                    if slots[p] != snd[k]:
+                        rep[n] = k
+                        recv[n] = slots[p]
+                        n += 1
+        else:
+            rep[n] = k
+            recv[n] = tgt[k]
+            n += 1
+    return rep, recv
+
+
+@nb.njit(cache=True)
+def route(rep, recv, msg, kind, snd, tgt, created, online, pos, r_max2, u, loss, dropped):  # type: ignore[no-untyped-def]
+    """Filter the pairs and build the event columns.
+
+    Drop reasons in priority order: receiver offline, beyond ``r_max2`` (squared metres, < 0 = no limit; agent
+    senders only), lost (``u[p] < loss``; ``u`` is empty when ``loss`` is 0). A receiver ``-1`` is the
+    controller (a heartbeat answer): never offline or out of range. Each drop adds one to ``dropped`` of the
+    receiver (of the sender for an answer to the controller).
+
+    Returns:
+        Delivered columns ``(msg, kind, sender, target, receiver, created, row)`` (``row``: the message's batch
+        row), dropped columns ``(msg, kind, sender, target, receiver, created, reason)``, and the number of
+        delivered heartbeats to slots and of answers that reached the controller.
+    """
+    m = rep.shape[0]
+    reason = np.zeros(m, dtype=np.int8)
+    n_ok = 0
+    for p in range(m):
+        r = recv[p]
+        s = snd[rep[p]]
+        why = REASON_NONE
+        if r >= 0:
+            if not online[r]:
+                why = DROP_OFFLINE
+            elif r_max2 >= 0.0 and s >= 0:
+                d0 = pos[s, 0] - pos[r, 0]
+                d1 = pos[s, 1] - pos[r, 1]
+                d2 = pos[s, 2] - pos[r, 2]
+                if (d0 * d0 + d2 * d2) + d1 * d1 > r_max2:  # numpy's einsum association, bit for bit
+                    why = DROP_RANGE
+        if why == REASON_NONE and loss > 0.0 and u[p] < loss:
+            why = DROP_LOSS
+        reason[p] = why
+        if why == REASON_NONE:
+            n_ok += 1
+        else:
+            c = r if r >= 0 else s
+            if c >= 0:
+                dropped[c] += 1
+    n_dr = m - n_ok
+    d_msg, d_kind = np.empty(n_ok, dtype=np.int64), np.empty(n_ok, dtype=np.int8)
+    d_snd, d_tgt = np.empty(n_ok, dtype=np.int64), np.empty(n_ok, dtype=np.int64)
+    d_rcv, d_cre, d_row = (
+        np.empty(n_ok, dtype=np.int64),
+        np.empty(n_ok, dtype=np.int64),
+        np.empty(n_ok, dtype=np.int64),
+    )
+    x_msg, x_kind = np.empty(n_dr, dtype=np.int64), np.empty(n_dr, dtype=np.int8)
+    x_snd, x_tgt = np.empty(n_dr, dtype=np.int64), np.empty(n_dr, dtype=np.int64)
+    x_rcv, x_cre, x_why = (
+        np.empty(n_dr, dtype=np.int64),
+        np.empty(n_dr, dtype=np.int64),
+        np.empty(n_dr, dtype=np.int8),
+    )
+    a = 0
+    b = 0
+    n_hb = 0
+    n_ans = 0
+    for p in range(m):
+        k = rep[p]
+        if reason[p] == REASON_NONE:
+            d_msg[a], d_kind[a], d_snd[a], d_tgt[a] = msg[k], kind[k], snd[k], tgt[k]
+            d_rcv[a], d_cre[a], d_row[a] = recv[p], created[k], k
+            if recv[p] < 0:
+                n_ans += 1
+            elif kind[k] == HEARTBEAT:
+                n_hb += 1
+            a += 1
+        else:
+            x_msg[b], x_kind[b], x_snd[b], x_tgt[b] = msg[k], kind[k], snd[k], tgt[k]
+            x_rcv[b], x_cre[b], x_why[b] = recv[p], created[k], reason[p]
+            b += 1
+    return (
+        (d_msg, d_kind, d_snd, d_tgt, d_rcv, d_cre, d_row),
+        (x_msg, x_kind, x_snd, x_tgt, x_rcv, x_cre, x_why),
+        n_hb,
+        n_ans,
+    )
