@@ -282,7 +282,7 @@ class MessageBus:
         s = self.n_worlds * self.n_agents
         self.inbox = Inbox(s, inbox_size, payload_dim, age_horizon=age_horizon, hop_horizon=hop_horizon,
                            pos_scale=pos_scale)  # fmt: skip
-        self.group = None
+        self.group: np.ndarray | None = None
         if group is not None:
             self.bind_groups(group)
         self._world_of = np.arange(s, dtype=np.int64) // self.n_agents
@@ -579,7 +579,8 @@ class MessageBus:
         ok, dr, n_hb, n_ans = route(rep, recv, b["msg"], kind, snd, tgt, b["created"], online, pos,
                                     -1.0 if r_max is None else r_max * r_max, u, loss, self.inbox.dropped)  # fmt: skip
         if dr[0].shape[0]:
-            self._drop_log.append(MessageLog(*dr[:6], np.full(dr[0].shape[0], step, dtype=np.int64), dr[6]))
+            when = np.full(dr[0].shape[0], step, dtype=np.int64)
+            self._drop_log.append(MessageLog(dr[0], dr[1], dr[2], dr[3], dr[4], dr[5], when, dr[6]))
         d_msg, d_kind, d_snd, d_tgt, d_rcv, d_cre, d_row = ok
         n_ok = d_msg.shape[0]
         if n_ok > n_ans:  # rows with receiver -1 (answers to the controller) are skipped by the push
