@@ -34,9 +34,8 @@ from agentsim_env.sensors.proximity import (  # noqa: E402
     ProximityConfig,
     ProximitySensor,
     ScanResult,
-    _ref_t,
-    scan_reference,
 )
+from agentsim_env.sensors.proximity_reference import _ref_t, scan_reference  # noqa: E402
 
 RANGE, RADIUS, CELL = 10.0, 0.5, 5.0
 

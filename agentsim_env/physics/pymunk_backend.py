@@ -30,15 +30,23 @@ for what pymunk state that drops).
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass
 from functools import cache
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from numba import njit
 
-from ..core.scene import BOX, CYLINDER, SPHERE
+from ..core.scene import BOX, SPHERE
+from ._pymunk_arrays import (
+    _NO_CONTACTS,
+    PhysicsContacts,
+    _check_backend_args,
+    _check_obstacles,
+    _check_step_inputs,
+    _int_array,
+    _pack,
+    _unpack,
+)
+from ._pymunk_fastpath import cffi_shape_getter, shape_reader
 
 if TYPE_CHECKING:
     import pymunk
@@ -69,168 +77,8 @@ def _import_pymunk() -> Any:
 
 @cache
 def _cffi_shape_getter() -> tuple[Any, Any] | None:
-    """``(ffi, lib)`` of pymunk's C layer if reading an arbiter's shapes through it works, else None.
-
-    ``Arbiter.shapes`` allocates two C arrays and resolves two Python handles per call (about 1 us, most of
-    the filter callback); reading the two ``cpShape *`` into preallocated arrays and mapping them to slots by
-    pointer costs about a third of that. It relies on pymunk internals (``pymunk._chipmunk_cffi``,
-    ``Arbiter._arbiter``, ``Shape._shape``), so a tiny space checks it once per process against the public
-    API; any difference falls back to ``Arbiter.shapes``.
-    """
-    pm = _import_pymunk()
-    try:
-        from pymunk._chipmunk_cffi import ffi, lib
-
-        pa, pb = ffi.new("cpShape *[1]"), ffi.new("cpShape *[1]")
-        space = pm.Space()
-        bodies = [pm.Body(1.0, float("inf")) for _ in range(2)]
-        bodies[1].position = (0.5, 0.0)
-        shapes = [pm.Circle(b, 0.5) for b in bodies]
-        shapes[0].collision_type, shapes[1].collision_type = 7, 8
-        key = {shapes[0]._shape: shapes[0], shapes[1]._shape: shapes[1]}
-        seen: list[bool] = []
-
-        def check(arbiter: pymunk.Arbiter, space: pymunk.Space, data: Any) -> None:
-            lib.cpArbiterGetShapes(arbiter._arbiter, pa, pb)
-            seen.append((key[pa[0]], key[pb[0]]) == tuple(arbiter.shapes) == (shapes[1], shapes[0]))
-
-        space.add(*bodies, *shapes)
-        space.on_collision(8, 7, pre_solve=check)  # handler order (8, 7): the shapes come back swapped
-        space.step(0.01)
-        return (ffi, lib) if seen == [True] else None
-    except Exception:  # any change in those internals means: use the public API
-        return None
-
-
-def _shape_reader() -> tuple[Callable[[Any], None], Any, Any, Callable[[Any], Any]]:
-    """``(read, pa, pb, key)``: ``read(arbiter)`` puts the keys of its two shapes in ``pa[0]`` and ``pb[0]``;
-    ``key(shape)`` is the key of a shape (its C pointer on the fast path, the Shape itself otherwise)."""
-    fast = _cffi_shape_getter()
-    if fast is None:
-        pa: Any = [None]
-        pb: Any = [None]
-
-        def read_public(arbiter: Any) -> None:
-            pa[0], pb[0] = arbiter.shapes
-
-        return read_public, pa, pb, lambda shape: shape
-    ffi, lib = fast
-    get = lib.cpArbiterGetShapes
-    pa, pb = ffi.new("cpShape *[1]"), ffi.new("cpShape *[1]")
-    return (lambda arbiter: get(arbiter._arbiter, pa, pb)), pa, pb, lambda shape: shape._shape
-
-
-# Row copies between the caller's arrays and the batch layout (x, y, vx, vy per body). One pass per side: numpy
-# needs three masked copies, and the (S, 2) strided ones are slow (about 10 us for 1,000 rows).
-@njit(cache=True)
-def _pack(
-    pos: np.ndarray, vel: np.ndarray, online: np.ndarray, x_offset: np.ndarray, body: np.ndarray
-) -> None:
-    for i in range(online.shape[0]):
-        if online[i]:  # offline rows keep their parking spot (and may hold NaN in pos)
-            body[i, 0] = pos[i, 0] + x_offset[i]
-            body[i, 1] = pos[i, 1]
-            body[i, 2] = vel[i, 0]
-            body[i, 3] = vel[i, 1]
-
-
-@njit(cache=True)
-def _unpack(
-    body: np.ndarray, online: np.ndarray, x_offset: np.ndarray, out_xy: np.ndarray, out_vel: np.ndarray
-) -> None:
-    for i in range(online.shape[0]):
-        if online[i]:
-            out_xy[i, 0] = body[i, 0] - x_offset[i]
-            out_xy[i, 1] = body[i, 1]
-            out_vel[i, 0] = body[i, 2]
-            out_vel[i, 1] = body[i, 3]
-
-
-@njit(cache=True)
-def _bad_online_row(pos: np.ndarray, vel: np.ndarray, online: np.ndarray, half_band: float) -> int:
-    """0 if every online row is valid, 1 if one is not finite, 2 if one's x is out of its band."""
-    for i in range(online.shape[0]):
-        if online[i] and not (
-            np.isfinite(pos[i, 0]) and np.isfinite(pos[i, 1]) and np.isfinite(pos[i, 2])
-            and np.isfinite(vel[i, 0]) and np.isfinite(vel[i, 1])
-        ):  # fmt: skip
-            return 1
-    for i in range(online.shape[0]):
-        if online[i] and abs(pos[i, 0]) >= half_band:
-            return 2
-    return 0
-
-
-@dataclass(frozen=True, slots=True)
-class PhysicsContacts:
-    """Contacts that began during one step, one row per unordered pair.
-
-    Attributes:
-        agent: Slot of the agent ``(C,) int64`` (the lower slot for agent-agent pairs).
-        other_agent: Slot of the other agent, or -1 for an agent-obstacle contact ``(C,) int64``.
-        obj: Obstacle index, or -1 for an agent-agent contact ``(C,) int64``.
-    """
-
-    agent: np.ndarray
-    other_agent: np.ndarray
-    obj: np.ndarray
-
-    def __len__(self) -> int:
-        return int(self.agent.shape[0])
-
-
-def _frozen_empty() -> np.ndarray:
-    a = np.zeros(0, dtype=np.int64)
-    a.flags.writeable = False
-    return a
-
-
-# Most steps begin no contact: they all return this (read-only) instance instead of three new arrays.
-_NO_CONTACTS = PhysicsContacts(_frozen_empty(), _frozen_empty(), _frozen_empty())
-
-
-def _float_array(name: str, a: Any, shape: tuple[int, ...], finite: bool = True) -> np.ndarray:
-    arr = np.asarray(a, dtype=np.float64)
-    if arr.shape != shape:
-        raise ValueError(f"{name} must have shape {shape}, got {arr.shape}")
-    if finite and not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name} must be finite")
-    return arr
-
-
-def _int_array(name: str, a: Any, shape: tuple[int, ...], low: int, high: int) -> np.ndarray:
-    arr = np.asarray(a)
-    if arr.shape != shape:
-        raise ValueError(f"{name} must have shape {shape}, got {arr.shape}")
-    if arr.size and not np.issubdtype(arr.dtype, np.integer):
-        raise ValueError(f"{name} must be an integer array, got dtype {arr.dtype}")
-    arr = arr.astype(np.int64)
-    if arr.size and (arr.min() < low or arr.max() >= high):
-        raise ValueError(f"{name} values must be in [{low}, {high}), got range [{arr.min()}, {arr.max()}]")
-    return arr
-
-
-def _check_obstacles(
-    kind: Any, centre: Any, half: Any, world: Any, n_worlds: int
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    k = np.asarray(kind)
-    if k.ndim != 1:
-        raise ValueError(f"obj_kind must have shape (O,), got {k.shape}")
-    n = k.shape[0]
-    kind_arr = _int_array("obj_kind", k, (n,), 0, 3).astype(np.int8)
-    centre_arr = _float_array("obj_centre", centre, (n, 3))
-    half_arr = _float_array("obj_half", half, (n, 3))
-    world_arr = _int_array("obj_world", world, (n,), 0, n_worlds).astype(np.int32)
-    # Only the columns each kind uses must be positive (cylinder: radius, half-height; sphere: radius).
-    used = np.ones((n, 3), dtype=bool)
-    used[kind_arr == CYLINDER, 1] = False
-    used[kind_arr == SPHERE, 1:] = False
-    if np.any(used & (half_arr <= 0.0)):
-        raise ValueError(
-            "obj_half must be positive in the columns its kind uses (box: x, y, z; "
-            "cylinder: radius [0], half-height [2]; sphere: radius [0])"
-        )
-    return kind_arr, centre_arr, half_arr, world_arr
+    """``(ffi, lib)`` for the C fast path of the collision callbacks, or None (see ``_pymunk_fastpath``)."""
+    return cffi_shape_getter(_import_pymunk())
 
 
 class PymunkPlanarBackend:
@@ -278,21 +126,7 @@ class PymunkPlanarBackend:
         collision_slop: float = 0.005,
         correction: float = 0.5,
     ) -> None:
-        r = np.asarray(radius, dtype=np.float64)
-        if r.ndim != 1 or r.shape[0] == 0:
-            raise ValueError(f"radius must have shape (S,) with S >= 1, got {r.shape}")
-        if not np.all(np.isfinite(r) & (r > 0.0)):
-            raise ValueError("radius must be finite and positive")
-        if isinstance(n_worlds, bool) or not isinstance(n_worlds, (int, np.integer)) or n_worlds < 1:
-            raise ValueError(f"n_worlds must be an integer >= 1, got {n_worlds!r}")
-        if isinstance(substeps, bool) or not isinstance(substeps, (int, np.integer)) or substeps < 1:
-            raise ValueError(f"substeps must be an integer >= 1, got {substeps!r}")
-        if not (np.isfinite(world_spacing) and world_spacing > 0.0):
-            raise ValueError(f"world_spacing must be finite and positive, got {world_spacing!r}")
-        if not (np.isfinite(collision_slop) and collision_slop >= 0.0):
-            raise ValueError(f"collision_slop must be finite and >= 0, got {collision_slop!r}")
-        if not (0.0 < correction < 1.0):
-            raise ValueError(f"correction must be in (0, 1), got {correction!r}")
+        r = _check_backend_args(radius, n_worlds, substeps, world_spacing, collision_slop, correction)
         n = r.shape[0]
         self._radius = r.copy()
         self._world_id = _int_array("world_id", world_id, (n,), 0, int(n_worlds))
@@ -347,7 +181,7 @@ class PymunkPlanarBackend:
         space.add(*shapes)
         self._agent_shapes = shapes
         # The callbacks map an arbiter's shapes to slots and obstacles through dicts keyed by self._key.
-        self._read_shapes, self._pa, self._pb, self._key = _shape_reader()
+        self._read_shapes, self._pa, self._pb, self._key = shape_reader(_cffi_shape_getter())
         self._slot_of_shape = {self._key(shape): s for s, shape in enumerate(shapes)}
         self._obj_of_shape: dict[Any, int] = {}
         space.on_collision(_AGENT_TYPE, _AGENT_TYPE, pre_solve=self._pre_solve_agents)
@@ -516,19 +350,8 @@ class PymunkPlanarBackend:
             (after the altitude filter) during this step and did not touch during the previous one.
         """
         n = self.n_slots
-        pos = _float_array("pos", pos, (n, 3), finite=False)
-        vel = _float_array("desired_vel", desired_vel, (n, 3), finite=False)
-        on = np.asarray(online)
-        if on.shape != (n,) or on.dtype != np.bool_:
-            raise ValueError(f"online must be a bool array of shape ({n},), got {on.dtype} {on.shape}")
-        if not (np.isfinite(dt) and dt > 0.0):
-            raise ValueError(f"dt must be finite and positive, got {dt!r}")
         half_band = 0.5 * self._args["world_spacing"]
-        bad = _bad_online_row(pos, vel, on, half_band)
-        if bad == 1:
-            raise ValueError("pos and desired_vel must be finite for online slots")
-        if bad == 2:
-            raise ValueError(f"pos x of online slots must stay within +-{half_band} m (world_spacing / 2)")
+        pos, vel, on = _check_step_inputs(pos, desired_vel, online, dt, n, half_band)
         new_xy = pos[:, :2].copy()
         new_vel = vel[:, :2].copy()
         contacts = self.step_unchecked(pos, vel, on, float(dt), new_xy, new_vel)

@@ -8,8 +8,8 @@ from agentsim_env.sensors.proximity import (
     ProximityConfig,
     ProximitySensor,
     ScanResult,
-    scan_reference,
 )
+from agentsim_env.sensors.proximity_reference import scan_reference
 
 __all__ = [
     "HIT_AGENT",

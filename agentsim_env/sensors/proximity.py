@@ -10,11 +10,12 @@ Conventions: distances are normalised by the slot's range (``1.0`` = nothing wit
 the range counts); a ray whose origin lies inside a shape (or below the ground) reads ``0`` on that shape;
 exact ties go to the lower ``(hit_kind, hit_id)``. Offline slots scan nothing and are invisible.
 
-The grid kernel (:class:`ProximitySensor`) and the brute-force numpy reference (:func:`scan_reference`,
-used by the tests) share these conventions exactly. The kernel finds agents through the step's agent grid
-(``spatial.build_grid`` over the online slots, built from the same positions) and objects through the
-object grid (``spatial.build_object_grid`` with ``scene.footprint_radius()``); both are keyed by world.
-Per candidate it rejects by bounding sphere vs range, then tests only the azimuths whose horizontal
+The grid kernel (:class:`ProximitySensor`) and the brute-force numpy reference (:func:`scan_reference`
+in :mod:`proximity_reference`, used by the tests) share these conventions exactly; the ray-shape tests
+live in :mod:`raycast`. The kernel finds agents through the step's agent grid (``spatial.build_grid``
+over the online slots, built from the same positions) and objects through the object grid
+(``spatial.build_object_grid`` with ``scene.footprint_radius()``); both are keyed by world. Per
+candidate it rejects by bounding sphere vs range, then tests only the azimuths whose horizontal
 projection can cross the candidate's bounding disc, so the cost per agent stays flat as N grows.
 """
 
@@ -26,18 +27,17 @@ import numba as nb
 import numpy as np
 
 from agentsim_env.core.spatial import Grid, _cell_of
-
-HIT_NONE = 0
-HIT_AGENT = 1
-HIT_OBJECT = 2
-HIT_GROUND = 3
-
-# Shape codes inside the kernel: the scene's BOX=0, CYLINDER=1, SPHERE=2 (agents are spheres too).
-_BOX, _CYL, _SPH = 0, 1, 2
-# A direction component below this is treated as parallel to the slab / cylinder axis; the kernel and the
-# reference apply the same rule, so they take the same branch.
-_EPS = 1e-12
-_ATAN_ERR = 1e-5  # bound on the azimuth-window angle error (fast atan2 + rounding), in radians
+from agentsim_env.sensors.raycast import (
+    _BOX,
+    _CYL,
+    _EPS,
+    _SPH,
+    HIT_AGENT,
+    HIT_GROUND,
+    HIT_NONE,
+    HIT_OBJECT,
+    _candidate,
+)
 
 
 @dataclass(frozen=True)
@@ -112,124 +112,8 @@ class ScanResult:
         )
 
 
-# ----------------------------------------------------------------------------------------------- kernel
 # Kernels compile with error_model="numpy": every division in them is guarded or by a validated positive
 # value, and dropping the per-division zero check of the default model made the scan ~20 % faster.
-@nb.njit(cache=True, error_model="numpy")
-def _slab(p, d, h, lo, hi):  # type: ignore[no-untyped-def]
-    # Clip the ray interval [lo, hi] to the slab |p + t d| <= h; an empty result has lo > hi.
-    if abs(d) < _EPS:
-        if abs(p) > h:
-            return np.inf, -np.inf
-        return lo, hi
-    inv = 1.0 / d  # one division instead of two (divisions dominate this test)
-    t1 = (-h - p) * inv
-    t2 = (h - p) * inv
-    if t1 > t2:
-        t1, t2 = t2, t1
-    return max(lo, t1), min(hi, t2)
-
-
-@nb.njit(cache=True, error_model="numpy")
-def _ray_shape(shape, px, py, pz, dx, dy, dz, hx, hy, hz):  # type: ignore[no-untyped-def]
-    # Nearest t >= 0 where the ray p + t d (p relative to the shape centre) is in the shape, else inf.
-    if shape == _SPH:
-        b = px * dx + py * dy + pz * dz
-        disc = b * b - (px * px + py * py + pz * pz - hx * hx)
-        if disc < 0.0:
-            return np.inf
-        sq = np.sqrt(disc)
-        if -b + sq < 0.0:
-            return np.inf
-        return max(-b - sq, 0.0)
-    lo, hi = -np.inf, np.inf
-    if shape == _BOX:
-        lo, hi = _slab(px, dx, hx, lo, hi)
-        lo, hi = _slab(py, dy, hy, lo, hi)
-    else:
-        a = dx * dx + dy * dy
-        c = px * px + py * py - hx * hx
-        if a < _EPS * _EPS:
-            if c > 0.0:
-                return np.inf
-        else:
-            b = px * dx + py * dy
-            disc = b * b - a * c
-            if disc < 0.0:
-                return np.inf
-            sq = np.sqrt(disc)
-            inv = 1.0 / a
-            lo, hi = (-b - sq) * inv, (-b + sq) * inv
-    lo, hi = _slab(pz, dz, hz, lo, hi)
-    if lo > hi or hi < 0.0:
-        return np.inf
-    return max(lo, 0.0)
-
-
-@nb.njit(cache=True, error_model="numpy")
-def _atan2_approx(y, x):  # type: ignore[no-untyped-def]
-    # atan2 within 5e-7 rad (a fitted polynomial on [0, 1] plus octant folding): several times cheaper
-    # than libm, and the azimuth window only needs a bound (callers widen it by _ATAN_ERR).
-    ax, ay = abs(x), abs(y)
-    mx = max(ax, ay)
-    if mx == 0.0:
-        return 0.0
-    a = min(ax, ay) / mx
-    s = a * a
-    p = ((((0.00782548 * s - 0.03689863) * s + 0.08374156) * s - 0.13480406) * s + 0.19879872) * s
-    r = a * ((p - 0.33326375) * s + 0.99999933)
-    if ay > ax:
-        r = 0.5 * np.pi - r
-    if x < 0.0:
-        r = np.pi - r
-    return -r if y < 0.0 else r
-
-
-@nb.njit(cache=True, inline="always", error_model="numpy")
-def _candidate(px, py, pz, shape, h, rb_h, rb_3, kind, ident, rng, cs, dirs, n_az, bt, bk, bi):  # type: ignore[no-untyped-def]
-    # Test one candidate against the rays that can reach it; p = ray origin - candidate centre, h = its
-    # half extents, rb_h / rb_3 = its horizontal / 3D bounding radii. Keeps the nearest hit per ray in
-    # (bt, bk, bi), ties going to the lower (kind, id).
-    d2 = px * px + py * py + pz * pz
-    reach = rng + rb_3
-    if d2 > reach * reach:  # its bounding sphere is out of range: no ray can hit it within range
-        return
-    lb = max(np.sqrt(d2) - rb_3, 0.0)  # no ray can hit it nearer than this
-    n_rings = dirs.shape[0] // n_az
-    dh2 = px * px + py * py
-    k_lo, k_hi = 0, n_az - 1
-    x2 = rb_h * rb_h / dh2 if dh2 > 0.0 else 1.0
-    if x2 < 0.98:
-        # A ray's horizontal projection must cross the bounding disc, so only azimuths within
-        # asin(rb_h / dh) <= tan(asin(rb_h / dh)) of the bearing to the centre can hit (at any elevation).
-        step = 2.0 * np.pi / n_az
-        # Bearing to the centre in the body frame (rotated like the rays, so huge headings stay exact).
-        phi = _atan2_approx(cs[1] * px - cs[0] * py, -cs[0] * px - cs[1] * py)
-        if phi < 0.0:
-            phi += 2.0 * np.pi
-        delta = np.sqrt(x2 / (1.0 - x2)) + _ATAN_ERR
-        lo_i = int(np.ceil((phi - delta) / step))
-        hi_i = int(np.floor((phi + delta) / step))
-        if hi_i - lo_i + 1 < n_az:
-            k_lo, k_hi = lo_i, hi_i
-    for kk in range(k_lo, k_hi + 1):
-        # The window spans less than one turn around phi in [0, 2 pi): one fold maps it into [0, n_az).
-        a = kk + n_az if kk < 0 else (kk - n_az if kk >= n_az else kk)
-        for ring in range(n_rings):
-            k = ring * n_az + a
-            if lb > bt[k]:
-                continue
-            # Rotate the body-frame ray by the heading here: only the few rays tested need it.
-            dx = cs[0] * dirs[k, 0] - cs[1] * dirs[k, 1]
-            dy = cs[1] * dirs[k, 0] + cs[0] * dirs[k, 1]
-            t = _ray_shape(shape, px, py, pz, dx, dy, dirs[k, 2], h[0], h[1], h[2])
-            b = bt[k]
-            if t < b or (t == b and (bk[k] == HIT_NONE or kind < bk[k] or (kind == bk[k] and ident < bi[k]))):
-                bt[k] = t
-                bk[k] = kind
-                bi[k] = ident
-
-
 @nb.njit(cache=True, error_model="numpy")
 def _scan_kernel(
     pos, heading, srange, radius, online, world, a_grid, scene, o_grid, dirs, n_az, flags, stamp, out
@@ -531,132 +415,3 @@ class ProximitySensor:
                      self.directions, self.config.n_azimuth, flags, self._stamp,
                      (out.distance, out.hit_kind, out.hit_id))  # fmt: skip
         return out
-
-
-# -------------------------------------------------------------------------------------------- reference
-def _ref_slab(p: np.ndarray, d: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    par = np.abs(d) < _EPS
-    with np.errstate(divide="ignore", invalid="ignore"):
-        inv = 1.0 / d
-        t1, t2 = (-h - p) * inv, (h - p) * inv
-    lo, hi = np.minimum(t1, t2), np.maximum(t1, t2)
-    inside = np.abs(p) <= h
-    lo = np.where(par, np.where(inside, -np.inf, np.inf), lo)
-    hi = np.where(par, np.where(inside, np.inf, -np.inf), hi)
-    return lo, hi
-
-
-def _ref_t(shape: int, p: np.ndarray, d: np.ndarray, h: np.ndarray) -> np.ndarray:
-    """Ray-shape distances, broadcast: ``p`` = origin - centre, ``d`` directions, ``h`` half extents."""
-    p, d, h = np.broadcast_arrays(p, d, h)
-    if shape == _SPH:
-        b = (p * d).sum(-1)
-        disc = b * b - ((p * p).sum(-1) - h[..., 0] ** 2)
-        sq = np.sqrt(np.maximum(disc, 0.0))
-        return np.where((disc >= 0.0) & (-b + sq >= 0.0), np.maximum(-b - sq, 0.0), np.inf)
-    if shape == _BOX:
-        lo, hi = _ref_slab(p[..., 0], d[..., 0], h[..., 0])
-        lo2, hi2 = _ref_slab(p[..., 1], d[..., 1], h[..., 1])
-        lo, hi = np.maximum(lo, lo2), np.minimum(hi, hi2)
-    else:
-        a = d[..., 0] ** 2 + d[..., 1] ** 2
-        b = p[..., 0] * d[..., 0] + p[..., 1] * d[..., 1]
-        c = p[..., 0] ** 2 + p[..., 1] ** 2 - h[..., 0] ** 2
-        disc = b * b - a * c
-        sq = np.sqrt(np.maximum(disc, 0.0))
-        vert = a < _EPS * _EPS
-        with np.errstate(divide="ignore", invalid="ignore"):
-            inv = 1.0 / a
-            lo = np.where(vert, np.where(c > 0, np.inf, -np.inf), np.where(disc < 0, np.inf, (-b - sq) * inv))
-            hi = np.where(
-                vert, np.where(c > 0, -np.inf, np.inf), np.where(disc < 0, -np.inf, (-b + sq) * inv)
-            )
-    lo3, hi3 = _ref_slab(p[..., 2], d[..., 2], h[..., 2])
-    lo, hi = np.maximum(lo, lo3), np.minimum(hi, hi3)
-    return np.where((lo <= hi) & (hi >= 0.0), np.maximum(lo, 0.0), np.inf)
-
-
-def scan_reference(
-    config: ProximityConfig,
-    pos: np.ndarray,
-    heading: np.ndarray,
-    sensor_range: np.ndarray,
-    radius: np.ndarray,
-    online: np.ndarray,
-    world: np.ndarray,
-    kind: np.ndarray,
-    centre: np.ndarray,
-    half: np.ndarray,
-    obj_world: np.ndarray,
-    ground: bool,
-    second: np.ndarray | None = None,
-) -> ScanResult:
-    """Brute-force numpy reference of :meth:`ProximitySensor.scan` (no grid; for tests only).
-
-    Args:
-        config: Ray layout and detection flags.
-        pos, heading, sensor_range, radius, online, world: As for ``scan``.
-        kind, centre, half, obj_world: Scene object arrays, as for ``scan``.
-        ground: Whether the plane ``z = 0`` is solid.
-        second: Optional ``(S, K)`` float array filled with the normalised distance of the second-nearest
-            candidate (``inf`` when none), so tests can tell near-ties apart.
-
-    Returns:
-        A fresh :class:`ScanResult`.
-    """
-    arrays, _ = _check_inputs(
-        pos, heading, sensor_range, radius, online, world, kind, centre, half, obj_world
-    )
-    pos, heading, srange, radius, online, world, kind, centre, half, obj_world = arrays
-    dirs = config.ray_directions()
-    res = ScanResult.empty(pos.shape[0], config.n_rays)
-    if second is not None:
-        second[...] = np.inf
-    bound3 = np.select(
-        [kind == _BOX, kind == _CYL],
-        [np.linalg.norm(half, axis=1), np.hypot(half[:, 0], half[:, 2])],
-        half[:, 0],
-    )
-    for i in np.flatnonzero(online):
-        c, s = np.cos(heading[i]), np.sin(heading[i])
-        wd = np.column_stack([c * dirs[:, 0] - s * dirs[:, 1], s * dirs[:, 0] + c * dirs[:, 1], dirs[:, 2]])
-        cols, kinds, ids = [], [], []
-        if config.detect_agents:
-            js = np.flatnonzero(online & (world == world[i]))
-            js = js[js != i]
-            js = js[np.linalg.norm(pos[js] - pos[i], axis=1) - radius[js] <= srange[i]]
-            rr = np.repeat(radius[js, None], 3, axis=1)
-            cols.append(_ref_t(_SPH, (pos[i] - pos[js])[None], wd[:, None], rr[None]))
-            kinds.append(np.full(js.size, HIT_AGENT))
-            ids.append(js)
-        if config.detect_objects:
-            os_ = np.flatnonzero(obj_world == world[i])
-            os_ = os_[np.linalg.norm(centre[os_] - pos[i], axis=1) - bound3[os_] <= srange[i]]
-            t = np.full((dirs.shape[0], os_.size), np.inf)
-            for sh in (_BOX, _CYL, _SPH):
-                m = kind[os_] == sh
-                t[:, m] = _ref_t(sh, (pos[i] - centre[os_[m]])[None], wd[:, None], half[os_[m]][None])
-            cols.append(t)
-            kinds.append(np.full(os_.size, HIT_OBJECT))
-            ids.append(os_)
-        if config.detect_ground and ground:
-            with np.errstate(divide="ignore"):
-                tg = np.where(wd[:, 2] < -_EPS, pos[i, 2] / -wd[:, 2], np.inf)
-            cols.append((np.zeros_like(tg) if pos[i, 2] < 0.0 else tg)[:, None])
-            kinds.append(np.array([HIT_GROUND]))
-            ids.append(np.array([-1]))
-        if not cols:
-            continue
-        t_all = np.concatenate(cols, axis=1)
-        if t_all.shape[1] == 0:
-            continue
-        kind_all, id_all = np.concatenate(kinds), np.concatenate(ids)
-        best = np.argmin(t_all, axis=1)  # first minimum: candidates are ordered by (kind, id)
-        tb = t_all[np.arange(t_all.shape[0]), best]
-        hit = tb <= srange[i]
-        res.distance[i] = np.where(hit, tb / srange[i], 1.0)
-        res.hit_kind[i] = np.where(hit, kind_all[best], HIT_NONE)
-        res.hit_id[i] = np.where(hit, id_all[best], -1)
-        if second is not None and t_all.shape[1] > 1:
-            second[i] = np.partition(t_all, 1, axis=1)[:, 1] / srange[i]
-    return res
