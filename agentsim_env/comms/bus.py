@@ -26,17 +26,17 @@ Rules (one line each, the tests check them):
   ``loss`` and collected by ``take_answers`` (the group controller reads them). Answers enter no inbox.
 - Bus messages have ``hops = 0`` (no relaying). Message ids are unique per bus until ``reset``.
 
-Queue: growable column arrays; the live region is kept sorted by due step (appends are in step order; an
-out-of-order append triggers one stable sort), so ``deliver`` slices a prefix: cost linear in the messages.
+Event records and the in-flight queue live in ``comms.events``, the numba kernels in ``comms.bus_kernels``.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
-import numba as nb
 import numpy as np
 
+from agentsim_env.comms.bus_kernels import bandwidth_kernel
+from agentsim_env.comms.events import DeliveryEvents, MessageLog, _Queue
 from agentsim_env.comms.messages import (
     AGENT,
     DROP_BANDWIDTH,
@@ -44,10 +44,11 @@ from agentsim_env.comms.messages import (
     GROUP,
     HEARTBEAT,
     KIND_NAMES,
-    REASON_NONE,
     Inbox,
 )
 from agentsim_env.comms.routing import expand, group_members, route
+
+__all__ = ["BUS_KINDS", "ChannelConfig", "DeliveryEvents", "MessageBus", "MessageLog"]
 
 BUS_KINDS = (AGENT, GROUP, ENV, HEARTBEAT)
 # Read-only inputs of the delivery kernels when a batch has no GROUP message / the channel no loss.
@@ -87,143 +88,6 @@ class ChannelConfig:
         r = self.max_range
         if r is not None and (isinstance(r, bool) or not isinstance(r, (int, float)) or not (0 < r < np.inf)):
             raise ValueError(f"max_range must be a finite number > 0 or None, got {r!r}")
-
-
-@dataclass(frozen=True, slots=True)
-class MessageLog:
-    """Message events as arrays, one row per event (for the data store).
-
-    Attributes:
-        msg: Message id ``(n,)`` int64 (a GROUP message has one id for all its receivers).
-        kind: Kind code ``(n,)`` int8.
-        sender: Sender slot ``(n,)`` int64 (-1 = environment / controller).
-        target: Receiver slot, group id (GROUP) or -1 (controller) ``(n,)`` int64, as sent.
-        receiver: Receiving slot ``(n,)`` int64 (-1: the controller, or a GROUP message not expanded).
-        created: Step the message was sent ``(n,)`` int64.
-        step: Step of this event ``(n,)`` int64.
-        reason: Drop reason ``(n,)`` int8 (``messages.DROP_*``; 0 in sent and delivered rows).
-    """
-
-    msg: np.ndarray
-    kind: np.ndarray
-    sender: np.ndarray
-    target: np.ndarray
-    receiver: np.ndarray
-    created: np.ndarray
-    step: np.ndarray
-    reason: np.ndarray
-
-    def __len__(self) -> int:
-        """Number of rows."""
-        return int(self.msg.shape[0])
-
-    @classmethod
-    def make(cls, msg, kind, sender, target, receiver, created, step, reason=REASON_NONE) -> MessageLog:  # type: ignore[no-untyped-def]
-        """Build a log of ``len(msg)`` rows; scalar columns are broadcast (fresh arrays)."""
-        n = np.shape(msg)[0]
-        cols = (msg, kind, sender, target, receiver, created, step, reason)
-        return cls(
-            *(
-                np.full(n, c, dtype=_LOG_DTYPES[i]) if np.ndim(c) == 0 else np.array(c, _LOG_DTYPES[i])
-                for i, c in enumerate(cols)
-            )
-        )
-
-    def take(self, mask: np.ndarray) -> MessageLog:
-        """The rows selected by a boolean mask or an index array."""
-        return MessageLog(*(getattr(self, f.name)[mask] for f in fields(self)))
-
-    @classmethod
-    def concat(cls, parts: list[MessageLog]) -> MessageLog:
-        """Concatenate logs (an empty log when ``parts`` is empty)."""
-        if not parts:
-            return cls.make(np.empty(0), 0, 0, 0, 0, 0, 0)
-        if len(parts) == 1:
-            return parts[0]
-        return cls(*(np.concatenate([getattr(p, f.name) for p in parts]) for f in fields(cls)))
-
-
-_LOG_DTYPES = (np.int64, np.int8, np.int64, np.int64, np.int64, np.int64, np.int64, np.int8)
-
-
-@dataclass(frozen=True, slots=True)
-class DeliveryEvents:
-    """The bus traffic of one step.
-
-    Attributes:
-        step: The step passed to ``deliver``.
-        sent: Messages sent since the previous ``deliver`` (heartbeat answers included).
-        delivered: (message, receiver) pairs delivered at ``step``.
-        dropped: Bandwidth drops since the previous ``deliver`` and (message, receiver) pairs dropped now.
-    """
-
-    step: int
-    sent: MessageLog
-    delivered: MessageLog
-    dropped: MessageLog
-
-
-class _Queue:
-    """Messages in flight as growable columns; the live region ``[head, tail)`` is kept sorted by due step."""
-
-    __slots__ = ("cols", "payload", "head", "tail", "last_due", "in_order")
-    NAMES = ("msg", "kind", "sender", "target", "world", "created", "due")
-
-    def __init__(self, cap: int, payload_dim: int) -> None:
-        self.cols = {c: np.empty(cap, dtype=np.int8 if c == "kind" else np.int64) for c in self.NAMES}
-        self.payload = np.empty((cap, payload_dim), dtype=np.float32)
-        self.head = self.tail = 0
-        self.last_due = -1
-        self.in_order = True
-
-    def __len__(self) -> int:
-        return self.tail - self.head
-
-    def append(self, payload: np.ndarray, **cols: np.ndarray) -> None:
-        k = payload.shape[0]
-        if k == 0:
-            return
-        cap, live = self.payload.shape[0], len(self)
-        if live == 0:
-            self.head = self.tail = 0
-            self.last_due = -1  # order only matters among live messages
-        if self.tail + k > cap:  # compact to the front, doubling when more than half full
-            new_cap = max(cap, 2 * (live + k)) if live + k > cap // 2 else cap
-            for c, a in self.cols.items():
-                self.cols[c] = np.empty(new_cap, dtype=a.dtype)
-                self.cols[c][:live] = a[self.head : self.tail]
-            p = self.payload
-            self.payload = np.empty((new_cap, p.shape[1]), dtype=np.float32)
-            self.payload[:live] = p[self.head : self.tail]
-            self.head, self.tail = 0, live
-        sl = slice(self.tail, self.tail + k)
-        for c in self.NAMES:
-            self.cols[c][sl] = cols[c]
-        self.payload[sl] = payload
-        self.tail += k
-        due = cols["due"]
-        if due.min() < self.last_due:  # appended out of step order: sort once before the next pop
-            self.in_order = False
-        self.last_due = max(self.last_due, int(due.max()))
-
-    def pop_due(self, step: int) -> dict[str, np.ndarray] | None:
-        h, t = self.head, self.tail
-        if h == t:
-            return None
-        if not self.in_order:
-            order = h + np.argsort(self.cols["due"][h:t], kind="stable")
-            for a in self.cols.values():
-                a[h:t] = a[order]
-            self.payload[h:t] = self.payload[order]
-            self.in_order = True
-        n = int(np.searchsorted(self.cols["due"][h:t], step, side="right"))
-        if n == 0:
-            return None
-        # Copies: the region may be overwritten by answers appended during this delivery.
-        batch = {c: a[h : h + n].copy() for c, a in self.cols.items()}
-        batch["payload"] = self.payload[h : h + n].copy()
-        self.head = h + n
-        return batch
 
 
 class MessageBus:
@@ -329,16 +193,7 @@ class MessageBus:
         """Forget world ``world``'s traffic (messages in flight, answers, inboxes), e.g. when it is reset alone."""
         n = self.n_agents
         slots = np.arange(world * n, (world + 1) * n)
-        q = self._queue
-        h, t = q.head, q.tail
-        if t > h:
-            keep = q.cols["world"][h:t] != world
-            if not keep.all():
-                m = int(keep.sum())
-                for c in q.NAMES:
-                    q.cols[c][h : h + m] = q.cols[c][h:t][keep]
-                q.payload[h : h + m] = q.payload[h:t][keep]
-                q.tail = h + m
+        self._queue.drop_world(world)
         answers = list(zip(self._ans_slot, self._ans_step))
         self._ans_slot = [a[a // n != world] for a, _ in answers]
         self._ans_step = [b[a // n != world] for a, b in answers]
@@ -510,7 +365,7 @@ class MessageBus:
     def _bandwidth(self, snd: np.ndarray, step: int) -> np.ndarray:
         acc = np.ones(snd.shape[0], dtype=bool)
         if self.channel.bandwidth > 0:
-            _bandwidth_kernel(snd, step, self.channel.bandwidth, self._bw_used, self._bw_step, acc)
+            bandwidth_kernel(snd, step, self.channel.bandwidth, self._bw_used, self._bw_step, acc)
         return acc
 
     # ------------------------------------------------------------------ delivery
@@ -602,22 +457,6 @@ class MessageBus:
                                world=self._world_of[hb], created=created, due=created + self.channel.latency)  # fmt: skip
         return MessageLog(d_msg, d_kind, d_snd, d_tgt, d_rcv, d_cre, np.full(n_ok, step, dtype=np.int64),
                           np.zeros(n_ok, dtype=np.int8))  # fmt: skip
-
-
-@nb.njit(cache=True)
-def _bandwidth_kernel(snd, step, bw, used, stamp, acc):  # type: ignore[no-untyped-def]
-    # In call order: an agent's count restarts when its stamp is an older step; accept below the limit.
-    for i in range(snd.shape[0]):
-        s = snd[i]
-        if s < 0:
-            continue  # the environment / controller is not limited
-        if stamp[s] != step:
-            stamp[s] = step
-            used[s] = 0
-        if used[s] < bw:
-            used[s] += 1
-        else:
-            acc[i] = False
 
 
 def _int_vector(x: np.ndarray, name: str, k: int | None = None) -> np.ndarray:
