@@ -96,6 +96,16 @@ class AgentState:
             max_accel=np.full(s, float(max_accel)),
         )
 
+    def configure(
+        self, *, radius: float, sensor_range: float, max_speed: float, max_accel: float, n_groups: int = 1
+    ) -> None:
+        """Give every slot the same body, sensor and limits, and deal agent ``i`` of each world to group ``i % n_groups``."""
+        self.radius[:] = radius
+        self.sensor_range[:] = sensor_range
+        self.max_speed[:] = max_speed
+        self.max_accel[:] = max_accel
+        self.group[:] = np.tile(np.arange(self.n_agents) % n_groups, self.n_worlds)
+
     @property
     def n_slots(self) -> int:
         """Total number of slots S = B * N."""

@@ -77,9 +77,8 @@ class AgentSimParallelEnv(ParallelEnv):
         self._obs_spaces = {
             a: observation_space_for(scenario.obs_parts(), obs_format) for a in self.possible_agents
         }
-        self._act_spaces = {
-            a: action_space_for(scenario.act_parts(), action_format) for a in self.possible_agents
-        }
+        self._act_parts = scenario.act_parts()  # fixed per config; read on every step
+        self._act_spaces = {a: action_space_for(self._act_parts, action_format) for a in self.possible_agents}
         n = scenario.state_size()
         self.state_space = spaces.Box(-10.0, 10.0, shape=(n,), dtype=np.float32)
         self._set_agents([])
@@ -183,7 +182,7 @@ class AgentSimParallelEnv(ParallelEnv):
                     )
             missing = [a for a in live if a not in actions]
             raise ValueError(f"missing actions for live agent(s) {missing[:5]}")
-        parts = self.scenario.act_parts()
+        parts = self._act_parts
         idx = self._live_idx
         n = len(live)
         acts = self._getter(actions) if self._getter is not None else (actions[live[0]],)

@@ -57,7 +57,9 @@ SELF_DIM, TASK_DIM = 8, 4
 # worlds). They evaluate the same float64 expressions in the same order as the numpy statements they replace
 # (error_model="numpy": x / 0 gives inf like numpy), so observations and rewards are unchanged bit for bit.
 @nb.njit(cache=True, error_model="numpy")
-def _score_kernel(goal, pos, vel, prev_dist, arrived_acc, energy, acting, online, went, goal_radius, bonus, dt):  # type: ignore[no-untyped-def]
+def _score_kernel(
+    goal, pos, vel, prev_dist, arrived_acc, energy, acting, online, went, goal_radius, bonus, dt
+):  # type: ignore[no-untyped-def]
     s_n = pos.shape[0]
     dist = np.empty(s_n)
     arrived = np.zeros(s_n, dtype=np.bool_)
@@ -131,7 +133,9 @@ class NavigationConfig:
     dt: float = 0.1
     max_steps: int = 400
     reward: RewardConfig = field(default_factory=lambda: RewardConfig(group_share=0.5, energy_weight=0.001))
-    comms: CommsConfig | None = None  # None: no communication; a CommsConfig (or dict) adds inbox + comm parts
+    comms: CommsConfig | None = (
+        None  # None: no communication; a CommsConfig (or dict) adds inbox + comm parts
+    )
 
     def __post_init__(self) -> None:
         check_int("n_agents", self.n_agents, 1)
@@ -187,8 +191,14 @@ class NavigationScenario(Scenario):
         c = config
         self.lidar = ProximityConfig(n_azimuth=c.n_azimuth, elevations_deg=tuple(c.elevations_deg))
         self.limits = MotionLimits(
-            max_speed=c.max_speed, max_accel=c.max_accel, max_radius=c.side / 4, max_duration=10.0,
-            z_min=c.altitude[0], z_max=c.altitude[1], max_omega=1.0, arrival_radius=c.goal_radius / 2,
+            max_speed=c.max_speed,
+            max_accel=c.max_accel,
+            max_radius=c.side / 4,
+            max_duration=10.0,
+            z_min=c.altitude[0],
+            z_max=c.altitude[1],
+            max_omega=1.0,
+            arrival_radius=c.goal_radius / 2,
         )
         self.goal = np.zeros((0, 3))
         self.prev_dist = np.zeros(0)
@@ -205,16 +215,18 @@ class NavigationScenario(Scenario):
         c = self.config
         s = c.side
         wc = WorldConfig(
-            bounds=(0.0, s, 0.0, s), z_range=(0.0, c.altitude[1] + 5.0), dt=c.dt, physics=c.physics,
-            collisions=c.collisions, lidar=self.lidar, grid_cell=max(c.sensor_range / 2, 2.0),
+            bounds=(0.0, s, 0.0, s),
+            z_range=(0.0, c.altitude[1] + 5.0),
+            dt=c.dt,
+            physics=c.physics,
+            collisions=c.collisions,
+            lidar=self.lidar,
+            grid_cell=max(c.sensor_range / 2, 2.0),
         )
         world = World(wc, n_worlds, c.n_agents, comms=c.comms)
         st = world.state
-        st.radius[:] = c.agent_radius
-        st.sensor_range[:] = c.sensor_range
-        st.max_speed[:] = c.max_speed
-        st.max_accel[:] = c.max_accel
-        st.group[:] = np.tile(np.arange(c.n_agents) % c.n_groups, n_worlds)
+        st.configure(radius=c.agent_radius, sensor_range=c.sensor_range, max_speed=c.max_speed,
+                     max_accel=c.max_accel, n_groups=c.n_groups)  # fmt: skip
         self.goal = np.zeros((st.n_slots, 3))
         self.prev_dist = np.zeros(st.n_slots)
         self.arrived = np.zeros(st.n_slots, dtype=bool)
@@ -245,8 +257,13 @@ class NavigationScenario(Scenario):
         world.remove_objects_of_world(w)
         n_obs = int(round(c.obstacle_density * s * s))
         kind, centre, half = obstacle_layout(
-            rng, n_obs, (0.0, s, 0.0, s), c.obstacle_size, c.obstacle_height,
-            np.vstack([start, goal]), keep_clear_radius=c.agent_radius + 2.0,
+            rng,
+            n_obs,
+            (0.0, s, 0.0, s),
+            c.obstacle_size,
+            c.obstacle_height,
+            np.vstack([start, goal]),
+            keep_clear_radius=c.agent_radius + 2.0,
         )
         if kind.size:
             world.scene.add(kind, centre, half, w)
@@ -254,7 +271,11 @@ class NavigationScenario(Scenario):
     def obs_parts(self) -> dict[str, Part]:
         """self (8,), lidar (K, 2), task (4,)."""
         k = self.lidar.n_rays
-        parts = {"self": Part((8,), -1.0, 1.0), "lidar": Part((k, 2), 0.0, 1.0), "task": Part((4,), -1.0, 1.0)}
+        parts = {
+            "self": Part((8,), -1.0, 1.0),
+            "lidar": Part((k, 2), 0.0, 1.0),
+            "task": Part((4,), -1.0, 1.0),
+        }
         return {**parts, **self.comm_obs_parts()}
 
     def act_parts(self) -> dict[str, Part]:
@@ -279,13 +300,30 @@ class NavigationScenario(Scenario):
         """Progress, arrival, collisions and energy -> rewards and terminations."""
         c, st = self.config, world.state
         dist, arrived, task, collided, effort = _score_kernel(
-            self.goal, st.pos, st.vel, self.prev_dist, self.arrived, st.energy, acting, st.online,
-            events.went_offline, float(c.goal_radius), float(c.arrival_bonus), float(world.config.dt),
+            self.goal,
+            st.pos,
+            st.vel,
+            self.prev_dist,
+            self.arrived,
+            st.energy,
+            acting,
+            st.online,
+            events.went_offline,
+            float(c.goal_radius),
+            float(c.arrival_bonus),
+            float(world.config.dt),
         )
         self.prev_dist = dist  # dist is fresh each step: the info array handed out below is never mutated
         rewards = compose_rewards(
-            c.reward, task, group=st.group, world=st.world_id, acting=acting, n_groups=c.n_groups,
-            collided=collided, energy=effort, messages_sent=None if world.comms is None else world.comms.sent,
+            c.reward,
+            task,
+            group=st.group,
+            world=st.world_id,
+            acting=acting,
+            n_groups=c.n_groups,
+            collided=collided,
+            energy=effort,
+            messages_sent=None if world.comms is None else world.comms.sent,
         )
         info = {"arrived": arrived.astype(np.int8), "collided": collided.astype(np.int8), "distance": dist}
         return StepResult(rewards, arrived, info)

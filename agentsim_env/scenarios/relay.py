@@ -100,11 +100,8 @@ class RelayScenario(Scenario):
         )
         world = World(wc, n_worlds, c.n_agents, comms=c.comms)
         st = world.state
-        st.radius[:] = c.agent_radius
-        st.sensor_range[:] = c.sensor_range
-        st.max_speed[:] = c.max_speed
-        st.max_accel[:] = c.max_accel
-        st.group[:] = np.tile(np.arange(c.n_agents) % c.n_groups, n_worlds)
+        st.configure(radius=c.agent_radius, sensor_range=c.sensor_range, max_speed=c.max_speed,
+                     max_accel=c.max_accel, n_groups=c.n_groups)  # fmt: skip
         self.target = np.zeros((st.n_slots, 2))
         self.scout = np.zeros(st.n_slots, dtype=bool)
         self.prev_dist = np.zeros(st.n_slots)

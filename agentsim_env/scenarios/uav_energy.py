@@ -26,6 +26,7 @@ Reference operating points at 20 N (computed from the formula): hover 168.5 W; 5
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -272,6 +273,13 @@ def _check_weight(weight_N: float | None, params: RotorParams) -> float:
     return float(w)
 
 
+def _argmin_speed(f: Callable[[float], float], lo: float, v_max: float) -> float:
+    """Speed in ``[lo, v_max]`` minimising ``f`` (bounded scalar search to 1e-6 m/s)."""
+    check_float("v_max", v_max, 0.0, lo_open=True)
+    res = minimize_scalar(f, bounds=(lo, v_max), method="bounded", options={"xatol": 1e-6})
+    return float(res.x)
+
+
 def min_power_speed(
     weight_N: float | None = None,
     params: RotorParams = DEFAULT_ROTOR,
@@ -288,14 +296,7 @@ def min_power_speed(
         The optimal horizontal speed in m/s.
     """
     w = _check_weight(weight_N, params)
-    check_float("v_max", v_max, 0.0, lo_open=True)
-    res = minimize_scalar(
-        lambda x: float(power(x, w, params=params)),
-        bounds=(0.0, v_max),
-        method="bounded",
-        options={"xatol": 1e-6},
-    )
-    return float(res.x)
+    return _argmin_speed(lambda x: float(power(x, w, params=params)), 0.0, v_max)
 
 
 def max_range_speed(
@@ -314,12 +315,5 @@ def max_range_speed(
         The optimal horizontal speed in m/s.
     """
     w = _check_weight(weight_N, params)
-    check_float("v_max", v_max, 0.0, lo_open=True)
     # P(V) / V diverges at V = 0, so the search starts just above it; the optimum lies well beyond v0.
-    res = minimize_scalar(
-        lambda x: float(energy_per_metre(x, w, params)),
-        bounds=(1e-3, v_max),
-        method="bounded",
-        options={"xatol": 1e-6},
-    )
-    return float(res.x)
+    return _argmin_speed(lambda x: float(energy_per_metre(x, w, params)), 1e-3, v_max)

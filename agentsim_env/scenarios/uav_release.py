@@ -84,6 +84,7 @@ class UavReleaseScenario(Scenario):
         self.payloads = PayloadSet(self.fall, c.scatter)
         self.fnd_oracle = oracle_fnd(self.zones, c.wsn)
         self.rng = np.random.default_rng(0)
+        self._released = np.zeros(0, dtype=np.int64)  # slots that released in the current step
 
     @property
     def n_agents(self) -> int:
@@ -98,9 +99,9 @@ class UavReleaseScenario(Scenario):
                          collisions=c.collisions, lidar=self.lidar, grid_cell=max(c.sensor_range / 2, 5.0))  # fmt: skip
         world = World(wc, n_worlds, c.n_uavs, comms=c.comms)
         st = world.state
-        st.radius[:], st.sensor_range[:] = c.uav_radius, c.sensor_range
-        st.max_speed[:], st.max_accel[:] = c.max_speed, c.max_accel
-        st.group[:] = 0
+        # one group: the whole fleet
+        st.configure(radius=c.uav_radius, sensor_range=c.sensor_range, max_speed=c.max_speed,
+                     max_accel=c.max_accel)  # fmt: skip
         self.payload_left = np.zeros(st.n_slots, dtype=np.int64)
         self.wind = WindModel(c.wind, self.rng, n_worlds)
         self.tracker = DeploymentTracker(self.zones, n_worlds, c.wsn.r_s)
