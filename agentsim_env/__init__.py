@@ -1,6 +1,9 @@
 """agentsim-env: a vectorised multi-agent simulator exposed as a PettingZoo ParallelEnv.
 
-Importing the package has no side effects; scenarios load on first use.
+Importing the package has no side effects; scenarios load on first use. The one exception: where numba
+cannot cache compiled kernels in its default locations (a read-only install without a writable home), the
+import points ``NUMBA_CACHE_DIR`` at a private temporary directory first (or, failing that, lets the
+kernels compile uncached) and warns (see ``_numba_cache``).
 
 Example:
     >>> import agentsim_env
@@ -11,6 +14,10 @@ Example:
 from __future__ import annotations
 
 from typing import Any
+
+from agentsim_env._numba_cache import ensure_numba_cache as _ensure_numba_cache
+
+_ensure_numba_cache()  # before any kernel module: numba picks a function's cache directory when decorating it
 
 __version__ = "0.1.0"
 

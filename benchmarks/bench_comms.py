@@ -103,7 +103,7 @@ def array_case(n: int, comms: bool) -> Case:
 STAGES = {
     "send (1)": [("agentsim_env.comms.stack", "CommsStack", "send_actions")],
     "groups (6)": [("agentsim_env.comms.stack", "CommsStack", "tick_groups")],
-    "range graph": [("agentsim_env.core.world", "World", "_comm_pairs"),
+    "range graph": [("agentsim_env.sim.world", "World", "_comm_pairs"),
                     ("agentsim_env.comms.stack", "CommsStack", "update_graph")],
     "bus": [("agentsim_env.comms.bus", "MessageBus", "deliver")],
     "overlay": [("agentsim_env.comms.overlay", "Overlay", "advance_graph"),
@@ -159,7 +159,7 @@ def stage_breakdown(n: int, steps: int) -> dict[str, float]:
 
 
 def _graph_in_deliver() -> bool:
-    from agentsim_env.core.world import World
+    from agentsim_env.sim.world import World
 
     return not hasattr(World, "_comm_pairs")
 

@@ -5,18 +5,24 @@ from __future__ import annotations
 import importlib
 from typing import Any
 
-from policies.base import Policy
-from policies.release.targets import STRATEGIES
+from agentsim_env.policies.base import Policy
+from agentsim_env.policies.release.targets import STRATEGIES
 
 # scenario -> {policy name: "module:Class" or ("module:Class", kwargs for for_env)}; the first entry is the
 # scenario's default baseline.
 BASELINES: dict[str, dict[str, str | tuple[str, dict[str, Any]]]] = {
-    "navigation": {"go_to_goal": "policies.navigation:GoToGoalPolicy", "random": "policies.random:RandomPolicy"},
-    "relay": {"flood": "policies.relay:FloodPolicy", "silent": "policies.relay:SilentPolicy"},
+    "navigation": {
+        "go_to_goal": "agentsim_env.policies.navigation:GoToGoalPolicy",
+        "random": "agentsim_env.policies.random:RandomPolicy",
+    },
+    "relay": {
+        "flood": "agentsim_env.policies.relay:FloodPolicy",
+        "silent": "agentsim_env.policies.relay:SilentPolicy",
+    },
 }
 # B5 (density-weighted CVT) first: the scenario's default baseline
 BASELINES["uav_release"] = {
-    name: ("policies.release.policy:ReleasePolicy", {"strategy": name})
+    name: ("agentsim_env.policies.release.policy:ReleasePolicy", {"strategy": name})
     for name in ["B5_cvt"] + [s for s in STRATEGIES if s != "B5_cvt"]
 }
 

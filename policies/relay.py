@@ -64,7 +64,7 @@ class _RelayBase:
     def _env_args(env: Any) -> dict[str, Any]:
         c = env.scenario.config
         return {"agents": list(env.possible_agents), "length": c.length, "width": c.corridor_width,
-                "n_groups": c.n_groups, "n_azimuth": c.n_azimuth, "sensor_range": c.sensor_range,
+                "n_groups": c.n_groups, "n_azimuth": c.sensing.n_azimuth, "sensor_range": c.sensing.range,
                 "payload_dim": c.comms.payload_dim}  # fmt: skip
 
     def _unpack(self, observations: dict[str, Any]) -> tuple[list[str], dict[str, np.ndarray]]:

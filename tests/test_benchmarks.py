@@ -172,13 +172,13 @@ def test_navigation_observe_kernel_equals_numpy_statement() -> None:
         env.step(rng.uniform(-1, 1, (3, 5, env.act_dim)))
     sc, world = env.scenario, env.world
     c, stt, scan = sc.config, world.state, world.scan
-    s, (lo, hi) = c.side, c.altitude
+    s, (lo, hi) = c.side, c.body.altitude
     selfp = np.column_stack(
         [stt.pos[:, 0] / s * 2 - 1, stt.pos[:, 1] / s * 2 - 1, (stt.pos[:, 2] - lo) / (hi - lo) * 2 - 1,
-         stt.vel / c.max_speed, np.cos(stt.heading), np.sin(stt.heading)]
+         stt.vel / c.body.max_speed, np.cos(stt.heading), np.sin(stt.heading)]
     )  # fmt: skip
     diag = s * np.sqrt(2.0)
-    d = sc.goal - stt.pos
+    d = world.task.goal - stt.pos
     expected = {
         "self": np.clip(selfp, -1, 1).astype(np.float32),
         "lidar": np.stack([scan.distance, scan.hit_kind / 3.0], axis=-1).astype(np.float32),

@@ -11,7 +11,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from agentsim_env.comms.overlay import Deliveries, Overlay
-from agentsim_env.core.spatial import GridSpec, build_grid, neighbor_pairs
+from agentsim_env.comms.rangegraph import RangeGraph, _links_from_pairs
+from agentsim_env.core.spatial import Grid, GridSpec, build_grid, neighbor_pairs
 
 D = 3
 
@@ -305,8 +306,136 @@ def test_call_validation() -> None:
         ov.readers(0)
 
 
-@st.composite
-def _small_graph(draw: st.DrawFn) -> tuple:
+# --------------------------------------------------------------- ranges above the configured one
+# The comms stack builds its RangeGraph for the configured overlay range (max(overlay_range, nearest_range))
+# and a neighbour grid of a fixed cell; set_range may later raise some slots' ranges above it.
+
+CONFIGURED = 30.0
+
+
+def _stack_graph(n: int) -> RangeGraph:
+    return RangeGraph(n, CONFIGURED, CONFIGURED)  # as CommsStack: max(overlay_range, nearest_range)
+
+
+def _grid(pos: np.ndarray, world: np.ndarray, online: np.ndarray, cell: float = 5.0) -> Grid:
+    return build_grid(GridSpec.for_bounds((0.0, 200.0, 0.0, 200.0), cell, int(world.max()) + 1), pos, world, online)
+
+
+def _flood_over_graph(ov: Overlay, graph: RangeGraph, pos, online, world, grid: Grid, calls: int) -> list[Deliveries]:
+    """``calls`` steps of the comms stack's overlay path: grid scan, then one hop over its links."""
+    out = []
+    for _ in range(calls):
+        graph.set_grid(grid, pos, online, world, ov.link_range, ov.frontier_size > 0)
+        out.append(ov.advance_graph(*graph.links(ov.link_range)))
+    return out
+
+
+def _square() -> tuple[np.ndarray, np.ndarray]:
+    """Four slots on a 60 m square; 0, 1 and 3 raised to 80 m, 2 left at the configured 30 m."""
+    pos = np.array([[10.0, 10.0, 5.0], [70.0, 10.0, 5.0], [10.0, 70.0, 5.0], [70.0, 70.0, 5.0]])
+    return pos, np.array([80.0, 80.0, CONFIGURED, 80.0])
+
+
+def test_set_range_above_configured_range_links_agents_60m_apart() -> None:
+    pos, ranges = _square()
+    online, world = np.ones(4, dtype=bool), np.zeros(4, dtype=np.int64)
+    grid = _grid(pos, world, online)
+    ov = Overlay(4, 1, CONFIGURED)
+    ov.start(np.array([0]), 3, np.array([[1.5]]), step=0)
+    out = _flood_over_graph(ov, _stack_graph(4), pos, online, world, grid, calls=2)
+    assert [len(d) for d in out] == [0, 0] and ov.active_count == 0  # 60 m > 30 m: nobody in range
+    ov.set_range(ranges)
+    assert ov.max_range == 80.0
+    (f,) = ov.start(np.array([0]), 3, np.array([[1.5]]), step=1)
+    out = _flood_over_graph(ov, _stack_graph(4), pos, online, world, grid, calls=3)
+    assert [d.receiver.tolist() for d in out] == [[1], [3], []]  # 2 keeps 30 m; 0-3 is 85 m
+    assert [d.hops.tolist() for d in out[:2]] == [[1], [2]] and out[0].payload[0, 0] == 1.5
+    # the same as breadth-first search over the brute-force range graph
+    want = nx.single_source_shortest_path_length(_oracle_graph(pos, online, world, ranges), 0, cutoff=3)
+    assert {int(d.receiver[0]): int(d.hops[0]) for d in out[:2]} == {v: h for v, h in want.items() if v != 0}
+    assert not ov.is_active(f)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_grid_links_follow_ranges_above_the_graph_radius(seed: int) -> None:
+    """Per-slot ranges up to 2.5x the graph's radius: links as brute force (the pairs path's rows, in order),
+    floods as BFS, nearest neighbours as with the configured ranges."""
+    pos, online, world, _ = _scene(seed)
+    rng = np.random.default_rng(seed)
+    n = len(pos)
+    ranges = rng.uniform(5.0, 2.5 * CONFIGURED, n)
+    grid = _grid(pos, world, online, cell=float(rng.choice([3.0, 5.0, 12.0])))
+    graph = _stack_graph(n)
+    graph.set_grid(grid, pos, online, world, ranges, True)
+    start, end, indices = (a.copy() for a in graph.links(ranges))
+    near = graph.nearest().copy()
+    pi, pj, _ = _pairs(pos, world, float(ranges.max()))
+    indptr, want_idx = _links_from_pairs(pi, pj, pos, online, world, ranges, n)
+    for s in range(n):
+        assert indices[start[s] : end[s]].tolist() == want_idx[indptr[s] : indptr[s + 1]].tolist(), s
+    oracle = _oracle_graph(pos, online, world, ranges)
+    assert sum(end - start) == 2 * oracle.number_of_edges()
+    graph.set_grid(grid, pos, online, world, np.full(n, CONFIGURED), True)  # nearest: independent of ranges
+    np.testing.assert_array_equal(graph.nearest(), near)
+    ov = Overlay(n, D, ranges, full_propagation=True)
+    floods = _start_random(ov, rng, online, 10, step=0)
+    seen: dict[int, dict[int, int]] = {f: {} for f in floods}
+    for d in _flood_over_graph(ov, graph, pos, online, world, grid, calls=1):
+        _collect(seen, d, floods)
+    for f, (origin, limit, *_) in floods.items():
+        want = nx.single_source_shortest_path_length(oracle, origin, cutoff=limit)
+        want.pop(origin)
+        assert seen[f] == want
+
+
+def test_grid_links_with_a_range_beyond_the_map() -> None:
+    pos = np.array([[0.0, 0.0, 0.0], [200.0, 200.0, 0.0], [100.0, 100.0, 1e6]])
+    online, world = np.ones(3, dtype=bool), np.zeros(3, dtype=np.int64)
+    graph = _stack_graph(3)
+    graph.set_grid(_grid(pos, world, online), pos, online, world, np.full(3, 1e300), True)
+    start, end, indices = graph.links(np.full(3, 1e300))
+    assert [sorted(indices[start[s] : end[s]].tolist()) for s in range(3)] == [[1, 2], [0, 2], [0, 1]]
+
+
+def test_pair_links_refuse_ranges_beyond_the_pairs_radius() -> None:
+    pos, ranges = _square()
+    online, world = np.ones(4, dtype=bool), np.zeros(4, dtype=np.int64)
+    graph = _stack_graph(4)
+    graph.set_pairs(_pairs(pos, world, CONFIGURED), pos, online, world)
+    with pytest.raises(ValueError, match=r"comm_range must be <= 30 m .*got 80 m"):
+        graph.links(ranges)
+    start, end, _ = graph.links(np.full(4, CONFIGURED))
+    assert (start == end).all()
+
+
+def test_set_range_above_configured_range_through_the_env() -> None:
+    import agentsim_env
+
+    env = agentsim_env.make("navigation", n_agents=4, obstacle_density=0.0, comms={"overlay_range": CONFIGURED})
+    env.reset(seed=0)
+    pos, ranges = _square()
+    st = env.world.state
+    st.pos[:] = pos * 0.5 + [12.5, 12.5, 0.0]  # the same square, 30 m apart, inside the 60 m map
+    env.world.refresh()
+    cfg = env.scenario.comms_config()
+    comm = np.full(cfg.action_dim, -1.0, np.float32)
+    flood = comm.copy()
+    flood[0], flood[2] = 0.8, 1.0  # channel 4 (overlay), the largest hop limit
+    idle = {"motion": np.zeros(3, np.float32), "comm": comm}
+
+    def reached(ranges: np.ndarray) -> list[list[int]]:
+        env.world.comms.overlay.set_range(ranges)
+        acts = {a: idle for a in env.agents} | {"agent_0": {"motion": np.zeros(3, np.float32), "comm": flood}}
+        got = []
+        for _ in range(3):
+            env.step(acts)
+            acts = {a: idle for a in env.agents}
+            got.append(sorted(env.world.last_events.comms.overlay.receiver.tolist()))
+        return got
+
+    assert reached(np.full(4, 14.0)) == [[], [], []]  # 30 m apart, 14 m ranges
+    assert reached(ranges * 0.5) == [[1], [3], []]  # 40 m on three slots, 15 m on slot 2
+draw: st.DrawFn) -> tuple:
     n = draw(st.integers(1, 12))
     all_pairs = [(i, j) for i in range(n) for j in range(i + 1, n)]
     edges = draw(st.lists(st.sampled_from(all_pairs), unique=True)) if all_pairs else []

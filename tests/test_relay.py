@@ -13,8 +13,8 @@ import pytest
 
 import agentsim_env
 from agentsim_env.comms.messages import OVERLAY
-from policies.registry import make_policy
-from policies.rollout import run_episode
+from agentsim_env.policies.registry import make_policy
+from agentsim_env.policies.rollout import run_episode
 
 SEEDS = range(20)
 NO_COMMS = {"loss": 1.0, "overlay_range": 1e-3}  # the bus loses everything, the overlay reaches nobody
@@ -27,7 +27,7 @@ def success_rate(policy: str, seeds: range = SEEDS, **config: Any) -> tuple[floa
     wins, steps = [], []
     for seed in seeds:
         steps.append(run_episode(env, pol, seed).steps)
-        wins.append(env.scenario.group_success())
+        wins.append(env.scenario.group_success(env.world))
     return float(np.mean(wins)), steps
 
 

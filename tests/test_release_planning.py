@@ -11,15 +11,15 @@ from hypothesis import strategies as st
 from scipy.spatial import cKDTree
 from scipy.stats import kstest
 
-from agentsim_env.wsn.profiles import RadialProfile
-from policies.release.planning import (
+from agentsim_env.policies.release.planning import (
     in_sector,
     path_length,
     plan_tour,
     sector_quota,
     split_sectors,
 )
-from policies.release.targets import STRATEGIES, make_plan
+from agentsim_env.policies.release.targets import STRATEGIES, make_plan
+from agentsim_env.wsn.profiles import RadialProfile
 
 R = 100.0
 CENTRE = np.array([250.0, -40.0])

@@ -11,10 +11,9 @@ from scipy.stats import kstest
 
 import agentsim_env
 from agentsim_env.comms.messages import FEATURES_PER_MESSAGE
-from agentsim_env.wsn import evaluate_deployment
-from policies.registry import baseline_names, make_policy
-from policies.release import STRATEGIES, ReleasePolicy, split_work
-from policies.release.coordination import (
+from agentsim_env.policies.registry import baseline_names, make_policy
+from agentsim_env.policies.release import STRATEGIES, ReleasePolicy, split_work
+from agentsim_env.policies.release.coordination import (
     MSG_CLAIM,
     MSG_DONE,
     MSG_HELLO,
@@ -24,7 +23,8 @@ from policies.release.coordination import (
     decode,
     encode,
 )
-from policies.release.planning import in_sector
+from agentsim_env.policies.release.planning import in_sector
+from agentsim_env.wsn import evaluate_deployment
 
 CALM = {"wind": {"mean_speed": 0.0}, "scatter": {"sigma_gnss": 0.5, "sigma_timing": 0.0, "sigma_bounce": 0.0}}
 TINY = {"zones": "tiny", "n_uavs": 2, "payload": 12, **CALM}
@@ -40,14 +40,14 @@ def fly(env: Any, policy: ReleasePolicy, seed: int, *, max_steps: int = 8000, ho
         steps += 1
         if hook is not None:
             hook(env, obs, steps)
-        if policy.mission_complete and env.scenario.payloads.n_falling == 0:
+        if policy.mission_complete and env.world.payloads.objects.n_falling == 0:
             break
     return steps
 
 
 def sensors(env: Any) -> dict[str, np.ndarray]:
     """Released sensors of world 0: owner slot, zone, target and landing point."""
-    ps = env.scenario.payloads
+    ps = env.world.payloads.objects
     n = ps.count
     return {k: ps.get(k)[:n] for k in ("owner", "zone", "target_xy", "land_xy", "landed")}
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 import agentsim_env
-from policies.registry import make_policy
-from policies.rollout import run_episode
+from agentsim_env.policies.registry import make_policy
+from agentsim_env.policies.rollout import run_episode
 
 
 def test_navigation_go_to_goal_reaches_90_percent_over_20_seeds() -> None:

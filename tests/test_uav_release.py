@@ -35,8 +35,8 @@ def test_release_falls_lands_and_is_recorded() -> None:
     st.pos[0] = [100.0, 100.0, 20.0]  # over the tiny zone's centre
     target_off = np.array([0.1, -0.05])
     env.step(_idle(env, {"uav_0": [1.0, *target_off]}))
-    ps = env.scenario.payloads
-    assert ps.count == 1 and env.scenario.payload_left[0] == 11
+    ps = env.world.payloads.objects
+    assert ps.count == 1 and env.world.task.payload_left[0] == 11
     landed_info = 0
     for _ in range(40):
         _, _, _, _, info = env.step(_idle(env))
@@ -70,7 +70,7 @@ def test_energy_follows_power_model_and_payload() -> None:
     env.step(_idle(env))
     hover_full = st.energy.copy()
     assert np.all(hover_full > 0)
-    env.scenario.payload_left[1] = 0  # a lighter UAV spends less to hover
+    env.world.task.payload_left[1] = 0  # a lighter UAV spends less to hover
     before = st.energy.copy()
     env.step(_idle(env))
     spent = st.energy - before
@@ -162,4 +162,4 @@ def test_mission_ends_when_zones_are_served_with_spares_on_board() -> None:
         if not env.agents:
             break
     assert not env.agents and all(term.values())
-    assert env.scenario.payload_left.tolist() == [2, 2]
+    assert env.world.task.payload_left.tolist() == [2, 2]

@@ -3,7 +3,7 @@
 Every agent of every world is one entry of an SB3 ``VecEnv`` (``AgentSimVecEnv``), so one network is trained on
 all agents (parameter sharing). Usage::
 
-    python -m train.ppo navigation --timesteps 200000 --worlds 16 --out outputs/ppo_navigation
+    python -m agentsim_env.train.ppo navigation --timesteps 200000 --worlds 16 --out outputs/ppo_navigation
 
 The model is saved as ``<out>/model.zip`` with ``<out>/config.json``; ``evaluate`` rolls it out in the
 ParallelEnv with flat observations and reports the mean return and the scenario's success counters.
@@ -40,12 +40,13 @@ def train(
         out: Folder for ``model.zip`` and ``config.json``.
         config: Scenario config keys.
         ppo_kwargs: Extra keyword arguments of ``stable_baselines3.PPO``.
-        progress: Show SB3's progress bar.
+        progress: Show a tqdm progress bar (on stderr) of the agent-steps done.
     """
     import torch
     from stable_baselines3 import PPO
 
     from agentsim_env.env.sb3 import AgentSimVecEnv
+    from agentsim_env.train.progress import TqdmProgressBar
 
     torch.set_num_threads(1)
     vec = AgentSimVecEnv(scenario, worlds, seed=seed, **(config or {}))
@@ -59,7 +60,7 @@ def train(
     }
     kw.update(ppo_kwargs or {})
     model = PPO("MlpPolicy", vec, seed=seed, device="cpu", **kw)
-    model.learn(total_timesteps=timesteps, progress_bar=progress)
+    model.learn(total_timesteps=timesteps, callback=TqdmProgressBar(desc=scenario) if progress else None)
     if out is not None:
         path = Path(out)
         path.mkdir(parents=True, exist_ok=True)
@@ -108,7 +109,7 @@ def evaluate(
 
 def main(argv: list[str] | None = None) -> int:
     """Command line: train, save, evaluate, print a summary."""
-    p = argparse.ArgumentParser(prog="python -m train.ppo", description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(prog="python -m agentsim_env.train.ppo", description=__doc__.splitlines()[0])
     p.add_argument("scenario")
     p.add_argument("--timesteps", type=int, default=200_000)
     p.add_argument("--worlds", type=int, default=16)

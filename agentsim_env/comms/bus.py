@@ -31,6 +31,7 @@ Event records and the in-flight queue live in ``comms.events``, the numba kernel
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -99,12 +100,12 @@ class MessageBus:
         payload_dim: Payload width D.
         channel: The channel model.
         inbox: The inboxes; the overlay pushes its deliveries here too.
-        rng: Generator of the loss draws.
+        rngs: Generators of the loss draws, one per world (a world's draws never depend on another's traffic).
         group: Group array ``(S,)`` used to validate GROUP targets at send time (by reference), or None.
     """
 
     __slots__ = tuple(
-        "n_worlds n_agents payload_dim channel inbox rng group _world_of _queue _next_id _bw_used _bw_step "
+        "n_worlds n_agents payload_dim channel inbox rngs group _world_of _queue _next_id _bw_used _bw_step "
         "_sent_log _drop_log _ans_slot _ans_step _pushes".split()
     )
 
@@ -115,7 +116,7 @@ class MessageBus:
         payload_dim: int,
         channel: ChannelConfig,
         inbox_size: int,
-        rng: np.random.Generator,
+        rng: np.random.Generator | Sequence[np.random.Generator],
         *,
         group: np.ndarray | None = None,
         age_horizon: int = 100,
@@ -130,7 +131,7 @@ class MessageBus:
             payload_dim: Payload width D (>= 0).
             channel: Channel model.
             inbox_size: Messages kept per slot M (>= 1).
-            rng: Generator for the loss draws.
+            rng: Generator for the loss draws (spawned into one per world), or one generator per world.
             group: Optional ``(S,)`` group array (e.g. ``AgentState.group``) to validate GROUP targets.
             age_horizon: Inbox age feature horizon in steps (see ``Inbox``).
             hop_horizon: Inbox hops feature horizon (see ``Inbox``).
@@ -173,11 +174,20 @@ class MessageBus:
             )
         self.group = g
 
-    def reset(self, rng: np.random.Generator) -> None:
-        """Drop everything in flight, empty the inboxes and logs, and use ``rng`` for the loss draws."""
-        if not isinstance(rng, np.random.Generator):
-            raise ValueError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
-        self.rng = rng
+    def reset(self, rng: np.random.Generator | Sequence[np.random.Generator]) -> None:
+        """Drop everything in flight, empty the inboxes and logs, and take new loss generators.
+
+        Args:
+            rng: One generator per world, or one generator (used as is for a single world, spawned into one
+                child per world otherwise).
+        """
+        if isinstance(rng, np.random.Generator):
+            self.rngs = [rng] if self.n_worlds == 1 else list(rng.spawn(self.n_worlds))
+        else:
+            rngs = list(rng)
+            if len(rngs) != self.n_worlds or not all(isinstance(r, np.random.Generator) for r in rngs):
+                raise ValueError(f"rng must be a numpy.random.Generator or {self.n_worlds} of them")
+            self.rngs = rngs
         self.inbox.clear()
         self._bw_used[:] = 0
         self._bw_step[:] = -1
@@ -188,6 +198,28 @@ class MessageBus:
         self._ans_slot: list[np.ndarray] = []
         self._ans_step: list[np.ndarray] = []
         self._pushes: list[tuple[np.ndarray, ...]] = []
+
+    def reset_world(self, world: int, rng: np.random.Generator) -> None:
+        """Drop world ``world``'s traffic and draw its losses from ``rng`` from now on (its episode's stream)."""
+        if not isinstance(rng, np.random.Generator):
+            raise ValueError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
+        self.drop_world(world)
+        self.rngs[world] = rng
+
+    def _loss_draws(self, world_of_row: np.ndarray) -> np.ndarray:
+        """One uniform per delivery row, each drawn from its world's generator in row order."""
+        k = world_of_row.shape[0]
+        if self.n_worlds == 1:
+            return self.rngs[0].random(k)
+        u = np.empty(k)
+        order = np.argsort(world_of_row, kind="stable")
+        counts = np.bincount(world_of_row, minlength=self.n_worlds)
+        start = 0
+        for w in np.flatnonzero(counts).tolist():
+            c = int(counts[w])
+            u[order[start : start + c]] = self.rngs[w].random(c)
+            start += c
+        return u
 
     def drop_world(self, world: int) -> None:
         """Forget world ``world``'s traffic (messages in flight, answers, inboxes), e.g. when it is reset alone."""
@@ -429,7 +461,7 @@ class MessageBus:
                                                 b["world"] * n_g + tgt)  # fmt: skip
         rep, recv = expand(kind, snd, tgt, kid, offsets, slots)
         loss = float(self.channel.loss)
-        u = self.rng.random(rep.shape[0]) if loss > 0.0 else _NO_DRAWS
+        u = self._loss_draws(b["world"][rep]) if loss > 0.0 and rep.shape[0] else _NO_DRAWS
         r_max = self.channel.max_range
         ok, dr, n_hb, n_ans = route(rep, recv, b["msg"], kind, snd, tgt, b["created"], online, pos,
                                     -1.0 if r_max is None else r_max * r_max, u, loss, self.inbox.dropped)  # fmt: skip

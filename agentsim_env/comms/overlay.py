@@ -167,7 +167,7 @@ class Overlay:
         self._last = OverlayStats()
         self._totals = OverlayStats()
 
-    def _grow(self, need: int) -> None:
+    def grow(self, need: int) -> None:
         old = self.capacity
         cap = old
         while cap - old + self._n_free < need:
@@ -219,8 +219,18 @@ class Overlay:
         """Per-slot transmission range ``(S,)`` (a copy)."""
         return self._range.copy()
 
+    @property
+    def max_range(self) -> float:
+        """The largest per-slot transmission range: how far the pairs given to ``advance`` must reach."""
+        return float(self._range.max())
+
     def set_range(self, comm_range: float | np.ndarray) -> None:
-        """Set the transmission range: a scalar for every slot or one per slot ``(S,)``, finite and >= 0."""
+        """Set the transmission range: a scalar for every slot or one per slot ``(S,)``, finite and >= 0.
+
+        A range may exceed the one the overlay was created with. Links then need candidates from as far: the
+        comms stack's ``RangeGraph`` scans the step's grid as far as the largest current range (``link_range``),
+        and the pairs given to ``advance`` must come from ``neighbor_pairs`` with ``max_dist >= max_range``.
+        """
         r = np.asarray(comm_range, dtype=np.float64)
         if r.ndim == 0:
             r = np.full(self.n_slots, float(r))
@@ -298,7 +308,7 @@ class Overlay:
         if k == 0:
             return np.empty(0, dtype=np.int64)
         if self._n_free < k:
-            self._grow(k)
+            self.grow(k)
         ids = self._free[self._n_free - k : self._n_free][::-1].copy()
         self._n_free -= k
         if self._n_pool + k > self._pool.shape[0]:

@@ -1,11 +1,12 @@
 """The range graph of a step: overlay links (an adjacency by slot) and every slot's nearest neighbour.
 
-Both come from the slots indexed in the step's neighbour grid (the online ones) within ``max_dist`` of each
-other (3D distance, same world):
+Both come from the slots indexed in the step's neighbour grid (the online ones), 3D distance, same world:
 
 - **links**: the overlay's edges, ``dist <= min(range_i, range_j)`` between two online slots, stored as rows
-  ``indices[start[s]:end[s]]`` per slot;
-- **nearest**: the closest other slot within ``nearest_range`` (ties: the lower slot), or -1.
+  ``indices[start[s]:end[s]]`` per slot. The ranges are the overlay's current ones, which may exceed the
+  configured range the graph was built for: the grid scan reaches ``max(max_dist, largest range)``. The pairs
+  of ``set_pairs`` only reach ``max_dist``, so links from them refuse larger ranges;
+- **nearest**: the closest other slot within ``nearest_range`` and ``max_dist`` (ties: the lower slot), or -1.
 
 Two sources give identical results. ``set_pairs`` takes the pairs ``(i, j, d)`` of
 ``core.spatial.neighbor_pairs`` (``i < j``, each once) and builds the rows by a counting sort (lazily: only what
@@ -22,7 +23,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from agentsim_env.core.spatial import Grid, _cell_of
+from agentsim_env.core.spatial import Grid, cell_of
 
 
 @nb.njit(cache=True)
@@ -83,13 +84,15 @@ def _grown(a, need, keep):  # type: ignore[no-untyped-def]
 
 
 @nb.njit(cache=True, error_model="numpy")
-def _graph_kernel(pos, online, world, cell_start, items, ox, oy, cell, nx, ny, max_dist, rng, near_r, links,  # type: ignore[no-untyped-def]  # noqa: E501
-                  start, end, near, indices, cand, sp, ok_link):  # fmt: skip
+def _graph_kernel(pos, online, world, cell_start, items, ox, oy, cell, nx, ny, reach, pair_d, rng, near_r,  # type: ignore[no-untyped-def]  # noqa: E501
+                  links, start, end, near, indices, cand, sp, ok_link):  # fmt: skip
     # One window scan per indexed slot u (every pair is seen from both ends), in two phases. Phase 1 keeps
-    # the grid positions q of the candidates within max_dist, branch free (whether a candidate is in range is
+    # the grid positions q of the candidates within reach, branch free (whether a candidate is in range is
     # data, not something to predict) with one store each. Phase 2 walks those few: nearest, then the links in
     # the order of the pairs path: lower slots found before u in grid order (A), every higher slot (B), then
-    # lower slots found after u (C), each in grid order.
+    # lower slots found after u (C), each in grid order. The window's cells come in grid order whatever its
+    # size, so a longer reach adds candidates but never reorders a row. A nearest neighbour must also lie
+    # within pair_d (<= reach), as with the pairs path: it does not depend on how far the links reach.
     m = items.shape[0]
     # coordinates, range and link eligibility in grid order: a window's candidates are read sequentially
     for q in range(m):
@@ -99,15 +102,20 @@ def _graph_kernel(pos, online, world, cell_start, items, ox, oy, cell, nx, ny, m
     start[:] = 0
     end[:] = 0
     near[:] = -1
-    r2 = max_dist * max_dist
+    r2 = reach * reach
+    pair_d2 = pair_d * pair_d
     # sqrt is monotone and correctly rounded: d2 above (1 + 1e-9) times a bound cannot round to within it
     near_hi = near_r * near_r * (1.0 + 1e-9)
+    # the window's corners are clamped to just outside the map before cell_of clamps them to the border
+    # cells (the same cells): a reach far beyond the map must not overflow the integer cell index
+    lo_x, lo_y = ox - cell, oy - cell
+    hi_x, hi_y = ox + (nx + 1) * cell, oy + (ny + 1) * cell
     n = 0
     for idx in range(m):
         u = items[idx]
         xu, yu, zu, ru = sp[idx, 0], sp[idx, 1], sp[idx, 2], sp[idx, 3]
-        x0, y0 = _cell_of(xu - max_dist, yu - max_dist, ox, oy, cell, nx, ny)
-        x1, y1 = _cell_of(xu + max_dist, yu + max_dist, ox, oy, cell, nx, ny)
+        x0, y0 = cell_of(max(xu - reach, lo_x), max(yu - reach, lo_y), ox, oy, cell, nx, ny)
+        x1, y1 = cell_of(min(xu + reach, hi_x), min(yu + reach, hi_y), ox, oy, cell, nx, ny)
         base0 = world[u] * nx
         n_cand = 0
         for a in range(x0, x1 + 1):
@@ -167,7 +175,7 @@ def _graph_kernel(pos, online, world, cell_start, items, ox, oy, cell, nx, ny, m
                 dy = sp[q, 1] - yu
                 dz = sp[q, 2] - zu
                 d2 = dx * dx + dy * dy + dz * dz
-                if d2 <= lim and v != u:
+                if d2 <= lim and d2 <= pair_d2 and v != u:
                     d = np.sqrt(d2)
                     if d <= near_r and (d < best or (d == best and v < bslot)):
                         best = d
@@ -189,7 +197,9 @@ class RangeGraph:
 
     Args:
         n_slots: Slots S.
-        max_dist: Pair radius in metres: nothing farther is a link or a nearest neighbour.
+        max_dist: Pair radius in metres: the radius of the pairs given to ``set_pairs``, the farthest a nearest
+            neighbour may be, and the least distance the grid scan reaches (its links reach as far as the
+            largest link range, see ``links``).
         nearest_range: Largest distance of a nearest neighbour in metres (<= ``max_dist`` to matter).
     """
 
@@ -231,7 +241,11 @@ class RangeGraph:
         self, grid: Grid, pos: np.ndarray, online: np.ndarray, world: np.ndarray, link_range: np.ndarray,
         links: bool,
     ) -> None:  # fmt: skip
-        """Scan the step's grid (built from ``pos`` over the online slots): nearest now, links if ``links``."""
+        """Scan the step's grid (built from ``pos`` over the online slots): nearest now, links if ``links``.
+
+        The links follow ``link_range`` whatever ``max_dist`` is: the scan reaches the largest link range when
+        that is farther (the grid's cells may be smaller than the reach; a query scans every cell it covers).
+        """
         empty = np.zeros(0, dtype=np.int64)
         self._grid, self._pairs = grid, (empty, empty, np.zeros(0))
         self._pos, self._online, self._world = pos, online, world
@@ -241,12 +255,15 @@ class RangeGraph:
         g = self._grid
         assert g is not None
         sp = g.spec
+        reach = self.max_dist
+        if links and link_range.shape[0]:
+            reach = max(reach, float(link_range.max()))  # a reduction, no allocation
         start, end, near, indices, cand, sp4, ok_link = self._buf
         indices, cand = _graph_kernel(
             np.ascontiguousarray(self._pos, dtype=np.float64), np.ascontiguousarray(self._online, dtype=np.bool_),
             np.ascontiguousarray(self._world, dtype=np.int64), g.cell_start, g.items, sp.origin_x, sp.origin_y,
-            sp.cell, sp.nx, sp.ny, self.max_dist, link_range, self.nearest_range, links, start, end, near, indices,
-            cand, sp4, ok_link,
+            sp.cell, sp.nx, sp.ny, reach, self.max_dist, link_range, self.nearest_range, links, start, end, near,
+            indices, cand, sp4, ok_link,
         )  # fmt: skip
         self._buf = (start, end, near, indices, cand, sp4, ok_link)
         self._near, self._near_ok = near, True
@@ -265,7 +282,12 @@ class RangeGraph:
         """``(start, end, indices)``: slot ``s`` links to ``indices[start[s]:end[s]]`` (internal buffers).
 
         Args:
-            link_range: ``(S,)`` per-slot transmission range (a link needs ``dist <= min`` of both ends').
+            link_range: ``(S,)`` per-slot transmission range (a link needs ``dist <= min`` of both ends'), such
+                as the overlay's current ``link_range``. From the grid any range works; from the pairs of
+                ``set_pairs``, which reach ``max_dist``, a larger range would lose links.
+
+        Raises:
+            ValueError: From pairs, if a range exceeds ``max_dist``.
         """
         if not self._links_ok:
             if self._grid is not None:
@@ -273,6 +295,12 @@ class RangeGraph:
             else:
                 if self._pos.shape[0] != self.n_slots:
                     raise ValueError("links need the positions of the pairs: pass them with set_pairs")
+                top = float(link_range.max()) if link_range.shape[0] else 0.0
+                if top > self.max_dist:
+                    raise ValueError(
+                        f"comm_range must be <= {self.max_dist:g} m (max_dist, the radius of the pairs given to "
+                        f"set_pairs), got {top:g} m: build the pairs with a larger max_dist or pass the grid"
+                    )
                 indptr, indices = _links_from_pairs(
                     np.ascontiguousarray(self._pairs[0], dtype=np.int64),
                     np.ascontiguousarray(self._pairs[1], dtype=np.int64), np.ascontiguousarray(self._pos),

@@ -1,9 +1,12 @@
-"""The communication stack the world drives: bus + overlay + group controller + inboxes.
+"""The comms stage of the pipeline (stage 7): bus + overlay + inboxes, as one subsystem.
 
-Pipeline hooks (DESIGN §4): ``send_actions`` in stage 1 (the agents' ``comm`` actions), ``on_collisions`` in
-stage 5 (the environment tells each hit agent what hit it), ``tick_groups`` in stage 6 (heartbeats and
-timeouts) and ``deliver`` in stage 7 (bus messages due this step, one overlay hop). ``observe`` gives the
-inbox features and per-step counters.
+``CommsStack`` implements the subsystem protocol of ``core.pipeline``: ``reset_world(w, rng)`` drops world
+``w``'s traffic and gives it its own loss stream; ``step(ctx)`` writes the environment's collision messages
+(stage 5's events, read from the context) into the hit agents' inboxes, sends the heartbeats the groups stage
+asked for, delivers the bus messages due this step and advances every overlay flood by one hop, and returns
+the step's traffic (``CommsEvents``, including the heartbeat answers the world hands back to the groups stage).
+Stage 1 calls ``send_actions`` with the agents' ``comm`` actions; ``send`` and ``broadcast`` are the code API
+the env front ends use. ``observe`` gives the inbox features and per-step counters.
 
 The ``comm`` action of an agent, all values in [-1, 1] (``COMM_HEADER + payload_dim`` floats):
 
@@ -36,14 +39,15 @@ from agentsim_env.comms.messages import (
     ENV_COLLISION_OBJECT,
     FEATURES_PER_MESSAGE,
     GROUP,
+    HEARTBEAT,
     OVERLAY,
     env_collision_payload,
 )
 from agentsim_env.comms.overlay import Deliveries, Overlay
 from agentsim_env.comms.rangegraph import RangeGraph
+from agentsim_env.core.pipeline import StepContext
 from agentsim_env.core.spatial import Grid
-from agentsim_env.groups.controller import GroupController, GroupEvents
-from agentsim_env.scenarios.config import check_float, check_int
+from agentsim_env.core.validation import check_float, check_int
 
 CHANNELS = ("none", "group", "nearest", "named", "overlay")
 N_CHANNELS = len(CHANNELS)
@@ -193,12 +197,19 @@ class CommsConfig:
 
 @dataclass(slots=True)
 class CommsEvents:
-    """The step's traffic for the data store (arrays)."""
+    """The step's traffic for the data store (arrays).
+
+    Attributes:
+        bus: Bus messages sent, delivered and dropped (with reasons) this step.
+        overlay: Overlay deliveries of this step's hop.
+        sent: ``(S,)`` messages each slot sent this step.
+        answers: ``(slots, steps)`` heartbeat answers that reached the controller (for the groups stage).
+    """
 
     bus: DeliveryEvents | None
     overlay: Deliveries | None
-    groups: GroupEvents | None
     sent: np.ndarray
+    answers: tuple[np.ndarray, np.ndarray] = (np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64))
 
 
 _OVERLAY_KIND = np.full(1, OVERLAY, dtype=np.int8)
@@ -207,36 +218,33 @@ _NO_ROWS = np.zeros(0, dtype=np.int64)  # push_rows: delivery j takes payload ro
 
 
 class CommsStack:
-    """Bus, overlay and group controller of B worlds, sharing the state's group array.
+    """Bus and overlay of B worlds (the comms subsystem), reading the state's group array.
 
     Args:
         cfg: Communication settings.
         n_worlds: Worlds B.
         n_agents: Agents per world N.
-        group: The state's ``(S,)`` group array (shared by reference, written by the controller).
-        rng: Generator for channel loss (replaced on ``reset``).
+        group: The state's ``(S,)`` group array (read by reference; the groups stage writes it).
     """
 
-    def __init__(
-        self, cfg: CommsConfig, n_worlds: int, n_agents: int, group: np.ndarray, rng: np.random.Generator
-    ) -> None:
+    name = "comms"
+
+    def __init__(self, cfg: CommsConfig, n_worlds: int, n_agents: int, group: np.ndarray) -> None:
         self.cfg = cfg
         self.n_agents = n_agents
         s = n_worlds * n_agents
-        self.bus = MessageBus(n_worlds, n_agents, cfg.payload_dim, cfg.channel(), cfg.inbox_size, rng, group=group,
-                              pos_scale=cfg.overlay_range)  # fmt: skip
+        # until a world's first reset its losses come from a fixed stream; reset_world replaces it
+        rngs = [np.random.default_rng(np.random.SeedSequence(0, spawn_key=(w,))) for w in range(n_worlds)]
+        self.bus = MessageBus(n_worlds, n_agents, cfg.payload_dim, cfg.channel(), cfg.inbox_size, rngs,
+                              group=group, pos_scale=cfg.overlay_range)  # fmt: skip
         self.overlay = Overlay(s, cfg.payload_dim, cfg.overlay_range, full_propagation=cfg.overlay_full)
-        period = cfg.heartbeat_period
-        self.groups = GroupController(
-            n_worlds, n_agents, period, max(cfg.heartbeat_timeout, period), group=group
-        )
         self.sent = np.zeros(s, dtype=np.int64)
         self._received0 = np.zeros(s, dtype=np.int64)
         self._dropped0 = np.zeros(s, dtype=np.int64)
         self.graph = RangeGraph(s, max(cfg.overlay_range, cfg.nearest_range), cfg.nearest_range)
         self._no_near = np.full(s, -1, dtype=np.int64)
         self._inbox_out = np.zeros((s, cfg.inbox_size, cfg.features), dtype=np.float32)
-        self.events = CommsEvents(None, None, None, self.sent.copy())
+        self.events = CommsEvents(None, None, self.sent.copy())
 
     @property
     def pairs(self) -> tuple[np.ndarray, ...]:
@@ -271,20 +279,50 @@ class CommsStack:
             self.graph.set_pairs(neighbours, pos, online, world)
 
     # ------------------------------------------------------------------ lifecycle
-    def reset(self, rng: np.random.Generator, step: int) -> None:
-        """Drop all traffic of every world; ``rng`` drives the channel's loss from now on."""
-        self.bus.reset(rng)
-        self.overlay.reset()
-        self.groups.reset(step)
-        self.sent[:] = 0
-
-    def reset_world(self, w: int, step: int) -> None:
-        """Drop the traffic of world ``w`` only (it starts a new episode while others go on)."""
+    def reset_world(self, w: int, rng: np.random.Generator) -> None:
+        """Drop the traffic of world ``w`` (it starts a new episode); its losses come from ``rng`` from now on."""
         slots = np.arange(w * self.n_agents, (w + 1) * self.n_agents)
-        self.bus.drop_world(w)
+        self.bus.reset_world(w, rng)
         self.overlay.drop_slots(slots)
-        self.groups.reset_slots(slots, step)
         self.sent[slots] = 0
+        self._received0[slots] = self.bus.inbox.received[slots]
+        self._dropped0[slots] = self.bus.inbox.dropped[slots]
+
+    # ------------------------------------------------------------------ code API
+    def send(
+        self, kind: int, sender: int, target: int, payload: np.ndarray, step: int, world: int | None = None
+    ) -> bool:
+        """Send one AGENT (to a slot) or GROUP (to a group id) message from code; counted as sent.
+
+        Args:
+            kind: ``AGENT`` or ``GROUP``.
+            sender: Sending slot, or -1 for the group controller (a GROUP broadcast; then ``world`` is needed).
+            target: Receiver slot (AGENT) or group id (GROUP).
+            payload: ``(D,)`` payload.
+            step: Current global tick.
+            world: World of a controller broadcast.
+
+        Returns:
+            Whether the bus accepted it (False: over the sender's bandwidth this step).
+        """
+        pay = np.asarray(payload, dtype=np.float32).reshape(1, -1)
+        wld = None if world is None else np.array([int(world)])
+        acc = self.bus.send(kind, np.array([int(sender)]), np.array([int(target)]), pay, step, world=wld)
+        if sender >= 0:
+            self.sent[sender] += 1
+        return bool(acc[0])
+
+    def unicast(self, sender: int, receiver: int, payload: np.ndarray, step: int) -> bool:
+        """An AGENT message from slot ``sender`` to slot ``receiver`` (see ``send``)."""
+        return self.send(AGENT, sender, receiver, payload, step)
+
+    def to_group(self, sender: int, group: int, payload: np.ndarray, step: int) -> bool:
+        """A GROUP message from slot ``sender`` to every online member of ``group`` in its world."""
+        return self.send(GROUP, sender, group, payload, step)
+
+    def broadcast(self, world: int, group: int, payload: np.ndarray, step: int) -> bool:
+        """Send ``payload`` from the group controller to every online member of ``group`` in ``world``."""
+        return self.send(GROUP, -1, group, payload, step, world=world)
 
     # ------------------------------------------------------------------ stage 1
     def send_actions(self, step: int, comm: np.ndarray, acting: np.ndarray, group: np.ndarray) -> None:
@@ -312,7 +350,24 @@ class CommsStack:
         if o_org.shape[0]:
             self.overlay.start(o_org, o_hops, o_pay, step)
 
-    # ------------------------------------------------------------------ stages 5-7
+    # ------------------------------------------------------------------ stage 7
+    def step(self, ctx: StepContext) -> CommsEvents:
+        """Stage 7: collision messages, heartbeats, bus deliveries due now and one overlay hop.
+
+        Reads stage 5's collisions and the groups stage's heartbeat requests (``ctx.outputs["groups"].ping``)
+        from the context.
+        """
+        st, tick = ctx.state, ctx.tick
+        col = ctx.collisions
+        self.on_collisions(tick, col.agent, col.other_agent, col.obj)
+        groups = ctx.outputs.get("groups")
+        ping = getattr(groups, "ping", None)
+        if ping is not None and ping.size:
+            k = ping.size
+            self.bus.send(HEARTBEAT, np.full(k, -1, dtype=np.int64), ping,
+                          np.zeros((k, self.cfg.payload_dim), dtype=np.float32), tick)  # fmt: skip
+        return self.deliver(tick, st.pos, st.online, st.group, st.world_id, ctx.grid)
+
     def on_collisions(self, step: int, agent: np.ndarray, other_agent: np.ndarray, obj: np.ndarray) -> None:
         """Write an ENV message into each hit agent's inbox naming the other agent (index in world) or object."""
         if agent.size == 0:
@@ -323,10 +378,6 @@ class CommsStack:
         k = agent.size
         self.bus.inbox.push(agent, np.full(k, ENV, np.int8), np.full(k, -1, np.int64), np.zeros(k, np.int16),
                             np.full(k, step, np.int64), pay)  # fmt: skip
-
-    def tick_groups(self, step: int, online: np.ndarray, pos: np.ndarray) -> np.ndarray:
-        """Heartbeats; returns the slots that timed out (the world takes them offline)."""
-        return self.groups.tick(step, self.bus, online, pos)
 
     def deliver(
         self,
@@ -353,7 +404,7 @@ class CommsStack:
             pushes.append((ov.receiver, np.broadcast_to(_OVERLAY_KIND, (k,)), ov.origin, ov.hops, ov.created,
                            ov.payload, _NO_ROWS))  # fmt: skip
         self.bus.inbox.push_batches(pushes)  # bus deliveries, then the overlay's: one pass over the inboxes
-        self.events = CommsEvents(bus_ev, ov, self.groups.take_events(), self.sent.copy())
+        self.events = CommsEvents(bus_ev, ov, self.sent.copy(), self.bus.take_answers())
         return self.events
 
     # ------------------------------------------------------------------ observation

@@ -14,7 +14,7 @@ import numba as nb
 import numpy as np
 
 from agentsim_env.core.scene import BOX, CYLINDER
-from agentsim_env.core.spatial import Grid, _cell_of, _grow
+from agentsim_env.core.spatial import Grid, cell_of, grow
 
 # Kernels compile with error_model="numpy": every division in them is guarded or by a validated positive
 # value, and dropping the per-division zero check of the default model made the scan ~20 % faster.
@@ -86,8 +86,8 @@ def _agent_agent(pos, radius, online, world, cell_start, items, ox, oy, cell, nx
     for idx in range(items.shape[0]):
         i = items[idx]
         w = world[i]
-        x0, y0 = _cell_of(pos[i, 0] - max_dist, pos[i, 1] - max_dist, ox, oy, cell, nx, ny)
-        x1, y1 = _cell_of(pos[i, 0] + max_dist, pos[i, 1] + max_dist, ox, oy, cell, nx, ny)
+        x0, y0 = cell_of(pos[i, 0] - max_dist, pos[i, 1] - max_dist, ox, oy, cell, nx, ny)
+        x1, y1 = cell_of(pos[i, 0] + max_dist, pos[i, 1] + max_dist, ox, oy, cell, nx, ny)
         for a in range(x0, x1 + 1):
             base = (w * nx + a) * ny
             for q in range(cell_start[base + y0], cell_start[base + y1 + 1]):
@@ -100,7 +100,7 @@ def _agent_agent(pos, radius, online, world, cell_start, items, ox, oy, cell, nx
                 d2 = dx * dx + dy * dy + dz * dz
                 if d2 <= r2 and np.sqrt(d2) < radius[i] + radius[j] + margin:
                     if n == out_i.shape[0]:
-                        out_i, out_j = _grow(out_i, n), _grow(out_j, n)
+                        out_i, out_j = grow(out_i, n), grow(out_j, n)
                     out_i[n] = i
                     out_j[n] = j
                     n += 1
@@ -119,8 +119,8 @@ def _agent_object(
         if not online[i]:
             continue
         reach = radius[i] + margin
-        x0, y0 = _cell_of(pos[i, 0] - reach, pos[i, 1] - reach, ox, oy, cell, nx, ny)
-        x1, y1 = _cell_of(pos[i, 0] + reach, pos[i, 1] + reach, ox, oy, cell, nx, ny)
+        x0, y0 = cell_of(pos[i, 0] - reach, pos[i, 1] - reach, ox, oy, cell, nx, ny)
+        x1, y1 = cell_of(pos[i, 0] + reach, pos[i, 1] + reach, ox, oy, cell, nx, ny)
         first = n  # this agent's rows start here
         last = -1
         for a in range(x0, x1 + 1):
@@ -142,7 +142,7 @@ def _agent_object(
                         if dup:
                             continue
                         if n == out_a.shape[0]:
-                            out_a, out_o = _grow(out_a, n), _grow(out_o, n)
+                            out_a, out_o = grow(out_a, n), grow(out_o, n)
                         out_a[n] = i
                         out_o[n] = o
                         n += 1

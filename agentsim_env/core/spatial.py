@@ -79,7 +79,12 @@ class Grid:
 
 
 @nb.njit(cache=True, error_model="numpy")
-def _cell_of(x: float, y: float, ox: float, oy: float, cell: float, nx: int, ny: int) -> tuple[int, int]:
+def cell_of(x: float, y: float, ox: float, oy: float, cell: float, nx: int, ny: int) -> tuple[int, int]:
+    """Cell ``(cx, cy)`` holding the point ``(x, y)``, clamped to the grid (numba; part of the public API).
+
+    Kernels of the sensors, comms and collisions find the cells a query box touches with it, so every user
+    of the step's grid agrees with ``build_grid`` on which cell a point falls in.
+    """
     cx = int(np.floor((x - ox) / cell))
     cy = int(np.floor((y - oy) / cell))
     cx = min(max(cx, 0), nx - 1)
@@ -99,7 +104,7 @@ def _build(pos, world, active, ox, oy, cell, nx, ny, n_cells):  # type: ignore[n
         if not active[i]:
             key[i] = -1
             continue
-        cx, cy = _cell_of(pos[i, 0], pos[i, 1], ox, oy, cell, nx, ny)
+        cx, cy = cell_of(pos[i, 0], pos[i, 1], ox, oy, cell, nx, ny)
         k = (world[i] * nx + cx) * ny + cy
         key[i] = k
         counts[k] += 1
@@ -149,8 +154,8 @@ def _build_objects(cx, cy, rad, world, ox, oy, cell, nx, ny, n_cells):  # type: 
             fill = counts[:-1].copy()
             items = np.empty(counts[n_cells], dtype=np.int64)
         for i in range(o):
-            x0, y0 = _cell_of(cx[i] - rad[i], cy[i] - rad[i], ox, oy, cell, nx, ny)
-            x1, y1 = _cell_of(cx[i] + rad[i], cy[i] + rad[i], ox, oy, cell, nx, ny)
+            x0, y0 = cell_of(cx[i] - rad[i], cy[i] - rad[i], ox, oy, cell, nx, ny)
+            x1, y1 = cell_of(cx[i] + rad[i], cy[i] + rad[i], ox, oy, cell, nx, ny)
             for a in range(x0, x1 + 1):
                 for b in range(y0, y1 + 1):
                     k = (world[i] * nx + a) * ny + b
@@ -183,8 +188,8 @@ def build_object_grid(spec: GridSpec, centre: np.ndarray, footprint_radius: np.n
 
 
 @nb.njit(cache=True, error_model="numpy")
-def _grow(a, n):  # type: ignore[no-untyped-def]
-    # Double a result buffer, keeping its first n entries.
+def grow(a, n):  # type: ignore[no-untyped-def]
+    """Double a kernel's result buffer, keeping its first ``n`` entries (numba; public API)."""
     b = np.empty(max(2 * a.shape[0], 16), dtype=a.dtype)
     b[:n] = a[:n]
     return b
@@ -198,8 +203,8 @@ def _pairs(pos, world, cell_start, items, ox, oy, cell, nx, ny, max_dist, out_i,
     for idx in range(items.shape[0]):
         i = items[idx]
         w = world[i]
-        x0, y0 = _cell_of(pos[i, 0] - max_dist, pos[i, 1] - max_dist, ox, oy, cell, nx, ny)
-        x1, y1 = _cell_of(pos[i, 0] + max_dist, pos[i, 1] + max_dist, ox, oy, cell, nx, ny)
+        x0, y0 = cell_of(pos[i, 0] - max_dist, pos[i, 1] - max_dist, ox, oy, cell, nx, ny)
+        x1, y1 = cell_of(pos[i, 0] + max_dist, pos[i, 1] + max_dist, ox, oy, cell, nx, ny)
         for a in range(x0, x1 + 1):
             base = (w * nx + a) * ny
             # The rows of one column are consecutive cells: one contiguous run of items.
@@ -213,7 +218,7 @@ def _pairs(pos, world, cell_start, items, ox, oy, cell, nx, ny, max_dist, out_i,
                 d2 = dx * dx + dy * dy + dz * dz
                 if d2 <= r2:
                     if n == out_i.shape[0]:
-                        out_i, out_j, out_d = _grow(out_i, n), _grow(out_j, n), _grow(out_d, n)
+                        out_i, out_j, out_d = grow(out_i, n), grow(out_j, n), grow(out_d, n)
                     out_i[n] = i
                     out_j[n] = j
                     out_d[n] = np.sqrt(d2)

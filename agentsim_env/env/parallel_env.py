@@ -6,9 +6,7 @@ let the scenario score (9), then build the per-agent dicts once from arrays.
 
 from __future__ import annotations
 
-import functools
 import operator
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -16,26 +14,17 @@ from gymnasium import spaces
 from pettingzoo import ParallelEnv
 from pettingzoo.utils.conversions import parallel_to_aec
 
+from agentsim_env.core.pipeline import EpisodeSeeds
+from agentsim_env.core.validation import check_choice
 from agentsim_env.env.spaces import FORMATS, action_space_for, observation_space_for, split_action
-from agentsim_env.scenarios.base import Scenario, run_step
-from agentsim_env.scenarios.config import check_choice
+from agentsim_env.scenarios.base import Scenario, reset_worlds, run_step
 
 RENDER_MODES = ("human", "rgb_array")
 
 
-@functools.lru_cache(maxsize=64)
-def _dict_builder(keys: tuple[str, ...]) -> Callable[..., dict[str, Any]]:
-    """A function ``f(v0, v1, ...) -> {keys[0]: v0, ...}`` compiled once per key tuple.
-
-    A dict display is about twice as fast as ``dict(zip(keys, values))``, which matters when thousands of
-    per-agent dicts are built every step. Keys are the scenario's part and info names (identifiers).
-    """
-    for k in keys:
-        if not k.replace(".", "_").isidentifier():
-            raise ValueError(f"observation/info names must be identifiers, got {k!r}")
-    args = ", ".join(f"v{i}" for i in range(len(keys)))
-    body = ", ".join(f"{k!r}: v{i}" for i, k in enumerate(keys))
-    return eval(f"lambda {args}: {{{body}}}")  # noqa: S307 - built from validated identifiers only
+def _dicts(keys: tuple[str, ...], columns: list[Any]) -> list[dict[str, Any]]:
+    """One dict ``{keys[i]: columns[i][j]}`` per row ``j`` (no code generation; C-level zips)."""
+    return [dict(zip(keys, row)) for row in zip(*columns)]
 
 
 class AgentSimParallelEnv(ParallelEnv):
@@ -82,7 +71,9 @@ class AgentSimParallelEnv(ParallelEnv):
         n = scenario.state_size()
         self.state_space = spaces.Box(-10.0, 10.0, shape=(n,), dtype=np.float32)
         self._set_agents([])
-        self._rng: np.random.Generator | None = None
+        self._info_keys = scenario.info_keys()
+        self._seeds = EpisodeSeeds()
+        self._seeded = False
         self._steps = 0
         self._window: Any = None
 
@@ -108,18 +99,17 @@ class AgentSimParallelEnv(ParallelEnv):
         self, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[dict[str, Any], dict[str, dict[str, Any]]]:
         """Start an episode; ``seed`` re-seeds the env's generator (otherwise it continues)."""
-        if seed is not None or self._rng is None:
-            self._rng = np.random.default_rng(seed)
-        self.scenario.reset_world(self.world, 0, self._rng)
-        self.world.reset_comms(self._rng.spawn(1)[0])
-        self.world.step_count[:] = 0
-        self.world.refresh()
+        if seed is not None or not self._seeded:
+            self._seeds.reset(seed)
+            self._seeded = True
+        reset_worlds(self.scenario, self.world, [0], [self._seeds.next()])
         self._steps = 0
         self._set_agents(list(self.possible_agents))
-        parts = self.scenario.observe(self.world)
+        parts = self.scenario.observation(self.world)
         if self.render_mode == "human":
             self.render()
-        return self._obs_dicts(parts, np.ones(len(self.agents), dtype=bool)), {a: {} for a in self.agents}
+        infos = self._reset_infos()
+        return self._obs_dicts(parts), infos
 
     def step(self, actions: dict[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
         """Advance one step with an action for every live agent (see the scenario docstring for layouts)."""
@@ -138,7 +128,7 @@ class AgentSimParallelEnv(ParallelEnv):
         res, terminated = run_step(sc, world, parts, acting)
         self._steps += 1
         truncated = acting & ~terminated & (self._steps >= sc.max_steps)
-        obs = self._obs_dicts(sc.observe(world), acting)
+        obs = self._obs_dicts(sc.observation(world))
         live = self.agents
         idx = self._live_idx
         rew = res.rewards[idx].astype(float).tolist()
@@ -149,7 +139,7 @@ class AgentSimParallelEnv(ParallelEnv):
         truncs = dict(zip(live, trunc))
         keys = tuple(res.info)
         cols = [res.info[k][idx].tolist() for k in keys]
-        infos = dict(zip(live, map(_dict_builder(keys), *cols))) if keys else {a: {} for a in live}
+        infos = dict(zip(live, _dicts(keys, cols))) if keys else {a: {} for a in live}
         if any(term) or any(trunc):
             self._set_agents([a for a, t, u in zip(live, term, trunc) if not (t or u)])
         if self.render_mode == "human":
@@ -175,13 +165,13 @@ class AgentSimParallelEnv(ParallelEnv):
         if actions.keys() != self._live_set:
             for a in actions:
                 if a not in self._index:
-                    raise ValueError(f"unknown agent id {a!r} in actions")
-                if a not in self._live_set:
-                    raise ValueError(
-                        f"agent {a!r} is no longer live (terminated or truncated); remove it from actions"
-                    )
+                    raise ValueError(f"unknown agent id {a!r} in actions; agents are {self.possible_agents[0]!r}..."
+                                     f"{self.possible_agents[-1]!r}")  # fmt: skip
             missing = [a for a in live if a not in actions]
-            raise ValueError(f"missing actions for live agent(s) {missing[:5]}")
+            if missing:
+                raise ValueError(f"missing actions for live agent(s) {missing[:5]}")
+            # actions for agents that ended earlier in this episode (TorchRL, BenchMARL send them): ignored
+            actions = {a: actions[a] for a in live}
         parts = self._act_parts
         idx = self._live_idx
         n = len(live)
@@ -219,7 +209,11 @@ class AgentSimParallelEnv(ParallelEnv):
             np.clip(out[name], p.low, p.high, out=out[name])
         return out
 
-    def _obs_dicts(self, parts: dict[str, np.ndarray], acting: np.ndarray) -> dict[str, Any]:
+    def _reset_infos(self) -> dict[str, dict[str, Any]]:
+        """Infos at reset: the keys ``step`` returns, each at its neutral value (0)."""
+        return {a: dict.fromkeys(self._info_keys, 0) for a in self.agents}
+
+    def _obs_dicts(self, parts: dict[str, np.ndarray]) -> dict[str, Any]:
         """Per-agent observations of the live agents, built once from the part arrays (rows of fresh arrays)."""
         s = self.world.state.n_slots
         idx = self._live_idx
@@ -228,7 +222,7 @@ class AgentSimParallelEnv(ParallelEnv):
             return dict(zip(self.agents, flat[idx]))
         keys = tuple(parts)
         rows = [parts[k][idx] for k in keys]  # fancy indexing: fresh arrays, never views of live state
-        return dict(zip(self.agents, map(_dict_builder(keys), *rows)))
+        return dict(zip(self.agents, _dicts(keys, rows)))
 
     # ------------------------------------------------------------------ extras
     def _comms(self) -> Any:
@@ -261,8 +255,6 @@ class AgentSimParallelEnv(ParallelEnv):
         Raises:
             ValueError: Unknown or offline agent, unknown group, wrong payload width, NaN payload.
         """
-        from agentsim_env.comms.messages import AGENT, GROUP
-
         comms = self._comms()
         s = self._live_slot(sender, "sender")
         if (to is None) == (group is None):
@@ -274,25 +266,20 @@ class AgentSimParallelEnv(ParallelEnv):
         if not np.isfinite(pay).all():
             raise ValueError(f"payload must be finite, got {pay.ravel().tolist()}")
         if to is not None:
-            r = self._live_slot(to, "receiver") if to in self._index else None
-            if r is None:
-                raise ValueError(f"receiver: unknown agent id {to!r}")
-            acc = comms.bus.send(AGENT, np.array([s]), np.array([r]), pay, self.world.tick)
-        else:
-            known = np.unique(self.world.state.group[self.world.state.group >= 0]).tolist()
-            if group not in known:
-                raise ValueError(f"group: unknown group {group!r}; groups are {known}")
-            acc = comms.bus.send(GROUP, np.array([s]), np.array([group]), pay, self.world.tick)
-        comms.sent[s] += 1
-        return bool(acc[0])
+            return bool(comms.unicast(s, self._live_slot(to, "receiver"), pay[0], self.world.tick))
+        known = np.unique(self.world.state.group[self.world.state.group >= 0]).tolist()
+        if group not in known:
+            raise ValueError(f"group: unknown group {group!r}; groups are {known}")
+        return bool(comms.to_group(s, int(group), pay[0], self.world.tick))
 
     def assign_group(self, agent: str, group: int) -> None:
         """Move ``agent`` to ``group`` at run time (-1: no group); the change is logged as an event."""
-        comms = self._comms()
+        self._comms()
         slot = self._live_slot(agent, "agent")
         if isinstance(group, bool) or not isinstance(group, (int, np.integer)) or group < -1:
             raise ValueError(f"group must be an integer >= -1, got {group!r}")
-        comms.groups.assign(np.array([slot]), int(group), self.world.tick)
+        assert self.world.groups is not None
+        self.world.groups.assign(np.array([slot]), int(group), self.world.tick)
 
     def state(self) -> np.ndarray:
         """Global state of the world for centralised critics (see ``state_space``)."""

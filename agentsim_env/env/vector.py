@@ -10,13 +10,15 @@ ignored and their observations are zeros (SuperSuit's "black death" convention).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from agentsim_env.core.pipeline import EpisodeSeeds
 from agentsim_env.env.spaces import flat_layout
-from agentsim_env.scenarios.base import run_step
+from agentsim_env.scenarios.base import reset_worlds, run_step
 from agentsim_env.scenarios.registry import make_scenario
 
 
@@ -69,36 +71,47 @@ class BatchedEnv:
         self.render_mode: str | None = None  # batched worlds are not rendered (read by vector-env adapters)
         self.alive = np.zeros((n_worlds, self.n_agents), dtype=bool)
         self.steps = np.zeros(n_worlds, dtype=np.int64)
-        self._rngs: list[np.random.Generator] = []
-        self._comm_rng = np.random.default_rng(0)
+        self._seeds = [EpisodeSeeds() for _ in range(n_worlds)]
+        self._started = False
 
     def _flat_obs(self) -> np.ndarray:
-        parts = self.scenario.observe(self.world)
+        parts = self.scenario.observation(self.world)
         s = self.world.state.n_slots
         flat = np.concatenate([p.reshape(s, -1) for p in parts.values()], axis=1, dtype=np.float32)
         return flat.reshape(self.n_worlds, self.n_agents, self.obs_dim)
 
     def _reset_worlds(self, worlds: np.ndarray) -> None:
-        if worlds.size == self.n_worlds:
-            self.world.reset_comms(self._comm_rng)
-        for w in worlds:
-            self.scenario.reset_world(self.world, int(w), self._rngs[w])
-            if worlds.size < self.n_worlds:
-                self.world.reset_comms(self._comm_rng, int(w))
+        reset_worlds(self.scenario, self.world, worlds.tolist(), [self._seeds[w].next() for w in worlds])
         self.steps[worlds] = 0
         self.alive[worlds] = True
-        self.world.refresh()
 
-    def reset(self, seed: int | None = None) -> np.ndarray:
-        """Reset every world; world ``w`` draws from its own child generator of ``seed``.
+    def reset(self, seed: int | Sequence[int] | None = None) -> np.ndarray:
+        """Reset every world; world ``w`` then behaves exactly like a ``ParallelEnv`` reset with its seed.
+
+        Args:
+            seed: ``None`` (fresh entropy per world), an int ``s`` (world ``w`` gets ``s + w``) or a sequence of
+                B ints (one per world). Later automatic resets of world ``w`` continue its seed's episodes, as
+                ``reset()`` without a seed continues a ``ParallelEnv``'s.
 
         Returns:
             Observations ``(B, N, obs_dim)``.
         """
-        children = np.random.SeedSequence(seed).spawn(self.n_worlds + 1)
-        self._rngs = [np.random.default_rng(c) for c in children[:-1]]
-        self._comm_rng = np.random.default_rng(children[-1])  # channel loss, shared by the worlds' bus
-        self._reset_worlds(np.arange(self.n_worlds))
+        b = self.n_worlds
+        if seed is None:
+            seeds: list[int | None] = [None] * b
+        elif isinstance(seed, (int, np.integer)) and not isinstance(seed, bool):
+            seeds = [int(seed) + w for w in range(b)]
+        else:
+            seeds = list(seed)  # type: ignore[arg-type]
+            if len(seeds) != b or not all(isinstance(s, (int, np.integer)) and not isinstance(s, bool)
+                                          for s in seeds):  # fmt: skip
+                raise ValueError(f"seed must be None, an int or a sequence of {b} ints (one per world), got {seed!r}")
+        for w, s in enumerate(seeds):
+            if s is not None and s < 0:
+                raise ValueError(f"seed of world {w} must be >= 0, got {s}")
+            self._seeds[w].reset(s)
+        self._started = True
+        self._reset_worlds(np.arange(b))
         return self._flat_obs()
 
     def step(self, actions: np.ndarray) -> BatchStep:
@@ -113,7 +126,7 @@ class BatchedEnv:
         Raises:
             ValueError: Wrong shape, or a NaN/inf action of a live agent (the message names world and agent).
         """
-        if not self._rngs:
+        if not self._started:
             raise ValueError("call reset() before step()")
         a = np.asarray(actions, dtype=np.float64)
         if a.shape != (self.n_worlds, self.n_agents, self.act_dim):

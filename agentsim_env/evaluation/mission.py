@@ -102,7 +102,7 @@ def fly_mission(env: Any, policy: Any, seed: int) -> dict[str, float]:
     obs, _ = env.reset(seed=seed)
     policy.reset(seed)
     log = MissionLog(env)
-    ps = env.scenario.payloads
+    ps = env.world.payloads.objects
     steps, work_done = 0, False
     while env.agents and not work_done:
         obs, *_ = env.step(policy.act({a: obs[a] for a in env.agents}))

@@ -26,7 +26,7 @@ import numpy as np  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Circle, Patch  # noqa: E402
 
-from agentsim_env.evaluation.report import composite_score, mean_std, rank_strategies, run_rows  # noqa: E402
+from agentsim_env.evaluation.scoring import composite_score, mean_std, rank_strategies, run_rows  # noqa: E402
 from agentsim_env.scenarios.uav_zones import ZoneSet  # noqa: E402
 
 __all__ = ["BAR_METRICS", "DPI", "density_raster", "plot_landing_maps", "plot_metric_bars", "write_plots"]

@@ -1,15 +1,18 @@
 """Group controller: group ids, run-time reassignment, group broadcast, heartbeats and timeouts.
 
-As in AgentSimJS, the controller assigns a group id to agents, changes it at run time, broadcasts to a
-group through the bus (GROUP messages with sender -1) and monitors its agents with periodic heartbeats.
+As in AgentSimJS, the controller assigns a group id to agents, changes it at run time and monitors its agents
+with periodic heartbeats. It is the groups stage (6) of the pipeline and imports no other subsystem: ``tick``
+returns the slots to ping and the slots that timed out; the comms stage carries the heartbeats and answers
+over the bus, and the world takes timed-out slots offline.
 
 Heartbeat protocol (all traffic crosses the bus, so latency and loss apply both ways):
 
-- Every ``heartbeat_period`` steps (``step % heartbeat_period == 0``) ``tick`` sends one HEARTBEAT to every
-  ONLINE slot that belongs to a group (``group >= 0``); slots without a group are not monitored.
+- Every ``heartbeat_period`` steps of a world (``phase % heartbeat_period == 0``, phase = steps since that
+  world's reset) ``tick`` asks for one HEARTBEAT to every ONLINE slot of a group (``group >= 0``); slots
+  without a group are not monitored.
 - The bus delivers it ``latency`` steps later (dropped if the slot went offline meanwhile) and the slot
   answers automatically; the answer reaches the controller another ``latency`` steps later unless lost.
-- ``tick`` first reads the answers that arrived since the previous tick into ``last_answer`` (the step each
+- ``tick`` first reads the answers handed to it (those that arrived since the previous tick) into ``last_answer`` (the step each
   answer arrived), then reports every monitored slot with ``step - last_answer > timeout``, offline ones
   included (an offline slot never answers). A slot is reported once (``timed_out`` remembers it); the world
   marks it offline.
@@ -20,7 +23,7 @@ member's ``step - last_answer`` stays <= ``heartbeat_period`` once it answers re
 after ``reset`` at a heartbeat step, and <= ``heartbeat_period - 1 + 2 * latency`` right after joining a
 group between two heartbeats (a joining slot starts with ``last_answer`` = the step it joined). Choose
 ``timeout >= heartbeat_period + 2 * latency`` and no answering member is ever reported; the constructor
-checks ``timeout >= heartbeat_period`` and ``tick`` checks ``timeout >= 2 * latency``. A member whose last
+checks ``timeout >= heartbeat_period`` and ``CommsConfig`` checks the latency term. A member whose last
 answer arrived at step ``a`` is reported by the tick of step ``a + timeout + 1``.
 
 The controller manages all worlds of its slot array (slot ``s`` is in world ``s // n_agents``); messages
@@ -33,8 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from agentsim_env.comms.bus import MessageBus
-from agentsim_env.comms.messages import GROUP, HEARTBEAT
+from agentsim_env.core.pipeline import StepContext
 
 
 @dataclass(frozen=True, slots=True)
@@ -56,6 +58,21 @@ class GroupEvents:
     def __len__(self) -> int:
         """Number of rows."""
         return int(self.slot.shape[0])
+
+
+@dataclass(frozen=True, slots=True)
+class GroupStepEvents:
+    """What the groups stage (6) reports each step.
+
+    Attributes:
+        timed_out: Slots whose heartbeat answers stopped past the timeout (the world takes them offline).
+        ping: Slots the comms stage sends a heartbeat to this step.
+        changes: Group changes logged since the previous step (run-time reassignment).
+    """
+
+    timed_out: np.ndarray
+    ping: np.ndarray
+    changes: GroupEvents
 
 
 class GroupController:
@@ -80,8 +97,12 @@ class GroupController:
         "last_answer",
         "timed_out",
         "_step",
+        "_next_tick",
+        "_answers",
         "_events",
     )
+
+    name = "groups"
 
     def __init__(
         self,
@@ -132,6 +153,8 @@ class GroupController:
         self.last_answer = np.zeros(s, dtype=np.int64)
         self.timed_out = np.zeros(s, dtype=bool)
         self._step = 0
+        self._next_tick = 0
+        self._answers: tuple[np.ndarray, np.ndarray] | None = None
         self._events: list[GroupEvents] = []
 
     @property
@@ -187,6 +210,29 @@ class GroupController:
                 GroupEvents(np.full(c.size, st, dtype=np.int64), c, old[changed], g[changed].astype(np.int32))
             )
 
+    # ------------------------------------------------------------------ the pipeline stage
+    def reset_world(self, w: int, rng: np.random.Generator) -> None:
+        """World ``w`` starts a new episode: its members' monitoring restarts at the next step."""
+        del rng  # the groups stage draws nothing
+        self.reset_slots(np.arange(w * self.n_agents, (w + 1) * self.n_agents), self._next_tick)
+
+    def receive_answers(self, answers: tuple[np.ndarray, np.ndarray]) -> None:
+        """Heartbeat answers the comms stage collected (``(slots, steps)``), read by the next ``step``."""
+        if self._answers is None or not self._answers[0].size:
+            self._answers = answers
+        else:
+            self._answers = (np.concatenate([self._answers[0], answers[0]]),
+                             np.concatenate([self._answers[1], answers[1]]))  # fmt: skip
+
+    def step(self, ctx: StepContext) -> GroupStepEvents:
+        """Stage 6: heartbeat tick; returns the timed-out slots, the slots to ping and the group changes."""
+        st = ctx.state
+        answers, self._answers = self._answers, None
+        phase = ctx.step_count[st.world_id]
+        timed_out, ping = self.tick(ctx.tick, st.online, answers, phase)
+        self._next_tick = ctx.tick + 1
+        return GroupStepEvents(timed_out[st.online[timed_out]], ping, self.take_events())
+
     def take_events(self) -> GroupEvents:
         """Group changes logged since the previous call (the log is then emptied)."""
         ev = self._events
@@ -205,74 +251,45 @@ class GroupController:
         lo = int(world) * self.n_agents
         return lo + np.flatnonzero(self.group[lo : lo + self.n_agents] == int(group))
 
-    def broadcast(self, bus: MessageBus, world: int, group: int, payload: np.ndarray, step: int) -> bool:
-        """Send ``payload`` to every online member of ``group`` in ``world`` (GROUP message, sender -1).
-
-        Args:
-            bus: The bus (its channel applies; GROUP targets are validated against this controller's groups).
-            world: World index.
-            group: Group id with at least one member in ``world``.
-            payload: ``(D,)`` payload.
-            step: Current step.
-
-        Returns:
-            Whether the bus accepted it (the controller is not bandwidth-limited, so True).
-        """
-        if not 0 <= int(world) < self.n_worlds:
-            raise ValueError(f"world must be in [0, {self.n_worlds}), got {world}")
-        p = np.asarray(payload, dtype=np.float32).reshape(1, -1)
-        acc = bus.send(
-            GROUP,
-            np.array([-1]),
-            np.array([int(group)]),
-            p,
-            step,
-            world=np.array([int(world)]),
-            group=self.group,
-        )
-        return bool(acc[0])
-
     def tick(
-        self, step: int, bus: MessageBus, online: np.ndarray, pos: np.ndarray | None = None
-    ) -> np.ndarray:
-        """Read heartbeat answers, send this step's heartbeats and report newly timed-out slots.
+        self,
+        step: int,
+        online: np.ndarray,
+        answers: tuple[np.ndarray, np.ndarray] | None = None,
+        phase: np.ndarray | None = None,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Read heartbeat answers, choose this step's heartbeats and report newly timed-out slots.
+
+        The controller sends nothing itself: it returns the slots to ping and the comms stage carries the
+        heartbeats over the bus (so its channel applies both ways) and hands the answers back.
 
         Args:
-            step: Current step.
-            bus: The bus the heartbeats and answers cross.
+            step: Current step (the global tick the answers are stamped with).
             online: ``(S,)`` bool online mask now.
-            pos: ``(S, 3)`` positions; unused (the controller has no position, its messages are not
-                range-limited), accepted so the world calls every subsystem alike.
+            answers: ``(slots, steps)`` heartbeat answers that reached the controller since the previous tick
+                (the bus's ``take_answers``), or ``None``.
+            phase: ``(S,)`` steps since each slot's world was reset (heartbeats go out when it is a multiple of
+                the period, so a world's heartbeats do not depend on other worlds); default ``step``.
 
         Returns:
-            Slots (ascending int64) whose last answer is older than ``timeout`` steps, each reported once.
+            ``(timed_out, ping)``: slots (ascending int64) whose last answer is older than ``timeout`` steps,
+            each reported once; and the slots to send a heartbeat to now.
         """
-        del pos
         step = int(step)
         self._step = step
+        empty = np.empty(0, dtype=np.int64)
         if not self.enabled:
-            return np.empty(0, dtype=np.int64)
-        if 2 * bus.channel.latency > self.timeout:
-            raise ValueError(
-                f"timeout ({self.timeout}) must be >= 2 * channel latency ({bus.channel.latency}): an answer "
-                "needs a round trip"
-            )
+            return empty, empty
         online = np.asarray(online, dtype=bool)
         if online.shape != (self.n_slots,):
             raise ValueError(f"online must have shape ({self.n_slots},), got {online.shape}")
-        slots, when = bus.take_answers()
-        if slots.size:
-            np.maximum.at(self.last_answer, slots, when)
-        if step % self.heartbeat_period == 0:
-            to = np.flatnonzero(online & (self.group >= 0))
-            if to.size:
-                bus.send(
-                    HEARTBEAT,
-                    np.full(to.size, -1, dtype=np.int64),
-                    to,
-                    np.zeros((to.size, bus.payload_dim), dtype=np.float32),
-                    step,
-                )
+        if answers is not None and answers[0].size:
+            np.maximum.at(self.last_answer, answers[0], answers[1])
+        if phase is None:
+            due = np.full(self.n_slots, step % self.heartbeat_period == 0)
+        else:
+            due = phase % self.heartbeat_period == 0
+        ping = np.flatnonzero(due & online & (self.group >= 0))
         late = (self.group >= 0) & ~self.timed_out & (step - self.last_answer > self.timeout)
         self.timed_out |= late
-        return np.flatnonzero(late)
+        return np.flatnonzero(late), ping

@@ -29,7 +29,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from agentsim_env.payloads.ballistic import FallParams
 from agentsim_env.payloads.kernels import PROFILE_CODES, fall_substeps
-from agentsim_env.payloads.wind import WindModel
+from agentsim_env.payloads.wind import RngLike, WindModel, normals
 
 __all__ = ["PAYLOAD_FIELDS", "PayloadSet", "ScatterConfig"]
 
@@ -163,7 +163,7 @@ class PayloadSet:
         t: float,
         zone: ArrayLike = -1,
         target_xy: ArrayLike | None = None,
-        rng: np.random.Generator | None = None,
+        rng: RngLike | None = None,
     ) -> NDArray[np.int64]:
         """Release ``k`` objects at time ``t`` from the given (commanded) states.
 
@@ -176,7 +176,7 @@ class PayloadSet:
             t: Simulation time of the release in seconds.
             zone: Zone id (``-1``: none), scalar or ``(k,)``.
             target_xy: Intended landing points ``(k, 2)`` or ``(2,)``; ``None`` stores NaN.
-            rng: Random generator; required when ``sigma_gnss`` or ``sigma_timing`` is > 0.
+            rng: Random generator, or one per world; required when ``sigma_gnss`` or ``sigma_timing`` is > 0.
 
         Returns:
             The new objects' ids ``(k,)``.
@@ -212,10 +212,11 @@ class PayloadSet:
         if sc.sigma_timing > 0.0 or sc.sigma_gnss > 0.0:
             if rng is None:
                 raise ValueError("rng must be a np.random.Generator when sigma_gnss or sigma_timing > 0")
+            w_of = cols["world"]
             if sc.sigma_timing > 0.0:
-                p_eff += v * (rng.standard_normal(k) * sc.sigma_timing)[:, None]
+                p_eff += v * (normals(rng, (k,), w_of) * sc.sigma_timing)[:, None]
             if sc.sigma_gnss > 0.0:
-                p_eff[:, :2] += rng.standard_normal((k, 2)) * sc.sigma_gnss
+                p_eff[:, :2] += normals(rng, (k, 2), w_of) * sc.sigma_gnss
         self._reserve(k)
         sl = slice(self._count, self._count + k)
         a = self._a
@@ -238,7 +239,7 @@ class PayloadSet:
         self._next_id += k
         return ids.copy()
 
-    def step(self, dt: float, wind: WindModel | None, rng: np.random.Generator) -> NDArray[np.int64]:
+    def step(self, dt: float, wind: WindModel | None, rng: RngLike) -> NDArray[np.int64]:
         """Advance every falling object by ``dt`` seconds; land those that reach the ground.
 
         With a single-world ``WindModel`` every object feels that world's wind; otherwise an object
@@ -249,7 +250,7 @@ class PayloadSet:
         Args:
             dt: Time step in seconds (> 0).
             wind: Wind model, or ``None`` for still air.
-            rng: Random generator for gusts and bounce scatter.
+            rng: Random generator for gusts and bounce scatter, or one per world.
 
         Returns:
             Ids of the objects that landed during this step, ascending.
@@ -268,6 +269,8 @@ class PayloadSet:
             mean_xy, code, z0, z_ref = np.zeros((n, 2)), PROFILE_CODES["uniform"], 1.0, 2.0
         else:
             w_of = None if wind.n_worlds == 1 else a["world"][act]
+            if not isinstance(rng, np.random.Generator) and w_of is None:
+                w_of = a["world"][act]
             mean_xy = wind.mean[wind.world_index(w_of, n)]
             cfg = wind.config
             code, z0, z_ref = PROFILE_CODES[cfg.profile], cfg.z0, cfg.z_ref
@@ -292,7 +295,7 @@ class PayloadSet:
         idx = act[landed]  # ascending, as act is
         xy = xy[landed]
         if self.scatter.sigma_bounce > 0.0:
-            xy = xy + rng.standard_normal(xy.shape) * self.scatter.sigma_bounce
+            xy = xy + normals(rng, xy.shape, a["world"][idx]) * self.scatter.sigma_bounce
         a["land_xy"][idx] = xy
         a["land_t"][idx] = a["release_t"][idx] + a["fall_time"][idx]
         a["pos"][idx, :2] = xy

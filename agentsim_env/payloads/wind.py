@@ -18,6 +18,7 @@ Conventions:
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -91,25 +92,61 @@ class WindConfig:
         return np.log(np.maximum(z_arr, self.z0) / self.z0) / math.log(self.z_ref / self.z0)
 
 
+RngLike = np.random.Generator | Sequence[np.random.Generator]
+"""One generator, or one per world (each object's numbers then come from its own world's generator)."""
+
+
+def normals(rng: RngLike, shape: tuple[int, ...], world: ArrayLike | None = None) -> NDArray[np.float64]:
+    """Standard normals of ``shape`` (rows = objects), drawn per world when ``rng`` holds one generator each.
+
+    Per-world draws take each world's rows in row order from that world's generator, so a world's numbers
+    never depend on what the other worlds of a batch hold.
+
+    Args:
+        rng: A generator, or a sequence of one generator per world.
+        shape: ``(n, ...)`` output shape.
+        world: ``(n,)`` world of each row (required with per-world generators and more than one of them).
+
+    Returns:
+        The normals.
+    """
+    if isinstance(rng, np.random.Generator):
+        return rng.standard_normal(shape)
+    gens = list(rng)
+    if len(gens) == 1 or world is None:
+        return gens[0].standard_normal(shape)
+    w_of = np.asarray(world, dtype=np.int64)
+    out = np.empty(shape)
+    for w in np.unique(w_of).tolist():
+        rows = np.flatnonzero(w_of == w)
+        out[rows] = gens[w].standard_normal((rows.size, *shape[1:]))
+    return out
+
+
 class WindModel:
     """Per-episode mean wind for ``n_worlds`` worlds and the Ornstein-Uhlenbeck gust dynamics.
 
     Args:
         config: Wind configuration.
-        rng: Generator used to draw the first episode's mean wind.
+        rng: Generator used to draw the first episode's mean wind (``None``: the configured mean speed and
+            direction, or calm direction 0, until a world's ``reset``).
         n_worlds: Number of independent worlds (>= 1).
     """
 
     __slots__ = ("_direction", "_speed", "config", "n_worlds")
 
-    def __init__(self, config: WindConfig, rng: np.random.Generator, n_worlds: int = 1) -> None:
+    def __init__(self, config: WindConfig, rng: np.random.Generator | None = None, n_worlds: int = 1) -> None:
         if isinstance(n_worlds, bool) or not isinstance(n_worlds, (int, np.integer)) or n_worlds < 1:
             raise ValueError(f"n_worlds must be an integer >= 1, got {n_worlds!r}")
         self.config = config
         self.n_worlds = int(n_worlds)
         self._speed = np.zeros(self.n_worlds)
         self._direction = np.zeros(self.n_worlds)
-        self.reset(rng)
+        if rng is not None:
+            self.reset(rng)
+        else:
+            self._speed[:] = config.mean_speed
+            self._direction[:] = 0.0 if config.direction is None else config.direction
 
     def reset(self, rng: np.random.Generator, world: ArrayLike | None = None) -> None:
         """Draw a new mean wind (speed and direction as configured) for all or some worlds.
@@ -206,26 +243,26 @@ class WindModel:
         return out
 
     def init_gusts(
-        self, n: int, rng: np.random.Generator, world: ArrayLike | None = None
+        self, n: int, rng: RngLike, world: ArrayLike | None = None
     ) -> NDArray[np.float64]:
         """Draw gusts from the stationary distribution ``N(0, sigma^2 I)`` of each object's world.
 
         Args:
             n: Number of objects.
-            rng: Random generator (consumes ``2 n`` normals).
+            rng: Random generator, or one per world (consumes ``2 n`` normals).
             world: World index per object (``None`` when ``n_worlds == 1``).
 
         Returns:
             ``(n, 2)`` gust velocities.
         """
         sigma = self.gust_sigma[self.world_index(world, n)]
-        return rng.standard_normal((n, 2)) * sigma[:, None]
+        return normals(rng, (n, 2), world) * sigma[:, None]
 
     def advance_gusts(
         self,
         gusts: NDArray[np.float64],
         dt: float,
-        rng: np.random.Generator,
+        rng: RngLike,
         world: ArrayLike | None = None,
     ) -> NDArray[np.float64]:
         """Advance the gusts by ``dt`` with the exact Ornstein-Uhlenbeck transition.
@@ -236,7 +273,7 @@ class WindModel:
         Args:
             gusts: Current gusts ``(n, 2)``.
             dt: Time step in seconds (>= 0).
-            rng: Random generator (consumes ``2 n`` normals).
+            rng: Random generator, or one per world (consumes ``2 n`` normals).
             world: World index per object (``None`` when ``n_worlds == 1``).
 
         Returns:
@@ -247,5 +284,5 @@ class WindModel:
             raise ValueError(f"gusts must have shape (n, 2), got {g.shape}")
         decay = math.exp(-dt / self.config.gust_tau)
         sigma = self.gust_sigma[self.world_index(world, g.shape[0])]
-        noise = rng.standard_normal(g.shape) * (sigma * math.sqrt(max(0.0, 1.0 - decay * decay)))[:, None]
+        noise = normals(rng, g.shape, world) * (sigma * math.sqrt(max(0.0, 1.0 - decay * decay)))[:, None]
         return g * decay + noise

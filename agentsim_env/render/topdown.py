@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from agentsim_env.core.scene import BOX
-from agentsim_env.core.world import World
+from agentsim_env.sim.world import World
 
 Markers = tuple[np.ndarray, np.ndarray, np.ndarray]  # xy (m,2), rgb (m,3) uint8, radius (m,) metres
 

@@ -1,20 +1,43 @@
-"""The Scenario contract: what a scenario file provides to the environment.
+"""The Scenario contract: four methods a scenario writes, everything else derived by this base class.
 
-A scenario is one small file: a frozen config dataclass and a ``Scenario`` subclass that builds the world,
-resets one world, decodes actions, observes, and scores. Observation and action *parts* are declared once
-(name -> shape and bounds); the environment turns them into Dict spaces or one flat Box (parts concatenated in
-declaration order), so every scenario gets both modes for free.
+A scenario is one small file: a config extending ``ScenarioConfig``, a per-slot state dataclass extending
+``SlotState``, and a ``Scenario[ConfigT]`` subclass with four required methods:
+
+- ``make_world(n_worlds)``: build the ``World`` (geometry, sensors, optional payloads; the base adds comms);
+- ``reset_world(world, w, rng)``: start an episode of world ``w`` (agents, goals, obstacles) from the
+  placement generator ``rng``;
+- ``score(world, events, acting)``: stage 9's rewards, terminations and infos;
+- ``observe(world)``: the scenario's own observation parts.
+
+Derived, never kept in step by hand: the observation parts (shapes from what ``observe`` returns on a probe
+world, bounds from ``obs_bounds``), the sensor parts (each sensor with an ``obs_part``), the comms parts
+(``inbox``, ``comms`` observations and the ``comm`` action, added when the config has comms), the action parts
+(``motion`` from ``action_mode`` plus ``extra_actions``), the global state and its size (the base's per-agent
+block plus ``state_extra``). ``apply_actions`` (stage 1) has a default that decodes ``motion``; a scenario with
+actions of its own (releases) extends it.
+
+``run_step`` and ``reset_worlds`` are the one pipeline every env front end calls: stage 1, ``World.step``
+(stages 2-8 and 10), stage 9.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from abc import ABC, abstractmethod
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Generic, TypeVar
 
 import numpy as np
 
-from agentsim_env.core.world import StepEvents, World
+from agentsim_env.motion import MotionLimits, decode_primitive
+from agentsim_env.motion.actions import decode_velocity_unchecked
+from agentsim_env.scenarios.config import ScenarioConfig
+from agentsim_env.sensors.proximity import ProximityConfig
+from agentsim_env.sim.world import StepEvents, World
+
+ConfigT = TypeVar("ConfigT", bound=ScenarioConfig)
+SlotT = TypeVar("SlotT", bound="SlotState")
 
 
 @dataclass(frozen=True)
@@ -33,12 +56,12 @@ class Part:
 
 @dataclass(slots=True)
 class StepResult:
-    """What the scenario computes after the world stepped (arrays over slots).
+    """What the scenario computes in stage 9 (arrays over slots).
 
     Attributes:
         rewards: Reward per slot ``(S,)``.
         terminated: Slots whose episode ended this step (goal reached, collision, dead battery...) ``(S,)``.
-        info: Per-slot scalar arrays copied into each agent's info dict.
+        info: Per-slot scalar arrays copied into each agent's info dict (the same keys every step).
     """
 
     rewards: np.ndarray
@@ -46,12 +69,39 @@ class StepResult:
     info: dict[str, np.ndarray]
 
 
-class Scenario(ABC):
-    """Base class of all scenarios.
+def slot(shape: tuple[int, ...] = (), dtype: Any = np.float64, *, per_world: bool = False) -> Any:
+    """Declare an array field of a ``SlotState``: ``(S, *shape)`` (or ``(B, *shape)`` when ``per_world``)."""
+    return dataclasses.field(default=None, metadata={"shape": shape, "dtype": dtype, "per_world": per_world})
 
-    Subclasses set ``name``, ``config_cls`` and ``version`` and implement the abstract methods. A scenario may
-    hold per-slot arrays of its own (goals, payloads...), allocated in ``build`` for ``n_worlds`` worlds.
+
+@dataclass(slots=True)
+class SlotState:
+    """Base of a scenario's per-slot state: declare each array with :func:`slot`; ``allocate`` sizes them.
+
+    Fields declared without :func:`slot` (e.g. a per-world tracker object) are left to the scenario.
     """
+
+    @classmethod
+    def allocate(cls: type[SlotT], n_slots: int, n_worlds: int = 1) -> SlotT:
+        """An instance whose every :func:`slot` field is a zeroed ``(n_slots or n_worlds, *shape)`` array."""
+        arrays = {
+            f.name: np.zeros((n_worlds if f.metadata["per_world"] else n_slots, *f.metadata["shape"]),
+                             dtype=f.metadata["dtype"])  # fmt: skip
+            for f in dataclasses.fields(cls)  # type: ignore[arg-type]
+            if "shape" in f.metadata
+        }
+        return cls(**arrays)
+
+
+@dataclass(frozen=True, slots=True)
+class _Spec:
+    obs: dict[str, Part]
+    state_size: int
+    info_keys: tuple[str, ...]
+
+
+class Scenario(ABC, Generic[ConfigT]):
+    """Base class of all scenarios (see the module docstring for the contract)."""
 
     name: ClassVar[str]
     config_cls: ClassVar[type]
@@ -59,15 +109,65 @@ class Scenario(ABC):
     agent_prefix: ClassVar[str] = "agent"
     #: Configs the conformance suite runs (each also in flat obs/action format); keep them small and fast.
     test_configs: ClassVar[tuple[dict[str, Any], ...]] = ({},)
+    #: Bounds of the scenario's observation parts (default (-1, 1)).
+    obs_bounds: ClassVar[dict[str, tuple[float, float]]] = {"lidar": (0.0, 1.0)}
+    #: Scenario action parts after ``motion`` (name -> size), each a box in [-1, 1].
+    extra_actions: ClassVar[dict[str, int]] = {}
 
-    def __init__(self, config: Any) -> None:
+    def __init__(self, config: ConfigT) -> None:
         self.config = config
+        self.lidar = ProximityConfig(n_azimuth=config.sensing.n_azimuth,
+                                     elevations_deg=tuple(config.sensing.elevations_deg))  # fmt: skip
+        self._spec: _Spec | None = None
 
-    # -- sizes -------------------------------------------------------------------------------------------
-    @property
+    # -- the four required methods ------------------------------------------------------------------------
     @abstractmethod
+    def make_world(self, n_worlds: int) -> World:
+        """Create the world for ``n_worlds`` worlds (pass ``comms=self.config.comms``; set ``world.task``)."""
+
+    @abstractmethod
+    def reset_world(self, world: World, w: int, rng: np.random.Generator) -> None:
+        """Start a new episode in world ``w``: place agents, goals, obstacles (draw only from ``rng``)."""
+
+    @abstractmethod
+    def score(self, world: World, events: StepEvents, acting: np.ndarray) -> StepResult:
+        """Stage 9: rewards, terminations and infos of every slot after the world stepped."""
+
+    @abstractmethod
+    def observe(self, world: World) -> dict[str, np.ndarray]:
+        """The scenario's observation parts ``{part: (S, *shape) float32}`` (inside ``obs_bounds``)."""
+
+    # -- optional ------------------------------------------------------------------------------------------
+    def apply_actions(self, world: World, actions: dict[str, np.ndarray], acting: np.ndarray) -> None:
+        """Stage 1: decode the acting slots' ``motion`` actions into motion primitives (validated, clipped)."""
+        st = world.state
+        if self.config.action_mode == "velocity":
+            decode_velocity_unchecked(world.motion, acting, actions["motion"], st.max_speed)
+        else:
+            slots = np.flatnonzero(acting)
+            decode_primitive(world.motion, slots, actions["motion"][slots], st.pos, self.motion_limits(world))
+
+    def motion_limits(self, world: World) -> MotionLimits:
+        """Limits of the ``primitive`` action mode (default: the body's, radius up to a quarter of the map)."""
+        b = self.config.body
+        x0, x1, y0, y1 = world.config.bounds
+        return MotionLimits(max_speed=b.max_speed, max_accel=b.max_accel, max_radius=min(x1 - x0, y1 - y0) / 4,
+                            max_duration=10.0, z_min=b.altitude[0], z_max=b.altitude[1], max_omega=1.0,
+                            arrival_radius=1.0)  # fmt: skip
+
+    def state_extra(self, world: World, w: int) -> np.ndarray:
+        """Scenario-specific global state of world ``w`` appended after the per-agent block (default none)."""
+        return np.zeros(0)
+
+    def markers(self, world: World, w: int) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """Scenario markers for the renderer: ``(xy (m, 2), rgb (m, 3) uint8, radius (m,))`` or ``None``."""
+        return None
+
+    # -- sizes ---------------------------------------------------------------------------------------------
+    @property
     def n_agents(self) -> int:
         """Agents per world."""
+        return int(self.config.n_agents)
 
     @property
     def max_steps(self) -> int:
@@ -77,96 +177,112 @@ class Scenario(ABC):
     @property
     def n_groups(self) -> int:
         """Groups per world (1 when the scenario has no groups)."""
-        return int(getattr(self.config, "n_groups", 1))
+        return int(getattr(self.config, "n_groups", None) or 1)
 
     def agent_names(self) -> list[str]:
         """Agent ids of one world, in slot order."""
         return [f"{self.agent_prefix}_{i}" for i in range(self.n_agents)]
 
-    # -- lifecycle ---------------------------------------------------------------------------------------
-    @abstractmethod
+    # -- derived -------------------------------------------------------------------------------------------
     def build(self, n_worlds: int) -> World:
-        """Create the world (state, scene, subsystems) for ``n_worlds`` worlds and allocate scenario arrays."""
+        """``make_world`` checked: the world must carry the config's comms settings."""
+        world = self.make_world(n_worlds)
+        if (world.comms is None) != (self.config.comms is None):
+            raise TypeError(f"{type(self).__name__}.make_world must pass comms=self.config.comms to World")
+        return world
 
-    @abstractmethod
-    def reset_world(self, world: World, w: int, rng: np.random.Generator) -> None:
-        """Start a new episode in world ``w``: place agents, goals, obstacles; set motion primitives."""
+    def spec(self) -> _Spec:
+        """Observation parts, state size and info keys, measured once on a probe world of one world."""
+        if self._spec is None:
+            world = self.build(1)
+            reset_worlds(self, world, [0], [np.random.SeedSequence(0)])
+            obs = self.observation(world)
+            acting = np.ones(world.state.n_slots, dtype=bool)
+            parts = {}
+            for k, v in obs.items():
+                lo, hi = self._bounds(world, k)
+                parts[k] = Part(tuple(int(d) for d in v.shape[1:]), lo, hi)
+            res = run_step(self, world, {k: np.zeros((world.state.n_slots, p.size))
+                                         for k, p in self.act_parts().items()}, acting)[0]  # fmt: skip
+            self._spec = _Spec(parts, int(self.state(world, 0).shape[0]), tuple(res.info))
+        return self._spec
 
-    # -- spaces ------------------------------------------------------------------------------------------
-    @abstractmethod
+    def _bounds(self, world: World, part: str) -> tuple[float, float]:
+        if part in ("inbox", "comms"):
+            return (-1e4, 1e4) if part == "inbox" else (0.0, 1.0)
+        for s in world.sensors:
+            if s.name == part and s.obs_part is not None:
+                return s.obs_part.low, s.obs_part.high
+        return self.obs_bounds.get(part, (-1.0, 1.0))
+
     def obs_parts(self) -> dict[str, Part]:
-        """Observation parts in layout order."""
+        """Observation parts in layout order: the scenario's, the sensors', then ``inbox`` and ``comms``."""
+        return self.spec().obs
 
-    @abstractmethod
     def act_parts(self) -> dict[str, Part]:
-        """Action parts in layout order (each a box in [-1, 1])."""
+        """Action parts in layout order: ``motion``, the scenario's ``extra_actions``, then ``comm``."""
+        motion = 3 if self.config.action_mode == "velocity" else 8
+        parts = {"motion": Part((motion,), -1.0, 1.0)}
+        parts.update({k: Part((n,), -1.0, 1.0) for k, n in self.extra_actions.items()})
+        if self.config.comms is not None:
+            parts["comm"] = Part((self.config.comms.action_dim,), -1.0, 1.0)
+        return parts
 
     def state_size(self) -> int:
         """Length of the global state vector of one world."""
-        return self.n_agents * 8
+        return self.spec().state_size
 
-    # -- step --------------------------------------------------------------------------------------------
-    @abstractmethod
-    def apply_actions(self, world: World, actions: dict[str, np.ndarray], acting: np.ndarray) -> None:
-        """Stage 1: decode actions ``{part: (S, size)}`` for the acting slots into motion commands."""
+    def info_keys(self) -> tuple[str, ...]:
+        """The keys of every agent's info dict (the same at reset and at every step)."""
+        return self.spec().info_keys
 
-    def before_world_step(self, world: World) -> None:  # noqa: B027 - an optional hook
-        """Hook run right before ``World.step`` (after actions are applied)."""
-
-    @abstractmethod
-    def after_world_step(self, world: World, events: StepEvents, acting: np.ndarray) -> StepResult:
-        """Stages after the world pipeline: scenario subsystems, rewards and terminations."""
-
-    @abstractmethod
-    def observe(self, world: World) -> dict[str, np.ndarray]:
-        """Observation parts ``{part: (S, *shape) float32}`` for every slot (clipped to the part bounds)."""
-
-    def markers(self, world: World, w: int) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-        """Scenario markers for the renderer: ``(xy (m, 2), rgb (m, 3) uint8, radius (m,))`` or ``None``."""
-        return None
-
-    # -- communication (shared by every scenario whose config has ``comms`` settings) ---------------------
-    def comms_config(self) -> Any:
-        """The scenario's ``CommsConfig`` or None (no bus, overlay, groups controller or inbox)."""
-        return getattr(self.config, "comms", None)
-
-    def comm_obs_parts(self) -> dict[str, Part]:
-        """``inbox (M, F)`` (newest first; layout in ``comms.messages``) and ``comms (2,)`` counters."""
-        cfg = self.comms_config()
-        if cfg is None:
-            return {}
-        # payloads are in [-1, 1] when agents send them; environment messages carry ids (see comms.messages)
-        return {"inbox": Part((cfg.inbox_size, cfg.features), -1e4, 1e4), "comms": Part((2,), 0.0, 1.0)}
-
-    def comm_act_parts(self) -> dict[str, Part]:
-        """``comm (3 + D,)``: channel, named receiver, hop limit, payload (layout in ``comms.stack``)."""
-        cfg = self.comms_config()
-        return {} if cfg is None else {"comm": Part((cfg.action_dim,), -1.0, 1.0)}
-
-    def comm_observe(self, world: World) -> dict[str, np.ndarray]:
-        """The inbox and counters of every slot, clipped to the part bounds."""
-        if world.comms is None:
-            return {}
-        inbox, stats = world.comms.observe(world.state.pos, max(world.tick - 1, 0))
-        return {"inbox": np.clip(inbox, -1e4, 1e4, out=inbox), "comms": stats}
+    def observation(self, world: World) -> dict[str, np.ndarray]:
+        """Every observation part of every slot: the scenario's, the sensors', the inbox and counters."""
+        out = self.observe(world)
+        for s in world.sensors:
+            if s.obs_part is not None:
+                out[s.name] = s.observe(world.readings[s.name])
+        if world.comms is not None:
+            inbox, stats = world.comms.observe(world.state.pos, max(world.tick - 1, 0))
+            out["inbox"] = np.clip(inbox, -1e4, 1e4, out=inbox)
+            out["comms"] = stats
+        return out
 
     def state(self, world: World, w: int) -> np.ndarray:
-        """Global state of world ``w`` for centralised critics: per agent pos, vel, online flag, group."""
+        """Global state of world ``w``: per agent pos / 100, vel / 10, online, group / 10; then ``state_extra``."""
         st = world.state
         sl = slice(w * self.n_agents, (w + 1) * self.n_agents)
         per = np.column_stack(
             [st.pos[sl] / 100.0, st.vel[sl] / 10.0, st.online[sl].astype(np.float64), st.group[sl] / 10.0]
         )
-        return np.clip(per.ravel(), -10.0, 10.0).astype(np.float32)
+        extra = np.asarray(self.state_extra(world, w), dtype=np.float64).ravel()
+        return np.clip(np.concatenate([per.ravel(), extra]), -10.0, 10.0).astype(np.float32)
+
+
+def reset_worlds(
+    scenario: Scenario[Any], world: World, worlds: Iterable[int], seeds: Sequence[np.random.SeedSequence]
+) -> None:
+    """Start new episodes of ``worlds``: every subsystem's stream, then the scenario's placement, then sensors.
+
+    Args:
+        scenario: The scenario.
+        world: Its world.
+        worlds: World indices to reset.
+        seeds: One episode seed sequence per world reset.
+    """
+    for w, seed in zip(worlds, seeds, strict=True):
+        placement = world.reset_world(int(w), seed)
+        scenario.reset_world(world, int(w), placement)
+    world.refresh()
 
 
 def run_step(
-    scenario: Scenario, world: World, parts: dict[str, np.ndarray], acting: np.ndarray
+    scenario: Scenario[Any], world: World, parts: dict[str, np.ndarray], acting: np.ndarray
 ) -> tuple[StepResult, np.ndarray]:
-    """One step of the pipeline (DESIGN §4) shared by every env front end.
+    """One step of the pipeline shared by every env front end.
 
     Stage 1 decodes the validated action parts of the acting slots (motion, scenario parts, ``comm``), stages
-    2-8 run in ``World.step``, stage 9 is the scenario's scoring; slots that ended leave the simulation.
+    2-8 and 10 run in ``World.step``, stage 9 is the scenario's scoring; slots that ended leave the simulation.
 
     Returns:
         The scenario's result and the mask of slots that terminated this step.
@@ -174,9 +290,8 @@ def run_step(
     scenario.apply_actions(world, parts, acting)
     if "comm" in parts:
         world.apply_comm(parts["comm"], acting)
-    scenario.before_world_step(world)
     events = world.step()
-    res = scenario.after_world_step(world, events, acting)
+    res = scenario.score(world, events, acting)
     terminated = acting & (res.terminated | ~world.state.online)
     world.set_offline(np.flatnonzero(terminated))
     return res, terminated

@@ -1,66 +1,151 @@
-"""Validation helpers for frozen scenario config dataclasses.
+"""Shared scenario configuration: the base every scenario config extends and its sub-configs.
 
-Configs reject unknown keys (naming the key and the allowed ones) and bad values (naming the field and the
-allowed values) at construction, before any state is touched.
+A scenario config is a frozen dataclass that extends :class:`ScenarioConfig`, so the fields every scenario has
+(the agent count, the body, the sensing, the episode, the world switches, rewards and communication) are declared
+once. A scenario changes a sub-config's defaults by redeclaring the field with its own default, e.g.
+``body: BodyConfig = field(default_factory=lambda: BodyConfig(max_speed=15.0))``; a user's dict for a
+sub-config overrides only the fields it names, on top of the scenario's default (``{"body": {"radius": 1.0}}``).
+Unknown keys and bad values raise ``ValueError`` naming the field and the allowed values.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import math
-from collections.abc import Iterable, Mapping
-from typing import Any, TypeVar
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
 
-T = TypeVar("T")
+from agentsim_env.comms.stack import CommsConfig
+from agentsim_env.core.validation import build_config, check_choice, check_float, check_int
+from agentsim_env.scenarios.rewards import RewardConfig
+from agentsim_env.sim.config import PHYSICS_MODES
+
+ACTION_MODES = ("velocity", "primitive")
 
 
-def build_config(cls: type[T], values: Mapping[str, Any]) -> T:
-    """Instantiate a config dataclass from keyword values, rejecting unknown keys.
+def _pair(name: str, value: Any, lo: float, *, strict: bool = False) -> tuple[float, float]:
+    """Validate a ``(low, high)`` pair with ``lo <= low <= high`` (``low < high`` when ``strict``)."""
+    if not isinstance(value, (tuple, list)) or len(value) != 2:
+        raise ValueError(f"{name} must be a pair (low, high), got {value!r}")
+    check_float(f"{name}[0]", value[0], lo)
+    check_float(f"{name}[1]", value[1], value[0], lo_open=strict)
+    return float(value[0]), float(value[1])
 
-    Args:
-        cls: A dataclass type.
-        values: Field values; missing fields keep their defaults.
 
-    Returns:
-        The validated config instance.
+@dataclass(frozen=True)
+class BodyConfig:
+    """An agent's body and motion limits.
 
-    Raises:
-        ValueError: On an unknown key (the message lists the allowed keys) or a bad value.
+    Attributes:
+        radius: Collision radius in metres (> 0).
+        max_speed: Speed limit in m/s (> 0).
+        max_accel: Acceleration limit in m/s^2 (> 0).
+        altitude: Flight band ``(low, high)`` in metres (``0 <= low < high``).
     """
-    names = [f.name for f in dataclasses.fields(cls)]  # type: ignore[arg-type]
-    unknown = sorted(set(values) - set(names))
-    if unknown:
-        raise ValueError(f"unknown config key(s) {unknown} for {cls.__name__}; allowed keys: {sorted(names)}")
-    try:
-        return cls(**values)
-    except TypeError as exc:  # e.g. a value of the wrong type reaching a comparison
-        raise ValueError(f"bad value for {cls.__name__}: {exc}") from exc
+
+    radius: float = 0.5
+    max_speed: float = 5.0
+    max_accel: float = 10.0
+    altitude: tuple[float, float] = (2.0, 12.0)
+
+    def __post_init__(self) -> None:
+        for name in ("radius", "max_speed", "max_accel"):
+            check_float(f"body.{name}", getattr(self, name), 0.0, lo_open=True)
+        object.__setattr__(self, "altitude", _pair("body.altitude", self.altitude, 0.0, strict=True))
 
 
-def check_choice(name: str, value: Any, allowed: Iterable[Any]) -> None:
-    """Raise unless ``value`` is one of ``allowed``."""
-    allowed = tuple(allowed)
-    if value not in allowed:
-        raise ValueError(f"{name} must be one of {allowed}, got {value!r}")
+@dataclass(frozen=True)
+class SensingConfig:
+    """The proximity sensor (a laser-scanner-like fan of rays).
+
+    Attributes:
+        range: Ray length in metres (> 0).
+        n_azimuth: Rays per elevation ring (1..1024); ray 0 points along the heading.
+        elevations_deg: Elevation of each ring in degrees (negative looks down), each in [-90, 90].
+    """
+
+    range: float = 10.0
+    n_azimuth: int = 16
+    elevations_deg: tuple[float, ...] = (0.0, -25.0)
+
+    def __post_init__(self) -> None:
+        check_float("sensing.range", self.range, 0.0, 1e5, lo_open=True)
+        check_int("sensing.n_azimuth", self.n_azimuth, 1, 1024)
+        if not isinstance(self.elevations_deg, (tuple, list)) or not self.elevations_deg:
+            raise ValueError(f"sensing.elevations_deg must be a non-empty sequence, got {self.elevations_deg!r}")
+        for i, e in enumerate(self.elevations_deg):
+            check_float(f"sensing.elevations_deg[{i}]", e, -90.0, 90.0)
+        object.__setattr__(self, "elevations_deg", tuple(float(e) for e in self.elevations_deg))
 
 
-def check_int(name: str, value: Any, lo: int | None = None, hi: int | None = None) -> None:
-    """Raise unless ``value`` is an int (not bool) within ``[lo, hi]``."""
-    if isinstance(value, bool) or not isinstance(value, int):
-        raise ValueError(f"{name} must be an integer, got {value!r}")
-    if lo is not None and value < lo:
-        raise ValueError(f"{name} must be >= {lo}, got {value}")
-    if hi is not None and value > hi:
-        raise ValueError(f"{name} must be <= {hi}, got {value}")
+@dataclass(frozen=True)
+class ScenarioConfig:
+    """Fields every scenario config has (extend it; redeclare a field to change its default).
+
+    Attributes:
+        n_agents: Agents per world.
+        body: Body and motion limits of every agent.
+        sensing: The proximity sensor.
+        action_mode: ``"velocity"`` (a target velocity) or ``"primitive"`` (a motion primitive and its
+            parameters; ``agentsim_env.motion.actions``).
+        physics: ``"kinematic"`` or ``"pymunk"`` (planar contact resolution).
+        collisions: Whether collisions are detected (and end the agents hit).
+        dt: Step length in seconds.
+        max_steps: Steps after which every live agent is truncated.
+        reward: The reward composer's weights.
+        comms: Communication (``None``: no bus, overlay, groups stage, inbox or ``comm`` action).
+    """
+
+    #: Sub-config fields: a dict given for one of them overrides the fields it names of the field's default.
+    nested: ClassVar[dict[str, type]] = {
+        "body": BodyConfig,
+        "sensing": SensingConfig,
+        "reward": RewardConfig,
+        "comms": CommsConfig,
+    }
+
+    n_agents: int = 4
+    body: BodyConfig = field(default_factory=BodyConfig)
+    sensing: SensingConfig = field(default_factory=SensingConfig)
+    action_mode: str = "velocity"
+    physics: str = "kinematic"
+    collisions: bool = True
+    dt: float = 0.1
+    max_steps: int = 400
+    reward: RewardConfig = field(default_factory=RewardConfig)
+    comms: CommsConfig | None = None
+
+    def __post_init__(self) -> None:
+        self._coerce_nested()
+        check_int("n_agents", self.n_agents, 1)
+        check_choice("action_mode", self.action_mode, ACTION_MODES)
+        check_choice("physics", self.physics, PHYSICS_MODES)
+        check_float("dt", self.dt, 0.0, 10.0, lo_open=True)
+        check_int("max_steps", self.max_steps, 1)
+
+    def _coerce_nested(self) -> None:
+        """Turn dicts given for sub-configs into validated instances (merged over the field's default)."""
+        defaults = {f.name: f for f in dataclasses.fields(self)}
+        for name, cls in self.nested.items():
+            value = getattr(self, name)
+            if isinstance(value, dict):
+                f = defaults[name]
+                base = f.default_factory() if f.default_factory is not dataclasses.MISSING else f.default
+                start = {} if base is None or base is dataclasses.MISSING else _shallow(base)
+                allowed = [g.name for g in dataclasses.fields(cls)]
+                unknown = sorted(set(value) - set(allowed))
+                if unknown:
+                    raise ValueError(f"unknown {name} key(s) {unknown}; allowed keys: {sorted(allowed)}")
+                value = build_config(cls, {**start, **value})
+                object.__setattr__(self, name, value)
+            if value is not None and not isinstance(value, cls):
+                raise ValueError(f"{name} must be a {cls.__name__} or a dict of its fields, got {value!r}")
+            if value is None and defaults[name].default is not None and name != "comms":
+                raise ValueError(f"{name} must be a {cls.__name__} or a dict of its fields, got None")
 
 
-def check_float(
-    name: str, value: Any, lo: float | None = None, hi: float | None = None, *, lo_open: bool = False
-) -> None:
-    """Raise unless ``value`` is a finite real within the bounds (``lo_open`` makes ``lo`` exclusive)."""
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise ValueError(f"{name} must be a finite number, got {value!r}")
-    if lo is not None and (value <= lo if lo_open else value < lo):
-        raise ValueError(f"{name} must be {'>' if lo_open else '>='} {lo}, got {value}")
-    if hi is not None and value > hi:
-        raise ValueError(f"{name} must be <= {hi}, got {value}")
+def _shallow(obj: Any) -> dict[str, Any]:
+    """A dataclass instance's fields as a dict (sub-dataclasses kept as instances)."""
+    return {f.name: getattr(obj, f.name) for f in dataclasses.fields(obj)}
+
+
+__all__ = ["ACTION_MODES", "BodyConfig", "ScenarioConfig", "SensingConfig", "build_config"]

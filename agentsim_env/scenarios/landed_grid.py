@@ -19,7 +19,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
-from agentsim_env.scenarios.config import check_float, check_int
+from agentsim_env.core.validation import check_float, check_int
 
 __all__ = ["local_counts"]
 

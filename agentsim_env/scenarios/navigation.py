@@ -13,9 +13,14 @@ Observation (Dict; the flat Box concatenates the parts in this order):
 | task   | (4,)     | goal minus position (dx, dy, dz) / map diagonal, distance / map diagonal                  |
 | inbox  | (M, 11+D)| only with ``comms``: received messages, newest first (layout in ``agentsim_env.comms.messages``) |
 | comms  | (2,)     | only with ``comms``: messages received and dropped this step / M                          |
+| gnss   | (3,)     | only with ``gnss``: noisy own position over the map and band (``agentsim_env.sensors.gnss``) |
 
-Rays: ``n_azimuth`` evenly spaced azimuths (ray 0 along the heading) per elevation ring in ``elevations_deg``;
-K = n_azimuth x rings (default 16 x 2 = 32: a horizontal ring and one tilted 25 degrees down).
+(With both, the order is self, lidar, task, gnss, inbox, comms.)
+
+Rays: ``sensing.n_azimuth`` evenly spaced azimuths (ray 0 along the heading) per elevation ring in
+``sensing.elevations_deg``; K = n_azimuth x rings (default 16 x 2 = 32: a horizontal ring and one tilted 25
+degrees down). Body (``body``: radius 0.5 m, 5 m/s, 10 m/s^2, band 2-12 m) and sensing are the shared
+sub-configs of ``agentsim_env.scenarios.config``; ``n_groups`` defaults to ``min(2, n_agents)``.
 
 Action (Dict with one part ``motion``; the flat Box is the same vector), values in [-1, 1]:
 - ``action_mode="velocity"`` (default): (3,) target velocity / max_speed (norm clipped to max_speed).
@@ -35,21 +40,22 @@ Version history: v0, first release.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 import numba as nb
 import numpy as np
 
-from agentsim_env.comms.stack import CommsConfig
-from agentsim_env.core.world import PHYSICS_MODES, StepEvents, World, WorldConfig
-from agentsim_env.motion import MotionLimits, decode_primitive, set_hold
-from agentsim_env.motion.actions import decode_velocity_unchecked
-from agentsim_env.scenarios.base import Part, Scenario, StepResult
-from agentsim_env.scenarios.config import build_config, check_choice, check_float, check_int
+from agentsim_env.core.pipeline import Sensor
+from agentsim_env.core.validation import check_float, check_int
+from agentsim_env.motion import MotionLimits
+from agentsim_env.scenarios.base import Scenario, SlotState, StepResult, slot
+from agentsim_env.scenarios.config import ScenarioConfig
 from agentsim_env.scenarios.placement import jittered_points, obstacle_layout
 from agentsim_env.scenarios.rewards import RewardConfig, compose_rewards
-from agentsim_env.sensors.proximity import ProximityConfig
+from agentsim_env.sensors.gnss import GnssConfig, GnssSensor
+from agentsim_env.sensors.proximity import ProximitySensor
+from agentsim_env.sim import StepEvents, World, WorldConfig
 
-ACTION_MODES = ("velocity", "primitive")
 SELF_DIM, TASK_DIM = 8, 4
 
 
@@ -108,61 +114,38 @@ def _observe_kernel(pos, vel, heading, goal, distance, hit_kind, side, lo, hi, v
 
 
 @dataclass(frozen=True)
-class NavigationConfig:
-    """Configuration of ``navigation`` (every field validated at construction)."""
+class NavigationConfig(ScenarioConfig):
+    """Configuration of ``navigation`` (every field validated at construction; shared fields in ``ScenarioConfig``)."""
 
-    n_agents: int = 4
-    n_groups: int = 2
+    nested: ClassVar[dict[str, type]] = {**ScenarioConfig.nested, "gnss": GnssConfig}
+
+    n_groups: int | None = None  # None: min(2, n_agents)
     map_size: float | None = None  # None: grows with n_agents (area_per_agent), at least 60 m
     area_per_agent: float = 150.0
     obstacle_density: float = 1.0 / 600.0  # obstacles per square metre
     obstacle_size: tuple[float, float] = (1.0, 3.0)
     obstacle_height: tuple[float, float] = (4.0, 24.0)
-    altitude: tuple[float, float] = (2.0, 12.0)
-    agent_radius: float = 0.5
-    max_speed: float = 5.0
-    max_accel: float = 10.0
-    sensor_range: float = 10.0
-    n_azimuth: int = 16
-    elevations_deg: tuple[float, ...] = (0.0, -25.0)
     goal_radius: float = 1.5
     arrival_bonus: float = 10.0
-    action_mode: str = "velocity"
-    physics: str = "kinematic"
-    collisions: bool = True
-    dt: float = 0.1
-    max_steps: int = 400
     reward: RewardConfig = field(default_factory=lambda: RewardConfig(group_share=0.5, energy_weight=0.001))
-    comms: CommsConfig | None = (
-        None  # None: no communication; a CommsConfig (or dict) adds inbox + comm parts
-    )
+    gnss: GnssConfig | None = None  # a GnssConfig (or dict) adds the noisy GNSS sensor and its ``gnss`` part
 
     def __post_init__(self) -> None:
-        check_int("n_agents", self.n_agents, 1)
+        super().__post_init__()
+        if self.n_groups is None:
+            object.__setattr__(self, "n_groups", min(2, self.n_agents))
         check_int("n_groups", self.n_groups, 1, self.n_agents)
         if self.map_size is not None:
             check_float("map_size", self.map_size, 10.0)
         check_float("area_per_agent", self.area_per_agent, 10.0)
         check_float("obstacle_density", self.obstacle_density, 0.0, 0.01)
-        for name in ("agent_radius", "max_speed", "max_accel", "sensor_range", "goal_radius", "dt"):
+        for name in ("goal_radius",):
             check_float(name, getattr(self, name), 0.0, lo_open=True)
         check_float("arrival_bonus", self.arrival_bonus, 0.0)
-        check_int("n_azimuth", self.n_azimuth, 1, 1024)
-        check_int("max_steps", self.max_steps, 1)
-        check_choice("action_mode", self.action_mode, ACTION_MODES)
-        check_choice("physics", self.physics, PHYSICS_MODES)
-        for name in ("obstacle_size", "obstacle_height", "altitude"):
+        for name in ("obstacle_size", "obstacle_height"):
             lo, hi = getattr(self, name)
             check_float(f"{name}[0]", lo, 0.0)
             check_float(f"{name}[1]", hi, lo)
-        if isinstance(self.reward, dict):
-            object.__setattr__(self, "reward", build_config(RewardConfig, self.reward))
-        if not isinstance(self.reward, RewardConfig):
-            raise ValueError(f"reward must be a RewardConfig or a dict of its fields, got {self.reward!r}")
-        if isinstance(self.comms, dict):
-            object.__setattr__(self, "comms", build_config(CommsConfig, self.comms))
-        if self.comms is not None and not isinstance(self.comms, CommsConfig):
-            raise ValueError(f"comms must be None, a CommsConfig or a dict of its fields, got {self.comms!r}")
 
     @property
     def side(self) -> float:
@@ -172,7 +155,16 @@ class NavigationConfig:
         return max(60.0, float(np.sqrt(self.n_agents * self.area_per_agent)))
 
 
-class NavigationScenario(Scenario):
+@dataclass(slots=True)
+class NavigationSlots(SlotState):
+    """Per-slot state of ``navigation``: each agent's goal, last distance to it and whether it arrived."""
+
+    goal: np.ndarray = slot((3,))
+    prev_dist: np.ndarray = slot()
+    arrived: np.ndarray = slot(dtype=bool)
+
+
+class NavigationScenario(Scenario[NavigationConfig]):
     """Reach your own goal among obstacles; see the module docstring for layouts."""
 
     name = "navigation"
@@ -184,65 +176,39 @@ class NavigationScenario(Scenario):
         {"n_agents": 5, "n_groups": 1, "action_mode": "primitive"},
         {"n_agents": 3, "physics": "pymunk"},
         {"n_agents": 6, "n_groups": 2, "comms": {"loss": 0.2, "latency": 1, "heartbeat_period": 5}},
+        {"n_agents": 3, "gnss": {"sigma_h": 2.0}},
     )
 
     def __init__(self, config: NavigationConfig) -> None:
         super().__init__(config)
-        c = config
-        self.lidar = ProximityConfig(n_azimuth=c.n_azimuth, elevations_deg=tuple(c.elevations_deg))
-        self.limits = MotionLimits(
-            max_speed=c.max_speed,
-            max_accel=c.max_accel,
-            max_radius=c.side / 4,
-            max_duration=10.0,
-            z_min=c.altitude[0],
-            z_max=c.altitude[1],
-            max_omega=1.0,
-            arrival_radius=c.goal_radius / 2,
-        )
-        self.goal = np.zeros((0, 3))
-        self.prev_dist = np.zeros(0)
-        self.arrived = np.zeros(0, dtype=bool)
         self._obs = np.zeros((0, SELF_DIM + 2 * self.lidar.n_rays + TASK_DIM), dtype=np.float32)
 
-    @property
-    def n_agents(self) -> int:
-        """Agents per world."""
-        return int(self.config.n_agents)
-
-    def build(self, n_worlds: int) -> World:
-        """World sized for the map, the band and the sensor; goals allocated per slot."""
+    def make_world(self, n_worlds: int) -> World:
+        """World sized for the map, the band and the sensors; goals allocated per slot."""
         c = self.config
-        s = c.side
-        wc = WorldConfig(
-            bounds=(0.0, s, 0.0, s),
-            z_range=(0.0, c.altitude[1] + 5.0),
-            dt=c.dt,
-            physics=c.physics,
-            collisions=c.collisions,
-            lidar=self.lidar,
-            grid_cell=max(c.sensor_range / 2, 2.0),
-        )
-        world = World(wc, n_worlds, c.n_agents, comms=c.comms)
+        s, b = c.side, c.body
+        wc = WorldConfig(bounds=(0.0, s, 0.0, s), z_range=(0.0, b.altitude[1] + 5.0), dt=c.dt, physics=c.physics,
+                         collisions=c.collisions, grid_cell=max(c.sensing.range / 2, 2.0))  # fmt: skip
+        sensors: list[Sensor] = [ProximitySensor(self.lidar)]
+        if c.gnss is not None:
+            sensors.append(GnssSensor(c.gnss, n_worlds, c.n_agents, wc.bounds, b.altitude))
+        world = World(wc, n_worlds, c.n_agents, sensors=sensors, comms=c.comms)
         st = world.state
-        st.configure(radius=c.agent_radius, sensor_range=c.sensor_range, max_speed=c.max_speed,
-                     max_accel=c.max_accel, n_groups=c.n_groups)  # fmt: skip
-        self.goal = np.zeros((st.n_slots, 3))
-        self.prev_dist = np.zeros(st.n_slots)
-        self.arrived = np.zeros(st.n_slots, dtype=bool)
-        self._obs = np.zeros((st.n_slots, self._obs.shape[1]), dtype=np.float32)
+        st.configure(radius=b.radius, sensor_range=c.sensing.range, max_speed=b.max_speed, max_accel=b.max_accel,
+                     n_groups=c.n_groups)  # fmt: skip
+        world.task = NavigationSlots.allocate(st.n_slots)
         return world
 
     def reset_world(self, world: World, w: int, rng: np.random.Generator) -> None:
         """New starts, goals and obstacles for world ``w``."""
-        c, st = self.config, world.state
+        c, st, t = self.config, world.state, world.task
         sl = st.slots_of_world(w)
         s, n = c.side, c.n_agents
         bounds = (2.0, s - 2.0, 2.0, s - 2.0)
-        sep = 4.0 * c.agent_radius + 2.0
+        sep = 4.0 * c.body.radius + 2.0
         start = jittered_points(rng, n, bounds, sep)
         goal = jittered_points(rng, n, bounds, sep)
-        z_lo, z_hi = c.altitude
+        z_lo, z_hi = c.body.altitude
         z0 = rng.uniform(z_lo, z_hi, n)
         zg = rng.uniform(z_lo, z_hi, n)
         st.pos[sl] = np.column_stack([start, z0])
@@ -250,111 +216,67 @@ class NavigationScenario(Scenario):
         st.heading[sl] = rng.uniform(-np.pi, np.pi, n)
         st.online[sl] = True
         st.energy[sl] = 0.0
-        self.goal[sl] = np.column_stack([goal, zg])
-        self.prev_dist[sl] = np.linalg.norm(self.goal[sl] - st.pos[sl], axis=1)
-        self.arrived[sl] = False
-        set_hold(world.motion, sl)
+        t.goal[sl] = np.column_stack([goal, zg])
+        t.prev_dist[sl] = np.linalg.norm(t.goal[sl] - st.pos[sl], axis=1)
+        t.arrived[sl] = False
         world.remove_objects_of_world(w)
         n_obs = int(round(c.obstacle_density * s * s))
-        kind, centre, half = obstacle_layout(
-            rng,
-            n_obs,
-            (0.0, s, 0.0, s),
-            c.obstacle_size,
-            c.obstacle_height,
-            np.vstack([start, goal]),
-            keep_clear_radius=c.agent_radius + 2.0,
-        )
+        kind, centre, half = obstacle_layout(rng, n_obs, (0.0, s, 0.0, s), c.obstacle_size, c.obstacle_height,
+                                             np.vstack([start, goal]), keep_clear_radius=c.body.radius + 2.0)  # fmt: skip
         if kind.size:
             world.scene.add(kind, centre, half, w)
 
-    def obs_parts(self) -> dict[str, Part]:
-        """self (8,), lidar (K, 2), task (4,)."""
-        k = self.lidar.n_rays
-        parts = {
-            "self": Part((8,), -1.0, 1.0),
-            "lidar": Part((k, 2), 0.0, 1.0),
-            "task": Part((4,), -1.0, 1.0),
-        }
-        return {**parts, **self.comm_obs_parts()}
+    def motion_limits(self, world: World) -> MotionLimits:
+        """Primitive limits: circles up to a quarter of the map, 10 s segments, goto arrival at goal_radius / 2."""
+        b = self.config.body
+        return MotionLimits(max_speed=b.max_speed, max_accel=b.max_accel, max_radius=self.config.side / 4,
+                            max_duration=10.0, z_min=b.altitude[0], z_max=b.altitude[1], max_omega=1.0,
+                            arrival_radius=self.config.goal_radius / 2)  # fmt: skip
 
-    def act_parts(self) -> dict[str, Part]:
-        """motion (3,) in velocity mode or (8,) in primitive mode."""
-        motion = {"motion": Part((3 if self.config.action_mode == "velocity" else 8,), -1.0, 1.0)}
-        return {**motion, **self.comm_act_parts()}
-
-    def state_size(self) -> int:
-        """Base state plus each goal."""
-        return self.n_agents * 11
-
-    def apply_actions(self, world: World, actions: dict[str, np.ndarray], acting: np.ndarray) -> None:
-        """Set each acting slot's motion primitive from its ``motion`` action."""
-        if self.config.action_mode == "velocity":
-            # the env has validated and clipped the actions: the unchecked one-kernel decoder is safe here
-            decode_velocity_unchecked(world.motion, acting, actions["motion"], world.state.max_speed)
-        else:
-            slots = np.flatnonzero(acting)
-            decode_primitive(world.motion, slots, actions["motion"][slots], world.state.pos, self.limits)
-
-    def after_world_step(self, world: World, events: StepEvents, acting: np.ndarray) -> StepResult:
+    def score(self, world: World, events: StepEvents, acting: np.ndarray) -> StepResult:
         """Progress, arrival, collisions and energy -> rewards and terminations."""
-        c, st = self.config, world.state
+        c, st, t = self.config, world.state, world.task
         dist, arrived, task, collided, effort = _score_kernel(
-            self.goal,
-            st.pos,
-            st.vel,
-            self.prev_dist,
-            self.arrived,
-            st.energy,
-            acting,
-            st.online,
-            events.went_offline,
-            float(c.goal_radius),
-            float(c.arrival_bonus),
-            float(world.config.dt),
-        )
-        self.prev_dist = dist  # dist is fresh each step: the info array handed out below is never mutated
-        rewards = compose_rewards(
-            c.reward,
-            task,
-            group=st.group,
-            world=st.world_id,
-            acting=acting,
-            n_groups=c.n_groups,
-            collided=collided,
-            energy=effort,
-            messages_sent=None if world.comms is None else world.comms.sent,
-        )
+            t.goal, st.pos, st.vel, t.prev_dist, t.arrived, st.energy, acting, st.online, events.went_offline,
+            float(c.goal_radius), float(c.arrival_bonus), float(world.config.dt),
+        )  # fmt: skip
+        t.prev_dist = dist  # dist is fresh each step: the info array handed out below is never mutated
+        rewards = compose_rewards(c.reward, task, group=st.group, world=st.world_id, acting=acting,
+                                  n_groups=int(c.n_groups or 1), collided=collided, energy=effort,
+                                  messages_sent=None if world.comms is None else world.comms.sent)  # fmt: skip
         info = {"arrived": arrived.astype(np.int8), "collided": collided.astype(np.int8), "distance": dist}
         return StepResult(rewards, arrived, info)
 
     def observe(self, world: World) -> dict[str, np.ndarray]:
-        """Observation parts for every slot (see the module docstring)."""
+        """self, lidar and task parts for every slot (see the module docstring)."""
         c, st = self.config, world.state
         scan = world.scan
         assert scan is not None
-        out, k = self._obs, self.lidar.n_rays
-        _observe_kernel(st.pos, st.vel, st.heading, self.goal, scan.distance, scan.hit_kind, float(c.side),
-                        float(c.altitude[0]), float(c.altitude[1]), float(c.max_speed), out)  # fmt: skip
+        k = self.lidar.n_rays
+        if self._obs.shape[0] != st.n_slots:
+            self._obs = np.zeros((st.n_slots, self._obs.shape[1]), dtype=np.float32)
+        out = self._obs
+        lo, hi = c.body.altitude
+        _observe_kernel(st.pos, st.vel, st.heading, world.task.goal, scan.distance, scan.hit_kind, float(c.side),
+                        float(lo), float(hi), float(c.body.max_speed), out)  # fmt: skip
         # Views of one reused buffer: the envs copy them into the fresh arrays they return.
         return {
             "self": out[:, :SELF_DIM],
             "lidar": out[:, SELF_DIM : SELF_DIM + 2 * k].reshape(-1, k, 2),
             "task": out[:, SELF_DIM + 2 * k :],
-            **self.comm_observe(world),
         }
 
-    def state(self, world: World, w: int) -> np.ndarray:
-        """Base state (pos, vel, online, group per agent) followed by every goal / 100 m."""
+    def state_extra(self, world: World, w: int) -> np.ndarray:
+        """Every goal / 100 m."""
         sl = slice(w * self.n_agents, (w + 1) * self.n_agents)
-        base = super().state(world, w)
-        return np.concatenate([base, np.clip(self.goal[sl].ravel() / 100.0, -10, 10)]).astype(np.float32)
+        return world.task.goal[sl].ravel() / 100.0
 
     def markers(self, world: World, w: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Goals as green discs (grey once reached)."""
         sl = slice(w * self.n_agents, (w + 1) * self.n_agents)
-        rgb = np.where(self.arrived[sl, None], [160, 200, 160], [40, 170, 60]).astype(np.uint8)
-        return self.goal[sl, :2], rgb, np.full(self.n_agents, self.config.goal_radius)
+        t = world.task
+        rgb = np.where(t.arrived[sl, None], [160, 200, 160], [40, 170, 60]).astype(np.uint8)
+        return t.goal[sl, :2], rgb, np.full(self.n_agents, self.config.goal_radius)
 
 
 SCENARIO = NavigationScenario

@@ -5,8 +5,8 @@ from __future__ import annotations
 import importlib
 from typing import Any
 
+from agentsim_env.core.validation import build_config
 from agentsim_env.scenarios.base import Scenario
-from agentsim_env.scenarios.config import build_config
 
 # name -> module path; modules are imported on first use so `import agentsim_env` stays cheap.
 _SCENARIOS: dict[str, str] = {
@@ -38,4 +38,9 @@ def make_scenario(name: str, **config: Any) -> Scenario:
     cls = scenario_class(name)
     if "max_cycles" in config:  # PettingZoo's name for the episode length
         config["max_steps"] = config.pop("max_cycles")
+    for alias, key in getattr(cls.config_cls, "aliases", {}).items():
+        if alias in config:
+            if key in config:
+                raise ValueError(f"give {key!r} or its alias {alias!r}, not both")
+            config[key] = config.pop(alias)
     return cls(build_config(cls.config_cls, config))

@@ -1,8 +1,9 @@
 """relay: in each group one scout sees the group's target; the others reach it only through messages.
 
-Agents (``agent_0`` ... ``agent_{N-1}``, N = ``n_groups x group_size``, slot i in group ``i % n_groups``)
+Agents (``agent_0`` ... ``agent_{N-1}``, N = ``n_agents`` = ``n_groups x group_size``, slot i in group
+``i % n_groups``)
 start strung out along a corridor (``length x corridor_width``): N start points form a chain along x with
-gaps drawn from ``gap``, lateral offsets up to ``lateral_spread`` and altitudes in ``altitude``, taken by the
+gaps drawn from ``gap``, lateral offsets up to ``lateral_spread`` and altitudes in ``body.altitude``, taken by the
 agents in a random order. Each episode draws one **scout** per group; the group's **target** (a ground
 marker) lies ``target_offset`` metres from its scout. Only the scout perceives the target; the others'
 ``task`` part is zeros.
@@ -24,7 +25,8 @@ Observation (Dict; the flat Box concatenates the parts in this order):
 | inbox | (M, 11+D) | received messages, newest first (layout in ``agentsim_env.comms.messages``)           |
 | comms | (2,)      | messages received and dropped this step / M                                           |
 
-Rays: ``n_azimuth`` azimuths (ray 0 along the heading) per ring of ``elevations_deg`` (default 12 x 1).
+Rays: ``sensing.n_azimuth`` azimuths (ray 0 along the heading) per ring of ``sensing.elevations_deg``
+(default 12 x 1).
 
 Action (Dict; the flat Box is ``motion`` then ``comm``), values in [-1, 1]:
 
@@ -46,20 +48,31 @@ Version history: v0, first release.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
-from agentsim_env.core.world import StepEvents, World, WorldConfig
-from agentsim_env.motion import decode_velocity, set_hold
-from agentsim_env.scenarios.base import Part, Scenario, StepResult
+from agentsim_env.scenarios.base import Scenario, SlotState, StepResult, slot
 from agentsim_env.scenarios.placement import obstacle_layout
 from agentsim_env.scenarios.relay_config import RELAY_COMMS, RelayConfig
 from agentsim_env.scenarios.rewards import compose_rewards
-from agentsim_env.sensors.proximity import ProximityConfig
+from agentsim_env.sensors.proximity import ProximitySensor
+from agentsim_env.sim import StepEvents, World, WorldConfig
 
 __all__ = ["RELAY_COMMS", "SCENARIO", "RelayConfig", "RelayScenario", "env", "parallel_env"]
 
 
-class RelayScenario(Scenario):
+@dataclass(slots=True)
+class RelaySlots(SlotState):
+    """Per-slot state of ``relay``: the group's target, the scout flag, the last distance and arrival."""
+
+    target: np.ndarray = slot((2,))
+    scout: np.ndarray = slot(dtype=bool)
+    prev_dist: np.ndarray = slot()
+    arrived: np.ndarray = slot(dtype=bool)
+
+
+class RelayScenario(Scenario[RelayConfig]):
     """Scouts see targets, members reach them through relayed messages; see the module docstring."""
 
     name = "relay"
@@ -70,47 +83,26 @@ class RelayScenario(Scenario):
         {"n_groups": 2, "group_size": 3},
         {"n_groups": 2, "group_size": 2, "max_steps": 120,
          "comms": {"loss": 0.3, "latency": 2, "heartbeat_period": 5}},
-        {"n_groups": 1, "group_size": 3, "obstacle_density": 0.0, "comms": {"overlay_full": True}},
+        {"n_groups": 1, "n_agents": 3, "obstacle_density": 0.0, "comms": {"overlay_full": True}},
     )  # fmt: skip
 
-    def __init__(self, config: RelayConfig) -> None:
-        super().__init__(config)
-        self.lidar = ProximityConfig(n_azimuth=config.n_azimuth, elevations_deg=tuple(config.elevations_deg))
-        self.target = np.zeros((0, 2))  # per slot: its group's target (x, y)
-        self.scout = np.zeros(0, dtype=bool)
-        self.prev_dist = np.zeros(0)
-        self.arrived = np.zeros(0, dtype=bool)
-
-    @property
-    def n_agents(self) -> int:
-        """Agents per world."""
-        return self.config.n_agents
-
-    def build(self, n_worlds: int) -> World:
+    def make_world(self, n_worlds: int) -> World:
         """World sized for the corridor and the band; per-slot target, scout and arrival arrays."""
         c = self.config
-        wc = WorldConfig(
-            bounds=(0.0, c.length, 0.0, c.corridor_width),
-            z_range=(0.0, c.altitude[1] + 5.0),
-            dt=c.dt,
-            physics=c.physics,
-            collisions=c.collisions,
-            lidar=self.lidar,
-            grid_cell=max(c.sensor_range / 2, 2.0),
-        )
-        world = World(wc, n_worlds, c.n_agents, comms=c.comms)
+        b = c.body
+        wc = WorldConfig(bounds=(0.0, c.length, 0.0, c.corridor_width), z_range=(0.0, b.altitude[1] + 5.0),
+                         dt=c.dt, physics=c.physics, collisions=c.collisions,
+                         grid_cell=max(c.sensing.range / 2, 2.0))  # fmt: skip
+        world = World(wc, n_worlds, c.n_agents, sensors=[ProximitySensor(self.lidar)], comms=c.comms)
         st = world.state
-        st.configure(radius=c.agent_radius, sensor_range=c.sensor_range, max_speed=c.max_speed,
-                     max_accel=c.max_accel, n_groups=c.n_groups)  # fmt: skip
-        self.target = np.zeros((st.n_slots, 2))
-        self.scout = np.zeros(st.n_slots, dtype=bool)
-        self.prev_dist = np.zeros(st.n_slots)
-        self.arrived = np.zeros(st.n_slots, dtype=bool)
+        st.configure(radius=b.radius, sensor_range=c.sensing.range, max_speed=b.max_speed, max_accel=b.max_accel,
+                     n_groups=c.n_groups)  # fmt: skip
+        world.task = RelaySlots.allocate(st.n_slots)
         return world
 
     def reset_world(self, world: World, w: int, rng: np.random.Generator) -> None:
         """New chain of start points, scouts, targets and obstacles for world ``w``."""
-        c, st = self.config, world.state
+        c, st, t = self.config, world.state, world.task
         sl = st.slots_of_world(w)
         n, g_n, length, width = c.n_agents, c.n_groups, c.length, c.corridor_width
         gaps = rng.uniform(c.gap[0], c.gap[1], n - 1)
@@ -119,7 +111,7 @@ class RelayScenario(Scenario):
             [
                 x0 + np.concatenate([[0.0], np.cumsum(gaps)]),
                 width / 2.0 + rng.uniform(-c.lateral_spread, c.lateral_spread, n),
-                rng.uniform(c.altitude[0], c.altitude[1], n),
+                rng.uniform(c.body.altitude[0], c.body.altitude[1], n),
             ]
         )
         st.pos[sl] = chain[rng.permutation(n)]
@@ -132,90 +124,56 @@ class RelayScenario(Scenario):
         r = rng.uniform(c.target_offset[0], c.target_offset[1], g_n)
         tgt = st.pos[sl][scout_slot, :2] + r[:, None] * np.column_stack([np.cos(ang), np.sin(ang)])
         tgt = np.clip(tgt, [2.0, 2.0], [length - 2.0, width - 2.0])
-        self.target[sl] = tgt[np.arange(n) % g_n]
-        self.scout[sl] = False
-        self.scout[sl[scout_slot]] = True
-        self.prev_dist[sl] = np.linalg.norm(self.target[sl] - st.pos[sl, :2], axis=1)
-        self.arrived[sl] = False
-        set_hold(world.motion, sl)
+        t.target[sl] = tgt[np.arange(n) % g_n]
+        t.scout[sl] = False
+        t.scout[sl[scout_slot]] = True
+        t.prev_dist[sl] = np.linalg.norm(t.target[sl] - st.pos[sl, :2], axis=1)
+        t.arrived[sl] = False
         world.remove_objects_of_world(w)
         n_obs = int(round(c.obstacle_density * length * width))
-        kind, centre, half = obstacle_layout(
-            rng,
-            n_obs,
-            (0.0, length, 0.0, width),
-            c.obstacle_size,
-            c.obstacle_height,
-            np.vstack([chain[:, :2], tgt]),
-            keep_clear_radius=max(c.agent_radius + 2.0, c.arrival_radius + 1.0),
-        )
+        kind, centre, half = obstacle_layout(rng, n_obs, (0.0, length, 0.0, width), c.obstacle_size,
+                                             c.obstacle_height, np.vstack([chain[:, :2], tgt]),
+                                             keep_clear_radius=max(c.body.radius + 2.0, c.arrival_radius + 1.0))  # fmt: skip
         if kind.size:
             world.scene.add(kind, centre, half, w)
 
-    def obs_parts(self) -> dict[str, Part]:
-        """self (9,), lidar (K, 2), task (4,), inbox (M, 11 + D), comms (2,)."""
-        parts = {"self": Part((9,), -1.0, 1.0), "lidar": Part((self.lidar.n_rays, 2), 0.0, 1.0),
-                 "task": Part((4,), -1.0, 1.0)}  # fmt: skip
-        return {**parts, **self.comm_obs_parts()}
-
-    def act_parts(self) -> dict[str, Part]:
-        """motion (3,) velocity, comm (3 + D,)."""
-        return {"motion": Part((3,), -1.0, 1.0), **self.comm_act_parts()}
-
-    def state_size(self) -> int:
-        """Base state, a scout flag per agent and every target."""
-        return self.n_agents * 9 + self.n_groups * 2
-
-    def apply_actions(self, world: World, actions: dict[str, np.ndarray], acting: np.ndarray) -> None:
-        """Set each acting slot's velocity from its ``motion`` action."""
-        slots = np.flatnonzero(acting)
-        decode_velocity(world.motion, slots, actions["motion"][slots], world.state.max_speed[slots])
-
-    def after_world_step(self, world: World, events: StepEvents, acting: np.ndarray) -> StepResult:
+    def score(self, world: World, events: StepEvents, acting: np.ndarray) -> StepResult:
         """Progress and arrival of non-scouts, scouts' end, collisions, energy and messages -> rewards."""
-        c, st = self.config, world.state
-        dist = np.linalg.norm(self.target - st.pos[:, :2], axis=1)
-        member = acting & ~self.scout
+        c, st, t = self.config, world.state, world.task
+        dist = np.linalg.norm(t.target - st.pos[:, :2], axis=1)
+        member = acting & ~t.scout
         arrived = member & st.online & (dist <= c.arrival_radius)
-        task = np.where(member, self.prev_dist - dist, 0.0) + c.arrival_bonus * arrived
-        self.prev_dist = dist
-        self.arrived |= arrived
+        task = np.where(member, t.prev_dist - dist, 0.0) + c.arrival_bonus * arrived
+        t.prev_dist = dist
+        t.arrived |= arrived
         # a scout is done once no member of its (world, group) is still live
         key = st.world_id.astype(np.int64) * c.n_groups + np.clip(st.group, 0, c.n_groups - 1)
-        pending = ~self.scout & st.online & ~self.arrived
+        pending = ~t.scout & st.online & ~t.arrived
         left = np.bincount(key[pending], minlength=st.n_slots)
-        scout_done = acting & self.scout & (left[key] == 0)
+        scout_done = acting & t.scout & (left[key] == 0)
         collided = np.zeros(st.n_slots)
         collided[events.went_offline] = 1.0
         effort = np.einsum("ij,ij->i", st.vel, st.vel) * world.config.dt
         st.energy += np.where(acting, effort, 0.0)
         assert world.comms is not None
-        rewards = compose_rewards(
-            c.reward,
-            task,
-            group=st.group,
-            world=st.world_id,
-            acting=acting,
-            n_groups=c.n_groups,
-            collided=collided,
-            energy=effort,
-            messages_sent=world.comms.sent,
-        )
+        rewards = compose_rewards(c.reward, task, group=st.group, world=st.world_id, acting=acting,
+                                  n_groups=c.n_groups, collided=collided, energy=effort,
+                                  messages_sent=world.comms.sent)  # fmt: skip
         info = {"arrived": arrived.astype(np.int8), "collided": collided.astype(np.int8), "distance": dist,
-                "scout": self.scout.astype(np.int8)}  # fmt: skip
+                "scout": t.scout.astype(np.int8)}  # fmt: skip
         return StepResult(rewards, arrived | scout_done, info)
 
     def observe(self, world: World) -> dict[str, np.ndarray]:
-        """Observation parts for every slot (see the module docstring)."""
-        c, st = self.config, world.state
-        lo, hi = c.altitude
+        """self, lidar and task parts for every slot (see the module docstring)."""
+        c, st, t = self.config, world.state, world.task
+        lo, hi = c.body.altitude
         code = st.group / max(c.n_groups - 1, 1) * 2.0 - 1.0 if c.n_groups > 1 else np.zeros(st.n_slots)
         selfp = np.column_stack(
             [
                 st.pos[:, 0] / c.length * 2 - 1,
                 st.pos[:, 1] / c.corridor_width * 2 - 1,
                 (st.pos[:, 2] - lo) / max(hi - lo, 1e-9) * 2 - 1,
-                st.vel / c.max_speed,
+                st.vel / c.body.max_speed,
                 np.cos(st.heading),
                 np.sin(st.heading),
                 code,
@@ -224,40 +182,34 @@ class RelayScenario(Scenario):
         scan = world.scan
         assert scan is not None
         diag = float(np.hypot(c.length, c.corridor_width))
-        d = self.target - st.pos[:, :2]
+        d = t.target - st.pos[:, :2]
         task = np.column_stack([np.ones(st.n_slots), d / diag, np.linalg.norm(d, axis=1) / diag])
-        task[~self.scout] = 0.0  # only the scout perceives the target
+        task[~t.scout] = 0.0  # only the scout perceives the target
         return {
             "self": np.clip(selfp, -1, 1).astype(np.float32),
             "lidar": np.stack([scan.distance, scan.hit_kind / 3.0], axis=-1).astype(np.float32),
             "task": np.clip(task, -1, 1).astype(np.float32),
-            **self.comm_observe(world),
         }
 
-    def state(self, world: World, w: int) -> np.ndarray:
-        """Base state, scout flags, then each group's target / 100 m."""
+    def state_extra(self, world: World, w: int) -> np.ndarray:
+        """Scout flags, then each group's target / 100 m."""
         sl = slice(w * self.n_agents, (w + 1) * self.n_agents)
-        tgt = self.target[sl][: self.n_groups]
-        extra = np.concatenate([self.scout[sl].astype(np.float64), np.clip(tgt.ravel() / 100.0, -10, 10)])
-        return np.concatenate([super().state(world, w), extra]).astype(np.float32)
+        t = world.task
+        tgt = t.target[sl][: self.n_groups]
+        return np.concatenate([t.scout[sl].astype(np.float64), tgt.ravel() / 100.0])
 
     def markers(self, world: World, w: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Targets as discs, one colour per group."""
         sl = slice(w * self.n_agents, (w + 1) * self.n_agents)
         g = np.arange(self.n_groups)
-        rgb = np.column_stack([40 + 70 * (g % 3), 170 - 50 * (g % 2), 60 + 60 * ((g + 1) % 3)]).astype(
-            np.uint8
-        )
-        return (
-            self.target[sl][: self.n_groups].copy(),
-            rgb,
-            np.full(self.n_groups, self.config.arrival_radius),
-        )
+        rgb = np.column_stack([40 + 70 * (g % 3), 170 - 50 * (g % 2), 60 + 60 * ((g + 1) % 3)]).astype(np.uint8)
+        return world.task.target[sl][: self.n_groups].copy(), rgb, np.full(self.n_groups, self.config.arrival_radius)
 
-    def group_success(self, w: int = 0, fraction: float = 0.5) -> np.ndarray:
+    def group_success(self, world: World, w: int = 0, fraction: float = 0.5) -> np.ndarray:
         """Per group of world ``w``: whether at least ``fraction`` of its non-scouts arrived (so far).
 
         Args:
+            world: The scenario's world.
             w: World index.
             fraction: Share of the group's non-scouts that must have arrived.
 
@@ -267,7 +219,8 @@ class RelayScenario(Scenario):
         c = self.config
         sl = slice(w * c.n_agents, (w + 1) * c.n_agents)
         g = np.arange(c.n_agents) % c.n_groups
-        hits = np.bincount(g, weights=self.arrived[sl] & ~self.scout[sl], minlength=c.n_groups)
+        t = world.task
+        hits = np.bincount(g, weights=t.arrived[sl] & ~t.scout[sl], minlength=c.n_groups)
         return hits >= fraction * (c.group_size - 1) - 1e-9
 
 

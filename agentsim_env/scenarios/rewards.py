@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
-from agentsim_env.scenarios.config import check_float
+from agentsim_env.core.validation import check_float
 
 
 @dataclass(frozen=True)

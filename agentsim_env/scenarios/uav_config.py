@@ -1,6 +1,7 @@
 """Configuration of the ``uav_release`` scenario (a frozen, validated dataclass).
 
-Nested parts (``wind``, ``scatter``, ``wsn``, ``reward``, ``comms``) accept dicts of their fields; ``zones`` is a
+Nested parts (``body``, ``sensing``, ``wind``, ``scatter``, ``wsn``, ``reward``, ``comms``) accept dicts of the
+fields to change from this scenario's defaults; ``zones`` is a
 zones JSON path, a dict in that format (``docs/zones.md``), a ``ZoneSet``, ``"tiny"``, or ``None`` / ``"default"``
 for the shipped default file. The fleet's payload must hold every zone's sensors.
 """
@@ -8,60 +9,51 @@ for the shipped default file. The fleet's payload must hold every zone's sensors
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, ClassVar
 
 from agentsim_env.comms.stack import CommsConfig
-from agentsim_env.core.world import PHYSICS_MODES
+from agentsim_env.core.validation import check_float, check_int
 from agentsim_env.payloads import ScatterConfig, WindConfig
-from agentsim_env.scenarios.config import build_config, check_choice, check_float, check_int
+from agentsim_env.scenarios.config import BodyConfig, ScenarioConfig, SensingConfig
 from agentsim_env.scenarios.rewards import RewardConfig
 from agentsim_env.scenarios.uav_zones import ZoneSet, load_zones, validate_against_payload, zones_from_dict
 from agentsim_env.wsn.evaluate import WsnConfig
 
-_NESTED = {
-    "wind": WindConfig,
-    "scatter": ScatterConfig,
-    "wsn": WsnConfig,
-    "reward": RewardConfig,
-    "comms": CommsConfig,
-}
-
 
 @dataclass(frozen=True)
-class UavReleaseConfig:
-    """Configuration of ``uav_release`` (validated; nested parts accept dicts of their fields)."""
+class UavReleaseConfig(ScenarioConfig):
+    """Configuration of ``uav_release`` (validated; nested parts accept dicts of their fields).
+
+    The fleet size is ``n_agents`` (``n_uavs`` is accepted as an alias key and readable as a property).
+    """
+
+    nested: ClassVar[dict[str, type]] = {**ScenarioConfig.nested, "wind": WindConfig, "scatter": ScatterConfig,
+                                         "wsn": WsnConfig}  # fmt: skip
+    aliases: ClassVar[dict[str, str]] = {"n_uavs": "n_agents"}
 
     zones: Any = (
         None  # a zones JSON path, a dict in that format, a ZoneSet, "tiny", or None / "default" (shipped)
     )
-    n_uavs: int = 4
     payload: int = 40
     sensor_mass: float = 0.05
     sensor_cd: float = 1.05
     sensor_area: float = 0.0025
     battery_j: float = 321_000.0
-    max_speed: float = 15.0
-    max_accel: float = 4.0
-    altitude: tuple[float, float] = (5.0, 60.0)
-    uav_radius: float = 0.6
-    sensor_range: float = 20.0
-    n_azimuth: int = 8
-    elevations_deg: tuple[float, ...] = (0.0, -45.0)
     target_scale: float = 60.0
     grid_cells: int = 8
     grid_extent: float = 80.0
-    action_mode: str = "velocity"
-    physics: str = "kinematic"
-    collisions: bool = True
-    dt: float = 0.1
     max_steps: int = 6000
+    body: BodyConfig = field(default_factory=lambda: BodyConfig(radius=0.6, max_speed=15.0, max_accel=4.0,
+                                                                altitude=(5.0, 60.0)))  # fmt: skip
+    sensing: SensingConfig = field(default_factory=lambda: SensingConfig(range=20.0, n_azimuth=8,
+                                                                        elevations_deg=(0.0, -45.0)))  # fmt: skip
     wind: WindConfig = field(default_factory=lambda: WindConfig(mean_speed=2.0))
     scatter: ScatterConfig = field(default_factory=lambda: ScatterConfig(1.0, 0.05, 0.5))
     wsn: WsnConfig = field(default_factory=WsnConfig)
     reward: RewardConfig = field(
         default_factory=lambda: RewardConfig(collision_penalty=20.0, message_cost=0.001)
     )
-    comms: CommsConfig = field(
+    comms: CommsConfig | None = field(
         default_factory=lambda: CommsConfig(payload_dim=6, inbox_size=8, overlay_range=150.0)
     )
     w_coverage: float = 10.0
@@ -73,40 +65,22 @@ class UavReleaseConfig:
     w_lifetime: float = 5.0
 
     def __post_init__(self) -> None:
-        check_int("n_uavs", self.n_uavs, 1, 1024)
+        super().__post_init__()
+        check_int("n_agents", self.n_agents, 1, 1024)
         check_int("payload", self.payload, 1)
-        for name in (
-            "sensor_mass",
-            "sensor_cd",
-            "sensor_area",
-            "battery_j",
-            "max_speed",
-            "max_accel",
-            "uav_radius",
-            "sensor_range",
-            "target_scale",
-            "grid_extent",
-            "dt",
-        ):
+        for name in ("sensor_mass", "sensor_cd", "sensor_area", "battery_j", "target_scale", "grid_extent"):
             check_float(name, getattr(self, name), 0.0, lo_open=True)
         for name in ("w_coverage", "w_fidelity", "w_energy", "w_miss", "w_out", "w_lcc", "w_lifetime"):
             check_float(name, getattr(self, name), 0.0)
-        check_int("n_azimuth", self.n_azimuth, 1, 1024)
         check_int("grid_cells", self.grid_cells, 1, 64)
-        check_int("max_steps", self.max_steps, 1)
-        check_choice("action_mode", self.action_mode, ("velocity", "primitive"))
-        check_choice("physics", self.physics, PHYSICS_MODES)
-        check_float("altitude[0]", self.altitude[0], 0.0)
-        check_float("altitude[1]", self.altitude[1], self.altitude[0], lo_open=True)
-        for name, cls in _NESTED.items():
-            v = getattr(self, name)
-            if isinstance(v, dict):
-                object.__setattr__(self, name, build_config(cls, v))
-            elif not isinstance(v, cls):
-                raise ValueError(f"{name} must be a {cls.__name__} or a dict of its fields, got {v!r}")
         zs = self.zone_set()
         object.__setattr__(self, "zones", zs)
-        validate_against_payload(zs, self.n_uavs, self.payload)
+        validate_against_payload(zs, self.n_agents, self.payload)
+
+    @property
+    def n_uavs(self) -> int:
+        """UAVs per world (the same as ``n_agents``)."""
+        return int(self.n_agents)
 
     def zone_set(self) -> ZoneSet:
         """The zones, loaded and validated."""

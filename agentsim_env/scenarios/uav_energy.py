@@ -33,7 +33,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import minimize_scalar
 
-from agentsim_env.scenarios.config import check_float
+from agentsim_env.core.validation import check_float
 
 __all__ = [
     "DEFAULT_BATTERY",

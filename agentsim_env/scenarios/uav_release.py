@@ -1,6 +1,6 @@
 """uav_release: UAVs release wireless sensors over circular hot zones, denser toward each zone's centre.
 
-K UAVs (``uav_0`` ...) take off from the base with ``payload`` sensors each and a battery (rotary-wing power
+K = ``n_agents`` UAVs (``uav_0`` ...; ``n_uavs`` is an alias key) take off from the base with ``payload`` sensors each and a battery (rotary-wing power
 model, the mass falling as sensors leave). A released sensor falls with quadratic drag and wind (log-law
 mean per episode plus gusts) and lands with scatter (GNSS, timing jitter, bounce). Zones come from a zone
 designer JSON file (``docs/zones.md``). The episode ends when the zones' sensors have all landed (or nothing is left on board
@@ -35,12 +35,14 @@ Version history: v0, first release.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
-from agentsim_env.core.world import StepEvents, World, WorldConfig
-from agentsim_env.motion import MotionLimits, decode_primitive, decode_velocity, set_hold
-from agentsim_env.payloads import FallParams, PayloadSet, WindModel
-from agentsim_env.scenarios.base import Part, Scenario, StepResult
+from agentsim_env.motion import MotionLimits
+from agentsim_env.payloads import FallParams
+from agentsim_env.payloads.stage import PayloadStage
+from agentsim_env.scenarios.base import Scenario, SlotState, StepResult, slot
 from agentsim_env.scenarios.landed_grid import local_counts
 from agentsim_env.scenarios.rewards import compose_rewards
 from agentsim_env.scenarios.uav_config import UavReleaseConfig
@@ -48,21 +50,34 @@ from agentsim_env.scenarios.uav_energy import DEFAULT_ROTOR, energy_step
 from agentsim_env.scenarios.uav_outcome import final_bonus, oracle_fnd
 from agentsim_env.scenarios.uav_tracking import DeploymentTracker
 from agentsim_env.scenarios.uav_zones import ZoneSet
-from agentsim_env.sensors.proximity import ProximityConfig
+from agentsim_env.sensors.proximity import ProximitySensor
+from agentsim_env.sim import StepEvents, World, WorldConfig
 
 
-class UavReleaseScenario(Scenario):
+@dataclass(slots=True)
+class UavSlots(SlotState):
+    """Per-slot state of ``uav_release``: sensors left on board, this step's releases, per-world mission end."""
+
+    payload_left: np.ndarray = slot(dtype=np.int64)
+    released: np.ndarray = slot(dtype=np.int8)
+    finished: np.ndarray = slot(dtype=bool, per_world=True)
+    tracker: DeploymentTracker | None = None  # coverage and radial fidelity of the landed sensors, per world
+
+
+class UavReleaseScenario(Scenario[UavReleaseConfig]):
     """UAV sensor release over hot zones; see the module docstring for layouts and rewards."""
 
     name = "uav_release"
     config_cls = UavReleaseConfig
     version = 0
     agent_prefix = "uav"
+    obs_bounds = {"lidar": (0.0, 1.0), "landed": (0.0, 1.0)}
+    extra_actions = {"release": 3}
     test_configs = (
-        {"zones": "tiny", "n_uavs": 2, "payload": 12, "max_steps": 400},
+        {"zones": "tiny", "n_agents": 2, "payload": 12, "max_steps": 400},
         {
             "zones": "tiny",
-            "n_uavs": 3,
+            "n_agents": 3,
             "payload": 8,
             "max_steps": 300,
             "action_mode": "primitive",
@@ -74,113 +89,87 @@ class UavReleaseScenario(Scenario):
         super().__init__(config)
         c = config
         self.zones: ZoneSet = c.zones
-        self.lidar = ProximityConfig(n_azimuth=c.n_azimuth, elevations_deg=tuple(c.elevations_deg))
         w, h = self.zones.map_size
         self.diag = float(np.hypot(w, h))
-        self.limits = MotionLimits(max_speed=c.max_speed, max_accel=c.max_accel, max_radius=min(w, h) / 4,
-                                   max_duration=30.0, z_min=c.altitude[0], z_max=c.altitude[1], max_omega=1.0,
-                                   arrival_radius=1.0)  # fmt: skip
         self.fall = FallParams(mass=c.sensor_mass, cd=c.sensor_cd, area=c.sensor_area)
-        self.payloads = PayloadSet(self.fall, c.scatter)
         self.fnd_oracle = oracle_fnd(self.zones, c.wsn)
-        self.rng = np.random.default_rng(0)
-        self._released = np.zeros(0, dtype=np.int64)  # slots that released in the current step
 
-    @property
-    def n_agents(self) -> int:
-        """UAVs per world."""
-        return int(self.config.n_uavs)
-
-    def build(self, n_worlds: int) -> World:
-        """World over the zones' map; payload, wind and deployment trackers for ``n_worlds`` worlds."""
-        c = self.config
+    def make_world(self, n_worlds: int) -> World:
+        """World over the zones' map with the payload stage; deployment trackers for ``n_worlds`` worlds."""
+        c, b = self.config, self.config.body
         w, h = self.zones.map_size
-        wc = WorldConfig(bounds=(0.0, w, 0.0, h), z_range=(0.0, c.altitude[1]), dt=c.dt, physics=c.physics,
-                         collisions=c.collisions, lidar=self.lidar, grid_cell=max(c.sensor_range / 2, 5.0))  # fmt: skip
-        world = World(wc, n_worlds, c.n_uavs, comms=c.comms)
+        wc = WorldConfig(bounds=(0.0, w, 0.0, h), z_range=(0.0, b.altitude[1]), dt=c.dt, physics=c.physics,
+                         collisions=c.collisions, grid_cell=max(c.sensing.range / 2, 5.0))  # fmt: skip
+        payloads = PayloadStage(self.fall, c.scatter, c.wind, n_worlds)
+        world = World(wc, n_worlds, c.n_agents, sensors=[ProximitySensor(self.lidar)], comms=c.comms,
+                      payloads=payloads)  # fmt: skip
         st = world.state
         # one group: the whole fleet
-        st.configure(radius=c.uav_radius, sensor_range=c.sensor_range, max_speed=c.max_speed,
-                     max_accel=c.max_accel)  # fmt: skip
-        self.payload_left = np.zeros(st.n_slots, dtype=np.int64)
-        self.wind = WindModel(c.wind, self.rng, n_worlds)
-        self.tracker = DeploymentTracker(self.zones, n_worlds, c.wsn.r_s)
-        self.finished = np.zeros(n_worlds, dtype=bool)
+        st.configure(radius=b.radius, sensor_range=c.sensing.range, max_speed=b.max_speed, max_accel=b.max_accel)
+        world.task = UavSlots.allocate(st.n_slots, n_worlds)
+        world.task.tracker = DeploymentTracker(self.zones, n_worlds, c.wsn.r_s)
         return world
 
     def reset_world(self, world: World, w: int, rng: np.random.Generator) -> None:
-        """UAVs at the base with full payload and battery; new wind; no sensors."""
-        c, st = self.config, world.state
+        """UAVs at the base with full payload and battery; no sensors (the payload stage cleared the world)."""
+        c, st, t = self.config, world.state, world.task
         sl = st.slots_of_world(w)
+        n = c.n_agents
         base = np.asarray(self.zones.base if self.zones.base is not None else (10.0, 10.0))
-        offs = np.column_stack([np.arange(c.n_uavs) * 3.0, np.zeros(c.n_uavs)])
-        st.pos[sl] = np.column_stack([base + offs, np.full(c.n_uavs, c.altitude[0])])
+        offs = np.column_stack([np.arange(n) * 3.0, np.zeros(n)])
+        st.pos[sl] = np.column_stack([base + offs, np.full(n, c.body.altitude[0])])
         st.vel[sl], st.heading[sl], st.energy[sl] = 0.0, 0.0, 0.0
         st.online[sl] = True
-        self.payload_left[sl] = c.payload
-        set_hold(world.motion, sl)
-        self.wind.reset(rng, world=[w])
-        self.payloads.clear_world(w)
-        self.tracker.reset_world(w)
-        self.finished[w] = False
-        if w == 0:
-            self.rng = rng.spawn(1)[0]
+        t.payload_left[sl] = c.payload
+        t.released[sl] = 0
+        t.tracker.reset_world(w)
+        t.finished[w] = False
 
-    def obs_parts(self) -> dict[str, Part]:
-        """self, lidar, zones, landed, inbox, comms."""
-        c = self.config
-        parts = {"self": Part((10,), -1.0, 1.0), "lidar": Part((self.lidar.n_rays, 2), 0.0, 1.0),
-                 "zones": Part((len(self.zones.zones), 5), -1.0, 1.0),
-                 "landed": Part((c.grid_cells, c.grid_cells), 0.0, 1.0)}  # fmt: skip
-        return {**parts, **self.comm_obs_parts()}
-
-    def act_parts(self) -> dict[str, Part]:
-        """motion, release, comm."""
-        motion = Part((3 if self.config.action_mode == "velocity" else 8,), -1.0, 1.0)
-        return {"motion": motion, "release": Part((3,), -1.0, 1.0), **self.comm_act_parts()}
-
-    def state_size(self) -> int:
-        """Base state plus payload left and battery used per UAV."""
-        return self.n_agents * 10
+    def motion_limits(self, world: World) -> MotionLimits:
+        """Primitive limits: circles up to a quarter of the map, 30 s segments, goto arrival within 1 m."""
+        b = self.config.body
+        w, h = self.zones.map_size
+        return MotionLimits(max_speed=b.max_speed, max_accel=b.max_accel, max_radius=min(w, h) / 4,
+                            max_duration=30.0, z_min=b.altitude[0], z_max=b.altitude[1], max_omega=1.0,
+                            arrival_radius=1.0)  # fmt: skip
 
     def apply_actions(self, world: World, actions: dict[str, np.ndarray], acting: np.ndarray) -> None:
-        """Motion commands, then releases from the UAVs' current position and velocity."""
-        c, st = self.config, world.state
-        slots = np.flatnonzero(acting)
-        if c.action_mode == "velocity":
-            decode_velocity(world.motion, slots, actions["motion"][slots], st.max_speed[slots])
-        else:
-            decode_primitive(world.motion, slots, actions["motion"][slots], st.pos, self.limits)
+        """Motion commands, then releases from the UAVs' current position and velocity (into stage 4)."""
+        super().apply_actions(world, actions, acting)
+        c, st, t = self.config, world.state, world.task
         rel = actions["release"]
-        go = np.flatnonzero(acting & st.online & (rel[:, 0] > 0) & (self.payload_left > 0))
+        go = np.flatnonzero(acting & st.online & (rel[:, 0] > 0) & (t.payload_left > 0))
+        t.released[:] = 0
         if go.size:
             target = st.pos[go, :2] + rel[go, 1:3] * c.target_scale
-            t = float(world.step_count[st.world_id[go[0]]]) * c.dt
-            self.payloads.release(go, st.world_id[go], st.pos[go], st.vel[go], t, self.zones.zone_index(target),
-                                  target, self.rng)  # fmt: skip
-            self.payload_left[go] -= 1
-        self._released = go
+            wld = st.world_id[go]
+            assert world.payloads is not None
+            world.payloads.release(go, wld, st.pos[go], st.vel[go], float(world.step_count[wld[0]]) * c.dt,
+                                   self.zones.zone_index(target), target)  # fmt: skip
+            t.payload_left[go] -= 1
+            t.released[go] = 1
 
-    def after_world_step(self, world: World, events: StepEvents, acting: np.ndarray) -> StepResult:
-        """Falling sensors land; coverage, fidelity, energy and miss terms; end of mission bonus."""
-        c, st = self.config, world.state
+    def score(self, world: World, events: StepEvents, acting: np.ndarray) -> StepResult:
+        """Landings (stage 4's events): coverage, fidelity, miss terms; energy; end of mission bonus."""
+        c, st, t = self.config, world.state, world.task
+        assert world.payloads is not None and events.payloads is not None
+        ps = world.payloads.objects
         s = st.n_slots
-        landed = self.payloads.step(c.dt, self.wind, self.rng)
+        landed = events.payloads.landed
         task = np.zeros(s)
         n_landed = np.zeros(s)
         if landed.size:
-            idx = self.payloads.index_of(landed)
-            get = self.payloads.get
-            owner, wld, zone = get("owner")[idx], get("world")[idx], get("zone")[idx]
-            land, target = get("land_xy")[idx], get("target_xy")[idx]
-            gain, dw1 = self.tracker.land(wld, land, zone)
+            idx = ps.index_of(landed)
+            owner, wld, zone = ps.get("owner")[idx], ps.get("world")[idx], ps.get("zone")[idx]
+            land, target = ps.get("land_xy")[idx], ps.get("target_xy")[idx]
+            gain, dw1 = t.tracker.land(wld, land, zone)
             radius = np.where(zone >= 0, self.zones.radii()[np.maximum(zone, 0)], c.target_scale)
             miss = np.nan_to_num(np.linalg.norm(land - target, axis=1) / radius)
             out = self.zones.zone_index(land) < 0
             term = c.w_coverage * gain - c.w_fidelity * dw1 - c.w_miss * miss - c.w_out * out
             np.add.at(task, owner, term)
             np.add.at(n_landed, owner, 1.0)
-        mass = DEFAULT_ROTOR.mass_kg + self.payload_left * c.sensor_mass
+        mass = DEFAULT_ROTOR.mass_kg + t.payload_left * c.sensor_mass
         energy = np.where(st.online, energy_step(st.vel, mass, c.dt), 0.0)
         st.energy += energy
         task -= c.w_energy * energy / c.battery_j
@@ -188,56 +177,54 @@ class UavReleaseScenario(Scenario):
         collided = np.zeros(s)
         collided[events.went_offline] = 1.0
         # mission complete in a world, nothing falling and: every zone's sensors landed, or nothing left on board
-        n = c.n_uavs
-        left = (self.payload_left * st.online).reshape(-1, n).sum(axis=1)
-        ps_world = self.payloads.get("world")
-        falling = np.bincount(ps_world[self.payloads.get("falling")], minlength=world.n_worlds)
-        down = np.bincount(ps_world[self.payloads.get("landed")], minlength=world.n_worlds)
+        n = c.n_agents
+        left = (t.payload_left * st.online).reshape(-1, n).sum(axis=1)
+        ps_world = ps.get("world")
+        falling = np.bincount(ps_world[ps.get("falling")], minlength=world.n_worlds)
+        down = np.bincount(ps_world[ps.get("landed")], minlength=world.n_worlds)
         complete = (falling == 0) & ((left == 0) | (down >= self.zones.n_sensors))
-        done_now = ~self.finished & (complete | (world.step_count >= c.max_steps))
+        done_now = ~t.finished & (complete | (world.step_count >= c.max_steps))
         terminated = empty_battery.copy()
         for w in np.flatnonzero(done_now).tolist():
-            self.finished[w] = True
+            t.finished[w] = True
             sl = st.slots_of_world(w)
-            task[sl] += final_bonus(self.payloads, w, self.zones, c, self.fnd_oracle)
+            task[sl] += final_bonus(ps, w, self.zones, c, self.fnd_oracle)
             terminated[sl] |= world.step_count[w] < c.max_steps  # finished, not cut off by the time limit
         rewards = compose_rewards(c.reward, task, group=st.group, world=st.world_id, acting=acting, n_groups=1,
                                   collided=collided, messages_sent=world.comms.sent if world.comms else None)  # fmt: skip
-        released = np.zeros(s, dtype=np.int8)
-        released[self._released] = 1
-        cov = np.repeat([self.tracker.weighted_coverage(w) for w in range(world.n_worlds)], n)
+        cov = np.repeat([t.tracker.weighted_coverage(w) for w in range(world.n_worlds)], n)
         info: dict[str, np.ndarray] = {
-            "released": released, "landed": n_landed.astype(np.int8), "payload_left": self.payload_left.copy(),
-            "energy_j": st.energy.copy(), "coverage_weighted": cov,
+            "released": t.released.copy(), "landed": n_landed.astype(np.int8),
+            "payload_left": t.payload_left.copy(), "energy_j": st.energy.copy(), "coverage_weighted": cov,
         }  # fmt: skip
         return StepResult(rewards, terminated & acting, info)
 
     def observe(self, world: World) -> dict[str, np.ndarray]:
-        """Observation parts for every slot (see the module docstring)."""
-        c, st = self.config, world.state
+        """self, lidar, zones and landed parts for every slot (see the module docstring)."""
+        c, st, t = self.config, world.state, world.task
         w, h = self.zones.map_size
-        lo, hi = c.altitude
+        lo, hi = c.body.altitude
         selfp = np.column_stack(
             [
                 st.pos[:, 0] / w * 2 - 1,
                 st.pos[:, 1] / h * 2 - 1,
                 (st.pos[:, 2] - lo) / (hi - lo) * 2 - 1,
-                st.vel / c.max_speed,
+                st.vel / c.body.max_speed,
                 np.cos(st.heading),
                 np.sin(st.heading),
-                self.payload_left / c.payload,
+                t.payload_left / c.payload,
                 1.0 - st.energy / c.battery_j,
             ]
         )
         scan = world.scan
-        assert scan is not None
+        assert scan is not None and world.payloads is not None
         rel = self.zones.centres()[None, :, :] - st.pos[:, None, :2]
         demand = self._demand(world)[st.world_id]
         wts = self.zones.weights()
         radius = np.broadcast_to(self.zones.radii() / self.diag, rel.shape[:2])
         zones = np.concatenate([rel / self.diag, radius[..., None], demand[..., None],
                                 np.broadcast_to(wts / wts.max(), rel.shape[:2])[..., None]], axis=2)  # fmt: skip
-        ps = self.payloads
+        ps = world.payloads.objects
         done = ps.get("landed")
         grid = local_counts(st.pos[:, :2], st.world_id, ps.get("land_xy")[done], ps.get("world")[done],
                             c.grid_cells, c.grid_extent)  # fmt: skip
@@ -246,29 +233,29 @@ class UavReleaseScenario(Scenario):
             "lidar": np.stack([scan.distance, scan.hit_kind / 3.0], axis=-1).astype(np.float32),
             "zones": np.clip(zones, -1, 1).astype(np.float32),
             "landed": grid,
-            **self.comm_observe(world),
         }
 
     def _demand(self, world: World) -> np.ndarray:
         """Unmet demand per (world, zone): sensors not yet landed or falling there / n_sensors."""
         k = len(self.zones.zones)
-        ps = self.payloads
+        assert world.payloads is not None
+        ps = world.payloads.objects
         zone, wld = ps.get("zone"), ps.get("world")
         ok = zone >= 0
         got = np.bincount(wld[ok] * k + zone[ok], minlength=world.n_worlds * k).reshape(world.n_worlds, k)
         need = np.array([z.n_sensors for z in self.zones.zones], dtype=np.float64)
         return np.clip((need - got) / need, 0.0, 1.0)
 
-    def state(self, world: World, w: int) -> np.ndarray:
-        """Base state plus payload left / payload and battery used / capacity per UAV."""
+    def state_extra(self, world: World, w: int) -> np.ndarray:
+        """Payload left / payload and battery used / capacity per UAV."""
         sl = slice(w * self.n_agents, (w + 1) * self.n_agents)
-        extra = np.column_stack([self.payload_left[sl] / self.config.payload,
-                                 world.state.energy[sl] / self.config.battery_j])  # fmt: skip
-        return np.concatenate([super().state(world, w), extra.ravel()]).astype(np.float32)
+        return np.column_stack([world.task.payload_left[sl] / self.config.payload,
+                                world.state.energy[sl] / self.config.battery_j]).ravel()  # fmt: skip
 
     def markers(self, world: World, w: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Zones as tinted discs, landed sensors as dark dots, falling ones as orange dots."""
-        ps = self.payloads
+        assert world.payloads is not None
+        ps = world.payloads.objects
         mine = ps.get("world") == w
         landed, falling = mine & ps.get("landed"), mine & ps.get("falling")
         tints = np.array([[205, 225, 245], [245, 220, 200], [215, 240, 210], [240, 215, 240]], dtype=np.uint8)

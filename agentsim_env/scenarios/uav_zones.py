@@ -51,7 +51,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from agentsim_env.scenarios.config import check_choice, check_float, check_int
+from agentsim_env.core.validation import check_choice, check_float, check_int
 from agentsim_env.wsn.profiles import PROFILE_KINDS, RadialProfile
 
 __all__ = [

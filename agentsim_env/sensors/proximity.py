@@ -26,7 +26,8 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
-from agentsim_env.core.spatial import Grid, _cell_of
+from agentsim_env.core.pipeline import StepContext
+from agentsim_env.core.spatial import Grid, cell_of
 from agentsim_env.sensors.raycast import (
     _BOX,
     _CYL,
@@ -180,8 +181,8 @@ def _scan_kernel(
         if use_agents:
             # Agents are binned by centre, so the cells must reach range + the largest radius.
             reach = rng + rmax
-            x0, y0 = _cell_of(x - reach, y - reach, a_ox, a_oy, a_cell, a_nx, a_ny)
-            x1, y1 = _cell_of(x + reach, y + reach, a_ox, a_oy, a_cell, a_nx, a_ny)
+            x0, y0 = cell_of(x - reach, y - reach, a_ox, a_oy, a_cell, a_nx, a_ny)
+            x1, y1 = cell_of(x + reach, y + reach, a_ox, a_oy, a_cell, a_nx, a_ny)
             for ca in range(x0, x1 + 1):
                 base = (w * a_nx + ca) * a_ny
                 # Rows of one column are consecutive cells, hence one contiguous run of items.
@@ -195,8 +196,8 @@ def _scan_kernel(
                     _candidate(px, py, pz, _SPH, h, r, r, HIT_AGENT, j, rng, cs, dirs, n_az, bt, bk, bi)
         if use_objects:
             # Objects are registered in every cell their footprint touches, so the range alone suffices.
-            x0, y0 = _cell_of(x - rng, y - rng, o_ox, o_oy, o_cell, o_nx, o_ny)
-            x1, y1 = _cell_of(x + rng, y + rng, o_ox, o_oy, o_cell, o_nx, o_ny)
+            x0, y0 = cell_of(x - rng, y - rng, o_ox, o_oy, o_cell, o_nx, o_ny)
+            x1, y1 = cell_of(x + rng, y + rng, o_ox, o_oy, o_cell, o_nx, o_ny)
             for ca in range(x0, x1 + 1):
                 base = (w * o_nx + ca) * o_ny
                 for q in range(o_start[base + y0], o_start[base + y1 + 1]):
@@ -327,6 +328,9 @@ def _grid_args(grid: Grid | None, lo: int, hi: int, name: str) -> tuple:
 class ProximitySensor:
     """Grid-accelerated ray caster for every slot (one numba kernel, single-threaded)."""
 
+    name = "proximity"
+    obs_part = None  # scenarios build their ``lidar`` part from the scan themselves
+
     def __init__(self, config: ProximityConfig | None = None) -> None:
         """Precompute the ray directions.
 
@@ -342,6 +346,21 @@ class ProximitySensor:
     def n_rays(self) -> int:
         """Rays per slot K."""
         return self.config.n_rays
+
+    # ------------------------------------------------------------------ the Sensor protocol (stage 8)
+    def reset_world(self, w: int, rng: np.random.Generator) -> None:
+        """The scan is noise-free: nothing to reset."""
+        del w, rng
+
+    def step(self, ctx: StepContext) -> ScanResult:
+        """Scan every online slot on the step's shared grid (into the sensor's reused buffers)."""
+        st, sc = ctx.state, ctx.scene
+        return self.scan(st.pos, st.heading, st.sensor_range, st.radius, st.online, st.world_id, ctx.grid,
+                         sc.kind, sc.centre, sc.half, sc.world, ctx.object_grid, sc.ground)  # fmt: skip
+
+    def observe(self, reading: ScanResult) -> np.ndarray:
+        """``(S, K, 2)`` float32: normalised distance and hit code / 3 per ray."""
+        return np.stack([reading.distance, reading.hit_kind / 3.0], axis=-1).astype(np.float32)
 
     def scan(
         self,

@@ -54,9 +54,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from agentsim_env.policies.release.planning import assemble_plan, plan_tour
+from agentsim_env.policies.release.targets import make_plan
 from agentsim_env.scenarios.uav_zones import Zone, ZoneSet
-from policies.release.planning import assemble_plan, plan_tour
-from policies.release.targets import make_plan
 
 __all__ = [
     "FLY",

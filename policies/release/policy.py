@@ -41,7 +41,7 @@ from typing import Any
 import numpy as np
 
 from agentsim_env.payloads.ballistic import predict_landing
-from policies.release.coordination import (
+from agentsim_env.policies.release.coordination import (
     FLY,
     HOVER,
     IDLE,
@@ -61,7 +61,7 @@ from policies.release.coordination import (
     split_work,
     target_tasks,
 )
-from policies.release.targets import STRATEGIES
+from agentsim_env.policies.release.targets import STRATEGIES
 
 __all__ = ["DEFAULT_RELEASE_SPEED", "ReleasePolicy"]
 
@@ -144,10 +144,10 @@ class ReleasePolicy:
             if not (math.isfinite(v) and (v > 0 if strict else v >= 0)):
                 raise ValueError(f"{name} must be a finite number {'>' if strict else '>='} 0, got {v!r}")
         if release_speed is not None and not (
-            math.isfinite(release_speed) and 0 <= release_speed <= c.max_speed
+            math.isfinite(release_speed) and 0 <= release_speed <= c.body.max_speed
         ):
             raise ValueError(
-                f"release_speed must be None or in [0, max_speed = {c.max_speed}], got {release_speed!r}"
+                f"release_speed must be None or in [0, max_speed = {c.body.max_speed}], got {release_speed!r}"
             )
         for name, v in (("hello_every", hello_every), ("lost_after", lost_after)):
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
@@ -158,7 +158,7 @@ class ReleasePolicy:
             )
         self.env, self.strategy, self.coordinate = env, strategy, bool(coordinate)
         self.options = {"fall_dt": 0.02, **(options or {})}  # RK4 at 0.02 s: sub-millimetre, half the cost
-        self.cruise = min(float(cruise_speed), c.max_speed)
+        self.cruise = min(float(cruise_speed), c.body.max_speed)
         speed = DEFAULT_RELEASE_SPEED[strategy] if release_speed is None else float(release_speed)
         self.hover = (
             speed == 0.0
@@ -187,8 +187,8 @@ class ReleasePolicy:
         c, zs = sc.config, sc.zones
         n, k = c.n_uavs, len(zs.zones)
         self._n, self._payload, self._map = n, c.payload, zs.map_size
-        self._dt, self._vmax, self._brake = c.dt, c.max_speed, _BRAKE * c.max_accel
-        lo, hi = c.altitude
+        self._dt, self._vmax, self._brake = c.dt, c.body.max_speed, _BRAKE * c.body.max_accel
+        lo, hi = c.body.altitude
         start = np.tile(np.asarray(zs.base if zs.base is not None else (10.0, 10.0)), (n, 1))
         start[slots] = pos[:, :2]
         zone_alt = np.array([z.altitude or self.default_altitude for z in zs.zones])
@@ -198,7 +198,7 @@ class ReleasePolicy:
         # transit layers above every working layer, one per UAV
         self._transit = np.clip(self._alts.max() + self.layer * (1 + np.arange(n)), lo, hi)
         self._zc, self._zr = zs.centres(), zs.radii()
-        self._wind = _forecast(sc.wind)
+        self._wind = _forecast(self.env.world.payloads.wind)
         uniq, inv = np.unique(self._alts, return_inverse=True)
         self._tabs = _throw_tables(uniq, self._vmax, sc.fall, self._wind)
         self._tab_of = inv.reshape(n, k)
@@ -298,11 +298,11 @@ class ReleasePolicy:
         c = self.env.scenario.config
         slots = np.array([self._index[a] for a in names])
         s = np.stack([observations[a]["self"] for a in names]).astype(np.float64)
-        (w, h), (lo, hi) = self.env.scenario.zones.map_size, c.altitude
+        (w, h), (lo, hi) = self.env.scenario.zones.map_size, c.body.altitude
         pos = np.column_stack(
             [(s[:, 0] + 1) / 2 * w, (s[:, 1] + 1) / 2 * h, lo + (s[:, 2] + 1) / 2 * (hi - lo)]
         )
-        vel = s[:, 3:6] * c.max_speed
+        vel = s[:, 3:6] * c.body.max_speed
         if not self._planned:
             self._plan(slots, pos)
         left = np.rint(s[:, 8] * c.payload).astype(np.int64)
@@ -423,7 +423,7 @@ class ReleasePolicy:
         release[fire, 1:] = np.clip((goal[fire] - p[fire]) / c.target_scale, -1.0, 1.0)
         for i in np.flatnonzero(fire | reached | need_lead):
             self._event(int(slots[i]), pos[i], bool(fire[i]), bool(reached[i]))
-        return (cmd / c.max_speed).astype(np.float32), release.astype(np.float32)
+        return (cmd / c.body.max_speed).astype(np.float32), release.astype(np.float32)
 
     def _altitude(self, slots: np.ndarray, pos: np.ndarray, idle: np.ndarray) -> tuple[np.ndarray, ...]:
         """Altitude error, hold-altitude mask and slow-down mask of the present UAVs.

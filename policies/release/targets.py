@@ -33,8 +33,7 @@ from scipy.cluster.vq import kmeans2
 from scipy.optimize import brentq
 from scipy.spatial import cKDTree
 
-from agentsim_env.wsn.profiles import RadialProfile
-from policies.release.planning import (
+from agentsim_env.policies.release.planning import (
     TWO_PI,
     ReleasePlan,
     assemble_plan,
@@ -43,6 +42,7 @@ from policies.release.planning import (
     plan_tour,
     sector_quota,
 )
+from agentsim_env.wsn.profiles import RadialProfile
 
 __all__ = ["STRATEGIES", "cvt_points", "make_plan", "spiral_points"]
 

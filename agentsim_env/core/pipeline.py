@@ -1,0 +1,134 @@
+"""The contracts of the step pipeline: the step context, the subsystem and sensor protocols, random streams.
+
+Every stage of ``sim.World.step`` (motion, physics, payloads, collisions, groups, comms, sensors) is a
+*subsystem*: an object built for B worlds that implements two methods,
+
+- ``reset_world(w, rng)``: world ``w`` starts a new episode; ``rng`` is that subsystem's own generator for the
+  episode (spawned from the world's ``SeedSequence`` by the subsystem's name, see :func:`stream`);
+- ``step(ctx) -> events``: advance every world by one step, reading what it needs from the
+  :class:`StepContext` and returning what happened as arrays.
+
+A subsystem never calls back into the world or into another subsystem: it returns events and the world acts on
+them (takes slots offline, hands one stage's events to the next through the context). A *sensor* is a
+subsystem of stage 8 whose ``step`` returns a reading, plus an optional observation part that scenarios get
+for free (see :class:`Sensor`).
+
+These contracts live in ``core`` so that the subsystem packages can implement them without importing ``sim``.
+"""
+
+from __future__ import annotations
+
+import zlib
+from dataclasses import dataclass, field
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+
+from agentsim_env.core.collisions import CollisionEvents
+from agentsim_env.core.scene import Scene
+from agentsim_env.core.spatial import Grid
+from agentsim_env.core.state import AgentState
+
+
+@dataclass(slots=True)
+class StepContext:
+    """What a stage of one step may read (the world fills it in as the stages run).
+
+    Attributes:
+        state: The agents' struct of arrays (stages may write the fields they own, e.g. motion writes ``pos``).
+        scene: Static objects.
+        grid: The step's neighbour grid over the online slots (rebuilt after collisions and timeouts).
+        object_grid: The static objects' grid (``None`` when the scene is empty).
+        dt: Step length in seconds.
+        tick: Global step counter (message timestamps); never reset per world.
+        step_count: ``(B,)`` steps since each world's reset, before this step.
+        collisions: Stage 5's collision events (empty before stage 5).
+        outputs: Events of the stages that already ran this step, by subsystem name.
+    """
+
+    state: AgentState
+    scene: Scene
+    grid: Grid
+    object_grid: Grid | None
+    dt: float
+    tick: int
+    step_count: np.ndarray
+    collisions: CollisionEvents = field(default_factory=CollisionEvents.empty)
+    outputs: dict[str, Any] = field(default_factory=dict)
+
+
+@runtime_checkable
+class Subsystem(Protocol):
+    """One stage of the pipeline, built for B worlds (see the module docstring)."""
+
+    name: str
+
+    def reset_world(self, w: int, rng: np.random.Generator) -> None:
+        """World ``w`` starts a new episode; ``rng`` is this subsystem's generator for it."""
+
+    def step(self, ctx: StepContext) -> Any:
+        """Advance every world by one step and return the step's events."""
+
+
+@dataclass(frozen=True)
+class ObsPart:
+    """An observation part a sensor contributes: its shape per slot and finite bounds."""
+
+    shape: tuple[int, ...]
+    low: float
+    high: float
+
+
+@runtime_checkable
+class Sensor(Subsystem, Protocol):
+    """A stage-8 subsystem: ``step(ctx)`` measures every online slot on the step's shared grid.
+
+    ``obs_part`` is ``None`` for a sensor whose reading the scenario turns into observations itself (the
+    proximity scan); otherwise the scenario base adds ``observe(reading)`` (``(S, *obs_part.shape)`` float32,
+    inside the bounds) to every observation under the sensor's ``name``.
+    """
+
+    obs_part: ObsPart | None
+
+    def observe(self, reading: Any) -> np.ndarray:
+        """The reading as an observation part ``(S, *obs_part.shape)`` float32."""
+
+
+def stream(seed: np.random.SeedSequence, name: str) -> np.random.Generator:
+    """The generator named ``name`` of one world episode's ``SeedSequence``.
+
+    Children are keyed by name (not by spawn order), so adding a subsystem never shifts another's numbers, and
+    the same seed gives the same streams in a single env and in any world of a batch.
+
+    Args:
+        seed: The world's episode seed sequence.
+        name: Stream name (``"placement"``, ``"comms"``, ``"payloads"``, ...).
+
+    Returns:
+        A fresh PCG64 generator.
+    """
+    key = zlib.crc32(name.encode("utf-8"))
+    child = np.random.SeedSequence(seed.entropy, spawn_key=(*seed.spawn_key, key), pool_size=seed.pool_size)
+    return np.random.default_rng(child)
+
+
+class EpisodeSeeds:
+    """The seed sequences of successive episodes of one world.
+
+    ``reset(seed)`` starts a new root (an int, a ``SeedSequence`` or ``None`` for fresh entropy); every call of
+    ``next()`` returns the next episode's sequence. A world reset with seed ``s`` and a single env reset with
+    ``seed=s`` therefore see the same episodes, including the ones that follow without a new seed.
+    """
+
+    __slots__ = ("_root",)
+
+    def __init__(self, seed: int | np.random.SeedSequence | None = None) -> None:
+        self._root = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
+
+    def reset(self, seed: int | np.random.SeedSequence | None) -> None:
+        """Start again from ``seed``."""
+        self._root = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
+
+    def next(self) -> np.random.SeedSequence:
+        """The next episode's seed sequence."""
+        return self._root.spawn(1)[0]

@@ -1,0 +1,92 @@
+"""A noisy GNSS receiver with a barometric altimeter: each agent's own position, with errors.
+
+The second sensor of the package and the model for adding one: it implements the ``Sensor`` protocol of
+``core.pipeline`` and nothing in ``sim`` or ``core`` knows about it. A scenario enables it by passing it to the
+world; the scenario base then adds its observation part, ``gnss (3,)``, to every observation:
+
+| idx | content                                                                     |
+|-----|-----------------------------------------------------------------------------|
+| 0   | measured x in [-1, 1] over the map's x range                                 |
+| 1   | measured y in [-1, 1] over the map's y range                                 |
+| 2   | measured altitude in [-1, 1] over the altitude band                          |
+
+The horizontal error is Gaussian with ``sigma_h`` per axis, the altimeter's with ``sigma_v``; every reading is
+new noise (no bias or random walk). Offline slots read zeros. Each world draws from its own stream, spawned at
+its reset, so a world's readings do not depend on the other worlds of a batch.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from agentsim_env.core.pipeline import ObsPart, StepContext
+from agentsim_env.core.validation import check_float
+
+
+@dataclass(frozen=True)
+class GnssConfig:
+    """Errors of the GNSS sensor.
+
+    Attributes:
+        sigma_h: Horizontal error per axis (standard deviation) in metres, >= 0.
+        sigma_v: Altimeter error (standard deviation) in metres, >= 0.
+    """
+
+    sigma_h: float = 1.5
+    sigma_v: float = 0.5
+
+    def __post_init__(self) -> None:
+        check_float("gnss.sigma_h", self.sigma_h, 0.0, 1e3)
+        check_float("gnss.sigma_v", self.sigma_v, 0.0, 1e3)
+
+
+class GnssSensor:
+    """Noisy own-position readings of B worlds of N agents.
+
+    Args:
+        config: Error model.
+        n_worlds: Worlds B.
+        n_agents: Agents per world N.
+        bounds: Map ``(xmin, xmax, ymin, ymax)`` the reading is normalised over.
+        z_range: Altitude band ``(zmin, zmax)`` the altitude is normalised over.
+    """
+
+    name = "gnss"
+    obs_part = ObsPart((3,), -1.0, 1.0)
+
+    def __init__(
+        self,
+        config: GnssConfig,
+        n_worlds: int,
+        n_agents: int,
+        bounds: tuple[float, float, float, float],
+        z_range: tuple[float, float],
+    ) -> None:
+        self.config = config
+        self.n_agents = int(n_agents)
+        self._lo = np.array([bounds[0], bounds[2], z_range[0]], dtype=np.float64)
+        self._span = np.array([bounds[1] - bounds[0], bounds[3] - bounds[2], z_range[1] - z_range[0]])
+        self._sigma = np.array([config.sigma_h, config.sigma_h, config.sigma_v])
+        self._rngs = [np.random.default_rng(np.random.SeedSequence(0, spawn_key=(w,))) for w in range(n_worlds)]
+
+    def reset_world(self, w: int, rng: np.random.Generator) -> None:
+        """World ``w``'s readings come from ``rng`` this episode."""
+        self._rngs[w] = rng
+
+    def step(self, ctx: StepContext) -> np.ndarray:
+        """Stage 8: measured positions ``(S, 3)`` in metres (NaN for offline slots)."""
+        st = ctx.state
+        n = self.n_agents
+        noise = np.empty((st.n_slots, 3))
+        for w, rng in enumerate(self._rngs):  # each world's rows from its own stream
+            noise[w * n : (w + 1) * n] = rng.standard_normal((n, 3))
+        reading = st.pos + noise * self._sigma
+        reading[~st.online] = np.nan
+        return reading
+
+    def observe(self, reading: np.ndarray) -> np.ndarray:
+        """``(S, 3)`` float32 in [-1, 1] (zeros for offline slots)."""
+        out = np.nan_to_num((reading - self._lo) / self._span * 2.0 - 1.0, nan=0.0)
+        return np.clip(out, -1.0, 1.0).astype(np.float32)

@@ -1,0 +1,37 @@
+"""The collisions stage of the pipeline (stage 5): distance-threshold agent-agent and agent-object events."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from agentsim_env.core.collisions import CollisionEvents, find_collisions
+from agentsim_env.core.pipeline import StepContext
+
+
+class CollisionStage:
+    """Finds every contact on the step's grid; the world takes the hit agents offline.
+
+    Args:
+        enabled: Whether collisions are detected at all.
+        margin: Extra distance added to every threshold.
+        ends_agent: Whether a hit agent goes offline (read by the world).
+    """
+
+    name = "collisions"
+
+    def __init__(self, enabled: bool = True, margin: float = 0.0, ends_agent: bool = True) -> None:
+        self.enabled = enabled
+        self.margin = float(margin)
+        self.ends_agent = ends_agent
+
+    def reset_world(self, w: int, rng: np.random.Generator) -> None:
+        """Collisions keep no per-world state."""
+        del w, rng
+
+    def step(self, ctx: StepContext) -> CollisionEvents:
+        """Stage 5: collision events of the online slots (who, the other agent or the object)."""
+        if not self.enabled:
+            return CollisionEvents.empty()
+        st, sc = ctx.state, ctx.scene
+        return find_collisions(st.pos, st.radius, st.online, st.world_id, ctx.grid, sc.kind, sc.centre, sc.half,
+                               sc.world, ctx.object_grid, self.margin)  # fmt: skip

@@ -1,0 +1,178 @@
+"""Packaging and module layering.
+
+``policies/`` and ``train/`` install as ``agentsim_env.policies`` and ``agentsim_env.train``, so a user's own
+``policies/`` or ``train/`` folder cannot shadow them; the evaluation package reaches the policies only through
+its ``strategies`` registry and has no import cycle.
+"""
+
+from __future__ import annotations
+
+import ast
+import importlib.metadata
+import os
+import shutil
+import subprocess
+import sys
+import zipfile
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+#: Repository folders installed under another package name.
+MOVED = {"policies": "agentsim_env.policies", "train": "agentsim_env.train"}
+
+
+def _python(code: str, cwd: Path, timeout: float = 120.0) -> subprocess.CompletedProcess[str]:
+    """Run ``code`` in a fresh interpreter of this environment, in ``cwd``, without PYTHONPATH."""
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    return subprocess.run(
+        [sys.executable, "-c", code], cwd=cwd, env=env, capture_output=True, text=True, timeout=timeout
+    )
+
+
+def _user_folders(root: Path) -> None:
+    """A user's project with its own ``policies`` and ``train`` packages."""
+    for name in MOVED:
+        (root / name).mkdir()
+        (root / name / "__init__.py").write_text(f"OWNER = 'user {name}'\n")
+    (root / "train" / "ppo.py").write_text("raise RuntimeError('the user module was imported')\n")
+
+
+def test_user_folders_do_not_shadow_the_policies(tmp_path: Path) -> None:
+    _user_folders(tmp_path)
+    code = """
+import os
+import policies, train
+assert policies.OWNER == "user policies" and train.OWNER == "user train"
+from agentsim_env.policies.navigation import GoToGoalPolicy
+from agentsim_env.policies.registry import make_policy
+import agentsim_env.policies, agentsim_env.train
+for mod in (agentsim_env.policies, agentsim_env.train):
+    assert not mod.__file__.startswith(os.getcwd()), mod.__file__
+    assert not hasattr(mod, "OWNER")
+print("ok", GoToGoalPolicy.__module__, make_policy.__module__)
+"""
+    res = _python(code, tmp_path)
+    assert res.returncode == 0, res.stderr
+    assert "ok agentsim_env.policies.navigation agentsim_env.policies.registry" in res.stdout
+
+
+def test_no_top_level_policies_or_train(tmp_path: Path) -> None:
+    code = """
+import importlib.util
+print([n for n in ("policies", "train") if importlib.util.find_spec(n) is not None])
+import agentsim_env.policies.release, agentsim_env.train
+"""
+    res = _python(code, tmp_path)
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.strip() == "[]"
+    top = importlib.metadata.distribution("agentsim-env").read_text("top_level.txt")
+    assert top is not None and top.split() == ["agentsim_env"]
+
+
+def _package_folders() -> set[str]:
+    """Dotted names of the folders that hold files (``__pycache__`` aside), as they install."""
+    names = set()
+    for top, dotted in {"agentsim_env": "agentsim_env", **MOVED}.items():
+        for folder in [ROOT / top, *(p for p in (ROOT / top).rglob("*") if p.is_dir())]:
+            rel = folder.relative_to(ROOT / top).parts
+            if any(part == "__pycache__" or part.startswith(".") for part in rel):
+                continue
+            files = (f for f in folder.rglob("*") if f.is_file() and "__pycache__" not in f.parts)
+            if any(True for _ in files):
+                names.add(".".join((dotted, *rel)))
+    return names
+
+
+def test_pyproject_lists_every_package() -> None:
+    tomllib = pytest.importorskip("tomllib")
+    setuptools_cfg = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))["tool"]["setuptools"]
+    assert setuptools_cfg["package-dir"] == {v: k for k, v in MOVED.items()}
+    listed = set(setuptools_cfg["packages"])
+    assert listed == _package_folders(), "add the new package folders to [tool.setuptools] packages"
+
+
+def test_wheel_installs_policies_and_train_inside_the_package(tmp_path: Path) -> None:
+    src = tmp_path / "src"
+    skip = shutil.ignore_patterns("__pycache__", "*.pyc", "*.nbi", "*.nbc")
+    for name in ("agentsim_env", *MOVED):
+        shutil.copytree(ROOT / name, src / name, ignore=skip)
+    for name in ("pyproject.toml", "README.md"):
+        shutil.copy2(ROOT / name, src / name)
+    out = tmp_path / "wheel"
+    cmd = [sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "--no-build-isolation", "--no-index",
+           "-w", str(out), str(src)]  # fmt: skip
+    res = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stderr
+    (wheel,) = out.glob("*.whl")
+    names = zipfile.ZipFile(wheel).namelist()
+    tops = {n.split("/")[0] for n in names if not n.split("/")[0].endswith(".dist-info")}
+    assert tops == {"agentsim_env"}
+    for top, dotted in MOVED.items():
+        for f in (ROOT / top).rglob("*.py"):
+            rel = f.relative_to(ROOT / top).as_posix()
+            assert f"{dotted.replace('.', '/')}/{rel}" in names
+    assert "agentsim_env/data/zones_default.json" in names
+
+
+# ------------------------------------------------------------------------------------------ layering
+def _imports(path: Path, module: str) -> set[str]:
+    """Modules imported anywhere in ``path`` (module ``module``), relative imports resolved."""
+    package = module if path.name == "__init__.py" else module.rpartition(".")[0]
+    out = set()
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.Import):
+            out.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                parts = package.split(".")
+                parent = ".".join(parts[: len(parts) - node.level + 1])
+                base = f"{parent}.{base}" if base else parent
+            out.add(base)
+            out.update(f"{base}.{alias.name}" for alias in node.names)
+    return out
+
+
+def _evaluation_graph() -> dict[str, set[str]]:
+    """Import edges between the modules of ``agentsim_env.evaluation`` and ``agentsim_env.cli``."""
+    files = {"agentsim_env.cli": ROOT / "agentsim_env" / "cli.py"}
+    for f in (ROOT / "agentsim_env" / "evaluation").glob("*.py"):
+        name = "agentsim_env.evaluation" + ("" if f.stem == "__init__" else f".{f.stem}")
+        files[name] = f
+    return {name: _imports(f, name) & set(files) - {name} for name, f in files.items()}
+
+
+def test_no_import_cycle_in_the_evaluation_package() -> None:
+    graph = _evaluation_graph()
+    assert "agentsim_env.evaluation.scoring" in graph
+    done: set[str] = set()
+
+    def visit(node: str, path: list[str]) -> None:
+        if node in path:
+            raise AssertionError("import cycle: " + " -> ".join([*path[path.index(node) :], node]))
+        if node in done:
+            return
+        for nxt in sorted(graph[node]):
+            visit(nxt, [*path, node])
+        done.add(node)
+
+    for node in sorted(graph):
+        visit(node, [])
+
+
+def test_evaluation_reaches_the_policies_only_through_its_registry() -> None:
+    from agentsim_env.evaluation import strategies
+    from agentsim_env.policies.registry import baseline_names, make_policy
+
+    for f in (ROOT / "agentsim_env" / "evaluation").glob("*.py"):
+        mods = _imports(f, f"agentsim_env.evaluation.{f.stem}")
+        found = {m for m in mods if m.split(".")[0] in MOVED or m.startswith(tuple(MOVED.values()))}
+        assert not found, (f.name, found)
+    assert strategies.policy_factory() is make_policy
+    assert strategies.strategy_names("uav_release") == baseline_names("uav_release")
+    with pytest.raises(ValueError, match="module:attribute"):
+        strategies.load("no_colon")
+    with pytest.raises(ValueError, match="cannot load"):
+        strategies.load("agentsim_env.policies.registry:nope")
