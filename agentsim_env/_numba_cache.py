@@ -144,7 +144,7 @@ def ensure_numba_cache(
         from numba.misc.appdirs import AppDirs
     except ImportError:
         return None
-    if config.CACHE_DIR or getattr(config, "CACHE_LOCATOR_CLASSES", ""):
+    if getattr(config, "CACHE_DIR", "") or getattr(config, "CACHE_LOCATOR_CLASSES", ""):
         return None  # chosen in a .numba_config.yaml
     user_dir = AppDirs(appname="numba", appauthor=False).user_cache_dir
     if _writable(user_dir, create=True):
@@ -155,7 +155,7 @@ def ensure_numba_cache(
         path = None
     if path is not None:
         os.environ["NUMBA_CACHE_DIR"] = path
-        config.CACHE_DIR = path
+        setattr(config, "CACHE_DIR", path)  # noqa: B010 (numba.config defines its settings at run time)
         # numba re-reads every NUMBA_* variable at the next compilation when it sees one change, which would
         # undo settings made in code since numba was imported: record this one as already read
         seen = getattr(getattr(config, "_env_reloader", None), "old_environ", None)

@@ -18,14 +18,14 @@ def _env(**comms):  # type: ignore[no-untyped-def]
 
 
 def _idle(env, **over):  # type: ignore[no-untyped-def]
-    d = env.scenario.comms_config().action_dim
+    d = env.scenario.config.comms.action_dim
     acts = {a: {"motion": np.zeros(3, np.float32), "comm": np.full(d, -1.0, np.float32)} for a in env.agents}
     acts.update(over)
     return acts
 
 
 def _comm(env, channel: int, receiver: int = 0, hops: int = 1, payload=(0.5, -0.5, 0.25, 0.0)):  # type: ignore[no-untyped-def]
-    n, cfg = env.scenario.n_agents, env.scenario.comms_config()
+    n, cfg = env.scenario.n_agents, env.scenario.config.comms
     a = np.zeros(cfg.action_dim, np.float32)
     a[0] = -1.0 + (channel + 0.5) * 2.0 / 5.0
     a[1] = receiver / (n - 1) * 2.0 - 1.0
@@ -120,7 +120,7 @@ def test_message_cost_and_events() -> None:
         reward={"message_cost": 1.0, "group_share": 0.0},
     )
     env.reset(seed=0)
-    d = env.scenario.comms_config().action_dim
+    d = env.scenario.config.comms.action_dim
     quiet = {a: {"motion": np.zeros(3, np.float32), "comm": np.full(d, -1.0, np.float32)} for a in env.agents}
     _, r0, *_ = env.step(quiet)
     loud = dict(quiet, agent_0=_comm(env, 3, receiver=1))
@@ -153,7 +153,7 @@ def test_code_api_and_bad_inputs() -> None:
         env.assign_group("agent_0", -5)
     obs, *_ = env.step(_idle(env))
     assert len(_rows(obs, "agent_3")) >= 1
-    groups = env.world.comms.events.groups
+    groups = env.world.last_events.groups
     assert groups is not None and groups.slot.tolist() == [0] and groups.new.tolist() == [1]
     no_comms = agentsim_env.make("navigation")
     no_comms.reset(seed=0)

@@ -59,9 +59,17 @@ def test_unknown_missing_and_dead_agents() -> None:
     _, _, term, _, _ = env.step(_good(env))
     assert term["agent_0"] and "agent_0" not in env.agents
     assert term["agent_1"]  # both agents of an agent-agent collision end
+    # actions for agents that ended earlier in the episode are accepted and ignored (TorchRL, BenchMARL)
     acts = _good(env)
     acts["agent_0"] = acts["agent_2"]
-    with pytest.raises(ValueError, match="agent_0"):
+    acts["agent_1"] = acts["agent_2"]
+    before = env.world.state.pos[:2].copy()
+    obs, *_ = env.step(acts)
+    assert "agent_0" not in obs and "agent_0" not in env.agents
+    np.testing.assert_array_equal(env.world.state.pos[:2], before)  # the ended agents did not move
+    acts = _good(env)
+    acts["agent_9"] = acts["agent_2"]
+    with pytest.raises(ValueError, match="agent_9"):  # an unknown id stays an error naming it
         env.step(acts)
     env.step(_good(env))
 

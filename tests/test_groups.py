@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from agentsim_env.comms import GROUP, HEARTBEAT, ChannelConfig, MessageBus
+from agentsim_env.comms.stack import CommsConfig, CommsStack
 from agentsim_env.core.state import AgentState
 from agentsim_env.groups import GroupController
 
@@ -17,6 +18,14 @@ def make(b=1, n=4, period=1, timeout=3, seed=0, **channel):  # type: ignore[no-u
     return state, ctrl, bus
 
 
+def tick(ctrl, bus, step, online):  # type: ignore[no-untyped-def]
+    """The groups stage, then what the comms stage does with its requests: heartbeats over the bus."""
+    timed, ping = ctrl.tick(step, online, bus.take_answers())
+    if ping.size:
+        bus.send(HEARTBEAT, np.full(ping.size, -1), ping, np.zeros((ping.size, bus.payload_dim), np.float32), step)
+    return timed
+
+
 def run(state, ctrl, bus, steps, offline_at=None):  # type: ignore[no-untyped-def]
     """Step the groups + comms part of the pipeline; returns {step: timed-out slots}."""
     offline_at = offline_at or {}
@@ -25,7 +34,7 @@ def run(state, ctrl, bus, steps, offline_at=None):  # type: ignore[no-untyped-de
         for slot, t in offline_at.items():
             if step == t:
                 state.online[slot] = False
-        timed = ctrl.tick(step, bus, state.online, state.pos)
+        timed = tick(ctrl, bus, step, state.online)
         if timed.size:
             reported[step] = timed.tolist()
             state.online[timed] = False
@@ -43,9 +52,8 @@ def test_validation() -> None:
     with pytest.raises(ValueError, match="group must be an int32"):
         GroupController(1, 4, 1, 3, group=np.zeros(4, dtype=np.int64))
     GroupController(1, 4, 0, 0)  # disabled: any timeout
-    state, ctrl, bus = make(timeout=3, latency=2)
-    with pytest.raises(ValueError, match="2 \\* channel latency"):
-        ctrl.tick(0, bus, state.online, state.pos)
+    with pytest.raises(ValueError, match="heartbeat_timeout must be >= heartbeat_period \\+ 2 \\* latency"):
+        CommsConfig(heartbeat_period=1, heartbeat_timeout=3, latency=2)
 
 
 def test_assign_writes_state_and_logs_changes() -> None:
@@ -56,7 +64,7 @@ def test_assign_writes_state_and_logs_changes() -> None:
     assert ctrl.members(1, 7).size == 0
     ev = ctrl.take_events()
     assert len(ev) == 6 and (ev.old == -1).all() and ev.new.tolist() == [0, 0, 1, 0, 1, 1]
-    ctrl.tick(7, bus, state.online, state.pos)
+    tick(ctrl, bus, 7, state.online)
     ctrl.assign(np.array([1, 2, 3]), np.array([1, 1, -1]))  # slot 2 is unchanged: no row
     ev = ctrl.take_events()
     assert ev.step.tolist() == [7, 7] and ev.slot.tolist() == [1, 3]
@@ -71,19 +79,21 @@ def test_assign_writes_state_and_logs_changes() -> None:
 
 
 def test_broadcast_reaches_exactly_the_online_members() -> None:
-    state, ctrl, bus = make(b=2, n=6, period=0, timeout=0, latency=1)
+    state, ctrl, _ = make(b=2, n=6, period=0, timeout=0, latency=1)
+    stack = CommsStack(CommsConfig(payload_dim=2, latency=1), 2, 6, state.group)
+    bus = stack.bus
     ctrl.assign(np.arange(12), np.array([0, 1, 0, 1, 2, 1, 1, 1, 0, 0, 0, 0]), step=0)
     state.online[3] = False
-    assert ctrl.broadcast(bus, 0, 1, np.array([4.0, 2.0]), 0)
+    assert stack.broadcast(0, 1, np.array([4.0, 2.0]), 0)
     assert len(bus.deliver(0, state.pos, state.online, state.group).delivered) == 0  # latency 1
     ev = bus.deliver(1, state.pos, state.online, state.group)
     assert sorted(ev.delivered.receiver.tolist()) == [1, 5]  # not offline 3, not world 1's group 1
     assert (ev.delivered.kind == GROUP).all() and (ev.delivered.sender == -1).all()
     np.testing.assert_array_equal(bus.inbox.payload[[1, 5], 0], [[4, 2], [4, 2]])
     with pytest.raises(ValueError, match="unknown group 2 in world 1"):
-        ctrl.broadcast(bus, 1, 2, np.zeros(2), 1)
+        stack.broadcast(1, 2, np.zeros(2), 1)
     with pytest.raises(ValueError, match="world must be in"):
-        ctrl.broadcast(bus, 2, 0, np.zeros(2), 1)
+        stack.broadcast(2, 0, np.zeros(2), 1)
 
 
 def test_offline_agent_times_out_after_timeout_steps() -> None:
@@ -129,7 +139,7 @@ def test_disabled_controller_sends_nothing() -> None:
     state, ctrl, bus = make(period=0, timeout=0)
     ctrl.assign(np.arange(4), 0, step=0)
     for step in range(10):
-        assert ctrl.tick(step, bus, state.online, state.pos).size == 0
+        assert tick(ctrl, bus, step, state.online).size == 0
         assert len(bus.deliver(step, state.pos, state.online, state.group).sent) == 0
 
 

@@ -318,10 +318,14 @@ def _stack_graph(n: int) -> RangeGraph:
 
 
 def _grid(pos: np.ndarray, world: np.ndarray, online: np.ndarray, cell: float = 5.0) -> Grid:
-    return build_grid(GridSpec.for_bounds((0.0, 200.0, 0.0, 200.0), cell, int(world.max()) + 1), pos, world, online)
+    return build_grid(
+        GridSpec.for_bounds((0.0, 200.0, 0.0, 200.0), cell, int(world.max()) + 1), pos, world, online
+    )
 
 
-def _flood_over_graph(ov: Overlay, graph: RangeGraph, pos, online, world, grid: Grid, calls: int) -> list[Deliveries]:
+def _flood_over_graph(
+    ov: Overlay, graph: RangeGraph, pos, online, world, grid: Grid, calls: int
+) -> list[Deliveries]:
     """``calls`` steps of the comms stack's overlay path: grid scan, then one hop over its links."""
     out = []
     for _ in range(calls):
@@ -369,7 +373,7 @@ def test_grid_links_follow_ranges_above_the_graph_radius(seed: int) -> None:
     graph.set_grid(grid, pos, online, world, ranges, True)
     start, end, indices = (a.copy() for a in graph.links(ranges))
     near = graph.nearest().copy()
-    pi, pj, _ = _pairs(pos, world, float(ranges.max()))
+    pi, pj, _ = neighbor_pairs(grid, pos, world, float(ranges.max()))  # the same grid: the same order
     indptr, want_idx = _links_from_pairs(pi, pj, pos, online, world, ranges, n)
     for s in range(n):
         assert indices[start[s] : end[s]].tolist() == want_idx[indptr[s] : indptr[s + 1]].tolist(), s
@@ -411,21 +415,19 @@ def test_pair_links_refuse_ranges_beyond_the_pairs_radius() -> None:
 def test_set_range_above_configured_range_through_the_env() -> None:
     import agentsim_env
 
-    env = agentsim_env.make("navigation", n_agents=4, obstacle_density=0.0, comms={"overlay_range": CONFIGURED})
+    env = agentsim_env.make("navigation", n_agents=4, map_size=100.0, obstacle_density=0.0,
+                            comms={"overlay_range": CONFIGURED, "nearest_range": CONFIGURED})  # fmt: skip
     env.reset(seed=0)
     pos, ranges = _square()
-    st = env.world.state
-    st.pos[:] = pos * 0.5 + [12.5, 12.5, 0.0]  # the same square, 30 m apart, inside the 60 m map
+    env.world.state.pos[:] = pos
     env.world.refresh()
-    cfg = env.scenario.comms_config()
-    comm = np.full(cfg.action_dim, -1.0, np.float32)
-    flood = comm.copy()
-    flood[0], flood[2] = 0.8, 1.0  # channel 4 (overlay), the largest hop limit
-    idle = {"motion": np.zeros(3, np.float32), "comm": comm}
+    d = env.action_space("agent_0")["comm"].shape[0]
+    idle = {"motion": np.zeros(3, np.float32), "comm": np.full(d, -1.0, np.float32)}
+    flood = {"motion": idle["motion"], "comm": idle["comm"].copy()}
+    flood["comm"][[0, 2]] = 0.8, 1.0  # channel 4 (overlay), the largest hop limit
 
-    def reached(ranges: np.ndarray) -> list[list[int]]:
-        env.world.comms.overlay.set_range(ranges)
-        acts = {a: idle for a in env.agents} | {"agent_0": {"motion": np.zeros(3, np.float32), "comm": flood}}
+    def reached() -> list[list[int]]:
+        acts = {a: idle for a in env.agents} | {"agent_0": flood}
         got = []
         for _ in range(3):
             env.step(acts)
@@ -433,9 +435,13 @@ def test_set_range_above_configured_range_through_the_env() -> None:
             got.append(sorted(env.world.last_events.comms.overlay.receiver.tolist()))
         return got
 
-    assert reached(np.full(4, 14.0)) == [[], [], []]  # 30 m apart, 14 m ranges
-    assert reached(ranges * 0.5) == [[1], [3], []]  # 40 m on three slots, 15 m on slot 2
-draw: st.DrawFn) -> tuple:
+    assert reached() == [[], [], []]  # 60 m apart, 30 m ranges
+    env.world.comms.overlay.set_range(ranges)
+    assert reached() == [[1], [3], []]  # 80 m on 0, 1 and 3; slot 2 keeps 30 m
+
+
+@st.composite
+def _small_graph(draw: st.DrawFn) -> tuple:
     n = draw(st.integers(1, 12))
     all_pairs = [(i, j) for i in range(n) for j in range(i + 1, n)]
     edges = draw(st.lists(st.sampled_from(all_pairs), unique=True)) if all_pairs else []

@@ -73,7 +73,7 @@ import agentsim_env.policies.release, agentsim_env.train
 
 def _package_folders() -> set[str]:
     """Dotted names of the folders that hold files (``__pycache__`` aside), as they install."""
-    names = set()
+    names: set[str] = set()
     for top, dotted in {"agentsim_env": "agentsim_env", **MOVED}.items():
         for folder in [ROOT / top, *(p for p in (ROOT / top).rglob("*") if p.is_dir())]:
             rel = folder.relative_to(ROOT / top).parts
@@ -120,7 +120,7 @@ def test_wheel_installs_policies_and_train_inside_the_package(tmp_path: Path) ->
 def _imports(path: Path, module: str) -> set[str]:
     """Modules imported anywhere in ``path`` (module ``module``), relative imports resolved."""
     package = module if path.name == "__init__.py" else module.rpartition(".")[0]
-    out = set()
+    out: set[str] = set()
     for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
         if isinstance(node, ast.Import):
             out.update(alias.name for alias in node.names)

@@ -62,13 +62,13 @@ def test_non_scouts_cannot_see_the_target() -> None:
         for _ in range(3):
             for i, a in enumerate(env.agents):
                 task = obs[a]["task"]
-                if sc.scout[i]:
+                if env.world.task.scout[i]:
                     assert task[0] == 1.0
-                    rel = sc.target[i] - env.world.state.pos[i, :2]
+                    rel = env.world.task.target[i] - env.world.state.pos[i, :2]
                     np.testing.assert_allclose(task[1:3] * diag, rel, atol=1e-3)
                 else:
                     assert not task.any(), f"non-scout {a} sees {task}"
-            assert sc.scout.reshape(-1, sc.n_groups).sum(axis=0).tolist() == [1] * sc.n_groups
+            assert env.world.task.scout.reshape(-1, sc.n_groups).sum(axis=0).tolist() == [1] * sc.n_groups
             obs, *_ = env.step({a: env.action_space(a).sample() for a in env.agents})
 
 
@@ -79,8 +79,8 @@ def test_most_members_start_beyond_one_bus_hop_on_a_connected_chain() -> None:
     for seed in SEEDS:
         env.reset(seed=seed)
         pos = env.world.state.pos
-        scout_of = pos[np.flatnonzero(sc.scout)[env.world.state.group]]
-        member = ~sc.scout
+        scout_of = pos[np.flatnonzero(env.world.task.scout)[env.world.state.group]]
+        member = ~env.world.task.scout
         far.append(np.linalg.norm(pos[member] - scout_of[member], axis=1) > cfg.max_range)
         chain = pos[np.argsort(pos[:, 0])]
         assert np.linalg.norm(np.diff(chain, axis=0), axis=1).max() <= cfg.overlay_range
@@ -129,7 +129,7 @@ def test_overlay_reports_carry_the_target_position() -> None:
             mine = rows[np.abs(rows[:, 13] - o["self"][8]) < 0.1]
             for row in mine:
                 xy = (row[11:13] + 1.0) / 2.0 * np.array([sc.config.length, sc.config.corridor_width])
-                np.testing.assert_allclose(xy, sc.target[i], atol=1e-3)
+                np.testing.assert_allclose(xy, env.world.task.target[i], atol=1e-3)
                 seen += 1
     assert seen > 0
 

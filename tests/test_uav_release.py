@@ -12,7 +12,7 @@ from agentsim_env.scenarios.uav_zones import default_zones_path
 
 
 def _idle(env, release=None):  # type: ignore[no-untyped-def]
-    d = env.scenario.comms_config().action_dim
+    d = env.scenario.config.comms.action_dim
     out = {}
     for a in env.agents:
         rel = np.array([-1.0, 0.0, 0.0], np.float32)
@@ -23,7 +23,7 @@ def _idle(env, release=None):  # type: ignore[no-untyped-def]
 
 
 def _tiny(**kw):  # type: ignore[no-untyped-def]
-    cfg = {"zones": "tiny", "n_uavs": 2, "payload": 12, "wind": {"mean_speed": 0.0}, "scatter": {}, **kw}
+    cfg = {"zones": "tiny", "n_uavs": 2, "payload": 12, "wind": {"mean_speed": 0.0}, "scatter": {"sigma_gnss": 0.0, "sigma_timing": 0.0, "sigma_bounce": 0.0}, **kw}
     env = agentsim_env.make("uav_release", **cfg)
     env.reset(seed=0)
     return env
@@ -128,7 +128,8 @@ def test_zones_file_errors_name_zone_and_field(tmp_path) -> None:  # type: ignor
 @pytest.mark.parametrize(
     ("key", "value", "field"),
     [
-        ("n_uavs", 0, "n_uavs"),
+        ("n_uavs", 0, "n_agents"),
+        ("n_agents", 0, "n_agents"),
         ("sensor_mass", -0.1, "sensor_mass"),
         ("wind", {"mean_speed": -2}, "mean_speed"),
         ("scatter", {"sigma_gnss": -1}, "sigma_gnss"),
