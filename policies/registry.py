@@ -19,6 +19,10 @@ BASELINES: dict[str, dict[str, str | tuple[str, dict[str, Any]]]] = {
         "flood": "agentsim_env.policies.relay:FloodPolicy",
         "silent": "agentsim_env.policies.relay:SilentPolicy",
     },
+    "rendezvous": {
+        "meet": "agentsim_env.policies.rendezvous:MeetPolicy",
+        "random": "agentsim_env.policies.random:RandomPolicy",
+    },
 }
 # B5 (density-weighted CVT) first: the scenario's default baseline
 BASELINES["uav_release"] = {

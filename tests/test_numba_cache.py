@@ -35,6 +35,8 @@ SCRIPT = """
 import os, sys, tempfile
 if len(sys.argv) > 1:
     tempfile.tempdir = sys.argv[1]  # what tempfile.gettempdir() answers
+if os.environ.get("IMPORT_NUMBA_FIRST"):
+    import numba  # numba has read its configuration already
 import agentsim_env
 assert agentsim_env.__file__.startswith(os.environ["PYTHONPATH"]), agentsim_env.__file__
 env = agentsim_env.make("navigation", n_agents=2)
@@ -124,6 +126,9 @@ def test_read_only_install_falls_back_to_a_private_temporary_cache(install: Read
     st = os.stat(cache)
     assert st.st_uid == install.uid and stat.S_IMODE(st.st_mode) == 0o700
     assert list(Path(cache).rglob("*.nbi")), "nothing was cached"
+    # the same when numba was imported first (numba.config.CACHE_DIR is set along with the variable)
+    res = install.run({"IMPORT_NUMBA_FIRST": "1"})
+    assert _ok(res) == cache and res.stderr.count(FALLBACK_WARNING) == 1
     # an existing NUMBA_CACHE_DIR is respected as is: no warning (and the kernels load from that cache)
     res = install.run({"NUMBA_CACHE_DIR": cache})
     assert _ok(res) == cache and "agentsim_env:" not in res.stderr

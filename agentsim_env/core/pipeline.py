@@ -44,6 +44,8 @@ class StepContext:
         step_count: ``(B,)`` steps since each world's reset, before this step.
         collisions: Stage 5's collision events (empty before stage 5).
         outputs: Events of the stages that already ran this step, by subsystem name.
+        fresh: Outside a step, after a reset: the worlds that were reset (the others did not move). A sensor
+            with noise draws only for these, so a world's stream never depends on another world's resets.
     """
 
     state: AgentState
@@ -55,6 +57,7 @@ class StepContext:
     step_count: np.ndarray
     collisions: CollisionEvents = field(default_factory=CollisionEvents.empty)
     outputs: dict[str, Any] = field(default_factory=dict)
+    fresh: np.ndarray | None = None
 
 
 @runtime_checkable

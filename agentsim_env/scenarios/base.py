@@ -270,10 +270,11 @@ def reset_worlds(
         worlds: World indices to reset.
         seeds: One episode seed sequence per world reset.
     """
-    for w, seed in zip(worlds, seeds, strict=True):
-        placement = world.reset_world(int(w), seed)
-        scenario.reset_world(world, int(w), placement)
-    world.refresh()
+    ws = [int(w) for w in worlds]
+    for w, seed in zip(ws, seeds, strict=True):
+        placement = world.reset_world(w, seed)
+        scenario.reset_world(world, w, placement)
+    world.refresh(ws)
 
 
 def run_step(

@@ -281,16 +281,3 @@ class NavigationScenario(Scenario[NavigationConfig]):
 
 SCENARIO = NavigationScenario
 
-
-def parallel_env(**config: object):  # type: ignore[no-untyped-def]
-    """The ``navigation`` ParallelEnv (``render_mode``, ``obs_format``, ``action_format`` plus config keys)."""
-    from agentsim_env import make
-
-    return make("navigation", **config)
-
-
-def env(**config: object):  # type: ignore[no-untyped-def]
-    """The ``navigation`` env in PettingZoo's AEC form."""
-    from agentsim_env.env.parallel_env import to_aec
-
-    return to_aec(parallel_env(**config))

@@ -13,6 +13,7 @@ _SCENARIOS: dict[str, str] = {
     "navigation": "agentsim_env.scenarios.navigation",
     "uav_release": "agentsim_env.scenarios.uav_release",
     "relay": "agentsim_env.scenarios.relay",
+    "rendezvous": "agentsim_env.scenarios.rendezvous",
 }
 
 

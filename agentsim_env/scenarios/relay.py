@@ -59,7 +59,7 @@ from agentsim_env.scenarios.rewards import compose_rewards
 from agentsim_env.sensors.proximity import ProximitySensor
 from agentsim_env.sim import StepEvents, World, WorldConfig
 
-__all__ = ["RELAY_COMMS", "SCENARIO", "RelayConfig", "RelayScenario", "env", "parallel_env"]
+__all__ = ["RELAY_COMMS", "SCENARIO", "RelayConfig", "RelayScenario"]
 
 
 @dataclass(slots=True)
@@ -226,16 +226,3 @@ class RelayScenario(Scenario[RelayConfig]):
 
 SCENARIO = RelayScenario
 
-
-def parallel_env(**config: object):  # type: ignore[no-untyped-def]
-    """The ``relay`` ParallelEnv (``render_mode``, ``obs_format``, ``action_format`` plus config keys)."""
-    from agentsim_env import make
-
-    return make("relay", **config)
-
-
-def env(**config: object):  # type: ignore[no-untyped-def]
-    """The ``relay`` env in PettingZoo's AEC form."""
-    from agentsim_env.env.parallel_env import to_aec
-
-    return to_aec(parallel_env(**config))

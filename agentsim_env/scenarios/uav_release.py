@@ -269,16 +269,3 @@ class UavReleaseScenario(Scenario[UavReleaseConfig]):
 
 SCENARIO = UavReleaseScenario
 
-
-def parallel_env(**config: object):  # type: ignore[no-untyped-def]
-    """The ``uav_release`` ParallelEnv (``render_mode``, ``obs_format``, ``action_format`` plus config keys)."""
-    from agentsim_env import make
-
-    return make("uav_release", **config)
-
-
-def env(**config: object):  # type: ignore[no-untyped-def]
-    """The ``uav_release`` env in PettingZoo's AEC form."""
-    from agentsim_env.env.parallel_env import to_aec
-
-    return to_aec(parallel_env(**config))

@@ -70,20 +70,26 @@ class GnssSensor:
         self._span = np.array([bounds[1] - bounds[0], bounds[3] - bounds[2], z_range[1] - z_range[0]])
         self._sigma = np.array([config.sigma_h, config.sigma_h, config.sigma_v])
         self._rngs = [np.random.default_rng(np.random.SeedSequence(0, spawn_key=(w,))) for w in range(n_worlds)]
+        self._reading = np.full((int(n_worlds) * self.n_agents, 3), np.nan)
 
     def reset_world(self, w: int, rng: np.random.Generator) -> None:
         """World ``w``'s readings come from ``rng`` this episode."""
         self._rngs[w] = rng
 
     def step(self, ctx: StepContext) -> np.ndarray:
-        """Stage 8: measured positions ``(S, 3)`` in metres (NaN for offline slots)."""
+        """Stage 8: measured positions ``(S, 3)`` in metres (NaN for offline slots).
+
+        After a reset only the reset worlds are measured again (``ctx.fresh``); the others keep their reading.
+        """
         st = ctx.state
         n = self.n_agents
-        noise = np.empty((st.n_slots, 3))
-        for w, rng in enumerate(self._rngs):  # each world's rows from its own stream
-            noise[w * n : (w + 1) * n] = rng.standard_normal((n, 3))
-        reading = st.pos + noise * self._sigma
+        reading = self._reading.copy()
+        worlds = range(len(self._rngs)) if ctx.fresh is None else ctx.fresh.tolist()
+        for w in worlds:  # each world's rows from its own stream
+            sl = slice(w * n, (w + 1) * n)
+            reading[sl] = st.pos[sl] + self._rngs[w].standard_normal((n, 3)) * self._sigma
         reading[~st.online] = np.nan
+        self._reading = reading
         return reading
 
     def observe(self, reading: np.ndarray) -> np.ndarray:

@@ -198,15 +198,17 @@ class World:
         st.online[slots] = False
         st.vel[slots] = 0.0
 
-    def refresh(self) -> None:
-        """Rebuild the grid, the comms range graph and every sensor reading from the current state (after a reset)."""
+    def refresh(self, worlds: Sequence[int] | None = None) -> None:
+        """Rebuild the grid, the comms range graph and the sensor readings after ``worlds`` were reset (None: all)."""
         st = self.state
         self.agent_grid = build_grid(self.grid_spec, st.pos, st.world_id, st.online)
         if self.comms is not None:
             self.comms.update_graph(self.agent_grid, st.pos, st.online, st.world_id)
         if self.physics is not None:
             self.physics.sync(st, self.scene)  # a reset's new scene: rebuild now rather than inside a step
-        self._sense(self._context())
+        ctx = self._context()
+        ctx.fresh = None if worlds is None else np.asarray(worlds, dtype=np.int64)
+        self._sense(ctx)
 
     def apply_comm(self, comm: np.ndarray, acting: np.ndarray) -> None:
         """Stage 1 (communication part): the acting slots' ``comm`` actions become messages and floods."""
