@@ -74,7 +74,7 @@ def test_non_scouts_cannot_see_the_target() -> None:
 
 def test_most_members_start_beyond_one_bus_hop_on_a_connected_chain() -> None:
     env = agentsim_env.make("relay")
-    sc, cfg = env.scenario, env.scenario.config.comms
+    cfg = env.scenario.config.comms
     far = []
     for seed in SEEDS:
         env.reset(seed=seed)

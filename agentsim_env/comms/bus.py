@@ -210,7 +210,7 @@ class MessageBus:
         """One uniform per delivery row, each drawn from its world's generator in row order."""
         k = world_of_row.shape[0]
         if self.n_worlds == 1:
-            return self.rngs[0].random(k)
+            return np.asarray(self.rngs[0].random(k))
         u = np.empty(k)
         order = np.argsort(world_of_row, kind="stable")
         counts = np.bincount(world_of_row, minlength=self.n_worlds)

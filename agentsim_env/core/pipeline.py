@@ -91,7 +91,9 @@ class Sensor(Subsystem, Protocol):
     inside the bounds) to every observation under the sensor's ``name``.
     """
 
-    obs_part: ObsPart | None
+    @property
+    def obs_part(self) -> ObsPart | None:
+        """The observation part this sensor adds, or ``None``."""
 
     def observe(self, reading: Any) -> np.ndarray:
         """The reading as an observation part ``(S, *obs_part.shape)`` float32."""

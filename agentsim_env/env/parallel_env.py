@@ -270,7 +270,7 @@ class AgentSimParallelEnv(ParallelEnv):
         known = np.unique(self.world.state.group[self.world.state.group >= 0]).tolist()
         if group not in known:
             raise ValueError(f"group: unknown group {group!r}; groups are {known}")
-        return bool(comms.to_group(s, int(group), pay[0], self.world.tick))
+        return bool(comms.to_group(s, int(group or 0), pay[0], self.world.tick))
 
     def assign_group(self, agent: str, group: int) -> None:
         """Move ``agent`` to ``group`` at run time (-1: no group); the change is logged as an event."""

@@ -195,7 +195,7 @@ class NavigationScenario(Scenario[NavigationConfig]):
         world = World(wc, n_worlds, c.n_agents, sensors=sensors, comms=c.comms)
         st = world.state
         st.configure(radius=b.radius, sensor_range=c.sensing.range, max_speed=b.max_speed, max_accel=b.max_accel,
-                     n_groups=c.n_groups)  # fmt: skip
+                     n_groups=int(c.n_groups or 1))  # fmt: skip
         world.task = NavigationSlots.allocate(st.n_slots)
         return world
 

@@ -93,7 +93,7 @@ class RelayScenario(Scenario[RelayConfig]):
         wc = WorldConfig(bounds=(0.0, c.length, 0.0, c.corridor_width), z_range=(0.0, b.altitude[1] + 5.0),
                          dt=c.dt, physics=c.physics, collisions=c.collisions,
                          grid_cell=max(c.sensing.range / 2, 2.0))  # fmt: skip
-        world = World(wc, n_worlds, c.n_agents, sensors=[ProximitySensor(self.lidar)], comms=c.comms)
+        world = World(wc, n_worlds, self.n_agents, sensors=[ProximitySensor(self.lidar)], comms=c.comms)
         st = world.state
         st.configure(radius=b.radius, sensor_range=c.sensing.range, max_speed=b.max_speed, max_accel=b.max_accel,
                      n_groups=c.n_groups)  # fmt: skip
@@ -104,7 +104,7 @@ class RelayScenario(Scenario[RelayConfig]):
         """New chain of start points, scouts, targets and obstacles for world ``w``."""
         c, st, t = self.config, world.state, world.task
         sl = st.slots_of_world(w)
-        n, g_n, length, width = c.n_agents, c.n_groups, c.length, c.corridor_width
+        n, g_n, length, width = self.n_agents, c.n_groups, c.length, c.corridor_width
         gaps = rng.uniform(c.gap[0], c.gap[1], n - 1)
         x0 = c.margin + rng.uniform(0.0, length - 2.0 * c.margin - gaps.sum())
         chain = np.column_stack(
@@ -119,7 +119,7 @@ class RelayScenario(Scenario[RelayConfig]):
         st.heading[sl] = rng.uniform(-np.pi, np.pi, n)
         st.online[sl] = True
         st.energy[sl] = 0.0
-        scout_slot = np.arange(g_n) + g_n * rng.integers(0, c.group_size, g_n)  # slot i is in group i % G
+        scout_slot = np.arange(g_n) + g_n * rng.integers(0, int(c.group_size or 1), g_n)  # slot i is in group i % G
         ang = rng.uniform(-np.pi, np.pi, g_n)
         r = rng.uniform(c.target_offset[0], c.target_offset[1], g_n)
         tgt = st.pos[sl][scout_slot, :2] + r[:, None] * np.column_stack([np.cos(ang), np.sin(ang)])
@@ -216,12 +216,12 @@ class RelayScenario(Scenario[RelayConfig]):
         Returns:
             ``(n_groups,)`` bool.
         """
-        c = self.config
-        sl = slice(w * c.n_agents, (w + 1) * c.n_agents)
-        g = np.arange(c.n_agents) % c.n_groups
+        c, n = self.config, self.n_agents
+        sl = slice(w * n, (w + 1) * n)
+        g = np.arange(n) % c.n_groups
         t = world.task
         hits = np.bincount(g, weights=t.arrived[sl] & ~t.scout[sl], minlength=c.n_groups)
-        return hits >= fraction * (c.group_size - 1) - 1e-9
+        return hits >= fraction * (n // c.n_groups - 1) - 1e-9
 
 
 SCENARIO = RelayScenario

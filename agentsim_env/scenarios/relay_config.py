@@ -50,8 +50,9 @@ class RelayConfig(ScenarioConfig):
         if self.group_size is not None:
             check_int("group_size", self.group_size, 2, 256)
         if self.n_agents is None:
-            object.__setattr__(self, "group_size", 4 if self.group_size is None else self.group_size)
-            object.__setattr__(self, "n_agents", self.n_groups * self.group_size)
+            size = 4 if self.group_size is None else self.group_size
+            object.__setattr__(self, "group_size", size)
+            object.__setattr__(self, "n_agents", self.n_groups * size)
         else:
             check_int("n_agents", self.n_agents, 2 * self.n_groups, 256 * self.n_groups)
             if self.n_agents % self.n_groups:
@@ -85,4 +86,4 @@ class RelayConfig(ScenarioConfig):
     @property
     def length(self) -> float:
         """Corridor length in metres: the longest possible chain plus a margin at both ends."""
-        return (self.n_agents - 1) * float(self.gap[1]) + 2.0 * self.margin
+        return (int(self.n_agents or 0) - 1) * float(self.gap[1]) + 2.0 * self.margin
