@@ -102,7 +102,8 @@ def array_case(n: int, comms: bool) -> Case:
 # every flood; "deliver, rest" the rest of stage 7 (inbox push of the overlay deliveries, events).
 STAGES = {
     "send (1)": [("agentsim_env.comms.stack", "CommsStack", "send_actions")],
-    "groups (6)": [("agentsim_env.comms.stack", "CommsStack", "tick_groups")],
+    "groups (6)": [("agentsim_env.groups.controller", "GroupController", "step"),
+                   ("agentsim_env.comms.stack", "CommsStack", "tick_groups")],
     "range graph": [("agentsim_env.sim.world", "World", "_comm_pairs"),
                     ("agentsim_env.comms.stack", "CommsStack", "update_graph")],
     "bus": [("agentsim_env.comms.bus", "MessageBus", "deliver")],
