@@ -119,18 +119,15 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     Nothing is written unless every run succeeds (see ``agentsim_env.evaluation.report``).
     """
     from agentsim_env.evaluation.report import ranking_table, write_outputs
-    from agentsim_env.evaluation.runner import SCENARIO, resolve_strategies, resolve_zones, run_grid
+    from agentsim_env.evaluation.runner import resolve_strategies, resolve_zones, run_grid
     from agentsim_env.evaluation.scoring import rank_strategies, run_rows
-    from agentsim_env.policies.registry import baseline_names, make_policy
 
     overrides = _parse_config(args.set or [])
     seeds = _parse_seeds(args.seeds)
-    allowed = baseline_names(SCENARIO)
     # validate the cheap inputs before the first (slow) run
     resolve_zones(args.zones)
-    resolve_strategies(args.strategies, allowed)
-    grid = run_grid(args.zones, args.strategies, seeds, overrides, progress=not args.quiet,
-                    make_policy=make_policy, allowed=allowed)  # fmt: skip
+    resolve_strategies(args.strategies)
+    grid = run_grid(args.zones, args.strategies, seeds, overrides, progress=not args.quiet)
     paths, _ = write_outputs(grid, args.out, plots=not args.no_plots)
     rows = run_rows(grid.runs)
     for src in grid.sources:

@@ -1,13 +1,12 @@
-"""Packaging and module layering.
+"""Packaging.
 
 ``policies/`` and ``train/`` install as ``agentsim_env.policies`` and ``agentsim_env.train``, so a user's own
-``policies/`` or ``train/`` folder cannot shadow them; the evaluation package reaches the policies only through
-its ``strategies`` registry and has no import cycle.
+``policies/`` or ``train/`` folder cannot shadow them; the evaluation package finds the policies through its
+``strategies`` registry.
 """
 
 from __future__ import annotations
 
-import ast
 import importlib.metadata
 import os
 import shutil
@@ -116,60 +115,12 @@ def test_wheel_installs_policies_and_train_inside_the_package(tmp_path: Path) ->
     assert "agentsim_env/data/zones_default.json" in names
 
 
-# ------------------------------------------------------------------------------------------ layering
-def _imports(path: Path, module: str) -> set[str]:
-    """Modules imported anywhere in ``path`` (module ``module``), relative imports resolved."""
-    package = module if path.name == "__init__.py" else module.rpartition(".")[0]
-    out: set[str] = set()
-    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
-        if isinstance(node, ast.Import):
-            out.update(alias.name for alias in node.names)
-        elif isinstance(node, ast.ImportFrom):
-            base = node.module or ""
-            if node.level:
-                parts = package.split(".")
-                parent = ".".join(parts[: len(parts) - node.level + 1])
-                base = f"{parent}.{base}" if base else parent
-            out.add(base)
-            out.update(f"{base}.{alias.name}" for alias in node.names)
-    return out
-
-
-def _evaluation_graph() -> dict[str, set[str]]:
-    """Import edges between the modules of ``agentsim_env.evaluation`` and ``agentsim_env.cli``."""
-    files = {"agentsim_env.cli": ROOT / "agentsim_env" / "cli.py"}
-    for f in (ROOT / "agentsim_env" / "evaluation").glob("*.py"):
-        name = "agentsim_env.evaluation" + ("" if f.stem == "__init__" else f".{f.stem}")
-        files[name] = f
-    return {name: _imports(f, name) & set(files) - {name} for name, f in files.items()}
-
-
-def test_no_import_cycle_in_the_evaluation_package() -> None:
-    graph = _evaluation_graph()
-    assert "agentsim_env.evaluation.scoring" in graph
-    done: set[str] = set()
-
-    def visit(node: str, path: list[str]) -> None:
-        if node in path:
-            raise AssertionError("import cycle: " + " -> ".join([*path[path.index(node) :], node]))
-        if node in done:
-            return
-        for nxt in sorted(graph[node]):
-            visit(nxt, [*path, node])
-        done.add(node)
-
-    for node in sorted(graph):
-        visit(node, [])
-
-
-def test_evaluation_reaches_the_policies_only_through_its_registry() -> None:
+# ------------------------------------------------------------------------------------------ registry
+# (the layering itself, no cycles and nothing below the CLI importing the policies, is tests/test_layers.py)
+def test_evaluation_finds_the_policies_through_its_registry() -> None:
     from agentsim_env.evaluation import strategies
     from agentsim_env.policies.registry import baseline_names, make_policy
 
-    for f in (ROOT / "agentsim_env" / "evaluation").glob("*.py"):
-        mods = _imports(f, f"agentsim_env.evaluation.{f.stem}")
-        found = {m for m in mods if m.split(".")[0] in MOVED or m.startswith(tuple(MOVED.values()))}
-        assert not found, (f.name, found)
     assert strategies.policy_factory() is make_policy
     assert strategies.strategy_names("uav_release") == baseline_names("uav_release")
     with pytest.raises(ValueError, match="module:attribute"):

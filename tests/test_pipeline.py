@@ -125,3 +125,15 @@ def test_batched_env_runs_every_scenario() -> None:
         obs = b.reset(seed=0)
         out = b.step(np.zeros((2, b.n_agents, b.act_dim)))
         assert obs.shape == out.obs.shape == (2, b.n_agents, b.obs_dim)
+
+
+def test_a_world_draws_nothing_before_its_reset() -> None:
+    """No placeholder generators: a random draw for a world that was never reset is an error naming the fix."""
+    scenario = agentsim_env.make("navigation", n_agents=2, gnss={}).scenario
+    world = scenario.build(1)
+    with pytest.raises(ValueError, match="reset"):
+        world.refresh()  # the GNSS sensor would draw its noise
+    uav = agentsim_env.make("uav_release", zones="tiny", n_agents=2, payload=12).scenario
+    world = uav.build(1)
+    with pytest.raises(ValueError, match="reset"):  # release scatter
+        world.payloads.release(0, 0, [10.0, 10.0, 20.0], [0.0, 0.0, 0.0], 0.0)

@@ -116,7 +116,7 @@ class MessageBus:
         payload_dim: int,
         channel: ChannelConfig,
         inbox_size: int,
-        rng: np.random.Generator | Sequence[np.random.Generator],
+        rng: np.random.Generator | Sequence[np.random.Generator] | None,
         *,
         group: np.ndarray | None = None,
         age_horizon: int = 100,
@@ -131,7 +131,8 @@ class MessageBus:
             payload_dim: Payload width D (>= 0).
             channel: Channel model.
             inbox_size: Messages kept per slot M (>= 1).
-            rng: Generator for the loss draws (spawned into one per world), or one generator per world.
+            rng: Generator for the loss draws (spawned into one per world), one generator per world, or None
+                (each world's generator comes with its ``reset_world``; a loss draw before that raises).
             group: Optional ``(S,)`` group array (e.g. ``AgentState.group``) to validate GROUP targets.
             age_horizon: Inbox age feature horizon in steps (see ``Inbox``).
             hop_horizon: Inbox hops feature horizon (see ``Inbox``).
@@ -174,17 +175,20 @@ class MessageBus:
             )
         self.group = g
 
-    def reset(self, rng: np.random.Generator | Sequence[np.random.Generator]) -> None:
+    def reset(self, rng: np.random.Generator | Sequence[np.random.Generator] | None) -> None:
         """Drop everything in flight, empty the inboxes and logs, and take new loss generators.
 
         Args:
-            rng: One generator per world, or one generator (used as is for a single world, spawned into one
-                child per world otherwise).
+            rng: One generator per world, one generator (used as is for a single world, spawned into one
+                child per world otherwise), or None (none until each world's ``reset_world``).
         """
-        if isinstance(rng, np.random.Generator):
-            self.rngs = [rng] if self.n_worlds == 1 else list(rng.spawn(self.n_worlds))
+        self.rngs: list[np.random.Generator | None]
+        if rng is None:
+            self.rngs = [None] * self.n_worlds
+        elif isinstance(rng, np.random.Generator):
+            self.rngs = [rng] if self.n_worlds == 1 else [*rng.spawn(self.n_worlds)]
         else:
-            rngs = list(rng)
+            rngs: list[np.random.Generator | None] = list(rng)
             if len(rngs) != self.n_worlds or not all(isinstance(r, np.random.Generator) for r in rngs):
                 raise ValueError(f"rng must be a numpy.random.Generator or {self.n_worlds} of them")
             self.rngs = rngs
@@ -210,16 +214,22 @@ class MessageBus:
         """One uniform per delivery row, each drawn from its world's generator in row order."""
         k = world_of_row.shape[0]
         if self.n_worlds == 1:
-            return np.asarray(self.rngs[0].random(k))
+            return np.asarray(self._rng_of(0).random(k))
         u = np.empty(k)
         order = np.argsort(world_of_row, kind="stable")
         counts = np.bincount(world_of_row, minlength=self.n_worlds)
         start = 0
         for w in np.flatnonzero(counts).tolist():
             c = int(counts[w])
-            u[order[start : start + c]] = self.rngs[w].random(c)
+            u[order[start : start + c]] = self._rng_of(w).random(c)
             start += c
         return u
+
+    def _rng_of(self, w: int) -> np.random.Generator:
+        rng = self.rngs[w]
+        if rng is None:
+            raise ValueError(f"world {w} has no loss generator: reset it (reset_world) before a lossy delivery")
+        return rng
 
     def drop_world(self, world: int) -> None:
         """Forget world ``world``'s traffic (messages in flight, answers, inboxes), e.g. when it is reset alone."""

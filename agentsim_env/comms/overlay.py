@@ -167,7 +167,7 @@ class Overlay:
         self._last = OverlayStats()
         self._totals = OverlayStats()
 
-    def grow(self, need: int) -> None:
+    def _grow(self, need: int) -> None:
         old = self.capacity
         cap = old
         while cap - old + self._n_free < need:
@@ -308,7 +308,7 @@ class Overlay:
         if k == 0:
             return np.empty(0, dtype=np.int64)
         if self._n_free < k:
-            self.grow(k)
+            self._grow(k)
         ids = self._free[self._n_free - k : self._n_free][::-1].copy()
         self._n_free -= k
         if self._n_pool + k > self._pool.shape[0]:

@@ -233,9 +233,8 @@ class CommsStack:
         self.cfg = cfg
         self.n_agents = n_agents
         s = n_worlds * n_agents
-        # until a world's first reset its losses come from a fixed stream; reset_world replaces it
-        rngs = [np.random.default_rng(np.random.SeedSequence(0, spawn_key=(w,))) for w in range(n_worlds)]
-        self.bus = MessageBus(n_worlds, n_agents, cfg.payload_dim, cfg.channel(), cfg.inbox_size, rngs,
+        # each world's loss generator comes with its reset_world
+        self.bus = MessageBus(n_worlds, n_agents, cfg.payload_dim, cfg.channel(), cfg.inbox_size, None,
                               group=group, pos_scale=cfg.overlay_range)  # fmt: skip
         self.overlay = Overlay(s, cfg.payload_dim, cfg.overlay_range, full_propagation=cfg.overlay_full)
         self.sent = np.zeros(s, dtype=np.int64)

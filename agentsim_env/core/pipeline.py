@@ -74,12 +74,17 @@ class Subsystem(Protocol):
 
 
 @dataclass(frozen=True)
-class ObsPart:
-    """An observation part a sensor contributes: its shape per slot and finite bounds."""
+class Part:
+    """One named part of an observation or action: a float32 box of fixed shape and finite bounds."""
 
     shape: tuple[int, ...]
     low: float
     high: float
+
+    @property
+    def size(self) -> int:
+        """Number of scalars in the part."""
+        return int(np.prod(self.shape))
 
 
 @runtime_checkable
@@ -92,7 +97,7 @@ class Sensor(Subsystem, Protocol):
     """
 
     @property
-    def obs_part(self) -> ObsPart | None:
+    def obs_part(self) -> Part | None:
         """The observation part this sensor adds, or ``None``."""
 
     def observe(self, reading: Any) -> np.ndarray:
@@ -128,7 +133,7 @@ class EpisodeSeeds:
     __slots__ = ("_root",)
 
     def __init__(self, seed: int | np.random.SeedSequence | None = None) -> None:
-        self._root = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
+        self.reset(seed)
 
     def reset(self, seed: int | np.random.SeedSequence | None) -> None:
         """Start again from ``seed``."""

@@ -14,12 +14,13 @@ from typing import Any, TypeVar
 T = TypeVar("T")
 
 
-def build_config(cls: type[T], values: Mapping[str, Any]) -> T:
+def build_config(cls: type[T], values: Mapping[str, Any], label: str = "config") -> T:
     """Instantiate a config dataclass from keyword values, rejecting unknown keys.
 
     Args:
         cls: A dataclass type.
         values: Field values; missing fields keep their defaults.
+        label: What the keys configure, named in the unknown-key error (e.g. ``"body"``).
 
     Returns:
         The validated config instance.
@@ -30,7 +31,7 @@ def build_config(cls: type[T], values: Mapping[str, Any]) -> T:
     names = [f.name for f in dataclasses.fields(cls)]  # type: ignore[arg-type]
     unknown = sorted(set(values) - set(names))
     if unknown:
-        raise ValueError(f"unknown config key(s) {unknown} for {cls.__name__}; allowed keys: {sorted(names)}")
+        raise ValueError(f"unknown {label} key(s) {unknown} for {cls.__name__}; allowed keys: {sorted(names)}")
     try:
         return cls(**values)
     except TypeError as exc:  # e.g. a value of the wrong type reaching a comparison

@@ -33,8 +33,7 @@ def _builder(keys: tuple[str, ...]) -> Callable[..., dict[str, Any]]:
     (every observation and info layout of the shipped scenarios); longer tuples fall back to ``zip``.
     """
     n = len(keys)
-    k = (*keys, *([None] * (8 - n))) if n <= 8 else keys
-    k0, k1, k2, k3, k4, k5, k6, k7 = k[:8]
+    k0, k1, k2, k3, k4, k5, k6, k7 = (*keys, *[""] * 8)[:8]  # padding keys are never used
     builders: dict[int, Callable[..., dict[str, Any]]] = {
         1: lambda a: {k0: a},
         2: lambda a, b: {k0: a, k1: b},
@@ -98,8 +97,7 @@ class AgentSimParallelEnv(ParallelEnv):
         self.state_space = spaces.Box(-10.0, 10.0, shape=(n,), dtype=np.float32)
         self._set_agents([])
         self._info_keys = scenario.info_keys()
-        self._seeds = EpisodeSeeds()
-        self._seeded = False
+        self._seeds = EpisodeSeeds()  # fresh entropy until a reset gives a seed
         self._steps = 0
         self._window: Any = None
 
@@ -125,9 +123,8 @@ class AgentSimParallelEnv(ParallelEnv):
         self, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[dict[str, Any], dict[str, dict[str, Any]]]:
         """Start an episode; ``seed`` re-seeds the env's generator (otherwise it continues)."""
-        if seed is not None or not self._seeded:
+        if seed is not None:
             self._seeds.reset(seed)
-            self._seeded = True
         reset_worlds(self.scenario, self.world, [0], [self._seeds.next()])
         self._steps = 0
         self._set_agents(list(self.possible_agents))
@@ -291,12 +288,12 @@ class AgentSimParallelEnv(ParallelEnv):
             raise ValueError(f"payload must have {d} values (comms.payload_dim), got {pay.shape[1]}")
         if not np.isfinite(pay).all():
             raise ValueError(f"payload must be finite, got {pay.ravel().tolist()}")
-        if to is not None:
-            return bool(comms.unicast(s, self._live_slot(to, "receiver"), pay[0], self.world.tick))
+        if group is None:
+            return bool(comms.unicast(s, self._live_slot(str(to), "receiver"), pay[0], self.world.tick))
         known = np.unique(self.world.state.group[self.world.state.group >= 0]).tolist()
         if group not in known:
             raise ValueError(f"group: unknown group {group!r}; groups are {known}")
-        return bool(comms.to_group(s, int(group or 0), pay[0], self.world.tick))
+        return bool(comms.to_group(s, int(group), pay[0], self.world.tick))
 
     def assign_group(self, agent: str, group: int) -> None:
         """Move ``agent`` to ``group`` at run time (-1: no group); the change is logged as an event."""

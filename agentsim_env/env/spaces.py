@@ -7,7 +7,7 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from agentsim_env.scenarios.base import Part
+from agentsim_env.core.pipeline import Part
 
 FORMATS = ("dict", "flat")
 

@@ -35,8 +35,7 @@ scores can be normalised by it (domain reference 5.4).
 
 Everything is deterministic: a run depends only on the zone file, the overrides, the strategy and the seed.
 
-Strategy names and policies come from the ``strategies`` registry (``agentsim_env.policies.registry`` by
-default), or from the ``allowed`` and ``make_policy`` arguments.
+Strategy names and policies come from the ``strategies`` registry (``agentsim_env.policies.registry``).
 """
 
 from __future__ import annotations
@@ -50,7 +49,7 @@ from typing import Any
 import numpy as np
 
 from agentsim_env.evaluation.mission import MISSION_KEYS, fly_mission, sensor_rows
-from agentsim_env.evaluation.strategies import NameLister, PolicyFactory, policy_factory, strategy_names
+from agentsim_env.evaluation.strategies import policy_factory, strategy_names
 from agentsim_env.scenarios.uav_outcome import oracle_points
 from agentsim_env.scenarios.uav_zones import ZoneSet, default_zones_path, load_zones, tiny_zones_path
 from agentsim_env.wsn.evaluate import WsnConfig, evaluate_deployment
@@ -173,24 +172,16 @@ def resolve_zones(specs: Sequence[str | Path]) -> list[ZoneSource]:
     return out
 
 
-def available_strategies(lister: NameLister | None = None) -> list[str]:
-    """The scripted release strategies of ``uav_release`` (registry order).
-
-    Args:
-        lister: ``baseline_names(scenario)``; default: the one registered in ``strategies``.
-
-    Returns:
-        The strategy names.
-    """
-    return list(lister(SCENARIO)) if lister is not None else strategy_names(SCENARIO)
+def available_strategies() -> list[str]:
+    """The scripted release strategies registered for ``uav_release`` (registry order)."""
+    return strategy_names(SCENARIO)
 
 
-def resolve_strategies(names: Iterable[str], allowed: Sequence[str] | None = None) -> list[str]:
+def resolve_strategies(names: Iterable[str]) -> list[str]:
     """Expand ``"all"`` (every registered strategy, by name) and check names; ``TELEPORT`` is dropped.
 
     Args:
         names: Strategy names, or ``["all"]``.
-        allowed: The known strategy names; default: ``available_strategies()``.
 
     Returns:
         The flown strategies, in the order given, without duplicates.
@@ -198,7 +189,7 @@ def resolve_strategies(names: Iterable[str], allowed: Sequence[str] | None = Non
     Raises:
         ValueError: On an unknown name (the message lists the allowed ones) or an empty selection.
     """
-    allowed = list(allowed) if allowed is not None else available_strategies()
+    allowed = available_strategies()
     out: list[str] = []
     for name in names:
         picked = sorted(allowed) if name == "all" else [name]  # B0 ... B8, whatever the registry order
@@ -242,7 +233,7 @@ def _evaluate(
 # ------------------------------------------------------------------------------------------ runs
 def run_one(
     source: ZoneSource, strategy: str, seed: int, overrides: Mapping[str, Any] | None = None,
-    reference: Mapping[str, float] | None = None, make_policy: PolicyFactory | None = None,
+    reference: Mapping[str, float] | None = None,
 ) -> RunResult:  # fmt: skip
     """Fly one strategy on one zone file with one seed and evaluate the deployment.
 
@@ -252,15 +243,13 @@ def run_one(
         seed: Reset seed of the env and the policy.
         overrides: Scenario config values (not ``zones``).
         reference: The teleport reference's metrics, for the ``*_vs_oracle`` keys (NaN without it).
-        make_policy: ``make_policy(scenario, env, name)``; default: the one registered in ``strategies``.
 
     Returns:
         The run's metrics and sensor rows.
     """
-    factory = make_policy if make_policy is not None else policy_factory()
     env = _make_env(source, overrides or {})
     try:
-        metrics = fly_mission(env, factory(SCENARIO, env, strategy), seed)
+        metrics = fly_mission(env, policy_factory()(SCENARIO, env, strategy), seed)
         ps = env.world.payloads.objects
         landed = ps.get("landed") & (ps.get("world") == 0)
         wsn = _wsn_config(env.scenario.config, source.zones)
@@ -326,9 +315,6 @@ def run_grid(
     seeds: Sequence[int],
     config_overrides: Mapping[str, Any] | None = None,
     progress: bool = True,
-    *,
-    make_policy: PolicyFactory | None = None,
-    allowed: Sequence[str] | None = None,
 ) -> GridResult:
     """Run every (zone file, strategy, seed), plus the teleport reference of each zone file.
 
@@ -341,15 +327,12 @@ def run_grid(
         seeds: Reset seeds (at least one).
         config_overrides: Scenario config values applied to every run (not ``zones``).
         progress: Show a tqdm progress bar (on stderr).
-        make_policy: ``make_policy(scenario, env, name)``; default: the one registered in ``strategies``.
-        allowed: The known strategy names; default: ``available_strategies()``.
 
     Returns:
         Every run, the reference rows included (one per seed, identical).
     """
     sources = resolve_zones(zone_files)
-    names = resolve_strategies(strategies, allowed)
-    factory = make_policy if make_policy is not None else policy_factory()
+    names = resolve_strategies(strategies)
     seed_list = [int(s) for s in seeds]
     if not seed_list:
         raise ValueError("seeds must hold at least one seed")
@@ -375,7 +358,7 @@ def run_grid(
                 for seed in seed_list:
                     if bar is not None:
                         bar.set_postfix_str(f"{src.label} {name} seed {seed}")
-                    runs.append(run_one(src, name, seed, overrides, ref.metrics, make_policy=factory))
+                    runs.append(run_one(src, name, seed, overrides, ref.metrics))
                     if bar is not None:
                         bar.update(1)
     finally:

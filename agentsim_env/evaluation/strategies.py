@@ -3,9 +3,7 @@
 The evaluation package does not import the policies package. It needs two callables, a policy factory
 (``make_policy(scenario, env, name) -> Policy``) and the list of strategy names of a scenario
 (``baseline_names(scenario) -> list[str]``); both are named here as ``"module:attribute"`` strings and loaded
-with importlib on first use. ``runner.run_grid``, ``runner.run_one`` and ``runner.resolve_strategies`` also
-take them as arguments (``agentsim evaluate`` passes those of ``agentsim_env.policies.registry``), and
-``register`` points the defaults elsewhere, e.g. at another policy package.
+with importlib on first use.
 
 This module imports no other module of the evaluation package.
 """
@@ -23,7 +21,6 @@ __all__ = [
     "PolicyFactory",
     "load",
     "policy_factory",
-    "register",
     "strategy_names",
 ]
 
@@ -36,9 +33,6 @@ NameLister = Callable[[str], list[str]]
 POLICY_FACTORY = "agentsim_env.policies.registry:make_policy"
 #: Default reference of the name lister.
 NAMES = "agentsim_env.policies.registry:baseline_names"
-
-_registry: dict[str, str] = {"policy_factory": POLICY_FACTORY, "names": NAMES}
-
 
 def load(ref: str) -> Any:
     """Import ``"package.module:attribute"`` and return the attribute.
@@ -61,27 +55,14 @@ def load(ref: str) -> Any:
         raise ValueError(f"cannot load {ref!r}: {exc}") from exc
 
 
-def register(*, policy_factory: str | None = None, names: str | None = None) -> None:
-    """Point the default policy factory and/or name lister at other ``"module:attribute"`` references.
-
-    Args:
-        policy_factory: Reference of a ``PolicyFactory`` (unchanged when ``None``).
-        names: Reference of a ``NameLister`` (unchanged when ``None``).
-    """
-    if policy_factory is not None:
-        _registry["policy_factory"] = policy_factory
-    if names is not None:
-        _registry["names"] = names
-
-
 def policy_factory() -> PolicyFactory:
-    """The registered policy factory (loaded now)."""
-    factory: PolicyFactory = load(_registry["policy_factory"])
+    """The policy factory (loaded now)."""
+    factory: PolicyFactory = load(POLICY_FACTORY)
     return factory
 
 
 def strategy_names(scenario: str) -> list[str]:
-    """The strategy names the registered name lister gives for ``scenario``, in its order.
+    """The strategy names the name lister gives for ``scenario``, in its order.
 
     Args:
         scenario: Scenario name.
@@ -89,5 +70,5 @@ def strategy_names(scenario: str) -> list[str]:
     Returns:
         The names.
     """
-    lister: NameLister = load(_registry["names"])
+    lister: NameLister = load(NAMES)
     return list(lister(scenario))

@@ -12,9 +12,9 @@ Heartbeat protocol (all traffic crosses the bus, so latency and loss apply both 
   without a group are not monitored.
 - The bus delivers it ``latency`` steps later (dropped if the slot went offline meanwhile) and the slot
   answers automatically; the answer reaches the controller another ``latency`` steps later unless lost.
-- ``tick`` first reads the answers handed to it (those that arrived since the previous tick) into ``last_answer`` (the step each
-  answer arrived), then reports every monitored slot with ``step - last_answer > timeout``, offline ones
-  included (an offline slot never answers). A slot is reported once (``timed_out`` remembers it); the world
+- ``tick`` first reads the answers handed to it (those that arrived since the previous tick) into
+  ``last_answer`` (the step each answer arrived), then reports every monitored slot with
+  ``step - last_answer > timeout``, offline ones included (an offline slot never answers). A slot is reported once (``timed_out`` remembers it); the world
   marks it offline.
 
 With the pipeline order of DESIGN section 4 (``tick`` before ``deliver`` in a step) and a loss-free channel,
@@ -227,10 +227,13 @@ class GroupController:
     def step(self, ctx: StepContext) -> GroupStepEvents:
         """Stage 6: heartbeat tick; returns the timed-out slots, the slots to ping and the group changes."""
         st = ctx.state
-        answers, self._answers = self._answers, None
-        phase = ctx.step_count[st.world_id]
-        timed_out, ping = self.tick(ctx.tick, st.online, answers, phase)
         self._next_tick = ctx.tick + 1
+        if not self.enabled:  # no heartbeats: only the group changes to report
+            self._step = ctx.tick
+            empty = np.empty(0, dtype=np.int64)
+            return GroupStepEvents(empty, empty, self.take_events())
+        answers, self._answers = self._answers, None
+        timed_out, ping = self.tick(ctx.tick, st.online, answers, ctx.step_count[st.world_id])
         return GroupStepEvents(timed_out[st.online[timed_out]], ping, self.take_events())
 
     def take_events(self) -> GroupEvents:

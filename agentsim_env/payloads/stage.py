@@ -47,10 +47,9 @@ class PayloadStage:
         self.objects = PayloadSet(params, scatter)
         self.wind = WindModel(wind, None, n_worlds) if wind is not None else None
         self.n_worlds = int(n_worlds)
-        # fixed streams until each world's first reset replaces them with its episode's
-        seeds = [np.random.SeedSequence(0, spawn_key=(w,)).spawn(2) for w in range(self.n_worlds)]
-        self._fall_rng = [np.random.default_rng(s[0]) for s in seeds]
-        self._release_rng = [np.random.default_rng(s[1]) for s in seeds]
+        # each world's streams come with its reset_world (a draw for a world never reset raises)
+        self._fall_rng: list[np.random.Generator | None] = [None] * self.n_worlds
+        self._release_rng: list[np.random.Generator | None] = [None] * self.n_worlds
 
     def reset_world(self, w: int, rng: np.random.Generator) -> None:
         """Remove world ``w``'s objects, draw its episode's mean wind and take its new streams."""

@@ -92,8 +92,9 @@ class WindConfig:
         return np.log(np.maximum(z_arr, self.z0) / self.z0) / math.log(self.z_ref / self.z0)
 
 
-RngLike = np.random.Generator | Sequence[np.random.Generator]
-"""One generator, or one per world (each object's numbers then come from its own world's generator)."""
+RngLike = np.random.Generator | Sequence[np.random.Generator | None]
+"""One generator, or one per world (each object's numbers then come from its own world's generator; ``None``
+for a world that has none yet, which raises when that world needs a draw)."""
 
 
 def normals(rng: RngLike, shape: tuple[int, ...], world: ArrayLike | None = None) -> NDArray[np.float64]:
@@ -113,13 +114,18 @@ def normals(rng: RngLike, shape: tuple[int, ...], world: ArrayLike | None = None
     if isinstance(rng, np.random.Generator):
         return rng.standard_normal(shape)
     gens = list(rng)
-    if len(gens) == 1 or world is None:
-        return gens[0].standard_normal(shape)
+    if world is None:
+        if len(gens) != 1:
+            raise ValueError(f"world must be given with {len(gens)} per-world generators")
+        world = np.zeros(shape[0], dtype=np.int64)
     w_of = np.asarray(world, dtype=np.int64)
     out = np.empty(shape)
     for w in np.unique(w_of).tolist():
+        g = gens[w]
+        if g is None:
+            raise ValueError(f"world {w} has no random stream yet: reset it (reset_world) first")
         rows = np.flatnonzero(w_of == w)
-        out[rows] = gens[w].standard_normal((rows.size, *shape[1:]))
+        out[rows] = g.standard_normal((rows.size, *shape[1:]))
     return out
 
 

@@ -30,6 +30,7 @@ from typing import Any, ClassVar, Generic, TypeVar
 
 import numpy as np
 
+from agentsim_env.core.pipeline import Part
 from agentsim_env.motion import MotionLimits, decode_primitive
 from agentsim_env.motion.actions import decode_velocity_unchecked
 from agentsim_env.scenarios.config import ScenarioConfig
@@ -38,20 +39,6 @@ from agentsim_env.sim.world import StepEvents, World
 
 ConfigT = TypeVar("ConfigT", bound=ScenarioConfig)
 SlotT = TypeVar("SlotT", bound="SlotState")
-
-
-@dataclass(frozen=True)
-class Part:
-    """One named part of an observation or action: a float32 box of fixed shape and finite bounds."""
-
-    shape: tuple[int, ...]
-    low: float
-    high: float
-
-    @property
-    def size(self) -> int:
-        """Number of scalars in the part."""
-        return int(np.prod(self.shape))
 
 
 @dataclass(slots=True)

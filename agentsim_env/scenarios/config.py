@@ -124,23 +124,18 @@ class ScenarioConfig:
 
     def _coerce_nested(self) -> None:
         """Turn dicts given for sub-configs into validated instances (merged over the field's default)."""
-        defaults = {f.name: f for f in dataclasses.fields(self)}
-        for name, cls in self.nested.items():
-            value = getattr(self, name)
+        for f in dataclasses.fields(self):
+            cls = self.nested.get(f.name)
+            if cls is None:
+                continue
+            value = getattr(self, f.name)
             if isinstance(value, dict):
-                f = defaults[name]
                 base = f.default_factory() if f.default_factory is not dataclasses.MISSING else f.default
-                start = {} if base is None or base is dataclasses.MISSING else _shallow(base)
-                allowed = [g.name for g in dataclasses.fields(cls)]
-                unknown = sorted(set(value) - set(allowed))
-                if unknown:
-                    raise ValueError(f"unknown {name} key(s) {unknown}; allowed keys: {sorted(allowed)}")
-                value = build_config(cls, {**start, **value})
-                object.__setattr__(self, name, value)
-            if value is not None and not isinstance(value, cls):
-                raise ValueError(f"{name} must be a {cls.__name__} or a dict of its fields, got {value!r}")
-            if value is None and defaults[name].default is not None and name != "comms":
-                raise ValueError(f"{name} must be a {cls.__name__} or a dict of its fields, got None")
+                start = _shallow(base) if isinstance(base, cls) else {}
+                value = build_config(cls, {**start, **value}, label=f.name)
+                object.__setattr__(self, f.name, value)
+            elif not isinstance(value, cls) and not (value is None and "None" in str(f.type)):
+                raise ValueError(f"{f.name} must be a {cls.__name__} or a dict of its fields, got {value!r}")
 
 
 def _shallow(obj: Any) -> dict[str, Any]:

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from agentsim_env.core.pipeline import ObsPart, StepContext
+from agentsim_env.core.pipeline import Part, StepContext
 from agentsim_env.core.validation import check_float
 
 
@@ -54,7 +54,7 @@ class GnssSensor:
     """
 
     name = "gnss"
-    obs_part = ObsPart((3,), -1.0, 1.0)
+    obs_part = Part((3,), -1.0, 1.0)
 
     def __init__(
         self,
@@ -69,7 +69,7 @@ class GnssSensor:
         self._lo = np.array([bounds[0], bounds[2], z_range[0]], dtype=np.float64)
         self._span = np.array([bounds[1] - bounds[0], bounds[3] - bounds[2], z_range[1] - z_range[0]])
         self._sigma = np.array([config.sigma_h, config.sigma_h, config.sigma_v])
-        self._rngs = [np.random.default_rng(np.random.SeedSequence(0, spawn_key=(w,))) for w in range(n_worlds)]
+        self._rngs: list[np.random.Generator | None] = [None] * int(n_worlds)  # each comes with its reset_world
         self._reading = np.full((int(n_worlds) * self.n_agents, 3), np.nan)
 
     def reset_world(self, w: int, rng: np.random.Generator) -> None:
@@ -86,8 +86,11 @@ class GnssSensor:
         reading = self._reading.copy()
         worlds = range(len(self._rngs)) if ctx.fresh is None else ctx.fresh.tolist()
         for w in worlds:  # each world's rows from its own stream
+            rng = self._rngs[w]
+            if rng is None:
+                raise ValueError(f"gnss: world {w} has no random stream yet: reset it (reset_world) first")
             sl = slice(w * n, (w + 1) * n)
-            reading[sl] = st.pos[sl] + self._rngs[w].standard_normal((n, 3)) * self._sigma
+            reading[sl] = st.pos[sl] + rng.standard_normal((n, 3)) * self._sigma
         reading[~st.online] = np.nan
         self._reading = reading
         return reading

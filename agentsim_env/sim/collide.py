@@ -9,20 +9,18 @@ from agentsim_env.core.pipeline import StepContext
 
 
 class CollisionStage:
-    """Finds every contact on the step's grid; the world takes the hit agents offline.
+    """Finds every contact on the step's grid; the world takes the hit agents offline (when configured).
 
     Args:
         enabled: Whether collisions are detected at all.
         margin: Extra distance added to every threshold.
-        ends_agent: Whether a hit agent goes offline (read by the world).
     """
 
     name = "collisions"
 
-    def __init__(self, enabled: bool = True, margin: float = 0.0, ends_agent: bool = True) -> None:
+    def __init__(self, enabled: bool = True, margin: float = 0.0) -> None:
         self.enabled = enabled
         self.margin = float(margin)
-        self.ends_agent = ends_agent
 
     def reset_world(self, w: int, rng: np.random.Generator) -> None:
         """Collisions keep no per-world state."""

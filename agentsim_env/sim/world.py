@@ -106,7 +106,7 @@ class World:
             PhysicsStage(config.physics_substeps, config.collisions) if config.physics == "pymunk" else None
         )
         self.payloads = payloads
-        self.collide = CollisionStage(config.collisions, config.collision_margin, config.collision_ends_agent)
+        self.collide = CollisionStage(config.collisions, config.collision_margin)
         self.comms: CommsStack | None = None
         self.groups: GroupController | None = None
         if comms is not None:
