@@ -42,6 +42,9 @@ from agentsim_env.sensors.proximity import ScanResult
 from agentsim_env.sim.collide import CollisionStage
 from agentsim_env.sim.config import WorldConfig
 
+_NONE = np.zeros(0, dtype=np.int64)  # no slots (read only)
+_NONE.flags.writeable = False
+
 StepHook = Callable[["World", "StepEvents"], None]
 """A stage-10 hook: called with the world and the step's events after every step."""
 
@@ -247,14 +250,16 @@ class World:
         if contacts is not None:
             events = events.concat(contacts)
         ctx.collisions = events
-        went = np.unique(events.agent) if cfg.collision_ends_agent else np.zeros(0, dtype=np.int64)
-        self.set_offline(went)
-        timed_out = np.zeros(0, dtype=np.int64)
+        went = np.unique(events.agent) if cfg.collision_ends_agent and len(events) else _NONE
+        if went.size:
+            self.set_offline(went)
+        timed_out = _NONE
         group_events = None
         if self.groups is not None:  # 6. groups: heartbeat tick; timed-out slots go offline
             g: GroupStepEvents = self.groups.step(ctx)
             out["groups"], timed_out, group_events = g, g.timed_out, g.changes
-            self.set_offline(timed_out)
+            if timed_out.size:
+                self.set_offline(timed_out)
         if went.size or timed_out.size:
             self._regrid(ctx)
         comm_events = None
