@@ -91,8 +91,11 @@ def test_env_message_and_collision_encoding() -> None:
     np.testing.assert_array_equal(obs[2, 0, 6:9], 0.0)  # the environment has no position
     with pytest.raises(ValueError, match="sender of ENV"):
         bus.send(ENV, np.array([0]), np.array([1]), np.zeros((1, 3)), 0)
+    # narrower payloads keep what fits (what was hit, then nothing), never an error inside a step
+    np.testing.assert_array_equal(env_collision_payload(ENV_COLLISION_AGENT, np.array([1]), 1), [[1]])
+    assert env_collision_payload(ENV_COLLISION_AGENT, np.array([1]), 0).shape == (1, 0)
     with pytest.raises(ValueError, match="payload_dim"):
-        env_collision_payload(ENV_COLLISION_AGENT, np.array([1]), 1)
+        env_collision_payload(ENV_COLLISION_AGENT, np.array([1]), -1)
 
 
 @pytest.mark.parametrize("latency", [0, 1, 3])

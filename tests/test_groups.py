@@ -74,7 +74,7 @@ def test_assign_writes_state_and_logs_changes() -> None:
         ctrl.assign(np.array([0, 0]), 1)
     with pytest.raises(ValueError, match="slots must be in"):
         ctrl.assign(np.array([6]), 1)
-    with pytest.raises(ValueError, match="groups must be integers >= -1"):
+    with pytest.raises(ValueError, match="group ids must be integers in -1..2"):
         ctrl.assign(np.array([0]), -2)
 
 

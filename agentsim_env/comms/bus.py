@@ -48,6 +48,7 @@ from agentsim_env.comms.messages import (
     Inbox,
 )
 from agentsim_env.comms.routing import expand, group_members, route
+from agentsim_env.core.validation import coerce_fields
 
 __all__ = ["BUS_KINDS", "ChannelConfig", "DeliveryEvents", "MessageBus", "MessageLog"]
 
@@ -76,6 +77,7 @@ class ChannelConfig:
 
     def __post_init__(self) -> None:
         """Validate every field; errors name the field and the allowed values."""
+        coerce_fields(self, "comms.")
         for name in ("latency", "bandwidth"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:

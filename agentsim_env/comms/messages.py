@@ -68,7 +68,8 @@ REASON_NAMES = {
 
 # Environment message encoding: payload[0] says what the slot collided with, payload[1] which one
 # (the other agent's index within its world, ``slot % n_agents``, or the static object's index);
-# the remaining payload values are 0. Exact in float32 for ids below 2**24.
+# the remaining payload values are 0. Exact in float32 for ids below 2**24. A narrower payload keeps what fits:
+# D = 1 carries only what was hit, D = 0 only the message itself (its kind says it is from the environment).
 ENV_COLLISION_AGENT = 1
 ENV_COLLISION_OBJECT = 2
 
@@ -79,13 +80,13 @@ def env_collision_payload(what: np.ndarray | int, ident: np.ndarray, payload_dim
     Args:
         what: ``ENV_COLLISION_AGENT`` or ``ENV_COLLISION_OBJECT``, a scalar or ``(k,)``.
         ident: The other agent's index within the world (``slot % n_agents``) or the object index ``(k,)``.
-        payload_dim: Payload width D of the bus (>= 2).
+        payload_dim: Payload width D of the bus (>= 0; the fields that do not fit are left out).
 
     Returns:
-        ``(k, D)`` float32 with ``[:, 0] = what``, ``[:, 1] = ident`` and zeros elsewhere.
+        ``(k, D)`` float32 with ``[:, 0] = what`` (D >= 1), ``[:, 1] = ident`` (D >= 2) and zeros elsewhere.
     """
-    if payload_dim < 2:
-        raise ValueError(f"payload_dim must be >= 2 to encode a collision, got {payload_dim}")
+    if payload_dim < 0:
+        raise ValueError(f"payload_dim must be >= 0, got {payload_dim}")
     ident = np.asarray(ident).reshape(-1)
     what_arr = np.broadcast_to(np.asarray(what), ident.shape)
     if not np.all(np.isin(what_arr, (ENV_COLLISION_AGENT, ENV_COLLISION_OBJECT))):
@@ -93,8 +94,10 @@ def env_collision_payload(what: np.ndarray | int, ident: np.ndarray, payload_dim
     if np.any(ident < 0):
         raise ValueError("ident must be >= 0")
     out = np.zeros((ident.shape[0], payload_dim), dtype=np.float32)
-    out[:, 0] = what_arr
-    out[:, 1] = ident
+    if payload_dim >= 1:
+        out[:, 0] = what_arr
+    if payload_dim >= 2:
+        out[:, 1] = ident
     return out
 
 

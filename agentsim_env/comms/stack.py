@@ -47,7 +47,7 @@ from agentsim_env.comms.overlay import Deliveries, Overlay
 from agentsim_env.comms.rangegraph import RangeGraph
 from agentsim_env.core.pipeline import StepContext
 from agentsim_env.core.spatial import Grid
-from agentsim_env.core.validation import check_float, check_int
+from agentsim_env.core.validation import check_float, check_int, coerce_fields
 
 CHANNELS = ("none", "group", "nearest", "named", "overlay")
 N_CHANNELS = len(CHANNELS)
@@ -163,6 +163,7 @@ class CommsConfig:
     heartbeat_timeout: int = 10
 
     def __post_init__(self) -> None:
+        coerce_fields(self, "comms.")
         check_int("comms.payload_dim", self.payload_dim, 0, 64)
         check_int("comms.inbox_size", self.inbox_size, 1, 64)
         check_int("comms.max_hops", self.max_hops, 1, 255)

@@ -28,6 +28,7 @@ from agentsim_env.core.collisions import CollisionEvents
 from agentsim_env.core.scene import Scene
 from agentsim_env.core.spatial import Grid
 from agentsim_env.core.state import AgentState
+from agentsim_env.core.validation import is_int, short_repr
 
 
 @dataclass(slots=True)
@@ -136,8 +137,20 @@ class EpisodeSeeds:
         self.reset(seed)
 
     def reset(self, seed: int | np.random.SeedSequence | None) -> None:
-        """Start again from ``seed``."""
-        self._root = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
+        """Start again from ``seed``.
+
+        Raises:
+            ValueError: Unless ``seed`` is ``None``, a ``SeedSequence`` or an integer ``>= 0`` (numpy integers
+                too; bools, floats and strings are refused).
+        """
+        if isinstance(seed, np.random.SeedSequence):
+            self._root = seed
+            return
+        if seed is not None and not is_int(seed):
+            raise ValueError(f"seed must be None or an integer >= 0, got {type(seed).__name__} {short_repr(seed)}")
+        if seed is not None and seed < 0:
+            raise ValueError(f"seed must be None or an integer >= 0, got {seed}")
+        self._root = np.random.SeedSequence(None if seed is None else int(seed))
 
     def next(self) -> np.random.SeedSequence:
         """The next episode's seed sequence."""

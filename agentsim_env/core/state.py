@@ -33,6 +33,8 @@ class AgentState:
         sensor_range: Proximity-sensor range ``(S,)`` in metres.
         max_speed: Speed limit ``(S,)`` in m/s.
         max_accel: Acceleration limit ``(S,)`` in m/s^2.
+        home_group: Group each slot starts every episode in ``(S,)`` (set by ``configure``; a world's reset
+            restores ``group`` from it, so run-time reassignments last one episode).
     """
 
     n_worlds: int
@@ -49,6 +51,7 @@ class AgentState:
     sensor_range: np.ndarray
     max_speed: np.ndarray
     max_accel: np.ndarray
+    home_group: np.ndarray
 
     @classmethod
     def create(
@@ -94,6 +97,7 @@ class AgentState:
             sensor_range=np.full(s, float(sensor_range)),
             max_speed=np.full(s, float(max_speed)),
             max_accel=np.full(s, float(max_accel)),
+            home_group=np.full(s, -1, dtype=np.int32),
         )
 
     def configure(
@@ -105,6 +109,7 @@ class AgentState:
         self.max_speed[:] = max_speed
         self.max_accel[:] = max_accel
         self.group[:] = np.tile(np.arange(self.n_agents) % n_groups, self.n_worlds)
+        self.home_group[:] = self.group
 
     @property
     def n_slots(self) -> int:

@@ -18,7 +18,7 @@ from pettingzoo.utils.conversions import parallel_to_aec
 
 from agentsim_env.core.pipeline import EpisodeSeeds
 from agentsim_env.core.validation import check_choice
-from agentsim_env.env.spaces import FORMATS, action_space_for, observation_space_for, split_action
+from agentsim_env.env.spaces import FORMATS, REAL_KINDS, action_space_for, observation_space_for, split_action
 from agentsim_env.scenarios.base import Scenario, reset_worlds, run_step
 
 RENDER_MODES = ("human", "rgb_array")
@@ -88,26 +88,29 @@ class AgentSimParallelEnv(ParallelEnv):
         }
         self.possible_agents = scenario.agent_names()
         self._index = {a: i for i, a in enumerate(self.possible_agents)}
-        self._obs_spaces = {
-            a: observation_space_for(scenario.obs_parts(), obs_format) for a in self.possible_agents
-        }
+        # every agent has the same spaces: one object each, shared (200,000 agents would otherwise build
+        # 400,000 gymnasium spaces, seconds of work for nothing)
+        obs_space = observation_space_for(scenario.obs_parts(), obs_format)
         self._act_parts = scenario.act_parts()  # fixed per config; read on every step
-        self._act_spaces = {a: action_space_for(self._act_parts, action_format) for a in self.possible_agents}
+        act_space = action_space_for(self._act_parts, action_format)
+        self._obs_spaces = dict.fromkeys(self.possible_agents, obs_space)
+        self._act_spaces = dict.fromkeys(self.possible_agents, act_space)
         n = scenario.state_size()
         self.state_space = spaces.Box(-10.0, 10.0, shape=(n,), dtype=np.float32)
         self._set_agents([])
         self._info_keys = scenario.info_keys()
         self._seeds = EpisodeSeeds()  # fresh entropy until a reset gives a seed
         self._steps = 0
+        self._started = False
         self._window: Any = None
 
     # ------------------------------------------------------------------ spaces
     def observation_space(self, agent: str) -> spaces.Space:
-        """The (cached) observation space of ``agent``; identical for every agent."""
+        """The observation space of ``agent``: one object shared by every agent (seeding it seeds all)."""
         return self._obs_spaces[self._check_known(agent)]
 
     def action_space(self, agent: str) -> spaces.Space:
-        """The (cached) action space of ``agent``; identical for every agent."""
+        """The action space of ``agent``: one object shared by every agent (seeding it seeds all)."""
         return self._act_spaces[self._check_known(agent)]
 
     def _check_known(self, agent: str) -> str:
@@ -127,6 +130,7 @@ class AgentSimParallelEnv(ParallelEnv):
             self._seeds.reset(seed)
         reset_worlds(self.scenario, self.world, [0], [self._seeds.next()])
         self._steps = 0
+        self._started = True
         self._set_agents(list(self.possible_agents))
         parts = self.scenario.observation(self.world)
         if self.render_mode == "human":
@@ -137,6 +141,8 @@ class AgentSimParallelEnv(ParallelEnv):
     def step(self, actions: dict[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
         """Advance one step with an action for every live agent (see the scenario docstring for layouts)."""
         if not self.agents:
+            if not self._started:
+                raise ValueError("call reset() before step(): no episode has started")
             if actions:
                 raise ValueError(
                     f"the episode is over (no live agents); got actions for {sorted(actions)[:3]}; call reset()"
@@ -202,11 +208,12 @@ class AgentSimParallelEnv(ParallelEnv):
         s = self.world.state.n_slots
         out = {name: np.zeros((s, p.size)) for name, p in parts.items()}
         try:
+            # one rule (env.spaces.ACTION_RULE): real numbers of exactly the part's shape
             if self.action_format == "flat":
                 total = sum(p.size for p in parts.values())
-                if set(map(len, acts)) != {total}:
+                arr = np.asarray(acts)
+                if arr.shape != (n, total) or arr.dtype.kind not in REAL_KINDS:
                     raise ValueError
-                arr = np.concatenate(acts).astype(np.float64, copy=False).reshape(n, total)
                 start = 0
                 for name, p in parts.items():
                     out[name][idx] = arr[:, start : start + p.size]
@@ -215,10 +222,10 @@ class AgentSimParallelEnv(ParallelEnv):
                 if set(map(len, acts)) != {len(parts)}:
                     raise ValueError
                 for name, p in parts.items():
-                    vals = list(map(operator.itemgetter(name), acts))
-                    if set(map(len, vals)) != {p.size}:
+                    arr = np.asarray(list(map(operator.itemgetter(name), acts)))
+                    if arr.shape != (n, *p.shape) or arr.dtype.kind not in REAL_KINDS:
                         raise ValueError
-                    out[name][idx] = np.concatenate(vals).astype(np.float64, copy=False).reshape(n, p.size)
+                    out[name][idx] = arr.reshape(n, p.size)
             for name in parts:
                 if not np.isfinite(out[name]).all():
                     raise ValueError
@@ -296,11 +303,16 @@ class AgentSimParallelEnv(ParallelEnv):
         return bool(comms.to_group(s, int(group), pay[0], self.world.tick))
 
     def assign_group(self, agent: str, group: int) -> None:
-        """Move ``agent`` to ``group`` at run time (-1: no group); the change is logged as an event."""
+        """Move ``agent`` to ``group`` for the rest of the episode (-1: no group); the change is logged as an event.
+
+        Group ids run from -1 to ``n_agents - 1`` (at most one group per agent); ``reset`` returns every agent to
+        the group the scenario dealt it.
+        """
         self._comms()
         slot = self._live_slot(agent, "agent")
-        if isinstance(group, bool) or not isinstance(group, (int, np.integer)) or group < -1:
-            raise ValueError(f"group must be an integer >= -1, got {group!r}")
+        n = self.scenario.n_agents
+        if isinstance(group, bool) or not isinstance(group, (int, np.integer)) or not -1 <= group < n:
+            raise ValueError(f"group must be an integer in -1..{n - 1} (-1 = no group), got {group!r}")
         assert self.world.groups is not None
         self.world.groups.assign(np.array([slot]), int(group), self.world.tick)
 

@@ -40,8 +40,11 @@ def flat_layout(parts: dict[str, Part]) -> dict[str, slice]:
 def split_action(action: Any, parts: dict[str, Part], fmt: str, agent: str) -> dict[str, np.ndarray]:
     """Check one agent's action and split it into parts (values are clipped to the part bounds).
 
+    Every part follows ``ACTION_RULE``: real numbers (ints or floats), exactly the part's shape.
+
     Raises:
-        ValueError: Wrong shape, missing or unknown part, or a non-finite value; the message names the agent.
+        ValueError: Wrong shape or type, missing or unknown part, or a non-finite value; the message names the
+            agent.
     """
     if fmt == "dict":
         if not isinstance(action, dict):
@@ -64,14 +67,25 @@ def split_action(action: Any, parts: dict[str, Part], fmt: str, agent: str) -> d
     return {k: flat[s] for k, s in flat_layout(parts).items()}
 
 
+REAL_KINDS = "iuf"
+"""numpy dtype kinds an action may have: signed and unsigned integers, floats (not bool, complex or strings)."""
+
+ACTION_RULE = "an action part takes real numbers (ints or floats) in exactly the part's shape"
+"""The one rule every action obeys, quoted in the errors: an array or sequence of real numbers (not bools,
+complex numbers or strings) whose shape is exactly the part's (a ``(3,)`` part refuses ``(3, 1)`` and ``(1, 3)``
+alike); values outside the bounds are clipped, NaN and inf are refused."""
+
+
 def _check(value: Any, part: Part, what: str) -> np.ndarray:
     try:
-        arr = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{what} must be numeric of shape {part.shape}") from exc
-    if arr.size != part.size or (arr.ndim > 0 and arr.shape != part.shape and arr.shape != (part.size,)):
-        raise ValueError(f"{what} must have shape {part.shape}, got {arr.shape}")
-    arr = arr.reshape(-1)
+        arr = np.asarray(value)
+    except (TypeError, ValueError) as exc:  # ragged sequences
+        raise ValueError(f"{what} must be real numbers of shape {part.shape} ({ACTION_RULE})") from exc
+    if arr.dtype.kind not in REAL_KINDS:
+        raise ValueError(f"{what} must be real numbers, got dtype {arr.dtype} ({ACTION_RULE})")
+    if arr.shape != part.shape:
+        raise ValueError(f"{what} must have shape {part.shape}, got {arr.shape} ({ACTION_RULE})")
+    arr = arr.astype(np.float64).reshape(-1)
     if not np.all(np.isfinite(arr)):
         raise ValueError(f"{what} contains NaN or inf: {arr}")
     return np.clip(arr, part.low, part.high)

@@ -17,9 +17,13 @@ from typing import Any
 import numpy as np
 
 from agentsim_env.core.pipeline import EpisodeSeeds
+from agentsim_env.core.validation import check_int
 from agentsim_env.env.spaces import flat_layout
 from agentsim_env.scenarios.base import reset_worlds, run_step
 from agentsim_env.scenarios.registry import make_scenario
+
+MAX_WORLDS = 1_000_000
+"""Most worlds in one batch (the memory they need is also checked before allocating: ``core.budget``)."""
 
 
 @dataclass(slots=True)
@@ -52,13 +56,13 @@ class BatchedEnv:
 
     Args:
         name: Scenario name.
-        n_worlds: Number of worlds B.
+        n_worlds: Number of worlds B, 1..1,000,000.
         **config: Scenario config keys.
     """
 
     def __init__(self, name: str, n_worlds: int, **config: Any) -> None:
-        if isinstance(n_worlds, bool) or not isinstance(n_worlds, int) or n_worlds < 1:
-            raise ValueError(f"n_worlds must be an integer >= 1, got {n_worlds!r}")
+        check_int("n_worlds", n_worlds, 1, MAX_WORLDS)
+        n_worlds = int(n_worlds)
         self.scenario = make_scenario(name, **config)
         self.world = self.scenario.build(n_worlds)
         self.n_worlds = n_worlds
@@ -107,9 +111,10 @@ class BatchedEnv:
                                           for s in seeds):  # fmt: skip
                 raise ValueError(f"seed must be None, an int or a sequence of {b} ints (one per world), got {seed!r}")
         for w, s in enumerate(seeds):
-            if s is not None and s < 0:
-                raise ValueError(f"seed of world {w} must be >= 0, got {s}")
-            self._seeds[w].reset(s)
+            try:
+                self._seeds[w].reset(s)
+            except ValueError as exc:
+                raise ValueError(f"world {w}: {exc}") from None
         self._started = True
         self._reset_worlds(np.arange(b))
         return self._flat_obs()

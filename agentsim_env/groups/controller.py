@@ -37,6 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from agentsim_env.core.pipeline import StepContext
+from agentsim_env.core.validation import short_repr
 
 
 @dataclass(frozen=True, slots=True)
@@ -89,6 +90,7 @@ class GroupController:
     """
 
     __slots__ = (
+        "home",
         "n_worlds",
         "n_agents",
         "heartbeat_period",
@@ -112,6 +114,7 @@ class GroupController:
         timeout: int,
         *,
         group: np.ndarray | None = None,
+        home: np.ndarray | None = None,
     ) -> None:
         """Create a controller; every slot starts without a group.
 
@@ -123,6 +126,8 @@ class GroupController:
                 when enabled; any value >= 0 when disabled).
             group: Optional ``(S,)`` int32 array to own and write in place (e.g. ``AgentState.group``, so the
                 world, the bus and the controller read one array); its current values are kept.
+            home: Optional ``(S,)`` array of the groups a world's slots return to when it is reset (read at each
+                reset, e.g. ``AgentState.home_group``); ``None``: a reset keeps the current groups.
         """
         for name, v, lo in (
             ("n_worlds", n_worlds, 1),
@@ -150,6 +155,7 @@ class GroupController:
         if np.any(group < -1):
             raise ValueError("group ids must be >= -1 (-1 = no group)")
         self.group = group
+        self.home = home
         self.last_answer = np.zeros(s, dtype=np.int64)
         self.timed_out = np.zeros(s, dtype=bool)
         self._step = 0
@@ -196,8 +202,11 @@ class GroupController:
         if np.unique(sl).size != sl.size:
             raise ValueError("slots must be distinct (one new group per slot)")
         g = np.broadcast_to(np.asarray(groups), sl.shape)
-        if g.size and (not np.issubdtype(g.dtype, np.integer) or g.min() < -1):
-            raise ValueError(f"groups must be integers >= -1 (-1 = none), got {np.asarray(groups)!r}")
+        if g.size and (not np.issubdtype(g.dtype, np.integer) or g.min() < -1 or g.max() >= self.n_agents):
+            raise ValueError(
+                f"group ids must be integers in -1..{self.n_agents - 1} (-1 = none; at most one group per agent), "
+                f"got {short_repr(np.asarray(groups).tolist())}"
+            )
         st = self._step if step is None else int(step)
         old = self.group[sl].copy()
         changed = old != g
@@ -212,9 +221,12 @@ class GroupController:
 
     # ------------------------------------------------------------------ the pipeline stage
     def reset_world(self, w: int, rng: np.random.Generator) -> None:
-        """World ``w`` starts a new episode: its members' monitoring restarts at the next step."""
+        """World ``w`` starts a new episode: its slots return to their home groups, monitoring restarts."""
         del rng  # the groups stage draws nothing
-        self.reset_slots(np.arange(w * self.n_agents, (w + 1) * self.n_agents), self._next_tick)
+        sl = np.arange(w * self.n_agents, (w + 1) * self.n_agents)
+        if self.home is not None:
+            self.group[sl] = self.home[sl]
+        self.reset_slots(sl, self._next_tick)
 
     def receive_answers(self, answers: tuple[np.ndarray, np.ndarray]) -> None:
         """Heartbeat answers the comms stage collected (``(slots, steps)``), read by the next ``step``."""

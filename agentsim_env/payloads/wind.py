@@ -24,6 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from agentsim_env.core.validation import coerce_fields
+
 __all__ = ["WIND_PROFILES", "WindConfig", "WindModel"]
 
 WIND_PROFILES: tuple[str, ...] = ("log", "power", "uniform")
@@ -55,6 +57,7 @@ class WindConfig:
 
     def __post_init__(self) -> None:
         """Validate the fields."""
+        coerce_fields(self, "wind.")
         if not (math.isfinite(self.mean_speed) and self.mean_speed >= 0.0):
             raise ValueError(f"mean_speed must be a finite number >= 0, got {self.mean_speed!r}")
         if self.direction is not None and not math.isfinite(self.direction):

@@ -30,6 +30,7 @@ from typing import Any, ClassVar, Generic, TypeVar
 
 import numpy as np
 
+from agentsim_env.core.budget import check_memory
 from agentsim_env.core.pipeline import Part
 from agentsim_env.motion import MotionLimits, decode_primitive
 from agentsim_env.motion.actions import decode_velocity_unchecked
@@ -78,6 +79,10 @@ class SlotState:
             if "shape" in f.metadata
         }
         return cls(**arrays)
+
+
+_BYTES_PER_SLOT = 1200
+"""Fixed bytes per slot of the memory estimate (agent state, motion primitives, grid, bookkeeping)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -170,9 +175,35 @@ class Scenario(ABC, Generic[ConfigT]):
         """Agent ids of one world, in slot order."""
         return [f"{self.agent_prefix}_{i}" for i in range(self.n_agents)]
 
+    def extra_bytes(self) -> tuple[int, int]:
+        """Memory the scenario adds beyond the shared estimate: ``(bytes per slot, bytes per world)``."""
+        return 0, 0
+
     # -- derived -------------------------------------------------------------------------------------------
+    def memory_estimate(self, n_worlds: int) -> int:
+        """Estimated bytes of a world of ``n_worlds`` worlds with its observations (before allocating it).
+
+        Calibrated on the shipped scenarios (state, motion, sensor readings, inbox, observation copies); the
+        scenario adds its own part with ``extra_bytes``.
+        """
+        c = self.config
+        rays = c.sensing.n_azimuth * len(c.sensing.elevations_deg)
+        obs, act = 2 * rays + 16, 8
+        if c.comms is not None:
+            obs += c.comms.inbox_size * c.comms.features + 2
+            act += c.comms.action_dim
+        per_slot, per_world = self.extra_bytes()
+        per_slot += _BYTES_PER_SLOT + 16 * obs + 24 * act
+        return int(n_worlds) * (self.n_agents * per_slot + per_world)
+
     def build(self, n_worlds: int) -> World:
-        """``make_world`` checked: the world must carry the config's comms settings."""
+        """``make_world`` checked: the memory it needs fits the machine, and the world carries the comms settings.
+
+        Raises:
+            ValueError: When the estimated memory is over the limit (``core.budget``).
+        """
+        check_memory(f"{self.name} with n_agents={self.n_agents} x n_worlds={n_worlds}", self.memory_estimate(n_worlds),
+                     "lower n_agents or n_worlds (or the sensor rays, inbox_size and payload_dim)")  # fmt: skip
         world = self.make_world(n_worlds)
         if (world.comms is None) != (self.config.comms is None):
             raise TypeError(f"{type(self).__name__}.make_world must pass comms=self.config.comms to World")

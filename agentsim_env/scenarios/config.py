@@ -15,20 +15,24 @@ from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 from agentsim_env.comms.stack import CommsConfig
-from agentsim_env.core.validation import build_config, check_choice, check_float, check_int
+from agentsim_env.core.validation import (
+    build_config,
+    check_choice,
+    check_float,
+    check_int,
+    check_pair,
+    coerce_fields,
+)
 from agentsim_env.scenarios.rewards import RewardConfig
 from agentsim_env.sim.config import PHYSICS_MODES
 
 ACTION_MODES = ("velocity", "primitive")
-
-
-def _pair(name: str, value: Any, lo: float, *, strict: bool = False) -> tuple[float, float]:
-    """Validate a ``(low, high)`` pair with ``lo <= low <= high`` (``low < high`` when ``strict``)."""
-    if not isinstance(value, (tuple, list)) or len(value) != 2:
-        raise ValueError(f"{name} must be a pair (low, high), got {value!r}")
-    check_float(f"{name}[0]", value[0], lo)
-    check_float(f"{name}[1]", value[1], value[0], lo_open=strict)
-    return float(value[0]), float(value[1])
+MAX_AGENTS = 1_000_000
+"""Most agents a world may hold (memory is also checked against the machine before allocating)."""
+MAX_STEPS = 10**9
+"""Longest episode, in steps."""
+MAX_RINGS = 64
+"""Most elevation rings of the proximity sensor."""
 
 
 @dataclass(frozen=True)
@@ -36,10 +40,10 @@ class BodyConfig:
     """An agent's body and motion limits.
 
     Attributes:
-        radius: Collision radius in metres (> 0).
-        max_speed: Speed limit in m/s (> 0).
-        max_accel: Acceleration limit in m/s^2 (> 0).
-        altitude: Flight band ``(low, high)`` in metres (``0 <= low < high``).
+        radius: Collision radius in metres, in (0, 1e4].
+        max_speed: Speed limit in m/s, in (0, 1e4].
+        max_accel: Acceleration limit in m/s^2, in (0, 1e4].
+        altitude: Flight band ``(low, high)`` in metres: ``0 <= low``, ``high <= 1e4``, ``high - low >= 0.1``.
     """
 
     radius: float = 0.5
@@ -48,9 +52,14 @@ class BodyConfig:
     altitude: tuple[float, float] = (2.0, 12.0)
 
     def __post_init__(self) -> None:
+        coerce_fields(self, "body.")
         for name in ("radius", "max_speed", "max_accel"):
-            check_float(f"body.{name}", getattr(self, name), 0.0, lo_open=True)
-        object.__setattr__(self, "altitude", _pair("body.altitude", self.altitude, 0.0, strict=True))
+            check_float(f"body.{name}", getattr(self, name), 0.0, 1e4, lo_open=True)
+        lo, hi = check_pair("body.altitude", self.altitude, 0.0, 1e4, strict=True)
+        if hi - lo < 0.1:
+            raise ValueError(
+                f"body.altitude must span at least 0.1 m (high - low >= 0.1), got {self.altitude}"
+            )
 
 
 @dataclass(frozen=True)
@@ -60,7 +69,8 @@ class SensingConfig:
     Attributes:
         range: Ray length in metres (> 0).
         n_azimuth: Rays per elevation ring (1..1024); ray 0 points along the heading.
-        elevations_deg: Elevation of each ring in degrees (negative looks down), each in [-90, 90].
+        elevations_deg: Elevation of each ring in degrees (negative looks down), each in [-90, 90]; 1..64
+            rings.
     """
 
     range: float = 10.0
@@ -68,10 +78,13 @@ class SensingConfig:
     elevations_deg: tuple[float, ...] = (0.0, -25.0)
 
     def __post_init__(self) -> None:
+        coerce_fields(self, "sensing.")
         check_float("sensing.range", self.range, 0.0, 1e5, lo_open=True)
         check_int("sensing.n_azimuth", self.n_azimuth, 1, 1024)
-        if not isinstance(self.elevations_deg, (tuple, list)) or not self.elevations_deg:
-            raise ValueError(f"sensing.elevations_deg must be a non-empty sequence, got {self.elevations_deg!r}")
+        if not 1 <= len(self.elevations_deg) <= MAX_RINGS:
+            raise ValueError(
+                f"sensing.elevations_deg must hold 1..{MAX_RINGS} elevations, got {self.elevations_deg!r}"
+            )
         for i, e in enumerate(self.elevations_deg):
             check_float(f"sensing.elevations_deg[{i}]", e, -90.0, 90.0)
         object.__setattr__(self, "elevations_deg", tuple(float(e) for e in self.elevations_deg))
@@ -82,15 +95,16 @@ class ScenarioConfig:
     """Fields every scenario config has (extend it; redeclare a field to change its default).
 
     Attributes:
-        n_agents: Agents per world.
+        n_agents: Agents per world, 1..1,000,000 (scenarios may lower the bound; the memory a world needs is
+            estimated and checked against the machine before anything is allocated, see ``core.budget``).
         body: Body and motion limits of every agent.
         sensing: The proximity sensor.
         action_mode: ``"velocity"`` (a target velocity) or ``"primitive"`` (a motion primitive and its
             parameters; ``agentsim_env.motion.actions``).
         physics: ``"kinematic"`` or ``"pymunk"`` (planar contact resolution).
-        collisions: Whether collisions are detected (and end the agents hit).
-        dt: Step length in seconds.
-        max_steps: Steps after which every live agent is truncated.
+        collisions: Whether collisions are detected (and end the agents hit); a bool.
+        dt: Step length in seconds, in (0, 10].
+        max_steps: Steps after which every live agent is truncated, 1..10^9.
         reward: The reward composer's weights.
         comms: Communication (``None``: no bus, overlay, groups stage, inbox or ``comm`` action).
     """
@@ -116,11 +130,12 @@ class ScenarioConfig:
 
     def __post_init__(self) -> None:
         self._coerce_nested()
-        check_int("n_agents", self.n_agents, 1)
+        coerce_fields(self)
+        check_int("n_agents", self.n_agents, 1, MAX_AGENTS)
         check_choice("action_mode", self.action_mode, ACTION_MODES)
         check_choice("physics", self.physics, PHYSICS_MODES)
         check_float("dt", self.dt, 0.0, 10.0, lo_open=True)
-        check_int("max_steps", self.max_steps, 1)
+        check_int("max_steps", self.max_steps, 1, MAX_STEPS)
 
     def _coerce_nested(self) -> None:
         """Turn dicts given for sub-configs into validated instances (merged over the field's default)."""

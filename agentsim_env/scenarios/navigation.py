@@ -46,17 +46,23 @@ import numba as nb
 import numpy as np
 
 from agentsim_env.core.pipeline import Sensor
-from agentsim_env.core.validation import check_float, check_int
+from agentsim_env.core.validation import check_float, check_int, check_pair
 from agentsim_env.motion import MotionLimits
 from agentsim_env.scenarios.base import Scenario, SlotState, StepResult, slot
 from agentsim_env.scenarios.config import ScenarioConfig
-from agentsim_env.scenarios.placement import jittered_points, obstacle_layout
+from agentsim_env.scenarios.placement import jittered_points, obstacle_layout, placement_problem
 from agentsim_env.scenarios.rewards import RewardConfig, compose_rewards
 from agentsim_env.sensors.gnss import GnssConfig, GnssSensor
 from agentsim_env.sensors.proximity import ProximitySensor
 from agentsim_env.sim import StepEvents, World, WorldConfig
 
 SELF_DIM, TASK_DIM = 8, 4
+MAX_SIDE = 1e5
+"""Largest map side in metres (100 km)."""
+MAX_SIDE_PYMUNK = 2.5e4
+"""Largest map side with ``physics="pymunk"`` (its worlds share one space, 1e5 m apart)."""
+MAX_OBSTACLES = 1_000_000
+"""Most obstacles per world."""
 
 
 # The two kernels below replace a few dozen small numpy passes per step (the fixed cost that dominated small
@@ -115,7 +121,23 @@ def _observe_kernel(pos, vel, heading, goal, distance, hit_kind, side, lo, hi, v
 
 @dataclass(frozen=True)
 class NavigationConfig(ScenarioConfig):
-    """Configuration of ``navigation`` (every field validated at construction; shared fields in ``ScenarioConfig``)."""
+    """Configuration of ``navigation`` (every field validated at construction; shared fields in ``ScenarioConfig``).
+
+    Attributes:
+        n_groups: Groups the agents are split into, 1..n_agents (``None``: ``min(2, n_agents)``).
+        map_size: Side of the square map in metres, 10..1e5 (2.5e4 with ``physics="pymunk"``); ``None``: grows
+            with the agent count, ``max(60, sqrt(n_agents x area_per_agent))``.
+        area_per_agent: Square metres per agent when ``map_size`` is ``None``, 10..1e6.
+        obstacle_density: Obstacles per square metre, 0..0.01 (at most 1,000,000 obstacles per world; a map too
+            crowded for them holds fewer).
+        obstacle_size: ``(low, high)`` obstacle half-width in metres, ``0 <= low <= high <= 100``.
+        obstacle_height: ``(low, high)`` obstacle height in metres, ``0 <= low <= high <= 1e4``.
+        goal_radius: Arrival distance in metres, in (0, 1e4].
+        arrival_bonus: Reward on arrival, 0..1e6.
+        gnss: A ``GnssConfig`` (or dict) adds the noisy GNSS sensor and its ``gnss`` part; ``None``: none.
+
+    The map must hold the agents' starts and goals ``4 x body.radius + 2`` metres apart (checked here).
+    """
 
     nested: ClassVar[dict[str, type]] = {**ScenarioConfig.nested, "gnss": GnssConfig}
 
@@ -135,17 +157,28 @@ class NavigationConfig(ScenarioConfig):
         if self.n_groups is None:
             object.__setattr__(self, "n_groups", min(2, self.n_agents))
         check_int("n_groups", self.n_groups, 1, self.n_agents)
+        max_side = MAX_SIDE_PYMUNK if self.physics == "pymunk" else MAX_SIDE
         if self.map_size is not None:
-            check_float("map_size", self.map_size, 10.0)
-        check_float("area_per_agent", self.area_per_agent, 10.0)
+            check_float("map_size", self.map_size, 10.0, max_side)
+        check_float("area_per_agent", self.area_per_agent, 10.0, 1e6)
         check_float("obstacle_density", self.obstacle_density, 0.0, 0.01)
-        for name in ("goal_radius",):
-            check_float(name, getattr(self, name), 0.0, lo_open=True)
-        check_float("arrival_bonus", self.arrival_bonus, 0.0)
-        for name in ("obstacle_size", "obstacle_height"):
-            lo, hi = getattr(self, name)
-            check_float(f"{name}[0]", lo, 0.0)
-            check_float(f"{name}[1]", hi, lo)
+        check_float("goal_radius", self.goal_radius, 0.0, 1e4, lo_open=True)
+        check_float("arrival_bonus", self.arrival_bonus, 0.0, 1e6)
+        check_pair("obstacle_size", self.obstacle_size, 0.0, 100.0)
+        check_pair("obstacle_height", self.obstacle_height, 0.0, 1e4)
+        side = self.side
+        if side > max_side:
+            raise ValueError(f"the map side grows with n_agents x area_per_agent to {side:.0f} m, over the "
+                             f"{max_side:.0f} m limit{' of physics=pymunk' if self.physics == 'pymunk' else ''}; "
+                             f"set map_size (<= {max_side:.0f}) or lower area_per_agent")  # fmt: skip
+        n_obs = self.obstacle_density * side * side
+        if n_obs > MAX_OBSTACLES:
+            raise ValueError(f"obstacle_density x map side^2 gives {n_obs:,.0f} obstacles per world, over the "
+                             f"limit of {MAX_OBSTACLES:,}; lower obstacle_density or map_size")  # fmt: skip
+        problem = placement_problem(self.n_agents, (2.0, side - 2.0, 2.0, side - 2.0), 4.0 * self.body.radius + 2.0)
+        if problem:
+            raise ValueError(f"n_agents: {problem} (4 x body.radius + 2 apart, on a map of side {side:g} m); "
+                             f"raise map_size or lower n_agents or body.radius")  # fmt: skip
 
     @property
     def side(self) -> float:
@@ -182,6 +215,11 @@ class NavigationScenario(Scenario[NavigationConfig]):
     def __init__(self, config: NavigationConfig) -> None:
         super().__init__(config)
         self._obs = np.zeros((0, SELF_DIM + 2 * self.lidar.n_rays + TASK_DIM), dtype=np.float32)
+
+    def extra_bytes(self) -> tuple[int, int]:
+        """Goals per slot; the obstacles (scene arrays and object grid, about 200 bytes each) per world."""
+        c = self.config
+        return 64, int(200 * c.obstacle_density * c.side * c.side)
 
     def make_world(self, n_worlds: int) -> World:
         """World sized for the map, the band and the sensors; goals allocated per slot."""

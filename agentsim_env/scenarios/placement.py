@@ -10,6 +10,31 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 
+def _cells(n: int, w: float, h: float, min_sep: float) -> tuple[float, int, int]:
+    """Cell side and counts of the jittered grid for ``n`` points in a ``w x h`` area (deterministic)."""
+    if w <= 0 or h <= 0:
+        return max(min_sep, 1.0), 0, 0
+    cell = max(float(np.sqrt(w * h / (1.3 * max(n, 1)))), min_sep)  # ~30 % spare cells: the choice stays random
+    nx, ny = int(w // cell), int(h // cell)
+    while nx * ny < 1.3 * n and cell * 0.95 >= min_sep:  # integer rounding lost cells: shrink them
+        cell *= 0.95
+        nx, ny = int(w // cell), int(h // cell)
+    return cell, nx, ny
+
+
+def placement_problem(n: int, bounds: tuple[float, float, float, float], min_sep: float) -> str:
+    """Why ``n`` points at least ``min_sep`` apart cannot be placed in ``bounds`` ("" when they can).
+
+    The answer depends only on the arguments (never on the random draw), so configs call it at construction:
+    a config that passes never fails to place its agents at reset.
+    """
+    w, h = bounds[1] - bounds[0], bounds[3] - bounds[2]
+    _, nx, ny = _cells(n, w, h, min_sep)
+    if nx * ny >= n:
+        return ""
+    return f"cannot place {n} points at least {min_sep:g} m apart in a {max(w, 0):.0f} x {max(h, 0):.0f} m area"
+
+
 def jittered_points(
     rng: np.random.Generator, n: int, bounds: tuple[float, float, float, float], min_sep: float
 ) -> np.ndarray:
@@ -29,15 +54,10 @@ def jittered_points(
     """
     xmin, xmax, ymin, ymax = bounds
     w, h = xmax - xmin, ymax - ymin
-    cell = max(np.sqrt(w * h / (1.3 * n)), min_sep)  # ~30 % spare cells so the choice stays random
-    nx, ny = int(w // cell), int(h // cell)
-    while nx * ny < 1.3 * n and cell * 0.95 >= min_sep:  # integer rounding lost cells: shrink them
-        cell *= 0.95
-        nx, ny = int(w // cell), int(h // cell)
-    if nx * ny < n:
-        raise ValueError(
-            f"cannot place {n} points at least {min_sep} m apart in a {w:.0f} x {h:.0f} m area; enlarge map_size"
-        )
+    problem = placement_problem(n, bounds, min_sep)
+    if problem:
+        raise ValueError(problem)
+    cell, nx, ny = _cells(n, w, h, min_sep)
     cells = rng.choice(nx * ny, size=n, replace=False)
     cx, cy = cells % nx, cells // nx
     slack = max(cell - min_sep, 0.0)  # jitter that still keeps neighbours min_sep apart
@@ -61,7 +81,8 @@ def obstacle_layout(
     """Non-overlapping ground obstacles (boxes and cylinders) that keep clear of given points.
 
     Each obstacle gets its own grid cell (so obstacles never overlap); those too close to a keep-clear point
-    are dropped, so fewer than ``n`` may be returned.
+    are dropped, and a map too small for ``n`` holds fewer (halving until they fit, possibly none), so fewer than
+    ``n`` may be returned.
 
     Returns:
         ``(kind (m,) int8, centre (m, 3), half (m, 3))`` ready for ``Scene.add``.
@@ -71,15 +92,12 @@ def obstacle_layout(
     xmin, xmax, ymin, ymax = bounds
     smax = size_range[1]
     sep = 2.0 * smax * np.sqrt(2.0) + clearance
-    try:
-        xy = jittered_points(
-            rng, n, (xmin + smax * 1.5, xmax - smax * 1.5, ymin + smax * 1.5, ymax - smax * 1.5), sep
-        )
-    except ValueError:
-        n = max(1, int((xmax - xmin) * (ymax - ymin) / (1.3 * sep * sep)) // 2)
-        xy = jittered_points(
-            rng, n, (xmin + smax * 1.5, xmax - smax * 1.5, ymin + smax * 1.5, ymax - smax * 1.5), sep
-        )
+    inner = (xmin + smax * 1.5, xmax - smax * 1.5, ymin + smax * 1.5, ymax - smax * 1.5)
+    while n > 0 and placement_problem(n, inner, sep):  # a crowded map holds fewer obstacles, never an error
+        n //= 2
+    if n <= 0:
+        return np.zeros(0, dtype=np.int8), np.zeros((0, 3)), np.zeros((0, 3))
+    xy = jittered_points(rng, n, inner, sep)
     kind = rng.integers(0, 2, n).astype(np.int8)  # 0 box, 1 cylinder
     hs = rng.uniform(size_range[0], size_range[1], n)
     hh = rng.uniform(height_range[0], height_range[1], n) / 2.0

@@ -8,7 +8,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from agentsim_env.comms.stack import CommsConfig
-from agentsim_env.core.validation import check_float, check_int
+from agentsim_env.core.validation import check_float, check_int, check_pair, coerce_fields
 from agentsim_env.scenarios.config import BodyConfig, ScenarioConfig, SensingConfig
 from agentsim_env.scenarios.rewards import RewardConfig
 
@@ -23,6 +23,22 @@ class RelayConfig(ScenarioConfig):
 
     The agent count is ``n_groups x group_size``: give ``n_agents`` (a multiple of ``n_groups``) or
     ``group_size`` (default 4), or both when they agree.
+
+    Attributes:
+        n_groups: Groups (one scout each), 1..64.
+        group_size: Agents per group, 2..256 (``None``: from ``n_agents``, else 4).
+        corridor_width: Corridor width in metres, ``2 x lateral_spread + 4`` .. 1e4.
+        gap: ``(low, high)`` distance along x between consecutive start points, ``0 < low <= high <= 1e3``.
+        lateral_spread: Start points lie within this distance of the centre line, 0..1e3 metres.
+        target_offset: ``(low, high)`` distance scout -> target, ``0 <= low <= high <= 1e3``.
+        obstacle_density: Obstacles per square metre, 0..0.01.
+        obstacle_size: ``(low, high)`` obstacle half-width, ``0 <= low <= high <= 100``.
+        obstacle_height: ``(low, high)`` obstacle height, ``0 <= low <= high <= 1e4``.
+        arrival_radius: Arrival distance in metres, in (0, 1e3].
+        arrival_bonus: Reward on arrival, 0..1e6.
+
+    The corridor (``(n_agents - 1) x gap[1] + 2 x (target_offset[1] + 5)`` metres) must be at most 1e5 m
+    (2.5e4 m with ``physics="pymunk"``).
     """
 
     n_agents: int | None = None  # type: ignore[assignment]  # None: n_groups x group_size
@@ -46,6 +62,7 @@ class RelayConfig(ScenarioConfig):
     comms: CommsConfig = RELAY_COMMS  # type: ignore[assignment]  # a dict overrides fields of RELAY_COMMS
 
     def __post_init__(self) -> None:
+        coerce_fields(self)
         check_int("n_groups", self.n_groups, 1, 64)
         if self.group_size is not None:
             check_int("group_size", self.group_size, 2, 256)
@@ -65,18 +82,22 @@ class RelayConfig(ScenarioConfig):
         super().__post_init__()
         if self.comms is None:
             raise ValueError("comms must be a CommsConfig or a dict of its fields (relay needs comms), got None")
-        check_float("corridor_width", self.corridor_width, 0.0, lo_open=True)
-        check_float("lateral_spread", self.lateral_spread, 0.0)
-        check_float("corridor_width", self.corridor_width, 2.0 * self.lateral_spread + 4.0)
+        check_float("lateral_spread", self.lateral_spread, 0.0, 1e3)
+        check_float("corridor_width", self.corridor_width, 2.0 * self.lateral_spread + 4.0, 1e4)
         check_float("obstacle_density", self.obstacle_density, 0.0, 0.01)
-        check_float("arrival_radius", self.arrival_radius, 0.0, lo_open=True)
-        check_float("arrival_bonus", self.arrival_bonus, 0.0)
-        for name in ("gap", "target_offset", "obstacle_size", "obstacle_height"):
-            pair = getattr(self, name)
-            if not isinstance(pair, (tuple, list)) or len(pair) != 2:
-                raise ValueError(f"{name} must be a pair (low, high), got {pair!r}")
-            check_float(f"{name}[0]", pair[0], 0.0, lo_open=name == "gap")
-            check_float(f"{name}[1]", pair[1], pair[0])
+        check_float("arrival_radius", self.arrival_radius, 0.0, 1e3, lo_open=True)
+        check_float("arrival_bonus", self.arrival_bonus, 0.0, 1e6)
+        check_pair("gap", self.gap, 0.0, 1e3)
+        if self.gap[0] <= 0:
+            raise ValueError(f"gap[0] must be > 0, got {self.gap[0]}")
+        check_pair("target_offset", self.target_offset, 0.0, 1e3)
+        check_pair("obstacle_size", self.obstacle_size, 0.0, 100.0)
+        check_pair("obstacle_height", self.obstacle_height, 0.0, 1e4)
+        limit = 2.5e4 if self.physics == "pymunk" else 1e5
+        if self.length > limit:
+            raise ValueError(f"the corridor is (n_agents - 1) x gap[1] + 2 x (target_offset[1] + 5) = "
+                             f"{self.length:.0f} m long, over the {limit:.0f} m limit"
+                             f"{' of physics=pymunk' if self.physics == 'pymunk' else ''}; lower n_agents or gap")  # fmt: skip
 
     @property
     def margin(self) -> float:

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
-from agentsim_env.core.validation import check_float
+from agentsim_env.core.validation import check_float, coerce_fields
 
 
 @dataclass(frozen=True)
@@ -36,6 +36,7 @@ class RewardConfig:
     message_cost: float = 0.0
 
     def __post_init__(self) -> None:
+        coerce_fields(self, "reward.")
         for name in ("task_weight", "group_share", "collision_penalty", "energy_weight", "message_cost"):
             check_float(f"reward.{name}", getattr(self, name), 0.0)
 

@@ -8,16 +8,21 @@ for the shipped default file. The fleet's payload must hold every zone's sensors
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 from agentsim_env.comms.stack import CommsConfig
-from agentsim_env.core.validation import check_float, check_int
+from agentsim_env.core.validation import check_float, check_int, short_repr
 from agentsim_env.payloads import ScatterConfig, WindConfig
 from agentsim_env.scenarios.config import BodyConfig, ScenarioConfig, SensingConfig
 from agentsim_env.scenarios.rewards import RewardConfig
 from agentsim_env.scenarios.uav_zones import ZoneSet, load_zones, validate_against_payload, zones_from_dict
 from agentsim_env.wsn.evaluate import WsnConfig
+
+ZONES_ACCEPTED = ("a zones JSON path (str or Path), a dict in the zones format (docs/zones.md), a ZoneSet, "
+                  "'tiny', 'default' or None")
+"""What the ``zones`` field accepts (named in its errors)."""
 
 
 @dataclass(frozen=True)
@@ -67,7 +72,7 @@ class UavReleaseConfig(ScenarioConfig):
     def __post_init__(self) -> None:
         super().__post_init__()
         check_int("n_agents", self.n_agents, 1, 1024)
-        check_int("payload", self.payload, 1)
+        check_int("payload", self.payload, 1, 100_000)
         for name in ("sensor_mass", "sensor_cd", "sensor_area", "battery_j", "target_scale", "grid_extent"):
             check_float(name, getattr(self, name), 0.0, lo_open=True)
         for name in ("w_coverage", "w_fidelity", "w_energy", "w_miss", "w_out", "w_lcc", "w_lifetime"):
@@ -91,10 +96,21 @@ class UavReleaseConfig(ScenarioConfig):
             return zones_from_dict(z)
         from agentsim_env.scenarios.uav_zones import default_zones_path, tiny_zones_path
 
+        if isinstance(z, (list, tuple)):
+            raise ValueError(
+                f"zones: a bare list of zones is not accepted; give a dict in the zones format, "
+                f"{{'map_size': [width, height], 'zones': [...]}} (docs/zones.md), or {ZONES_ACCEPTED}"
+            )
+        if not (z is None or isinstance(z, (str, os.PathLike))):
+            raise ValueError(f"zones must be {ZONES_ACCEPTED}; got {type(z).__name__} {short_repr(z)}")
+        if isinstance(z, str) and not z.strip():
+            raise ValueError(f"zones must be {ZONES_ACCEPTED}; got an empty string")
         named = {None: default_zones_path, "default": default_zones_path, "tiny": tiny_zones_path}
-        if z in named:
+        if z is None or z in named:
             return load_zones(named[z]())
         try:
             return load_zones(z)
         except OSError as exc:
-            raise ValueError(f"zones: cannot read zones file {str(z)!r}: {exc.strerror or exc}") from None
+            raise ValueError(
+                f"zones: cannot read zones file {str(z)!r}: {exc.strerror or exc} (zones must be {ZONES_ACCEPTED})"
+            ) from None

@@ -94,6 +94,10 @@ class UavReleaseScenario(Scenario[UavReleaseConfig]):
         self.fall = FallParams(mass=c.sensor_mass, cd=c.sensor_cd, area=c.sensor_area)
         self.fnd_oracle = oracle_fnd(self.zones, c.wsn)
 
+    def extra_bytes(self) -> tuple[int, int]:
+        """The payload's sensors (state, fall, landing and deployment records, about 1.7 kB each) per slot."""
+        return 1700 * int(self.config.payload), 0
+
     def make_world(self, n_worlds: int) -> World:
         """World over the zones' map with the payload stage; deployment trackers for ``n_worlds`` worlds."""
         c, b = self.config, self.config.body

@@ -36,9 +36,12 @@ class DeploymentTracker:
         pts = self.grid.points
         phi = np.zeros(pts.shape[0])
         for k, (z, prof) in enumerate(zip(zones.zones, self.profiles)):
-            inside = self.grid.member[:, k]
+            inside = np.flatnonzero(self.grid.member[:, k])
             r = np.linalg.norm(pts[inside] - centres[k], axis=1)
-            phi[inside] += z.weight * prof.density(r)
+            d = z.weight * prof.density(r)
+            if inside.size and not d.sum() > 0:  # a profile narrower than the lattice: its mass on the nearest point
+                d[np.argmin(r)] = z.weight / (resolution * resolution)
+            phi[inside] += d
         self.phi = phi / phi.sum()
         self.covered = np.zeros((n_worlds, pts.shape[0]), dtype=bool)
         self.radii_landed: list[list[list[float]]] = [[[] for _ in zones.zones] for _ in range(n_worlds)]

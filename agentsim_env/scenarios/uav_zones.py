@@ -9,9 +9,9 @@ JSON format (one object; UTF-8; see docs/zones.md for a complete example)::
     {
       "version": 1,                      optional; must be 1 when present
       "description": "free text",        optional; ignored by the loader and not kept
-      "map_size": [width, height],       required; two numbers > 0 (m)
+      "map_size": [width, height],       required; two numbers in (0, 100000] (m)
       "base": [x, y],                    optional; UAV take-off point inside the map, or null
-      "zones": [ {zone}, ... ]           required; at least one zone
+      "zones": [ {zone}, ... ]           required; 1 to 1,000 zones
     }
 
 Each ``{zone}`` object:
@@ -21,17 +21,17 @@ field        type     default  meaning
 ============ ======== ======== ======================================================================
 centre       [x, y]   required centroid (m); the whole disc must lie inside the map
 radius       number   required disc radius (m), > 0
-n_sensors    integer  required sensors allotted to the zone, >= 1
+n_sensors    integer  required sensors allotted to the zone, 1..100,000
 profile      string   "gauss"  one of ``PROFILE_KINDS``: "uniform", "power", "gauss", "linear"
 alpha        number   1.0      power-law exponent, 0 <= alpha < 2 (``power`` only; 1 is R-random)
-sigma        number   null     Gaussian width (m), > 0; null means radius / 2 (``gauss`` only)
+sigma        number   null     Gaussian width (m), radius / 1000 .. 1000 x radius; null: radius / 2 (gauss)
 floor        number   0.0      uniform share of the mass, 0 <= floor < 1 (keeps the rim connected)
 weight       number   1.0      priority used to allocate UAVs across zones, > 0
 altitude     number   null     release altitude (m AGL), 0 < altitude <= 120; null: scenario default
 name         string   null     label used in messages, logs and plots
 ============ ======== ======== ======================================================================
 
-Unknown fields, missing required fields, wrong types (a boolean is not a number; an integer is accepted for
+A file is at most 16 MiB of UTF-8 JSON. Unknown fields, missing required fields, wrong types (a boolean is not a number; an integer is accepted for
 a number) and out-of-range values raise ``ValueError`` naming the zone (``zones[i]`` and its name) and the
 field.
 Overlapping zones are allowed (see ``overlaps``); the payload check is separate (``validate_against_payload``)
@@ -51,12 +51,15 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from agentsim_env.core.validation import check_choice, check_float, check_int
+from agentsim_env.core.validation import check_choice, check_float, check_int, short_repr
 from agentsim_env.wsn.profiles import PROFILE_KINDS, RadialProfile
 
 __all__ = [
     "FORMAT_VERSION",
     "MAX_ALTITUDE",
+    "MAX_MAP_SIDE",
+    "MAX_SENSORS_PER_ZONE",
+    "MAX_ZONES",
     "Zone",
     "ZoneSet",
     "default_zones_path",
@@ -73,6 +76,12 @@ FORMAT_VERSION = 1
 #: Altitude cap (m above ground) of the usual small-UAS rules (EU Open category, US Part 107).
 MAX_ALTITUDE = 120.0
 
+#: Most zones in one set, sensors in one zone, and map side (m); a zone file is at most ``MAX_FILE_BYTES``.
+MAX_ZONES = 1000
+MAX_SENSORS_PER_ZONE = 100_000
+MAX_MAP_SIDE = 1e5
+MAX_FILE_BYTES = 16 << 20
+
 _REQUIRED = ("centre", "radius", "n_sensors")
 _TOP_FIELDS = ("version", "description", "map_size", "base", "zones")
 
@@ -80,7 +89,7 @@ _TOP_FIELDS = ("version", "description", "map_size", "base", "zones")
 def _pair(label: str, value: Any) -> tuple[float, float]:
     """Validate a 2-vector of finite numbers (a JSON list or a tuple)."""
     if not isinstance(value, (list, tuple, np.ndarray)) or len(value) != 2:
-        raise ValueError(f"{label} must be a list of two numbers [x, y], got {value!r}")
+        raise ValueError(f"{label} must be a list of two numbers [x, y], got {short_repr(value)}")
     for v in value:
         check_float(label, v)
     return float(value[0]), float(value[1])
@@ -94,15 +103,16 @@ def _check_zone_values(label: str, v: dict[str, Any]) -> None:
 
     _pair(f("centre"), v["centre"])
     check_float(f("radius"), v["radius"], 0.0, lo_open=True)
-    check_int(f("n_sensors"), v["n_sensors"], 1)
+    check_int(f("n_sensors"), v["n_sensors"], 1, MAX_SENSORS_PER_ZONE)
     if not isinstance(v["profile"], str):
-        raise ValueError(f"{f('profile')} must be a string, one of {PROFILE_KINDS}, got {v['profile']!r}")
+        raise ValueError(f"{f('profile')} must be a string, one of {PROFILE_KINDS}, got {short_repr(v['profile'])}")
     check_choice(f("profile"), v["profile"], PROFILE_KINDS)
     check_float(f("alpha"), v["alpha"], 0.0)
     if v["alpha"] >= 2.0:
         raise ValueError(f"{f('alpha')} must satisfy 0 <= alpha < 2, got {v['alpha']}")
-    if v["sigma"] is not None:
-        check_float(f("sigma"), v["sigma"], 0.0, lo_open=True)
+    if v["sigma"] is not None:  # a narrower or wider Gaussian is a point or a uniform disc in all but name
+        r = float(v["radius"])
+        check_float(f("sigma"), v["sigma"], r / 1000.0, 1000.0 * r)
     check_float(f("floor"), v["floor"], 0.0)
     if v["floor"] >= 1.0:
         raise ValueError(f"{f('floor')} must satisfy 0 <= floor < 1, got {v['floor']}")
@@ -110,13 +120,13 @@ def _check_zone_values(label: str, v: dict[str, Any]) -> None:
     if v["altitude"] is not None:
         check_float(f("altitude"), v["altitude"], 0.0, MAX_ALTITUDE, lo_open=True)
     if v["name"] is not None and not isinstance(v["name"], str):
-        raise ValueError(f"{f('name')} must be a string or null, got {v['name']!r}")
+        raise ValueError(f"{f('name')} must be a string or null, got {short_repr(v['name'])}")
 
 
 def _zone_label(index: int | None, name: Any) -> str:
     """``zones[3] 'north'``-style label used in every zone error."""
     head = "zone" if index is None else f"zones[{index}]"
-    return head if name is None else f"{head} {name!r}"
+    return head if name is None else f"{head} {short_repr(name, 60)}"
 
 
 @dataclass(frozen=True)
@@ -180,11 +190,13 @@ class ZoneSet:
     def __post_init__(self) -> None:
         """Validate the map, the base and that every zone lies fully inside the map."""
         width, height = _pair("map_size", self.map_size)
-        check_float("map_size[0] (width)", width, 0.0, lo_open=True)
-        check_float("map_size[1] (height)", height, 0.0, lo_open=True)
+        check_float("map_size[0] (width)", width, 0.0, MAX_MAP_SIDE, lo_open=True)
+        check_float("map_size[1] (height)", height, 0.0, MAX_MAP_SIDE, lo_open=True)
         object.__setattr__(self, "map_size", (width, height))
         if not isinstance(self.zones, (tuple, list)) or len(self.zones) == 0:
-            raise ValueError(f"zones must be a non-empty sequence of Zone, got {self.zones!r}")
+            raise ValueError(f"zones must be a non-empty sequence of Zone, got {short_repr(self.zones)}")
+        if len(self.zones) > MAX_ZONES:
+            raise ValueError(f"a zone set holds at most {MAX_ZONES:,} zones, got {len(self.zones):,}")
         object.__setattr__(self, "zones", tuple(self.zones))
         for i, z in enumerate(self.zones):
             if not isinstance(z, Zone):
@@ -258,7 +270,7 @@ def _check_keys(label: str, d: dict[str, Any], allowed: tuple[str, ...], require
         if key not in allowed:
             close = difflib.get_close_matches(str(key), allowed, n=1)
             hint = f" (did you mean {close[0]!r}?)" if close else ""
-            raise ValueError(f"{label}: unknown field {key!r}{hint}; allowed fields: {list(allowed)}")
+            raise ValueError(f"{label}: unknown field {short_repr(key, 60)}{hint}; allowed fields: {list(allowed)}")
 
 
 def zones_from_dict(d: dict[str, Any]) -> ZoneSet:
@@ -278,16 +290,18 @@ def zones_from_dict(d: dict[str, Any]) -> ZoneSet:
         raise ValueError(f"the zone file must hold a JSON object, got {type(d).__name__}")
     _check_keys("zone file", d, _TOP_FIELDS, ("map_size", "zones"))
     if "version" in d and (isinstance(d["version"], bool) or d["version"] != FORMAT_VERSION):
-        raise ValueError(f"field 'version' must be {FORMAT_VERSION}, got {d['version']!r}")
+        raise ValueError(f"field 'version' must be {FORMAT_VERSION}, got {short_repr(d['version'])}")
     raw = d["zones"]
     if not isinstance(raw, list) or not raw:
-        raise ValueError(f"field 'zones' must be a non-empty list of zone objects, got {raw!r}")
+        raise ValueError(f"field 'zones' must be a non-empty list of zone objects, got {short_repr(raw)}")
+    if len(raw) > MAX_ZONES:
+        raise ValueError(f"field 'zones' holds {len(raw):,} zones; at most {MAX_ZONES:,} are allowed")
     zone_fields = tuple(fl.name for fl in fields(Zone))
     defaults = {fl.name: fl.default for fl in fields(Zone) if fl.name not in _REQUIRED}
     zones = []
     for i, zd in enumerate(raw):
         if not isinstance(zd, dict):
-            raise ValueError(f"zones[{i}] must be a JSON object, got {zd!r}")
+            raise ValueError(f"zones[{i}] must be a JSON object, got {short_repr(zd)}")
         label = _zone_label(i, zd.get("name"))
         _check_keys(label, zd, zone_fields, _REQUIRED)
         values = {**defaults, **zd}
@@ -335,13 +349,31 @@ def load_zones(path: str | os.PathLike[str]) -> ZoneSet:
         The validated zone set.
 
     Raises:
-        ValueError: On malformed JSON or invalid content; the message starts with the path.
+        ValueError: On malformed JSON, non-UTF-8 text, a file over ``MAX_FILE_BYTES`` or invalid content; the
+            message starts with the path.
+        OSError: When the file cannot be read.
     """
-    text = Path(path).read_text(encoding="utf-8")
+    p = Path(path)
+    if not str(path):
+        raise ValueError("zones: the zone file path is empty")
+    if p.is_dir():
+        raise ValueError(f"{path}: is a folder, not a zone file")
+    size = p.stat().st_size
+    if size > MAX_FILE_BYTES:
+        raise ValueError(f"{path}: {size:,} bytes; a zone file is at most {MAX_FILE_BYTES:,} bytes")
+    try:
+        text = p.read_bytes().decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ValueError(
+            f"{path}: not UTF-8 text (byte {exc.object[exc.start]:#04x} at position {exc.start}); "
+            "zone files are UTF-8 JSON: re-save the file as UTF-8"
+        ) from None
     try:
         data = json.loads(text)
     except json.JSONDecodeError as exc:
         raise ValueError(f"{path}: not valid JSON: {exc}") from exc
+    except RecursionError:
+        raise ValueError(f"{path}: JSON nested too deeply to be a zone file") from None
     try:
         return zones_from_dict(data)
     except ValueError as exc:

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from agentsim_env.core.pipeline import Part, StepContext
-from agentsim_env.core.validation import check_float
+from agentsim_env.core.validation import check_float, coerce_fields
 
 
 @dataclass(frozen=True)
@@ -38,6 +38,7 @@ class GnssConfig:
     sigma_v: float = 0.5
 
     def __post_init__(self) -> None:
+        coerce_fields(self, "gnss.")
         check_float("gnss.sigma_h", self.sigma_h, 0.0, 1e3)
         check_float("gnss.sigma_v", self.sigma_v, 0.0, 1e3)
 

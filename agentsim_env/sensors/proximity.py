@@ -28,6 +28,7 @@ import numpy as np
 
 from agentsim_env.core.pipeline import StepContext
 from agentsim_env.core.spatial import Grid, cell_of
+from agentsim_env.core.validation import coerce_fields
 from agentsim_env.sensors.raycast import (
     _BOX,
     _CYL,
@@ -60,6 +61,7 @@ class ProximityConfig:
     detect_ground: bool = True
 
     def __post_init__(self) -> None:
+        coerce_fields(self, "")
         if isinstance(self.n_azimuth, bool) or not isinstance(self.n_azimuth, (int, np.integer)):
             raise ValueError(f"n_azimuth must be an int >= 1, got {self.n_azimuth!r}")
         if not 1 <= int(self.n_azimuth) <= 4096:

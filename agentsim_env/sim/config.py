@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from agentsim_env.core.validation import check_choice, check_float, check_int
+from agentsim_env.core.validation import check_choice, check_float, check_int, coerce_fields
 
 PHYSICS_MODES = ("kinematic", "pymunk")
 
@@ -39,6 +39,7 @@ class WorldConfig:
     max_waypoints: int = 16
 
     def __post_init__(self) -> None:
+        coerce_fields(self, "")
         check_choice("physics", self.physics, PHYSICS_MODES)
         if not self.dt > 0:
             raise ValueError(f"dt must be > 0, got {self.dt}")

@@ -115,7 +115,7 @@ class World:
         if comms is not None:
             period = comms.heartbeat_period
             self.groups = GroupController(n_worlds, n_agents, period, max(comms.heartbeat_timeout, period),
-                                          group=st.group)  # fmt: skip
+                                          group=st.group, home=st.home_group)  # fmt: skip
             self.comms = CommsStack(comms, n_worlds, n_agents, st.group)
         stages = [self.motion_stage, self.physics, self.payloads, self.collide, self.groups, self.comms]
         self.subsystems: tuple[Subsystem, ...] = tuple(s for s in stages if s is not None) + self.sensors

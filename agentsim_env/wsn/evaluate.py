@@ -37,6 +37,7 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from agentsim_env.core.validation import coerce_fields
 from agentsim_env.wsn.connectivity import connectivity, unit_disk_edges
 from agentsim_env.wsn.coverage import (
     DensityProfile,
@@ -99,6 +100,7 @@ class WsnConfig:
 
     def __post_init__(self) -> None:
         """Validate every field."""
+        coerce_fields(self, "wsn.")
         _positive(self.r_s, "r_s")
         _positive(self.r_c, "r_c")
         _positive(self.coverage_resolution, "coverage_resolution")
