@@ -17,6 +17,7 @@ $(STAMP): pyproject.toml constraints.txt
 	# torch first, pinned to the CPU build, so nothing pulls CUDA packages
 	$(PY) -m pip install -q -c constraints.txt "torch==2.13.0+cpu"
 	$(PY) -m pip install -q -c constraints.txt -e ".[$(EXTRAS)]"
+	$(VENV)/bin/agentsim warmup --quiet
 	touch $(STAMP)
 
 install: $(STAMP)

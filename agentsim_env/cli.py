@@ -2,39 +2,256 @@
 
 Subcommands:
     run        roll out a scenario's scripted baseline (batch, or live with --render), print a summary table,
-               write the last frame as PNG
+               draw the first episode's trajectories as PNG (named by scenario, policy, seed and --set values)
     scenarios  list the registered scenarios
     evaluate   batch evaluation of the UAV sensor-release strategies (zone files x strategies x seeds):
                sensors.csv, runs.csv, summary.md (ranking) and PNG plots
+    warmup     compile and cache every simulation kernel (steps each scenario briefly); ``make install`` runs it
+
+``--set KEY=VALUE`` values are parsed by the type of the config field they set (``agentsim_env.cli_set``).
+Bad input (counts, folders, config values) ends with one ``agentsim: error: ...`` line and exit code 2, before
+any rollout. Help texts that need the registries are built only when shown, so ``agentsim --help`` stays fast.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
+import hashlib
+import os
 import sys
+import textwrap
+import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from agentsim_env.cli_set import canonical, parse_set
 
-def _parse_config(pairs: list[str]) -> dict[str, Any]:
-    """``key=value`` pairs; values are parsed as JSON when possible (numbers, lists, booleans)."""
-    out: dict[str, Any] = {}
-    for p in pairs:
-        if "=" not in p:
-            raise SystemExit(f"--set expects key=value, got {p!r}")
-        k, v = p.split("=", 1)
+#: File in the numba cache directory whose content (versions) says the kernels were compiled and cached.
+WARM_MARKER = ".agentsim-kernels-warm"
+COMPILE_NOTICE = "agentsim: compiling simulation kernels (first run only, ~30 s)..."
+#: Tiny configs for ``agentsim warmup`` (every scenario also gets a short episode).
+WARMUP_CONFIG: dict[str, dict[str, Any]] = {"navigation": {"n_agents": 2}, "rendezvous": {"n_agents": 2},
+                                            "uav_release": {"zones": "tiny"}}  # fmt: skip
+WARMUP_STEPS = 5
+SET_HELP = (
+    "config values, parsed by each field's type: booleans true/false/1/0/yes/no, integers, numbers, "
+    "lists as 12,20 or [12,20], none/null for optional fields, sub-configs as a JSON object or dotted keys "
+    "(body.radius=1.0 comms.loss=0.1)"
+)
+
+
+# ----------------------------------------------------------------------------------------------- help
+class _Formatter(argparse.RawDescriptionHelpFormatter, argparse.ArgumentDefaultsHelpFormatter):
+    """Epilogs kept as written; defaults appended to help texts (unless None/False or already named)."""
+
+    def _get_help_string(self, action: argparse.Action) -> str | None:
+        text = action.help or ""
+        default = action.default
+        if default is None or default is False or default is argparse.SUPPRESS or "(default" in text:
+            return text
+        shown = " ".join(map(str, default)) if isinstance(default, (list, tuple)) else str(default)
+        return f"{text} (default: {shown.replace('%', '%%')})"
+
+
+class _LazyParser(argparse.ArgumentParser):
+    """An ArgumentParser whose help texts that need imports are filled in only when help is shown."""
+
+    def __init__(self, *args: Any, lazy: Callable[[argparse.ArgumentParser], None] | None = None,
+                 **kwargs: Any) -> None:  # fmt: skip
+        kwargs.setdefault("formatter_class", _Formatter)
+        super().__init__(*args, **kwargs)
+        self._lazy = lazy
+
+    def format_help(self) -> str:
+        """The help text (running the lazy filler first, once)."""
+        if self._lazy is not None:
+            fill, self._lazy = self._lazy, None
+            fill(self)
+        return super().format_help()
+
+
+def _action(parser: argparse.ArgumentParser, dest: str) -> argparse.Action:
+    return next(a for a in parser._actions if a.dest == dest)
+
+
+def _wrap(label: str, names: list[str], width: int = 100) -> str:
+    return textwrap.fill(", ".join(names), width, initial_indent=f"  {label:13s}", subsequent_indent=" " * 15)
+
+
+def _fill_main(p: argparse.ArgumentParser) -> None:
+    import agentsim_env
+
+    p.epilog = f"scenarios: {', '.join(agentsim_env.list_scenarios())}\n\n" + (p.epilog or "")
+
+
+def _fill_run(p: argparse.ArgumentParser) -> None:
+    import agentsim_env
+    from agentsim_env.policies.registry import BASELINES
+
+    names = agentsim_env.list_scenarios()
+    _action(p, "scenario").help = f"one of: {', '.join(names)}"
+    lines = [_wrap(n, [f"{b} (default)" if i == 0 else b for i, b in enumerate(BASELINES.get(n, []))] or ["-"])
+             for n in names]  # fmt: skip
+    p.epilog = "baselines per scenario (--policy):\n" + "\n".join(lines) + "\n\n" + (p.epilog or "")
+
+
+def _fill_evaluate(p: argparse.ArgumentParser) -> None:
+    from agentsim_env.evaluation.runner import TELEPORT, available_strategies
+
+    names = [n for n in available_strategies() if n != TELEPORT]
+    listed = textwrap.fill(", ".join(names), 100, initial_indent="  ", subsequent_indent="  ")
+    p.epilog = (
+        f"release strategies (--strategies):\n{listed}\n  ({TELEPORT} is always added as the reference)\n\n"
+        + (p.epilog or "")
+    )
+
+
+RUN_EPILOG = """\
+The PNG of the first episode is OUT/SCENARIO_POLICY_seedSEED[_HASH].png, HASH being 6 hex digits of the --set
+values (none without --set), so different configs do not overwrite each other.
+
+examples:
+  agentsim run navigation --episodes 20
+  agentsim run navigation --policy random --set n_agents=8 collisions=false body.max_speed=8
+  agentsim run relay --set gap=12,20 comms.loss=0.1 --out outputs/relay
+  agentsim run uav_release --set zones=tiny n_uavs=2 --episodes 1 --render"""
+EVALUATE_EPILOG = """\
+examples:
+  agentsim evaluate --zones default --strategies all --seeds 3
+  agentsim evaluate --zones tiny my_zones.json --strategies B2_rings B5_cvt --seeds 0,4,9 \\
+      --set n_uavs=2 payload=10 wind.mean_speed=3 --out outputs/eval_tiny"""
+MAIN_EPILOG = """\
+examples:
+  agentsim scenarios
+  agentsim run navigation --episodes 20 --set n_agents=8
+  agentsim evaluate --zones default --strategies all --seeds 3
+  agentsim warmup
+Run 'agentsim COMMAND --help' for a command's options."""
+
+
+# -------------------------------------------------------------------------------------------- checks
+def _check_count(option: str, value: int) -> None:
+    """Raise unless ``value`` is an integer >= 1 (episodes, seeds)."""
+    if value < 1:
+        raise ValueError(f"{option} must be an integer >= 1, got {value}")
+
+
+def prepare_out(out: str | os.PathLike[str], option: str = "--out") -> list[Path]:
+    """Create output folder ``out`` and prove it writable (a probe file is written and deleted).
+
+    Args:
+        out: The folder.
+        option: The option named in the error.
+
+    Returns:
+        The folders this call created, deepest first (for :func:`remove_created` when the command fails).
+
+    Raises:
+        ValueError: Naming the option, the path and the OS reason, when the folder cannot be created or written.
+    """
+    path = Path(out)
+    created: list[Path] = []
+    p = path
+    while not p.exists() and not p.is_symlink() and p != p.parent:
+        created.append(p)
+        p = p.parent
+    if path.exists() and not path.is_dir():
+        raise ValueError(f"{option} {str(path)!r} cannot be used as the output folder: it is a file")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        probe = path / f".agentsim-write-probe-{os.getpid()}"
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as exc:
+        remove_created(created)
+        raise ValueError(
+            f"{option} {str(path)!r} cannot be created or written: {exc.strerror or exc}"
+        ) from None
+    return created
+
+
+def remove_created(folders: list[Path]) -> None:
+    """Remove the folders :func:`prepare_out` created, where they are still empty (deepest first)."""
+    for d in folders:
         try:
-            out[k] = json.loads(v)
-        except json.JSONDecodeError:
-            out[k] = v
-        if isinstance(out[k], list):
-            out[k] = tuple(out[k])
-    return out
+            d.rmdir()
+        except OSError:
+            pass
 
 
+def config_tag(config: dict[str, Any]) -> str:
+    """``""`` without config values, else ``"_"`` + 6 hex digits of their canonical text (for file names)."""
+    if not config:
+        return ""
+    return "_" + hashlib.sha1(canonical(config).encode()).hexdigest()[:6]
+
+
+# ------------------------------------------------------------------------------------- kernel cache
+def _kernel_cache_dir() -> Path | None:
+    """The directory numba caches the package's kernels in (None: no writable one is known)."""
+    chosen = os.environ.get("NUMBA_CACHE_DIR")
+    if chosen:
+        return Path(chosen)
+    from agentsim_env._numba_cache import PACKAGE_DIR, in_tree_writable
+
+    if in_tree_writable():
+        return Path(PACKAGE_DIR) / "__pycache__"
+    try:
+        from numba.misc.appdirs import AppDirs
+    except ImportError:
+        return None
+    return Path(AppDirs(appname="numba", appauthor=False).user_cache_dir)
+
+
+def _stamp() -> str:
+    """What the warm marker records: the versions that decide whether numba's cache is reused."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    import agentsim_env
+
+    try:
+        numba_version = version("numba")
+    except PackageNotFoundError:
+        numba_version = "?"
+    py = ".".join(map(str, sys.version_info[:2]))
+    return f"agentsim_env {agentsim_env.__version__} numba {numba_version} python {py}\n"
+
+
+def kernels_cold() -> bool:
+    """Whether the numba kernel cache looks cold (no warm marker with the current versions)."""
+    d = _kernel_cache_dir()
+    if d is None:
+        return True
+    try:
+        return (d / WARM_MARKER).read_text(encoding="utf-8") != _stamp()
+    except OSError:
+        return True
+
+
+def announce_compile() -> bool:
+    """Print the one-line compile notice to stderr when the kernel cache is cold; return whether it was."""
+    cold = kernels_cold()
+    if cold:
+        print(COMPILE_NOTICE, file=sys.stderr, flush=True)
+    return cold
+
+
+def mark_warm() -> None:
+    """Record that the kernels are compiled and cached (silently skipped where the cache is not writable)."""
+    d = _kernel_cache_dir()
+    if d is None:
+        return
+    try:
+        d.mkdir(parents=True, exist_ok=True)
+        (d / WARM_MARKER).write_text(_stamp(), encoding="utf-8")
+    except OSError:
+        pass
+
+
+# ------------------------------------------------------------------------------------------ commands
 def _progress(it: Any, total: int, desc: str, enabled: bool) -> Any:
     if not enabled:
         return it
@@ -44,29 +261,52 @@ def _progress(it: Any, total: int, desc: str, enabled: bool) -> Any:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    """Roll out the baseline over seeds; print success and return statistics; save the last frame."""
+    """Roll out the baseline over seeds; print success and return statistics; draw the first episode."""
+    _check_count("--episodes", args.episodes)
+    if args.seed < 0:
+        raise ValueError(f"--seed must be an integer >= 0, got {args.seed}")
+    if args.fps is not None and args.fps <= 0:
+        raise ValueError(f"--fps must be an integer > 0, got {args.fps}")
+    from agentsim_env.scenarios.registry import scenario_class
+
+    config = parse_set(scenario_class(args.scenario).config_cls, args.set or [])
+    from agentsim_env.policies.registry import baseline_names
+
+    names = baseline_names(args.scenario)
+    policy_name = args.policy or names[0]
+    if policy_name not in names:
+        raise ValueError(f"--policy must be one of {names} for {args.scenario!r}, got {policy_name!r}")
+    created = prepare_out(args.out) if args.out else []
+    try:
+        return _run(args, config, policy_name)
+    except BaseException:
+        remove_created(created)
+        raise
+
+
+def _run(args: argparse.Namespace, config: dict[str, Any], policy_name: str) -> int:
     import agentsim_env
     from agentsim_env.policies.registry import make_policy
     from agentsim_env.policies.rollout import run_episode
-    from agentsim_env.render.topdown import save_png
+    from agentsim_env.render.trajectories import TrajectoryRecorder, plot_trajectories
 
-    config = _parse_config(args.set or [])
-    env = agentsim_env.make(args.scenario, render_mode="human" if args.render else "rgb_array", **config)
+    announce_compile()
+    env = agentsim_env.make(args.scenario, render_mode="human" if args.render else None, **config)
     if args.fps is not None:
-        if args.fps <= 0:
-            raise ValueError(f"--fps must be > 0, got {args.fps}")
         env.metadata["render_fps"] = args.fps  # the live window paces itself with this rate
-    policy = make_policy(args.scenario, env, args.policy)
+    policy = make_policy(args.scenario, env, policy_name)
     rows = []
-    frame = None
+    traj = None
     for k in _progress(range(args.episodes), args.episodes, args.scenario, not args.quiet):
-        ep = run_episode(env, policy, args.seed + k, render_every=0 if args.render else (1 if k == 0 else 0))
-        if ep.frames:
-            frame = ep.frames[-1]
+        recorder = TrajectoryRecorder() if k == 0 and args.out else None
+        ep = run_episode(env, policy, args.seed + k, on_step=recorder)
+        if recorder is not None:
+            traj = recorder.result(env)
         rows.append((ep.seed, ep.steps, float(np.mean(list(ep.returns.values()))), ep.info_sums))
+    mark_warm()
     n = env.scenario.n_agents
     keys = sorted({k for *_, s in rows for k in s if k in ("arrived", "collided", "released", "landed")})
-    print(f"\n{args.scenario}: {args.episodes} episodes x {n} agents, policy={args.policy or 'default'}")
+    print(f"\n{args.scenario}: {args.episodes} episodes x {n} agents, policy={policy_name}")
     print("| metric | mean | std |")
     print("|---|---|---|")
     print(f"| steps | {np.mean([r[1] for r in rows]):.1f} | {np.std([r[1] for r in rows]):.1f} |")
@@ -74,11 +314,13 @@ def cmd_run(args: argparse.Namespace) -> int:
     for key in keys:
         frac = np.array([r[3].get(key, 0.0) / n for r in rows])
         print(f"| {key} per agent | {frac.mean():.3f} | {frac.std():.3f} |")
-    if frame is not None and args.out:
-        out = Path(args.out)
-        out.mkdir(parents=True, exist_ok=True)
-        save_png(frame, str(out / f"{args.scenario}_seed{args.seed}.png"))
-        print(f"frame written to {out / f'{args.scenario}_seed{args.seed}.png'}")
+    if traj is not None:
+        name = f"{args.scenario}_{policy_name}_seed{args.seed}{config_tag(config)}.png"
+        title = f"{args.scenario} | policy {policy_name} | seed {args.seed} | {traj.steps} steps"
+        if args.set:
+            title += "\n" + textwrap.shorten(" ".join(args.set), 110, placeholder=" ...")
+        path = plot_trajectories(traj, Path(args.out) / name, title)
+        print(f"trajectories written to {path}")
     env.close()
     return 0
 
@@ -107,6 +349,8 @@ def _parse_seeds(tokens: list[str]) -> list[int]:
     if not values:
         raise ValueError("--seeds must be a count N >= 1 or a list of integers, got nothing")
     if explicit:
+        if min(values) < 0:
+            raise ValueError(f"--seeds must be integers >= 0, got {min(values)}")
         return list(dict.fromkeys(values))
     if values[0] < 1:
         raise ValueError(f"--seeds N must be >= 1 (or give a list such as 0,4,9), got {values[0]}")
@@ -116,19 +360,28 @@ def _parse_seeds(tokens: list[str]) -> list[int]:
 def cmd_evaluate(args: argparse.Namespace) -> int:
     """Fly every strategy over every zone file and seed; write CSVs, plots and the Markdown ranking.
 
-    Nothing is written unless every run succeeds (see ``agentsim_env.evaluation.report``).
+    Nothing is written unless every run succeeds (see ``agentsim_env.evaluation.report``); the output folder
+    is created and probed before the first run, and removed again (when still empty) if a run fails.
     """
     from agentsim_env.evaluation.report import ranking_table, write_outputs
     from agentsim_env.evaluation.runner import resolve_strategies, resolve_zones, run_grid
     from agentsim_env.evaluation.scoring import rank_strategies, run_rows
+    from agentsim_env.scenarios.registry import scenario_class
 
-    overrides = _parse_config(args.set or [])
-    seeds = _parse_seeds(args.seeds)
     # validate the cheap inputs before the first (slow) run
+    seeds = _parse_seeds(args.seeds)
+    overrides = parse_set(scenario_class("uav_release").config_cls, args.set or [])
     resolve_zones(args.zones)
     resolve_strategies(args.strategies)
-    grid = run_grid(args.zones, args.strategies, seeds, overrides, progress=not args.quiet)
-    paths, _ = write_outputs(grid, args.out, plots=not args.no_plots)
+    created = prepare_out(args.out)
+    try:
+        announce_compile()
+        grid = run_grid(args.zones, args.strategies, seeds, overrides, progress=not args.quiet)
+        paths, _ = write_outputs(grid, args.out, plots=not args.no_plots)
+    except BaseException:
+        remove_created(created)
+        raise
+    mark_warm()
     rows = run_rows(grid.runs)
     for src in grid.sources:
         print(f"\nRanking, zone file {src.label!r} ({len(seeds)} seed(s)):\n")
@@ -139,50 +392,89 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_warmup(args: argparse.Namespace) -> int:
+    """Build and step every registered scenario briefly, which compiles and caches every kernel."""
+    import agentsim_env
+    from agentsim_env.policies.registry import BASELINES, make_policy
+    from agentsim_env.policies.rollout import run_episode
+
+    announce_compile()
+    for name in agentsim_env.list_scenarios():
+        t0 = time.perf_counter()
+        config = {**WARMUP_CONFIG.get(name, {}), "max_steps": WARMUP_STEPS}
+        env = agentsim_env.make(name, **config)
+        if name in BASELINES:
+            run_episode(env, make_policy(name, env), 0)
+        else:  # a scenario registered without baselines: random actions
+            env.reset(seed=0)
+            while env.agents:
+                env.step({a: env.action_space(a).sample() for a in env.agents})
+        env.close()
+        if not args.quiet:
+            print(f"  {name:14s} ready ({time.perf_counter() - t0:.1f} s)")
+    mark_warm()
+    if not args.quiet:
+        print("agentsim: simulation kernels compiled and cached")
+    return 0
+
+
+# -------------------------------------------------------------------------------------------- parser
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``agentsim``."""
-    p = argparse.ArgumentParser(prog="agentsim", description="agentsim-env command line")
-    sub = p.add_subparsers(dest="command", required=True)
-    r = sub.add_parser("run", help="roll out a scenario's scripted baseline")
-    r.add_argument("scenario")
-    r.add_argument("--episodes", type=int, default=5)
-    r.add_argument("--seed", type=int, default=0)
-    r.add_argument("--policy", default=None, help="baseline name (default: the scenario's first)")
-    r.add_argument("--set", nargs="*", metavar="KEY=VALUE", help="scenario config values")
+    p = _LazyParser(
+        prog="agentsim", description="agentsim-env command line", epilog=MAIN_EPILOG, lazy=_fill_main
+    )
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    r = sub.add_parser(
+        "run",
+        help="roll out a scenario's scripted baseline",
+        description="Roll out a scenario's scripted baseline over --episodes seeds, print a summary table\n"
+        "and draw the first episode's trajectories.",
+        epilog=RUN_EPILOG,
+        lazy=_fill_run,
+    )
+    r.add_argument("scenario", metavar="SCENARIO", help="a registered scenario ('agentsim scenarios')")
+    r.add_argument("--episodes", type=int, default=5, help="episodes (seeds SEED, SEED+1, ...), >= 1")
+    r.add_argument("--seed", type=int, default=0, help="seed of the first episode, >= 0")
+    r.add_argument("--policy", default=None, help="baseline name (default: the scenario's first; see below)")
+    r.add_argument("--set", nargs="*", metavar="KEY=VALUE", help=SET_HELP)
     r.add_argument("--render", action="store_true", help="show a live window (graphical mode)")
-    r.add_argument("--fps", type=int, default=None, help="frames per second of the live window (default: real time)")
-    r.add_argument("--out", default="outputs", help="folder for the PNG frame")
+    r.add_argument("--fps", type=int, default=None, help="frames per second of the live window, > 0 "
+                   "(default: real time)")  # fmt: skip
+    r.add_argument("--out", default="outputs", help="folder for the trajectory PNG ('' for none)")
     r.add_argument("--quiet", action="store_true", help="no progress bar")
     r.set_defaults(func=cmd_run)
     s = sub.add_parser("scenarios", help="list the registered scenarios")
     s.set_defaults(func=cmd_scenarios)
-    e = sub.add_parser("evaluate", help="batch evaluation of the UAV sensor-release strategies")
-    e.add_argument(
-        "--zones",
-        nargs="+",
-        default=["default"],
-        metavar="ZONES",
-        help="zone files: 'default', 'tiny' or JSON paths (several allowed; default: default)",
+    e = sub.add_parser(
+        "evaluate",
+        help="batch evaluation of the UAV sensor-release strategies",
+        description="Fly every release strategy over every zone file and seed (scenario uav_release);\n"
+        "write sensors.csv, runs.csv, summary.md and PNG plots.",
+        epilog=EVALUATE_EPILOG,
+        lazy=_fill_evaluate,
     )
+    e.add_argument("--zones", nargs="+", default=["default"], metavar="ZONES",
+                   help="zone files: 'default', 'tiny' or JSON paths (several allowed)")  # fmt: skip
+    e.add_argument("--strategies", nargs="+", default=["all"], metavar="NAME",
+                   help="release strategies (see below), or 'all'")  # fmt: skip
+    e.add_argument("--seeds", nargs="+", default=["3"], metavar="SEED",
+                   help="a count N >= 1 (seeds 0..N-1) or a list: 0,4,9 or 0 4 9 (one seed: 7,)")  # fmt: skip
     e.add_argument(
-        "--strategies",
-        nargs="+",
-        default=["all"],
-        metavar="NAME",
-        help="release strategies, or 'all' (default); the B8 teleport reference is always added",
+        "--set", nargs="*", metavar="KEY=VALUE", help="uav_release " + SET_HELP + "; for every run"
     )
-    e.add_argument(
-        "--seeds",
-        nargs="+",
-        default=["3"],
-        metavar="SEED",
-        help="a count N (seeds 0..N-1; default 3) or a list: 0,4,9 or 0 4 9 (one seed: 7,)",
-    )
-    e.add_argument("--set", nargs="*", metavar="KEY=VALUE", help="uav_release config values for every run")
-    e.add_argument("--out", default="outputs/evaluation", help="output folder (default: outputs/evaluation)")
+    e.add_argument("--out", default="outputs/evaluation", help="output folder")
     e.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     e.add_argument("--quiet", action="store_true", help="no progress bar")
     e.set_defaults(func=cmd_evaluate)
+    w = sub.add_parser(
+        "warmup",
+        help="compile and cache the simulation kernels (done once; make install runs it)",
+        description="Build and step every registered scenario for a few steps, which compiles every numba\n"
+        "kernel into the on-disk cache, so later runs start at once.",
+    )
+    w.add_argument("--quiet", action="store_true", help="print only the compile notice")
+    w.set_defaults(func=cmd_warmup)
     return p
 
 

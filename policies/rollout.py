@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -29,7 +30,13 @@ class EpisodeSummary:
     frames: list[np.ndarray] = field(default_factory=list)
 
 
-def run_episode(env: Any, policy: Policy, seed: int, *, render_every: int = 0) -> EpisodeSummary:
+#: ``on_step(env, infos)``: called after the reset (``infos`` empty) and after every step (the step's infos).
+StepCallback = Callable[[Any, dict[str, dict[str, Any]]], None]
+
+
+def run_episode(
+    env: Any, policy: Policy, seed: int, *, render_every: int = 0, on_step: StepCallback | None = None
+) -> EpisodeSummary:
     """Reset ``env`` with ``seed`` and step ``policy`` until every agent is done.
 
     Args:
@@ -37,6 +44,8 @@ def run_episode(env: Any, policy: Policy, seed: int, *, render_every: int = 0) -
         policy: Acts on the observations of live agents.
         seed: Reset seed (also passed to ``policy.reset``).
         render_every: Keep a frame every this many steps (0: none; the last frame is always kept when > 0).
+        on_step: Optional observer, called with ``(env, {})`` after the reset and with ``(env, infos)`` after
+            every step (e.g. to record positions from ``env.world.state``); it must not change the env.
 
     Returns:
         The episode summary.
@@ -47,10 +56,14 @@ def run_episode(env: Any, policy: Policy, seed: int, *, render_every: int = 0) -
     sums: dict[str, float] = {}
     frames: list[np.ndarray] = []
     steps = 0
+    if on_step is not None:
+        on_step(env, {})
     while env.agents:
         live = {a: obs[a] for a in env.agents}
         obs, rew, _, _, infos = env.step(policy.act(live))
         steps += 1
+        if on_step is not None:
+            on_step(env, infos)
         for a, r in rew.items():
             returns[a] += r
         for info in infos.values():

@@ -1,0 +1,217 @@
+"""Trajectory figures of one episode: the map, obstacles, scenario markers and every agent's path.
+
+:class:`TrajectoryRecorder` is an observer for ``agentsim_env.policies.rollout.run_episode(on_step=...)``: it
+keeps the positions of world 0's agents after the reset and after every step, and what happened to each agent
+(arrived, collided, went offline, still flying). :func:`plot_trajectories` draws the result with matplotlib
+(headless, no pyplot state): map bounds, obstacles (boxes and cylinders, shaded by height), the scenario's
+markers (goals, zones, landed sensors: ``scenario.markers(world, 0)``), each path as a line from a start
+marker to an end marker whose colour and shape say the agent's outcome, a legend and a title.
+
+The recorder reads ``env.world``, ``env.scenario`` and ``env.possible_agents`` only; it imports nothing above
+the render layer.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from agentsim_env.core.scene import BOX
+
+__all__ = ["OUTCOMES", "TrajectoryRecorder", "Trajectories", "plot_trajectories"]
+
+#: Agent outcomes, in drawing priority, with their colour and end marker.
+OUTCOMES: dict[str, tuple[str, str]] = {
+    "collided": ("#d62728", "X"),
+    "arrived": ("#2ca02c", "*"),
+    "offline": ("#7f7f7f", "v"),
+    "active": ("#1f77b4", "s"),
+}
+#: Info keys that mean an agent reached its objective (``met``: rendezvous).
+ARRIVAL_KEYS: tuple[str, ...] = ("arrived", "met")
+
+
+@dataclass
+class Trajectories:
+    """One episode's paths and the map they were flown on.
+
+    Attributes:
+        agents: Agent ids of world 0, in slot order.
+        xy: Positions ``(records, agents, 2)``: after the reset, then after every step.
+        last: Per agent, the last record index at which it was still in the episode.
+        outcome: Per agent, a key of :data:`OUTCOMES`.
+        bounds: ``(xmin, xmax, ymin, ymax)`` of the map in metres.
+        obstacles: ``(k, 5)`` rows ``(is_box, cx, cy, half_x, half_y)`` (cylinders: ``half_x`` is the radius).
+        obstacle_top: ``(k,)`` obstacle top heights in metres (for shading).
+        markers: ``(xy (m, 2), rgb (m, 3) uint8, radius (m,))`` of the scenario at the end, or None.
+        steps: Steps of the episode.
+    """
+
+    agents: list[str]
+    xy: np.ndarray
+    last: np.ndarray
+    outcome: list[str]
+    bounds: tuple[float, float, float, float]
+    obstacles: np.ndarray = field(default_factory=lambda: np.zeros((0, 5)))
+    obstacle_top: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    markers: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+    steps: int = 0
+
+
+class TrajectoryRecorder:
+    """Records world 0's agent positions and outcomes; pass it as ``run_episode(..., on_step=recorder)``."""
+
+    def __init__(self) -> None:
+        """An empty recorder (one episode; it restarts when called with empty infos after a reset)."""
+        self._xy: list[np.ndarray] = []
+        self._live: list[np.ndarray] = []
+        self._arrived: np.ndarray = np.zeros(0, dtype=bool)
+        self._collided: np.ndarray = np.zeros(0, dtype=bool)
+        self._agents: list[str] = []
+
+    def __call__(self, env: Any, infos: dict[str, dict[str, Any]]) -> None:
+        """Record the positions now and the outcome flags in ``infos`` (empty right after the reset)."""
+        st = env.world.state
+        slots = st.slots_of_world(0)
+        if not infos or not self._agents:  # right after a reset: a new episode
+            self._agents = list(env.possible_agents)
+            n = len(self._agents)
+            self._xy, self._live = [], []
+            self._arrived, self._collided = np.zeros(n, dtype=bool), np.zeros(n, dtype=bool)
+        self._xy.append(np.array(st.pos[slots, :2], dtype=float))
+        live = set(env.agents)
+        self._live.append(np.array([a in live for a in self._agents], dtype=bool))
+        for i, a in enumerate(self._agents):
+            info = infos.get(a)
+            if not info:
+                continue
+            if any(info.get(k) for k in ARRIVAL_KEYS):
+                self._arrived[i] = True
+            if info.get("collided"):
+                self._collided[i] = True
+
+    def result(self, env: Any) -> Trajectories:
+        """The recorded episode, with the map, obstacles and markers of ``env`` as they are now (its end)."""
+        if not self._xy:
+            raise ValueError("no positions recorded: pass the recorder to run_episode(on_step=...) first")
+        world = env.world
+        st = world.state
+        slots = st.slots_of_world(0)
+        xy = np.stack(self._xy)
+        live = np.stack(self._live)
+        # an agent's last record is the step that ended it (it is no longer live after that step)
+        gone = ~live
+        first_gone = np.where(gone.any(axis=0), gone.argmax(axis=0), len(live) - 1)
+        online = np.asarray(st.online[slots], dtype=bool)
+        outcome = []
+        for i in range(len(self._agents)):
+            if self._collided[i]:
+                outcome.append("collided")
+            elif self._arrived[i]:
+                outcome.append("arrived")
+            elif not online[i]:
+                outcome.append("offline")
+            else:
+                outcome.append("active")
+        sc = world.scene
+        mine = np.flatnonzero(np.asarray(sc.world) == 0)
+        obstacles = (
+            np.column_stack(
+                [
+                    np.asarray(sc.kind)[mine] == BOX,
+                    np.asarray(sc.centre)[mine, 0],
+                    np.asarray(sc.centre)[mine, 1],
+                    np.asarray(sc.half)[mine, 0],
+                    np.asarray(sc.half)[mine, 1],
+                ]
+            ).astype(float)
+            if len(mine)
+            else np.zeros((0, 5))
+        )
+        tops = (np.asarray(sc.centre)[mine, 2] + np.asarray(sc.half)[mine, 2]).astype(float)
+        found = env.scenario.markers(world, 0)  # may be views of the world's arrays: copy them
+        markers = None if found is None else (np.array(found[0]), np.array(found[1]), np.array(found[2]))
+        xmin, xmax, ymin, ymax = (float(b) for b in world.config.bounds)
+        return Trajectories(
+            agents=list(self._agents),
+            xy=xy,
+            last=first_gone.astype(int),
+            outcome=outcome,
+            bounds=(xmin, xmax, ymin, ymax),
+            obstacles=obstacles,
+            obstacle_top=tops,
+            markers=markers,
+            steps=len(xy) - 1,
+        )
+
+
+def plot_trajectories(traj: Trajectories, path: str | os.PathLike[str], title: str) -> Path:
+    """Draw an episode's paths over its map and write the figure as PNG.
+
+    Args:
+        traj: The recorded episode (:meth:`TrajectoryRecorder.result`).
+        path: The PNG file to write (its folder must exist).
+        title: The figure title (e.g. scenario, policy, seed, steps).
+
+    Returns:
+        The written path.
+    """
+    from matplotlib.figure import Figure
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Circle, Patch, Rectangle
+
+    xmin, xmax, ymin, ymax = traj.bounds
+    w, h = xmax - xmin, ymax - ymin
+    side = 7.0
+    fig = Figure(figsize=(side * min(1.6, max(0.6, w / max(h, 1e-9))) + 2.5, side))
+    ax = fig.add_subplot()
+    ax.add_patch(Rectangle((xmin, ymin), w, h, fill=False, edgecolor="black", linewidth=1.2))
+    handles: list[Any] = [Patch(facecolor="none", edgecolor="black", label="map bounds")]
+    ztop = max(float(traj.obstacle_top.max()) if len(traj.obstacle_top) else 1.0, 1.0)
+    for (is_box, cx, cy, hx, hy), top in zip(traj.obstacles, traj.obstacle_top):
+        grey = str(float(np.clip(0.75 - 0.45 * top / ztop, 0.2, 0.75)))
+        if is_box:
+            ax.add_patch(Rectangle((cx - hx, cy - hy), 2 * hx, 2 * hy, facecolor=grey, edgecolor="none"))
+        else:
+            ax.add_patch(Circle((cx, cy), hx, facecolor=grey, edgecolor="none"))
+    if len(traj.obstacles):
+        handles.append(Patch(facecolor="0.5", label=f"obstacles ({len(traj.obstacles)})"))
+    if traj.markers is not None and len(traj.markers[0]):
+        mxy, rgb, rad = traj.markers
+        for (x, y), c, r in zip(mxy, np.asarray(rgb, dtype=float) / 255.0, rad):
+            ax.add_patch(Circle((x, y), max(float(r), 0.3), facecolor=tuple(c), edgecolor="none", alpha=0.6))
+        handles.append(Patch(facecolor=tuple(np.asarray(rgb[0], dtype=float) / 255.0), alpha=0.6,
+                             label="scenario markers (goals, zones, sensors)"))  # fmt: skip
+    counts = dict.fromkeys(OUTCOMES, 0)
+    for i, outcome in enumerate(traj.outcome):
+        colour, end = OUTCOMES[outcome]
+        path_xy = traj.xy[: traj.last[i] + 1, i]
+        ax.plot(path_xy[:, 0], path_xy[:, 1], color=colour, linewidth=1.1, alpha=0.85, zorder=3)
+        ax.plot(
+            *path_xy[0], marker="o", markersize=5, markerfacecolor="white", markeredgecolor=colour, zorder=4
+        )
+        ax.plot(*path_xy[-1], marker=end, markersize=9, color=colour, markeredgecolor="black",
+                markeredgewidth=0.4, zorder=5)  # fmt: skip
+        counts[outcome] += 1
+    handles.append(Line2D([], [], linestyle="none", marker="o", markerfacecolor="white",
+                          markeredgecolor="black", label="start"))  # fmt: skip
+    for outcome, n in counts.items():
+        if n:
+            colour, end = OUTCOMES[outcome]
+            handles.append(Line2D([], [], color=colour, marker=end, markeredgecolor="black",
+                                  markeredgewidth=0.4, label=f"{outcome} ({n})"))  # fmt: skip
+    pad = 0.03 * max(w, h)
+    ax.set_xlim(xmin - pad, xmax + pad)
+    ax.set_ylim(ymin - pad, ymax + pad)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.set_title(title)
+    ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
+    out = Path(path)
+    fig.savefig(out, dpi=110, bbox_inches="tight")
+    return out
