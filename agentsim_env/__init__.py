@@ -21,7 +21,7 @@ _ensure_numba_cache()  # before any kernel module: numba picks a function's cach
 
 __version__ = "0.1.0"
 
-ENV_KEYS = ("render_mode", "obs_format", "action_format")
+ENV_KEYS = ("render_mode", "obs_format", "action_format", "check_finite")
 
 
 def list_scenarios() -> list[str]:
@@ -37,7 +37,9 @@ def make(name: str, **config: Any) -> Any:
     Args:
         name: A registered scenario (see ``list_scenarios()``).
         **config: ``render_mode`` (None or "rgb_array"), ``obs_format`` / ``action_format`` ("dict" or "flat"),
-            and the scenario's config fields (unknown keys raise ``ValueError`` naming them).
+            ``check_finite`` (a debug switch: fail fast on a NaN or inf observation, reward or info, naming the
+            part and the agent; default from ``AGENTSIM_CHECK_FINITE``), and the scenario's config fields
+            (unknown keys raise ``ValueError`` naming them).
 
     Returns:
         An ``AgentSimParallelEnv``.

@@ -1,10 +1,11 @@
-"""Test-wide settings: headless rendering, one numba thread, hypothesis profile."""
+"""Test-wide settings: headless rendering, one numba thread, check_finite on, hypothesis profile."""
 
 import os
 
 os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
 os.environ.setdefault("SDL_AUDIODRIVER", "dummy")
 os.environ.setdefault("MPLBACKEND", "Agg")
+os.environ.setdefault("AGENTSIM_CHECK_FINITE", "1")  # every env in the tests fails fast on a NaN or inf
 
 from hypothesis import settings  # noqa: E402
 

@@ -19,7 +19,7 @@ from pettingzoo.utils.conversions import parallel_to_aec
 from agentsim_env.core.pipeline import EpisodeSeeds
 from agentsim_env.core.validation import check_choice
 from agentsim_env.env.spaces import FORMATS, REAL_KINDS, action_space_for, observation_space_for, split_action
-from agentsim_env.scenarios.base import Scenario, reset_worlds, run_step
+from agentsim_env.scenarios.base import Scenario, assert_finite, check_finite_default, reset_worlds, run_step
 
 RENDER_MODES = ("human", "rgb_array")
 
@@ -61,6 +61,9 @@ class AgentSimParallelEnv(ParallelEnv):
             window, updated on every step).
         obs_format: ``"dict"`` (a Dict of the scenario's observation parts) or ``"flat"`` (one float32 Box).
         action_format: ``"dict"`` (a Dict of action parts) or ``"flat"`` (one float32 Box in [-1, 1]).
+        check_finite: Debug switch: after every reset and step, raise ``FloatingPointError`` naming the part and
+            the agent when an observation, reward or info handed out is NaN or inf (``None``: on when the
+            environment variable ``AGENTSIM_CHECK_FINITE`` is ``1``; the test suite sets it).
     """
 
     def __init__(
@@ -70,12 +73,14 @@ class AgentSimParallelEnv(ParallelEnv):
         render_mode: str | None = None,
         obs_format: str = "dict",
         action_format: str = "dict",
+        check_finite: bool | None = None,
     ) -> None:
         if render_mode is not None:
             check_choice("render_mode", render_mode, RENDER_MODES + (None,))
         check_choice("obs_format", obs_format, FORMATS)
         check_choice("action_format", action_format, FORMATS)
         self.scenario = scenario
+        self.check_finite = check_finite_default(check_finite)
         self.render_mode = render_mode
         self.obs_format = obs_format
         self.action_format = action_format
@@ -133,6 +138,8 @@ class AgentSimParallelEnv(ParallelEnv):
         self._started = True
         self._set_agents(list(self.possible_agents))
         parts = self.scenario.observation(self.world)
+        if self.check_finite:
+            assert_finite(self.scenario, self.world.state.online, 0, parts)
         if self.render_mode == "human":
             self.render()
         infos = self._reset_infos()
@@ -157,7 +164,10 @@ class AgentSimParallelEnv(ParallelEnv):
         res, terminated = run_step(sc, world, parts, acting)
         self._steps += 1
         truncated = acting & ~terminated & (self._steps >= sc.max_steps)
-        obs = self._obs_dicts(sc.observation(world))
+        obs_parts = sc.observation(world)
+        if self.check_finite:
+            assert_finite(sc, acting, self._steps, obs_parts, res)
+        obs = self._obs_dicts(obs_parts)
         live = self.agents
         idx = self._live_idx
         rew = res.rewards[idx].astype(float).tolist()

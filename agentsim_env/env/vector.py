@@ -17,9 +17,9 @@ from typing import Any
 import numpy as np
 
 from agentsim_env.core.pipeline import EpisodeSeeds
-from agentsim_env.core.validation import check_int
+from agentsim_env.core.validation import check_int, is_int, short_repr
 from agentsim_env.env.spaces import flat_layout
-from agentsim_env.scenarios.base import reset_worlds, run_step
+from agentsim_env.scenarios.base import assert_finite, check_finite_default, reset_worlds, run_step
 from agentsim_env.scenarios.registry import make_scenario
 
 MAX_WORLDS = 1_000_000
@@ -57,12 +57,15 @@ class BatchedEnv:
     Args:
         name: Scenario name.
         n_worlds: Number of worlds B, 1..1,000,000.
+        check_finite: Debug switch: raise ``FloatingPointError`` naming the part, the agent and the world when
+            an observation, reward or info of a live agent is NaN or inf (``None``: from ``AGENTSIM_CHECK_FINITE``).
         **config: Scenario config keys.
     """
 
-    def __init__(self, name: str, n_worlds: int, **config: Any) -> None:
+    def __init__(self, name: str, n_worlds: int, *, check_finite: bool | None = None, **config: Any) -> None:
         check_int("n_worlds", n_worlds, 1, MAX_WORLDS)
         n_worlds = int(n_worlds)
+        self.check_finite = check_finite_default(check_finite)
         self.scenario = make_scenario(name, **config)
         self.world = self.scenario.build(n_worlds)
         self.n_worlds = n_worlds
@@ -78,8 +81,11 @@ class BatchedEnv:
         self._seeds = [EpisodeSeeds() for _ in range(n_worlds)]
         self._started = False
 
-    def _flat_obs(self) -> np.ndarray:
+    def _flat_obs(self, rows: np.ndarray | None = None, step: int = 0, result: Any = None) -> np.ndarray:
+        """Flat observations of every slot; with ``check_finite``, ``rows`` (and ``result``) are checked."""
         parts = self.scenario.observation(self.world)
+        if self.check_finite and rows is not None:
+            assert_finite(self.scenario, rows, step, parts, result)
         s = self.world.state.n_slots
         flat = np.concatenate([p.reshape(s, -1) for p in parts.values()], axis=1, dtype=np.float32)
         return flat.reshape(self.n_worlds, self.n_agents, self.obs_dim)
@@ -106,10 +112,13 @@ class BatchedEnv:
         elif isinstance(seed, (int, np.integer)) and not isinstance(seed, bool):
             seeds = [int(seed) + w for w in range(b)]
         else:
-            seeds = list(seed)  # type: ignore[arg-type]
-            if len(seeds) != b or not all(isinstance(s, (int, np.integer)) and not isinstance(s, bool)
-                                          for s in seeds):  # fmt: skip
-                raise ValueError(f"seed must be None, an int or a sequence of {b} ints (one per world), got {seed!r}")
+            if isinstance(seed, (str, bytes)) or not isinstance(seed, (Sequence, np.ndarray)):
+                raise ValueError(f"seed must be None, an int or a sequence of {b} ints (one per world), "
+                                 f"got {type(seed).__name__} {short_repr(seed)}")  # fmt: skip
+            seeds = list(seed)
+            if len(seeds) != b or not all(is_int(s) for s in seeds):
+                raise ValueError(f"seed must be None, an int or a sequence of {b} ints (one per world), "
+                                 f"got {short_repr(seed)}")  # fmt: skip
         for w, s in enumerate(seeds):
             try:
                 self._seeds[w].reset(s)
@@ -117,7 +126,7 @@ class BatchedEnv:
                 raise ValueError(f"world {w}: {exc}") from None
         self._started = True
         self._reset_worlds(np.arange(b))
-        return self._flat_obs()
+        return self._flat_obs(np.ones(self.world.state.n_slots, dtype=bool))
 
     def step(self, actions: np.ndarray) -> BatchStep:
         """Advance every world by one step.
@@ -152,7 +161,7 @@ class BatchedEnv:
         shape = (self.n_worlds, self.n_agents)
         term, trunc = term.reshape(shape), trunc.reshape(shape)
         self.alive &= ~(term | trunc)
-        obs = self._flat_obs()
+        obs = self._flat_obs(acting, int(self.steps.max()), res)
         obs[~self.alive & ~(term | trunc)] = 0.0
         # asarray: numpy's stubs type a reduction over an axis as scalar-or-array; on (B, N) it is (B,)
         done_worlds = np.asarray(~self.alive.any(axis=1))
@@ -160,7 +169,8 @@ class BatchedEnv:
         if done_worlds.any():
             final[done_worlds] = obs[done_worlds]
             self._reset_worlds(np.flatnonzero(done_worlds))
-            obs[done_worlds] = self._flat_obs()[done_worlds]
+            fresh = np.repeat(done_worlds, self.n_agents)
+            obs[done_worlds] = self._flat_obs(fresh)[done_worlds]
         info = {k: v.reshape(shape) for k, v in res.info.items()}
         rewards = res.rewards.reshape(shape).astype(np.float32)
         return BatchStep(obs, rewards, term, trunc, self.alive.copy(), final, done_worlds, info)
