@@ -40,9 +40,9 @@ class BodyConfig:
     """An agent's body and motion limits.
 
     Attributes:
-        radius: Collision radius in metres, in (0, 1e4].
-        max_speed: Speed limit in m/s, in (0, 1e4].
-        max_accel: Acceleration limit in m/s^2, in (0, 1e4].
+        radius: Collision radius in metres, 0.01..1e4.
+        max_speed: Speed limit in m/s, 0.01..1e4.
+        max_accel: Acceleration limit in m/s^2, 0.01..1e4.
         altitude: Flight band ``(low, high)`` in metres: ``0 <= low``, ``high <= 1e4``, ``high - low >= 0.1``.
     """
 
@@ -54,7 +54,7 @@ class BodyConfig:
     def __post_init__(self) -> None:
         coerce_fields(self, "body.")
         for name in ("radius", "max_speed", "max_accel"):
-            check_float(f"body.{name}", getattr(self, name), 0.0, 1e4, lo_open=True)
+            check_float(f"body.{name}", getattr(self, name), 0.01, 1e4)
         lo, hi = check_pair("body.altitude", self.altitude, 0.0, 1e4, strict=True)
         if hi - lo < 0.1:
             raise ValueError(
@@ -67,7 +67,7 @@ class SensingConfig:
     """The proximity sensor (a laser-scanner-like fan of rays).
 
     Attributes:
-        range: Ray length in metres (> 0).
+        range: Ray length in metres, 0.01..1e5.
         n_azimuth: Rays per elevation ring (1..1024); ray 0 points along the heading.
         elevations_deg: Elevation of each ring in degrees (negative looks down), each in [-90, 90]; 1..64
             rings.
@@ -79,7 +79,7 @@ class SensingConfig:
 
     def __post_init__(self) -> None:
         coerce_fields(self, "sensing.")
-        check_float("sensing.range", self.range, 0.0, 1e5, lo_open=True)
+        check_float("sensing.range", self.range, 0.01, 1e5)
         check_int("sensing.n_azimuth", self.n_azimuth, 1, 1024)
         if not 1 <= len(self.elevations_deg) <= MAX_RINGS:
             raise ValueError(
@@ -103,7 +103,7 @@ class ScenarioConfig:
             parameters; ``agentsim_env.motion.actions``).
         physics: ``"kinematic"`` or ``"pymunk"`` (planar contact resolution).
         collisions: Whether collisions are detected (and end the agents hit); a bool.
-        dt: Step length in seconds, in (0, 10].
+        dt: Step length in seconds, 0.001..10.
         max_steps: Steps after which every live agent is truncated, 1..10^9.
         reward: The reward composer's weights.
         comms: Communication (``None``: no bus, overlay, groups stage, inbox or ``comm`` action).
@@ -134,7 +134,7 @@ class ScenarioConfig:
         check_int("n_agents", self.n_agents, 1, MAX_AGENTS)
         check_choice("action_mode", self.action_mode, ACTION_MODES)
         check_choice("physics", self.physics, PHYSICS_MODES)
-        check_float("dt", self.dt, 0.0, 10.0, lo_open=True)
+        check_float("dt", self.dt, 1e-3, 10.0)
         check_int("max_steps", self.max_steps, 1, MAX_STEPS)
 
     def _coerce_nested(self) -> None:

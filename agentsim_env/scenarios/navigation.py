@@ -130,8 +130,8 @@ class NavigationConfig(ScenarioConfig):
         area_per_agent: Square metres per agent when ``map_size`` is ``None``, 10..1e6.
         obstacle_density: Obstacles per square metre, 0..0.01 (at most 1,000,000 obstacles per world; a map too
             crowded for them holds fewer).
-        obstacle_size: ``(low, high)`` obstacle half-width in metres, ``0 <= low <= high <= 100``.
-        obstacle_height: ``(low, high)`` obstacle height in metres, ``0 <= low <= high <= 1e4``.
+        obstacle_size: ``(low, high)`` obstacle half-width in metres, ``0.01 <= low <= high <= 100``.
+        obstacle_height: ``(low, high)`` obstacle height in metres, ``0.01 <= low <= high <= 1e4``.
         goal_radius: Arrival distance in metres, in (0, 1e4].
         arrival_bonus: Reward on arrival, 0..1e6.
         gnss: A ``GnssConfig`` (or dict) adds the noisy GNSS sensor and its ``gnss`` part; ``None``: none.
@@ -164,8 +164,8 @@ class NavigationConfig(ScenarioConfig):
         check_float("obstacle_density", self.obstacle_density, 0.0, 0.01)
         check_float("goal_radius", self.goal_radius, 0.0, 1e4, lo_open=True)
         check_float("arrival_bonus", self.arrival_bonus, 0.0, 1e6)
-        check_pair("obstacle_size", self.obstacle_size, 0.0, 100.0)
-        check_pair("obstacle_height", self.obstacle_height, 0.0, 1e4)
+        check_pair("obstacle_size", self.obstacle_size, 0.01, 100.0)
+        check_pair("obstacle_height", self.obstacle_height, 0.01, 1e4)
         side = self.side
         if side > max_side:
             raise ValueError(f"the map side grows with n_agents x area_per_agent to {side:.0f} m, over the "

@@ -106,7 +106,8 @@ class RelayScenario(Scenario[RelayConfig]):
         sl = st.slots_of_world(w)
         n, g_n, length, width = self.n_agents, c.n_groups, c.length, c.corridor_width
         gaps = rng.uniform(c.gap[0], c.gap[1], n - 1)
-        x0 = c.margin + rng.uniform(0.0, length - 2.0 * c.margin - gaps.sum())
+        # the slack is >= 0 in exact arithmetic (every gap <= gap[1]); max() absorbs the rounding of the sum
+        x0 = c.margin + rng.uniform(0.0, max(length - 2.0 * c.margin - gaps.sum(), 0.0))
         chain = np.column_stack(
             [
                 x0 + np.concatenate([[0.0], np.cumsum(gaps)]),

@@ -28,12 +28,13 @@ class RelayConfig(ScenarioConfig):
         n_groups: Groups (one scout each), 1..64.
         group_size: Agents per group, 2..256 (``None``: from ``n_agents``, else 4).
         corridor_width: Corridor width in metres, ``2 x lateral_spread + 4`` .. 1e4.
-        gap: ``(low, high)`` distance along x between consecutive start points, ``0 < low <= high <= 1e3``.
+        gap: ``(low, high)`` distance along x between consecutive start points,
+            ``2 x body.radius + 0.5 <= low <= high <= 1e3`` (neighbours start clear of each other).
         lateral_spread: Start points lie within this distance of the centre line, 0..1e3 metres.
         target_offset: ``(low, high)`` distance scout -> target, ``0 <= low <= high <= 1e3``.
         obstacle_density: Obstacles per square metre, 0..0.01.
-        obstacle_size: ``(low, high)`` obstacle half-width, ``0 <= low <= high <= 100``.
-        obstacle_height: ``(low, high)`` obstacle height, ``0 <= low <= high <= 1e4``.
+        obstacle_size: ``(low, high)`` obstacle half-width, ``0.01 <= low <= high <= 100``.
+        obstacle_height: ``(low, high)`` obstacle height, ``0.01 <= low <= high <= 1e4``.
         arrival_radius: Arrival distance in metres, in (0, 1e3].
         arrival_bonus: Reward on arrival, 0..1e6.
 
@@ -87,12 +88,10 @@ class RelayConfig(ScenarioConfig):
         check_float("obstacle_density", self.obstacle_density, 0.0, 0.01)
         check_float("arrival_radius", self.arrival_radius, 0.0, 1e3, lo_open=True)
         check_float("arrival_bonus", self.arrival_bonus, 0.0, 1e6)
-        check_pair("gap", self.gap, 0.0, 1e3)
-        if self.gap[0] <= 0:
-            raise ValueError(f"gap[0] must be > 0, got {self.gap[0]}")
+        check_pair("gap", self.gap, 2.0 * self.body.radius + 0.5, 1e3)  # neighbours start clear of each other
         check_pair("target_offset", self.target_offset, 0.0, 1e3)
-        check_pair("obstacle_size", self.obstacle_size, 0.0, 100.0)
-        check_pair("obstacle_height", self.obstacle_height, 0.0, 1e4)
+        check_pair("obstacle_size", self.obstacle_size, 0.01, 100.0)
+        check_pair("obstacle_height", self.obstacle_height, 0.01, 1e4)
         limit = 2.5e4 if self.physics == "pymunk" else 1e5
         if self.length > limit:
             raise ValueError(f"the corridor is (n_agents - 1) x gap[1] + 2 x (target_offset[1] + 5) = "
