@@ -37,7 +37,7 @@ from agentsim_env.motion import MotionLimits, decode_primitive
 from agentsim_env.motion.actions import decode_velocity_unchecked
 from agentsim_env.scenarios.config import ScenarioConfig
 from agentsim_env.sensors.proximity import ProximityConfig
-from agentsim_env.sim.world import StepEvents, World
+from agentsim_env.sim.world import StepEvents, StepScores, World
 
 ConfigT = TypeVar("ConfigT", bound=ScenarioConfig)
 SlotT = TypeVar("SlotT", bound="SlotState")
@@ -351,7 +351,8 @@ def run_step(
     """One step of the pipeline shared by every env front end.
 
     Stage 1 decodes the validated action parts of the acting slots (motion, scenario parts, ``comm``), stages
-    2-8 and 10 run in ``World.step``, stage 9 is the scenario's scoring; slots that ended leave the simulation.
+    2-8 run in ``World.step``, stage 9 is the scenario's scoring (slots that ended leave the simulation), and
+    stage 10 runs the world's step hooks with the scores in ``events.scores``.
 
     Returns:
         The scenario's result and the mask of slots that terminated this step.
@@ -359,8 +360,11 @@ def run_step(
     scenario.apply_actions(world, parts, acting)
     if "comm" in parts:
         world.apply_comm(parts["comm"], acting)
-    events = world.step()
+    events = world.step(hooks=False)
     res = scenario.score(world, events, acting)
     terminated = acting & (res.terminated | ~world.state.online)
     world.set_offline(np.flatnonzero(terminated))
+    if world.hooks:  # 10. step hooks, with the scores
+        events.scores = StepScores(acting, res.rewards, terminated, res.info)
+        world.run_hooks(events)
     return res, terminated

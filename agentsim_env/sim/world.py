@@ -10,7 +10,9 @@ stage 9, scoring and observing, are the scenario's; ``scenarios.base.run_step`` 
 6. groups (with comms): heartbeat tick; the world takes the timed-out agents offline (``groups``)
 7. comms (optional): collision messages, heartbeats, bus deliveries, one overlay hop (``comms.CommsStack``)
 8. sensors: every sensor of the world on the step's shared grid (``sensors``; the proximity scan first)
-10. step hooks: callables ``hook(world, events)`` (the recorder, the viewer's stream, ...)
+10. step hooks: callables ``hook(world, events)`` (the recorder, the viewer's stream, ...), after the scenario
+    scored the step (stage 9, ``scenarios.base.run_step``), so ``events.scores`` holds the rewards, terminations
+    and infos; a world stepped on its own runs them at the end of ``step`` (``events.scores`` is then ``None``)
 
 Every stage is a subsystem with the protocol of ``core.pipeline``: it reads the step context and returns
 events; it never calls back into the world or another subsystem. The world hands one stage's events to the next
@@ -50,6 +52,23 @@ StepHook = Callable[["World", "StepEvents"], None]
 
 
 @dataclass(slots=True)
+class StepScores:
+    """Stage 9's result, handed to the step hooks (arrays over all slots).
+
+    Attributes:
+        acting: ``(S,)`` bool, the slots that acted this step.
+        rewards: ``(S,)`` rewards.
+        terminated: ``(S,)`` bool, slots that ended this step (goal, collision, timeout).
+        info: The scenario's per-slot info arrays.
+    """
+
+    acting: np.ndarray
+    rewards: np.ndarray
+    terminated: np.ndarray
+    info: dict[str, np.ndarray]
+
+
+@dataclass(slots=True)
 class StepEvents:
     """What happened in one world step (arrays over all worlds).
 
@@ -61,6 +80,7 @@ class StepEvents:
         groups: Group changes of the step (stage 6), or None without comms.
         payloads: Landings (stage 4), or None without payloads.
         readings: Every sensor's reading by sensor name (stage 8).
+        scores: Stage 9's rewards, terminations and infos (``None`` when the world was stepped on its own).
     """
 
     collisions: CollisionEvents
@@ -70,6 +90,7 @@ class StepEvents:
     groups: GroupEvents | None = None
     payloads: PayloadEvents | None = None
     readings: dict[str, Any] = field(default_factory=dict)
+    scores: StepScores | None = None
 
 
 class World:
@@ -233,8 +254,13 @@ class World:
         st = self.state
         self.agent_grid = ctx.grid = build_grid(self.grid_spec, st.pos, st.world_id, st.online)
 
-    def step(self) -> StepEvents:
-        """Advance every world by one ``dt``: stages 2-8, then the step hooks (10)."""
+    def step(self, *, hooks: bool = True) -> StepEvents:
+        """Advance every world by one ``dt``: stages 2-8, then the step hooks (10).
+
+        Args:
+            hooks: Run the step hooks now; ``scenarios.base.run_step`` passes False and calls ``run_hooks``
+                after the scenario scored the step.
+        """
         cfg, st = self.config, self.state
         ctx = self._context()
         out = ctx.outputs
@@ -271,6 +297,11 @@ class World:
         self.step_count += 1
         self.tick += 1
         self.last_events = StepEvents(events, went, timed_out, comm_events, group_events, landed, readings)
-        for hook in self.hooks:  # 10. step hooks
-            hook(self, self.last_events)
+        if hooks:
+            self.run_hooks(self.last_events)
         return self.last_events
+
+    def run_hooks(self, events: StepEvents) -> None:
+        """Stage 10: every step hook, in the order they were added."""
+        for hook in self.hooks:
+            hook(self, events)
