@@ -9,7 +9,7 @@ timing errors) from the other, so a world's objects never depend on the other wo
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -26,9 +26,11 @@ class PayloadEvents:
 
     Attributes:
         landed: Ids of the objects that landed this step, ascending (index them with ``objects.index_of``).
+        released: Ids of the objects released since the previous step (stage 1 of this step), in release order.
     """
 
     landed: NDArray[np.int64]
+    released: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
 
 
 class PayloadStage:
@@ -49,6 +51,7 @@ class PayloadStage:
         self.n_worlds = int(n_worlds)
         # each world's streams come with its reset_world (a draw for a world never reset raises)
         self._fall_rng: list[np.random.Generator | None] = [None] * self.n_worlds
+        self._released: list[NDArray[np.int64]] = []
         self._release_rng: list[np.random.Generator | None] = [None] * self.n_worlds
 
     def reset_world(self, w: int, rng: np.random.Generator) -> None:
@@ -75,8 +78,13 @@ class PayloadStage:
         Returns:
             The new objects' ids.
         """
-        return self.objects.release(owner, world, pos, vel, t, zone, target_xy, self._release_rng)
+        ids = self.objects.release(owner, world, pos, vel, t, zone, target_xy, self._release_rng)
+        if ids.size:
+            self._released.append(ids)
+        return ids
 
     def step(self, ctx: StepContext) -> PayloadEvents:
         """Stage 4: advance every falling object by ``dt``; report the landings."""
-        return PayloadEvents(self.objects.step(ctx.dt, self.wind, self._fall_rng))
+        released = np.concatenate(self._released) if self._released else np.zeros(0, dtype=np.int64)
+        self._released = []
+        return PayloadEvents(self.objects.step(ctx.dt, self.wind, self._fall_rng), released)
