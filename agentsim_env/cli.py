@@ -475,6 +475,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     w.add_argument("--quiet", action="store_true", help="print only the compile notice")
     w.set_defaults(func=cmd_warmup)
+    from agentsim_env.cli_replay import add_replay_command
+
+    add_replay_command(sub)
+    from agentsim_env.cli_store import add_store_commands
+
+    add_store_commands(sub)
     return p
 
 

@@ -30,6 +30,8 @@ LAYERS: dict[str, float] = {
     "train": 8,
     "cli": 8,
     "cli_set": 7.5,  # the --set parser of cli; imports nothing from the package
+    "cli_replay": 7.5,  # the replay subcommand of cli; over the recorder and render
+    "cli_store": 7.5,  # the export and runs subcommands of cli; over the recorder
 }
 # folders installed under the package's name (pyproject's package-dir)
 MAPPED = {"policies": ROOT / "policies", "train": ROOT / "train"}

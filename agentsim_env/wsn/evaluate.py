@@ -37,7 +37,7 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from agentsim_env.core.validation import coerce_fields
+from agentsim_env.core.validation import build_config, coerce_fields
 from agentsim_env.wsn.connectivity import connectivity, unit_disk_edges
 from agentsim_env.wsn.coverage import (
     DensityProfile,
@@ -104,8 +104,10 @@ class WsnConfig:
         _positive(self.r_s, "r_s")
         _positive(self.r_c, "r_c")
         _positive(self.coverage_resolution, "coverage_resolution")
+        if isinstance(self.radio, dict):  # e.g. a config read back from JSON (a recorded run)
+            object.__setattr__(self, "radio", build_config(RadioParams, self.radio, label="wsn.radio"))
         if not isinstance(self.radio, RadioParams):
-            raise ValueError(f"radio must be a RadioParams, got {type(self.radio).__name__}")
+            raise ValueError(f"wsn.radio must be a RadioParams or a dict of its fields, got {type(self.radio).__name__}")
         for name in ("k", "knn_k"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
