@@ -25,11 +25,25 @@ ZONES_ACCEPTED = ("a zones JSON path (str or Path), a dict in the zones format (
 """What the ``zones`` field accepts (named in its errors)."""
 
 
+_RANGES = {
+    "sensor_mass": (1e-4, 100.0),  # kg
+    "sensor_cd": (0.01, 10.0),
+    "sensor_area": (1e-6, 10.0),  # m^2
+    "battery_j": (1.0, 1e9),  # J
+    "target_scale": (1e-3, 1e6),
+    "grid_extent": (1.0, 1e5),  # m
+}
+"""Allowed ``(low, high)`` of the physical fields (outside them the physics and rewards overflow)."""
+
+
 @dataclass(frozen=True)
 class UavReleaseConfig(ScenarioConfig):
     """Configuration of ``uav_release`` (validated; nested parts accept dicts of their fields).
 
-    The fleet size is ``n_agents`` (``n_uavs`` is accepted as an alias key and readable as a property).
+    The fleet size is ``n_agents``, 1..1,024 (``n_uavs`` is accepted as an alias key and readable as a property).
+    Ranges: ``payload`` 1..100,000 sensors per UAV; ``sensor_mass`` 1e-4..100 kg; ``sensor_cd`` 0.01..10;
+    ``sensor_area`` 1e-6..10 m^2; ``battery_j`` 1..1e9 J; ``target_scale`` 1e-3..1e6; ``grid_extent``
+    1..1e5 m; ``grid_cells`` 1..64; reward weights ``w_*`` 0..1e6.
     """
 
     nested: ClassVar[dict[str, type]] = {**ScenarioConfig.nested, "wind": WindConfig, "scatter": ScatterConfig,
@@ -73,10 +87,10 @@ class UavReleaseConfig(ScenarioConfig):
         super().__post_init__()
         check_int("n_agents", self.n_agents, 1, 1024)
         check_int("payload", self.payload, 1, 100_000)
-        for name in ("sensor_mass", "sensor_cd", "sensor_area", "battery_j", "target_scale", "grid_extent"):
-            check_float(name, getattr(self, name), 0.0, lo_open=True)
+        for name, (lo, hi) in _RANGES.items():
+            check_float(name, getattr(self, name), lo, hi)
         for name in ("w_coverage", "w_fidelity", "w_energy", "w_miss", "w_out", "w_lcc", "w_lifetime"):
-            check_float(name, getattr(self, name), 0.0)
+            check_float(name, getattr(self, name), 0.0, 1e6)
         check_int("grid_cells", self.grid_cells, 1, 64)
         zs = self.zone_set()
         object.__setattr__(self, "zones", zs)
