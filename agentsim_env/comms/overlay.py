@@ -247,12 +247,22 @@ class Overlay:
     def drop_slots(self, slots: np.ndarray) -> None:
         """Stop relaying at ``slots`` (e.g. a world being reset): frontier entries there are removed.
 
-        A flood's frontier lies in its origin's world, so dropping a whole world's slots ends its floods at the
-        next ``advance``; readers elsewhere are untouched.
+        A flood's frontier lies in its origin's world, so dropping a whole world's slots ends its floods here
+        (their rows go back to the free list, so resets never accumulate dead floods); readers elsewhere are
+        untouched.
         """
         if self._front_n.size:
             keep = ~np.isin(self._front_n, np.asarray(slots, dtype=np.int64))
+            if keep.all():
+                return
+            hit = np.unique(self._front_f[~keep])
             self._front_f, self._front_n = self._front_f[keep], self._front_n[keep]
+            # a flood left without any frontier entry can never spread again: end it now (its row is reused)
+            ended = hit[~np.isin(hit, self._front_f)]
+            if ended.size:
+                self._active[ended] = False
+                self._free[self._n_free : self._n_free + ended.size] = ended[::-1]
+                self._n_free += ended.size
 
     def is_active(self, flood: int) -> bool:
         """Whether flood id ``flood`` is still spreading."""
