@@ -9,7 +9,7 @@ export OMP_NUM_THREADS ?= 1
 export SDL_VIDEODRIVER ?= dummy
 export MPLBACKEND ?= Agg
 
-.PHONY: run test test-fast bench lint install clean
+.PHONY: run test test-fast bench fuzz lint install clean
 
 $(STAMP): pyproject.toml constraints.txt
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -33,6 +33,10 @@ test-fast: $(STAMP)
 
 bench: $(STAMP)
 	$(PY) benchmarks/run_all.py
+
+# hypothesis fuzz of every scenario, long profile: AGENTSIM_FUZZ_EXAMPLES examples in all (tests/test_fuzz.py)
+fuzz: $(STAMP)
+	AGENTSIM_FUZZ_EXAMPLES=$${AGENTSIM_FUZZ_EXAMPLES:-10000} $(PY) -m pytest -q -p no:randomly tests/test_fuzz.py
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check agentsim_env policies train tests benchmarks

@@ -60,7 +60,7 @@ CONSTRUCTION: list[Case] = [
     ("too many obstacles", lambda: agentsim_env.make("navigation", map_size=1e5, obstacle_density=0.01), ValueError,
      ("obstacle_density", "obstacles per world")),
     ("pymunk map", lambda: agentsim_env.make("navigation", map_size=5e4, physics="pymunk"), ValueError,
-     ("map_size", "25000")),
+     ("map_size", "20000")),
     ("relay corridor", lambda: agentsim_env.make("relay", n_groups=64, group_size=256, gap=(900, 1000)), ValueError,
      ("corridor", "gap", "limit")),
     ("uav payload", lambda: agentsim_env.make("uav_release", payload=10**9), ValueError, ("payload", "100000")),

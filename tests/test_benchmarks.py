@@ -192,3 +192,23 @@ def test_navigation_observe_kernel_equals_numpy_statement() -> None:
         assert got[k].dtype == np.float32 and got[k].shape == v.shape
         # cos / sin may differ in the last float64 bit between numpy builds and libm: 1 float32 ulp at most
         np.testing.assert_allclose(got[k], v, rtol=0, atol=1.2e-7 if k == "self" else 0, err_msg=k)
+
+
+@pytest.mark.slow
+def test_soak_tiny_run_prints_its_table_and_plot(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    import soak
+
+    png = tmp_path / "rss.png"
+    rc = soak.main(
+        ["--steps", "2000", "--missions", "2", "--agents", "20", "--no-progress", "--plot", str(png)]
+    )
+    out = capsys.readouterr().out
+    assert rc in (0, 1)  # growth over so short a run is noise: only the output is checked here
+    assert out.startswith("machine: ") and png.stat().st_size > 0
+    ((head, rows),) = _tables(out)
+    assert head[0] == "phase" and head[-1] == "result" and len(rows) == 2
+    for row in rows:
+        assert len(row) == len(head) and row[-1] in {"PASS", "FAIL"}
+        for cell in row[2:-1]:
+            assert math.isfinite(float(cell.replace(",", "").replace("+", ""))), (row[0], cell)
+    assert "soak" not in [p.stem for p in run_all.benchmarks()]  # make bench never runs it

@@ -40,8 +40,8 @@ class WindConfig:
         direction: Direction the wind blows toward, radians from +x; ``None`` draws one per episode.
         randomise_speed: ``(lo, hi)`` with ``0 <= lo <= hi``: draw the speed uniformly per episode.
         profile: Height profile, one of ``WIND_PROFILES``.
-        z0: Roughness length in metres (> 0; 0.03 for grass or open land).
-        z_ref: Reference height in metres (> z0 for the log law, > 0 otherwise).
+        z0: Roughness length in metres, 1e-4..10 (0.03 for grass or open land).
+        z_ref: Reference height in metres, ``max(2 x z0, 0.1)``..1000.
         gust_sigma_frac: Gust standard deviation as a fraction of the mean speed (>= 0).
         gust_tau: Gust correlation time in seconds (> 0).
     """
@@ -68,10 +68,13 @@ class WindConfig:
                 raise ValueError(f"randomise_speed must be None or (lo, hi) with 0 <= lo <= hi, got {rs!r}")
         if self.profile not in WIND_PROFILES:
             raise ValueError(f"profile must be one of {WIND_PROFILES}, got {self.profile!r}")
-        if not (math.isfinite(self.z0) and self.z0 > 0.0):
-            raise ValueError(f"z0 must be a finite number > 0, got {self.z0!r}")
-        if not (math.isfinite(self.z_ref) and self.z_ref > self.z0):
-            raise ValueError(f"z_ref must be a finite number > z0 ({self.z0}), got {self.z_ref!r}")
+        if not (math.isfinite(self.z0) and 1e-4 <= self.z0 <= 10.0):
+            raise ValueError(f"wind.z0 must be a number in [0.0001, 10] (metres), got {self.z0!r}")
+        if not (math.isfinite(self.z_ref) and max(2.0 * self.z0, 0.1) <= self.z_ref <= 1e3):
+            raise ValueError(
+                f"wind.z_ref must be a number in [max(2 x z0, 0.1), 1000] = [{max(2.0 * self.z0, 0.1):g}, 1000] "
+                f"(metres), got {self.z_ref!r}"
+            )
         if not (math.isfinite(self.gust_sigma_frac) and self.gust_sigma_frac >= 0.0):
             raise ValueError(f"gust_sigma_frac must be a finite number >= 0, got {self.gust_sigma_frac!r}")
         if not (math.isfinite(self.gust_tau) and self.gust_tau > 0.0):

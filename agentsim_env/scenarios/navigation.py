@@ -59,7 +59,7 @@ from agentsim_env.sim import StepEvents, World, WorldConfig
 SELF_DIM, TASK_DIM = 8, 4
 MAX_SIDE = 1e5
 """Largest map side in metres (100 km)."""
-MAX_SIDE_PYMUNK = 2.5e4
+MAX_SIDE_PYMUNK = 2e4
 """Largest map side with ``physics="pymunk"`` (its worlds share one space, 1e5 m apart)."""
 MAX_OBSTACLES = 1_000_000
 """Most obstacles per world."""
@@ -125,7 +125,7 @@ class NavigationConfig(ScenarioConfig):
 
     Attributes:
         n_groups: Groups the agents are split into, 1..n_agents (``None``: ``min(2, n_agents)``).
-        map_size: Side of the square map in metres, 10..1e5 (2.5e4 with ``physics="pymunk"``); ``None``: grows
+        map_size: Side of the square map in metres, 10..1e5 (2e4 with ``physics="pymunk"``); ``None``: grows
             with the agent count, ``max(60, sqrt(n_agents x area_per_agent))``.
         area_per_agent: Square metres per agent when ``map_size`` is ``None``, 10..1e6.
         obstacle_density: Obstacles per square metre, 0..0.01 (at most 1,000,000 obstacles per world; a map too

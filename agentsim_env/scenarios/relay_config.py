@@ -39,7 +39,7 @@ class RelayConfig(ScenarioConfig):
         arrival_bonus: Reward on arrival, 0..1e6.
 
     The corridor (``(n_agents - 1) x gap[1] + 2 x (target_offset[1] + 5)`` metres) must be at most 1e5 m
-    (2.5e4 m with ``physics="pymunk"``).
+    (2e4 m with ``physics="pymunk"``).
     """
 
     n_agents: int | None = None  # type: ignore[assignment]  # None: n_groups x group_size
@@ -92,7 +92,7 @@ class RelayConfig(ScenarioConfig):
         check_pair("target_offset", self.target_offset, 0.0, 1e3)
         check_pair("obstacle_size", self.obstacle_size, 0.01, 100.0)
         check_pair("obstacle_height", self.obstacle_height, 0.01, 1e4)
-        limit = 2.5e4 if self.physics == "pymunk" else 1e5
+        limit = 2e4 if self.physics == "pymunk" else 1e5
         if self.length > limit:
             raise ValueError(f"the corridor is (n_agents - 1) x gap[1] + 2 x (target_offset[1] + 5) = "
                              f"{self.length:.0f} m long, over the {limit:.0f} m limit"

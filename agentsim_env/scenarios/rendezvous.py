@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from agentsim_env.core.validation import check_float
 from agentsim_env.scenarios.base import Scenario, SlotState, StepResult, slot
 from agentsim_env.scenarios.config import ScenarioConfig
 from agentsim_env.sensors.proximity import ProximitySensor
@@ -20,11 +21,17 @@ from agentsim_env.sim import StepEvents, World, WorldConfig
 
 @dataclass(frozen=True)
 class RendezvousConfig(ScenarioConfig):
-    """``rendezvous``: the shared fields plus the map side, the meeting radius and the bonus."""
+    """``rendezvous``: the shared fields plus the map side (10..1e4 m), the meeting radius (0.1..1e4 m), the bonus."""
 
     side: float = 60.0
     radius: float = 4.0
     bonus: float = 10.0
+
+    def __post_init__(self) -> None:
+        super().__post_init__()  # the shared fields; then ours, each error naming the field and its range
+        check_float("side", self.side, 10.0, 1e4)
+        check_float("radius", self.radius, 0.1, 1e4)
+        check_float("bonus", self.bonus, 0.0, 1e6)
 
 
 @dataclass(slots=True)

@@ -8,6 +8,7 @@ for the shipped default file. The fleet's payload must hold every zone's sensors
 
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
@@ -42,8 +43,9 @@ class UavReleaseConfig(ScenarioConfig):
 
     The fleet size is ``n_agents``, 1..1,024 (``n_uavs`` is accepted as an alias key and readable as a property).
     Ranges: ``payload`` 1..100,000 sensors per UAV; ``sensor_mass`` 1e-4..100 kg; ``sensor_cd`` 0.01..10;
-    ``sensor_area`` 1e-6..10 m^2; ``battery_j`` 1..1e9 J; ``target_scale`` 1e-3..1e6; ``grid_extent``
-    1..1e5 m; ``grid_cells`` 1..64; reward weights ``w_*`` 0..1e6.
+    ``sensor_area`` 1e-6..10 m^2, with the sensors' terminal fall speed ``sqrt(2 m g / (rho cd A))`` at least
+    1 m/s; ``battery_j`` 1..1e9 J; ``target_scale`` 1e-3..1e6; ``grid_extent`` 1..1e5 m; ``grid_cells``
+    1..64; reward weights ``w_*`` 0..1e6; with ``physics="pymunk"`` the zones' map at most 20 km.
     """
 
     nested: ClassVar[dict[str, type]] = {**ScenarioConfig.nested, "wind": WindConfig, "scatter": ScatterConfig,
@@ -92,8 +94,17 @@ class UavReleaseConfig(ScenarioConfig):
         for name in ("w_coverage", "w_fidelity", "w_energy", "w_miss", "w_out", "w_lcc", "w_lifetime"):
             check_float(name, getattr(self, name), 0.0, 1e6)
         check_int("grid_cells", self.grid_cells, 1, 64)
+        v_t = math.sqrt(2.0 * self.sensor_mass * 9.81 / (1.225 * self.sensor_cd * self.sensor_area))
+        if v_t < 1.0:
+            raise ValueError(
+                f"sensor_mass, sensor_cd and sensor_area give a terminal fall speed of {v_t:.3g} m/s; it must be "
+                "at least 1 m/s (sqrt(2 m g / (rho cd A)) >= 1) or sensors drift for minutes: raise sensor_mass "
+                "or lower sensor_cd or sensor_area"
+            )
         zs = self.zone_set()
         object.__setattr__(self, "zones", zs)
+        if self.physics == "pymunk" and max(zs.map_size) > 2e4:
+            raise ValueError(f"zones: map_size {list(zs.map_size)} is over 20000 m, the limit with physics='pymunk'")
         validate_against_payload(zs, self.n_agents, self.payload)
 
     @property

@@ -37,7 +37,9 @@ class DeploymentTracker:
         phi = np.zeros(pts.shape[0])
         for k, (z, prof) in enumerate(zip(zones.zones, self.profiles)):
             inside = np.flatnonzero(self.grid.member[:, k])
-            r = np.linalg.norm(pts[inside] - centres[k], axis=1)
+            # a lattice point on the centre stands for its cell: a power-law density (infinite at r = 0) is
+            # read a quarter cell out, so phi stays finite
+            r = np.maximum(np.linalg.norm(pts[inside] - centres[k], axis=1), 0.25 * resolution)
             d = z.weight * prof.density(r)
             if inside.size and not d.sum() > 0:  # a profile narrower than the lattice: its mass on the nearest point
                 d[np.argmin(r)] = z.weight / (resolution * resolution)

@@ -20,13 +20,13 @@ Each ``{zone}`` object:
 field        type     default  meaning
 ============ ======== ======== ======================================================================
 centre       [x, y]   required centroid (m); the whole disc must lie inside the map
-radius       number   required disc radius (m), > 0
+radius       number   required disc radius (m), 0.5..100000
 n_sensors    integer  required sensors allotted to the zone, 1..100,000
 profile      string   "gauss"  one of ``PROFILE_KINDS``: "uniform", "power", "gauss", "linear"
 alpha        number   1.0      power-law exponent, 0 <= alpha < 2 (``power`` only; 1 is R-random)
 sigma        number   null     Gaussian width (m), radius / 1000 .. 1000 x radius; null: radius / 2 (gauss)
 floor        number   0.0      uniform share of the mass, 0 <= floor < 1 (keeps the rim connected)
-weight       number   1.0      priority used to allocate UAVs across zones, > 0
+weight       number   1.0      priority used to allocate UAVs across zones, 0.001..1000
 altitude     number   null     release altitude (m AGL), 0 < altitude <= 120; null: scenario default
 name         string   null     label used in messages, logs and plots
 ============ ======== ======== ======================================================================
@@ -102,7 +102,7 @@ def _check_zone_values(label: str, v: dict[str, Any]) -> None:
         return f"{label}: field {name!r}"
 
     _pair(f("centre"), v["centre"])
-    check_float(f("radius"), v["radius"], 0.0, lo_open=True)
+    check_float(f("radius"), v["radius"], 0.5, MAX_MAP_SIDE)
     check_int(f("n_sensors"), v["n_sensors"], 1, MAX_SENSORS_PER_ZONE)
     if not isinstance(v["profile"], str):
         raise ValueError(f"{f('profile')} must be a string, one of {PROFILE_KINDS}, got {short_repr(v['profile'])}")
@@ -116,7 +116,7 @@ def _check_zone_values(label: str, v: dict[str, Any]) -> None:
     check_float(f("floor"), v["floor"], 0.0)
     if v["floor"] >= 1.0:
         raise ValueError(f"{f('floor')} must satisfy 0 <= floor < 1, got {v['floor']}")
-    check_float(f("weight"), v["weight"], 0.0, lo_open=True)
+    check_float(f("weight"), v["weight"], 1e-3, 1e3)
     if v["altitude"] is not None:
         check_float(f("altitude"), v["altitude"], 0.0, MAX_ALTITUDE, lo_open=True)
     if v["name"] is not None and not isinstance(v["name"], str):
