@@ -260,6 +260,23 @@ def _progress(it: Any, total: int, desc: str, enabled: bool) -> Any:
     return tqdm(it, total=total, desc=desc, unit="ep")
 
 
+def _check_record(path: str | None) -> None:
+    """Fail before any rollout when ``--record PATH`` cannot be recorded to: a missing folder, a file that is not
+    a store or a store of another schema version (a missing file is created by the first recording)."""
+    if not path:
+        return
+    from agentsim_env.recorder.schema import StoreError, connect
+
+    p = Path(path)
+    try:
+        if p.exists():
+            connect(p, create=False).close()
+        elif not p.parent.is_dir():
+            raise StoreError(f"{p}: the folder {str(p.parent)!r} does not exist")
+    except StoreError as exc:
+        raise ValueError(f"--record {exc}") from None
+
+
 def cmd_run(args: argparse.Namespace) -> int:
     """Roll out the baseline over seeds; print success and return statistics; draw the first episode."""
     _check_count("--episodes", args.episodes)
@@ -276,6 +293,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     policy_name = args.policy or names[0]
     if policy_name not in names:
         raise ValueError(f"--policy must be one of {names} for {args.scenario!r}, got {policy_name!r}")
+    _check_record(getattr(args, "record", None))
     created = prepare_out(args.out) if args.out else []
     try:
         return _run(args, config, policy_name)
@@ -294,15 +312,27 @@ def _run(args: argparse.Namespace, config: dict[str, Any], policy_name: str) -> 
     env = agentsim_env.make(args.scenario, render_mode="human" if args.render else None, **config)
     if args.fps is not None:
         env.metadata["render_fps"] = args.fps  # the live window paces itself with this rate
+    store = getattr(args, "record", None)
+    if store:  # every episode of the rollout, in one run of the store
+        from agentsim_env.recorder import record
+
+        label = f"agentsim run {args.scenario} --policy {policy_name} --seed {args.seed} --episodes {args.episodes}"
+        env = record(env, store, label=label + (" --set " + " ".join(args.set) if args.set else ""))
+        store_run = env.recorder.run
     policy = make_policy(args.scenario, env, policy_name)
     rows = []
     traj = None
-    for k in _progress(range(args.episodes), args.episodes, args.scenario, not args.quiet):
-        recorder = TrajectoryRecorder() if k == 0 and args.out else None
-        ep = run_episode(env, policy, args.seed + k, on_step=recorder)
-        if recorder is not None:
-            traj = recorder.result(env)
-        rows.append((ep.seed, ep.steps, float(np.mean(list(ep.returns.values()))), ep.info_sums))
+    try:
+        for k in _progress(range(args.episodes), args.episodes, args.scenario, not args.quiet):
+            recorder = TrajectoryRecorder() if k == 0 and args.out else None
+            ep = run_episode(env, policy, args.seed + k, on_step=recorder)
+            if recorder is not None:
+                traj = recorder.result(env)
+            rows.append((ep.seed, ep.steps, float(np.mean(list(ep.returns.values()))), ep.info_sums))
+    except BaseException:
+        if store:
+            env.recorder.finish("incomplete")
+        raise
     mark_warm()
     n = env.scenario.n_agents
     keys = sorted({k for *_, s in rows for k in s if k in ("arrived", "collided", "released", "landed")})
@@ -322,6 +352,10 @@ def _run(args: argparse.Namespace, config: dict[str, Any], policy_name: str) -> 
         path = plot_trajectories(traj, Path(args.out) / name, title)
         print(f"trajectories written to {path}")
     env.close()
+    if store:
+        failed = env.recorder.error
+        stopped = f"; recording stopped early: {failed}" if failed else ""
+        print(f"recorded to {store} (run {store_run}){stopped}")
     return 0
 
 
@@ -373,11 +407,25 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     overrides = parse_set(scenario_class("uav_release").config_cls, args.set or [])
     resolve_zones(args.zones)
     resolve_strategies(args.strategies)
+    store = getattr(args, "record", None) or None
+    _check_record(store)
     created = prepare_out(args.out)
     try:
         announce_compile()
-        grid = run_grid(args.zones, args.strategies, seeds, overrides, progress=not args.quiet)
-        paths, _ = write_outputs(grid, args.out, plots=not args.no_plots)
+        if store is None:
+            grid = run_grid(args.zones, args.strategies, seeds, overrides, progress=not args.quiet)
+            paths, _ = write_outputs(grid, args.out, plots=not args.no_plots)
+        else:  # every mission recorded; sensors.csv and runs.csv read back from the store
+            from agentsim_env.recorder import record
+            from agentsim_env.recorder.read import open_store
+
+            def record_env(env: Any, label: str) -> Any:
+                return record(env, store, label=label)
+
+            grid = run_grid(args.zones, args.strategies, seeds, overrides, progress=not args.quiet,
+                            record_env=record_env)  # fmt: skip
+            with open_store(store) as st:
+                paths, _ = write_outputs(grid, args.out, plots=not args.no_plots, store=st.con)
     except BaseException:
         remove_created(created)
         raise
@@ -389,6 +437,9 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     print("\nwritten:")
     for p in paths:
         print(f"  {p}")
+    if store:
+        flown = [r.store_run for r in grid.runs if r.store_run is not None]
+        print(f"  {store} ({len(flown)} missions recorded, runs {min(flown)}-{max(flown)})")
     return 0
 
 
@@ -443,6 +494,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "(default: real time)")  # fmt: skip
     r.add_argument("--out", default="outputs", help="folder for the trajectory PNG ('' for none)")
     r.add_argument("--quiet", action="store_true", help="no progress bar")
+    r.add_argument("--record", default=None, metavar="PATH", help="record every episode to this SQLite store "
+                   "(one run; created when missing; see 'agentsim runs')")  # fmt: skip
     r.set_defaults(func=cmd_run)
     s = sub.add_parser("scenarios", help="list the registered scenarios")
     s.set_defaults(func=cmd_scenarios)
@@ -466,6 +519,9 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--out", default="outputs/evaluation", help="output folder")
     e.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     e.add_argument("--quiet", action="store_true", help="no progress bar")
+    e.add_argument("--record", default=None, metavar="PATH", help="record every mission to this SQLite store "
+                   "(a run each, labelled zones= strategy= seed=); sensors.csv and runs.csv are then read "
+                   "back from it")  # fmt: skip
     e.set_defaults(func=cmd_evaluate)
     w = sub.add_parser(
         "warmup",

@@ -7,6 +7,8 @@ all agents (parameter sharing). Usage::
 
 The model is saved as ``<out>/model.zip`` with ``<out>/config.json``; ``evaluate`` rolls it out in the
 ParallelEnv with flat observations and reports the mean return and the scenario's success counters.
+``--record run.db`` records the training env (every world, every step, automatic resets as new episodes) to an
+SQLite store (``agentsim_env.recorder``) as one run; it is marked ``complete`` when training ends.
 """
 
 from __future__ import annotations
@@ -29,6 +31,7 @@ def train(
     config: dict[str, Any] | None = None,
     ppo_kwargs: dict[str, Any] | None = None,
     progress: bool = False,
+    record: str | Path | None = None,
 ) -> Any:
     """Train PPO on ``scenario`` and return the SB3 model (saved under ``out`` when given).
 
@@ -41,6 +44,7 @@ def train(
         config: Scenario config keys.
         ppo_kwargs: Extra keyword arguments of ``stable_baselines3.PPO``.
         progress: Show a tqdm progress bar (on stderr) of the agent-steps done.
+        record: An SQLite store to record the training env to (one run; ``agentsim_env.recorder.record``).
     """
     import torch
     from stable_baselines3 import PPO
@@ -50,6 +54,12 @@ def train(
 
     torch.set_num_threads(1)
     vec = AgentSimVecEnv(scenario, worlds, seed=seed, **(config or {}))
+    recorded: Any = None
+    if record is not None:  # the VecEnv steps the recorded BatchedEnv (every attribute is the wrapped env's)
+        from agentsim_env.recorder import record as record_env
+
+        recorded = record_env(vec.batch, record, label=f"train.ppo {scenario} worlds={worlds} seed={seed}")
+        vec.batch = recorded
     kw: dict[str, Any] = {
         "n_steps": 64,
         "batch_size": 512,
@@ -59,8 +69,15 @@ def train(
         "verbose": 0,
     }
     kw.update(ppo_kwargs or {})
-    model = PPO("MlpPolicy", vec, seed=seed, device="cpu", **kw)
-    model.learn(total_timesteps=timesteps, callback=TqdmProgressBar(desc=scenario) if progress else None)
+    try:
+        model = PPO("MlpPolicy", vec, seed=seed, device="cpu", **kw)
+        model.learn(total_timesteps=timesteps, callback=TqdmProgressBar(desc=scenario) if progress else None)
+    except BaseException:
+        if recorded is not None:
+            recorded.recorder.finish("incomplete")
+        raise
+    if recorded is not None:
+        recorded.close()  # the run is complete
     if out is not None:
         path = Path(out)
         path.mkdir(parents=True, exist_ok=True)
@@ -116,9 +133,18 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--eval-seeds", type=int, default=10)
     p.add_argument("--out", default=None)
+    p.add_argument("--record", default=None, metavar="PATH",
+                   help="record the training env to this SQLite store (one run)")  # fmt: skip
     args = p.parse_args(argv)
-    model = train(args.scenario, timesteps=args.timesteps, worlds=args.worlds, seed=args.seed, out=args.out,
-                  progress=True)  # fmt: skip
+    from agentsim_env.recorder import StoreError
+
+    try:
+        model = train(args.scenario, timesteps=args.timesteps, worlds=args.worlds, seed=args.seed, out=args.out,
+                      progress=True, record=args.record)  # fmt: skip
+    except StoreError as exc:
+        p.error(f"--record {exc}")  # raised before training: a write failing later only stops the recording
+    if args.record is not None:
+        print(f"training env recorded to {args.record}")
     res = evaluate(model, args.scenario, list(range(1000, 1000 + args.eval_seeds)))
     print("| metric | value |\n|---|---|")
     for k, v in res.items():

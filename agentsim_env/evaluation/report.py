@@ -6,6 +6,18 @@ module adds the CSV files, the Markdown tables and ``write_outputs``.
 Files are written only after every run succeeded, each through a temporary file renamed into place, so a
 failed or interrupted evaluation leaves no partial file that looks complete (files of an earlier evaluation in
 the same folder are left as they were; ``summary.md`` lists the files of its own evaluation).
+
+When the missions were recorded (``agentsim evaluate --record run.db``), ``write_outputs(..., store=con)`` reads
+the flown missions' sensor rows back from the store's open connection (``store_rows``): ``sensors`` joined with ``runs`` gives
+every released sensor with its UAV, zone, release point and time and landing point and time. The store does
+not record a sensor's release velocity or target point, so ``vx_rel, vy_rel, x_target, y_target`` are joined
+in from the evaluation by sensor id. The store holds no table for the evaluation's metrics either: the
+``runs.csv`` rows are the evaluation's, checked against the store (``steps`` = the run's last recorded step,
+``sensors_released`` / ``sensors_landed`` = its rows of ``sensors``). Any disagreement between the store and the
+evaluation is an error, and nothing is written. The teleport reference is not flown: its rows are the
+evaluation's. (The store is read with SQL through the connection the caller opened, e.g. with
+``agentsim_env.recorder.read.open_store``, which checks its schema version: this package sits beside the
+recorder and does not import it.)
 """
 
 from __future__ import annotations
@@ -14,6 +26,7 @@ import csv
 import io
 import math
 import os
+import sqlite3
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -35,6 +48,7 @@ __all__ = [
     "TABLE_METRICS",
     "StrategySummary",
     "composite_score",
+    "store_rows",
     "format_mean_std",
     "mean_std",
     "rank_strategies",
@@ -200,22 +214,111 @@ def summary_markdown(grid: Any, files: Sequence[str] = ()) -> str:
     return "\n".join(out)
 
 
-def write_outputs(grid: Any, out_dir: str | os.PathLike[str], plots: bool = True) -> tuple[list[Path], str]:
+#: ``sensors.csv`` column <- ``sensors`` table column, for the values read back from a store.
+_FROM_STORE: dict[str, str] = {
+    "sensor_id": "sensor", "uav_id": "uav", "zone_id": "zone", "t_release": "release_t", "x_rel": "release_x",
+    "y_rel": "release_y", "z_rel": "release_z", "x_land": "land_x", "y_land": "land_y", "t_land": "land_t",
+}  # fmt: skip
+
+
+def _same(a: Any, b: Any) -> bool:
+    """Equal values, NaN and None (a missing number) counting as equal."""
+    fa = math.nan if a is None else float(a)
+    fb = math.nan if b is None else float(b)
+    return fa == fb or (math.isnan(fa) and math.isnan(fb))
+
+
+def store_rows(grid: Any, con: sqlite3.Connection) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+    """``sensors.csv`` and ``runs.csv`` rows of ``grid`` with the recorded values read from a store.
+
+    See the module docstring for which values come from the store. Rows are in the order of ``grid.runs``.
+
+    Args:
+        grid: A ``runner.GridResult`` whose flown runs were recorded (``RunResult.store_run``).
+        con: An open connection to the store they were recorded to.
+
+    Returns:
+        ``(sensor rows, run rows)``.
+
+    Raises:
+        ValueError: A flown run that is not in the store, not complete, labelled otherwise, or whose recorded
+            sensors or counts differ from the evaluation's.
+    """
+    from agentsim_env.evaluation.runner import TELEPORT, mission_label
+
+    store = con.execute("PRAGMA database_list").fetchone()[2] or "the store"
+    cols = ", ".join(f"s.{c}" for c in _FROM_STORE.values())
+    sensors: list[dict[str, Any]] = []
+    rows = run_rows(grid.runs)
+    for run, row in zip(grid.runs, rows):
+        if run.strategy == TELEPORT:
+            sensors += run.sensors
+            continue
+        label = mission_label(run.zones, run.strategy, run.seed)
+        rec = None
+        if run.store_run is not None:
+            sql = "SELECT label, status, last_step FROM runs WHERE run = ?"
+            rec = con.execute(sql, (run.store_run,)).fetchone()
+        if rec is None or rec[0] != label or rec[1] != "complete":
+            got = "missing" if rec is None else f"run {run.store_run}: {rec[0]!r}, {rec[1]}"
+            raise ValueError(f"{store}: the mission {label} is not recorded complete in the store ({got})")
+        head = {"zones": run.zones, "strategy": run.strategy, "seed": run.seed}
+        mine = {int(r["sensor_id"]): r for r in run.sensors}
+        recorded = con.execute(
+            f"SELECT {cols} FROM sensors AS s JOIN runs AS r ON r.run = s.run "
+            "WHERE s.run = ? AND s.world = 0 AND s.episode = 0 ORDER BY s.sensor",
+            (run.store_run,),
+        ).fetchall()
+        if sorted(mine) != [r[0] for r in recorded]:
+            raise ValueError(f"{store}: run {run.store_run} ({label}) recorded sensors "
+                             f"{[r[0] for r in recorded]}, the evaluation {sorted(mine)}")  # fmt: skip
+        for values in recorded:
+            # NULL (not landed) as NaN, as the evaluation writes it
+            got_row = {k: math.nan if v is None else v for k, v in zip(_FROM_STORE, values)}
+            ev = mine[int(got_row["sensor_id"])]
+            bad = [k for k, v in got_row.items() if not _same(v, ev[k])]
+            if bad:
+                raise ValueError(f"{store}: run {run.store_run} ({label}), sensor {got_row['sensor_id']}: "
+                                 f"the store and the evaluation disagree on {', '.join(bad)}")  # fmt: skip
+            extra = {k: ev[k] for k in SENSOR_COLUMNS if k not in got_row and k not in head}
+            sensors.append({**head, **got_row, **extra})
+        landed = sum(r[list(_FROM_STORE).index("x_land")] is not None for r in recorded)
+        counts = {"steps": rec[2], "sensors_released": len(recorded), "sensors_landed": landed}
+        for key, value in counts.items():
+            if not _same(value, row[key]):
+                raise ValueError(f"{store}: run {run.store_run} ({label}): {key} is {value} in the store, "
+                                 f"{row[key]} in the evaluation")  # fmt: skip
+            row[key] = float(value)
+    return sensors, rows
+
+
+def write_outputs(
+    grid: Any,
+    out_dir: str | os.PathLike[str],
+    plots: bool = True,
+    store: sqlite3.Connection | None = None,
+) -> tuple[list[Path], str]:
     """Write ``sensors.csv``, ``runs.csv``, ``summary.md`` and (optionally) the PNG plots.
 
     Args:
         grid: A ``runner.GridResult`` (all runs done).
         out_dir: Output folder (created).
         plots: Also draw the landing maps and metric bar charts.
+        store: An open connection to the store the flown missions were recorded to: the CSV rows are read from
+            it (``store_rows``).
 
     Returns:
         ``(paths written, the ranking Markdown)``.
     """
+    if store is not None:
+        sensors, rows = store_rows(grid, store)  # checked before anything is written
+    else:
+        sensors, rows = [s for run in grid.runs for s in run.sensors], run_rows(grid.runs)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = [
-        write_csv([s for run in grid.runs for s in run.sensors], out / "sensors.csv", SENSOR_COLUMNS),
-        write_csv(run_rows(grid.runs), out / "runs.csv"),
+        write_csv(sensors, out / "sensors.csv", SENSOR_COLUMNS),
+        write_csv(rows, out / "runs.csv"),
     ]
     if plots:
         from agentsim_env.evaluation.plots import write_plots

@@ -35,13 +35,18 @@ scores can be normalised by it (domain reference 5.4).
 
 Everything is deterministic: a run depends only on the zone file, the overrides, the strategy and the seed.
 
+With ``record_env`` (``agentsim evaluate --record run.db`` passes ``agentsim_env.recorder.record`` to a store),
+every flown mission is recorded as one run labelled ``zones=<label> strategy=<name> seed=<seed>``
+(``mission_label``); ``RunResult.store_run`` is its run id. The teleport reference is not flown and not recorded.
+This package sits beside the recorder (same layer), so it is handed the recording function, never imports it.
+
 Strategy names and policies come from the ``strategies`` registry (``agentsim_env.policies.registry``).
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -61,6 +66,7 @@ __all__ = [
     "RunResult",
     "ZoneSource",
     "available_strategies",
+    "mission_label",
     "resolve_strategies",
     "resolve_zones",
     "run_grid",
@@ -101,6 +107,7 @@ class RunResult:
         seed: Reset seed.
         metrics: Mission costs and WSN metrics (see the module docstring), floats.
         sensors: One dict per released sensor with the ``report.SENSOR_COLUMNS`` keys.
+        store_run: The run id of the recorded mission (``run_one``'s ``record_env``; None: not recorded).
     """
 
     zones: str
@@ -108,6 +115,7 @@ class RunResult:
     seed: int
     metrics: dict[str, float]
     sensors: list[dict[str, Any]] = field(default_factory=list)
+    store_run: int | None = None
 
     def row(self) -> dict[str, Any]:
         """``zones, strategy, seed`` followed by every metric (a ``runs.csv`` row)."""
@@ -231,9 +239,14 @@ def _evaluate(
 
 
 # ------------------------------------------------------------------------------------------ runs
+def mission_label(zones: str, strategy: str, seed: int) -> str:
+    """The ``runs.label`` of a recorded mission: ``zones=<label> strategy=<name> seed=<seed>``."""
+    return f"zones={zones} strategy={strategy} seed={seed}"
+
+
 def run_one(
     source: ZoneSource, strategy: str, seed: int, overrides: Mapping[str, Any] | None = None,
-    reference: Mapping[str, float] | None = None,
+    reference: Mapping[str, float] | None = None, record_env: Callable[[Any, str], Any] | None = None,
 ) -> RunResult:  # fmt: skip
     """Fly one strategy on one zone file with one seed and evaluate the deployment.
 
@@ -243,13 +256,32 @@ def run_one(
         seed: Reset seed of the env and the policy.
         overrides: Scenario config values (not ``zones``).
         reference: The teleport reference's metrics, for the ``*_vs_oracle`` keys (NaN without it).
+        record_env: Records the mission: called with the env and the mission's ``mission_label``, it returns the
+            env to fly, whose ``recorder`` (``run``, ``error``, ``path``, ``finish``) writes it, e.g.
+            ``lambda env, label: agentsim_env.recorder.record(env, "run.db", label=label)``.
 
     Returns:
         The run's metrics and sensor rows.
+
+    Raises:
+        ValueError: The recording failed during the mission (a write error stops a recorder without stopping
+            its env; the mission's rows in the store would be incomplete), or ``record_env`` raised one
+            (``StoreError``: the store cannot be opened).
     """
     env = _make_env(source, overrides or {})
+    label = mission_label(source.label, strategy, seed)
+    rec = None
+    if record_env is not None:
+        try:
+            env = record_env(env, label)
+        except BaseException:
+            env.close()
+            raise
+        rec = env.recorder
     try:
         metrics = fly_mission(env, policy_factory()(SCENARIO, env, strategy), seed)
+        if rec is not None and rec.error is not None:
+            raise ValueError(f"{rec.path}: recording the mission {label} failed ({rec.error})")
         ps = env.world.payloads.objects
         landed = ps.get("landed") & (ps.get("world") == 0)
         wsn = _wsn_config(env.scenario.config, source.zones)
@@ -257,9 +289,15 @@ def run_one(
         metrics.update(_evaluate(source.zones, wsn, xy, zone, target))
         metrics.update(_vs_oracle(metrics, reference))
         head = {"zones": source.label, "strategy": strategy, "seed": seed}
-        return RunResult(source.label, strategy, seed, metrics, sensor_rows(ps, head))
+        store_run = None if rec is None else rec.run
+        result = RunResult(source.label, strategy, seed, metrics, sensor_rows(ps, head), store_run)
+    except BaseException:
+        if rec is not None:
+            rec.finish("incomplete")
+        raise
     finally:
-        env.close()
+        env.close()  # a recorded run still open is marked complete
+    return result
 
 
 def _vs_oracle(metrics: Mapping[str, float], reference: Mapping[str, float] | None) -> dict[str, float]:
@@ -315,6 +353,7 @@ def run_grid(
     seeds: Sequence[int],
     config_overrides: Mapping[str, Any] | None = None,
     progress: bool = True,
+    record_env: Callable[[Any, str], Any] | None = None,
 ) -> GridResult:
     """Run every (zone file, strategy, seed), plus the teleport reference of each zone file.
 
@@ -327,6 +366,7 @@ def run_grid(
         seeds: Reset seeds (at least one).
         config_overrides: Scenario config values applied to every run (not ``zones``).
         progress: Show a tqdm progress bar (on stderr).
+        record_env: Records every flown mission (one run each; see ``run_one``).
 
     Returns:
         Every run, the reference rows included (one per seed, identical).
@@ -358,7 +398,7 @@ def run_grid(
                 for seed in seed_list:
                     if bar is not None:
                         bar.set_postfix_str(f"{src.label} {name} seed {seed}")
-                    runs.append(run_one(src, name, seed, overrides, ref.metrics))
+                    runs.append(run_one(src, name, seed, overrides, ref.metrics, record_env=record_env))
                     if bar is not None:
                         bar.update(1)
     finally:

@@ -26,6 +26,7 @@ from __future__ import annotations
 import os
 import socket
 import sqlite3
+import time
 from pathlib import Path
 
 SCHEMA_VERSION = 1
@@ -92,6 +93,24 @@ def _pid_alive(pid: int) -> bool:
     return True
 
 
+def _wal(con: sqlite3.Connection, timeout: float) -> None:
+    """Switch ``con``'s database to WAL journaling, retrying while another connection holds a lock.
+
+    Switching a new file to WAL needs an exclusive lock, and SQLite answers "database is locked" at once, without
+    its busy timeout, while another process reads or creates the same file: writers that start together would
+    fail. A database already in WAL mode returns at once.
+    """
+    deadline = time.monotonic() + timeout
+    while True:
+        try:
+            con.execute("PRAGMA journal_mode=WAL").fetchone()
+            return
+        except sqlite3.OperationalError as exc:
+            if "locked" not in str(exc) or time.monotonic() >= deadline:
+                raise
+        time.sleep(0.005)
+
+
 def connect(
     path: str | os.PathLike[str], *, create: bool = True, timeout: float = 30.0
 ) -> sqlite3.Connection:
@@ -110,7 +129,8 @@ def connect(
         The open connection (autocommit off; the caller commits).
 
     Raises:
-        StoreError: Missing folder or file, unreadable or not an SQLite file, or another schema version.
+        StoreError: Missing folder or file, unreadable or not an SQLite file, an SQLite file that is not a
+            store, or another schema version. Nothing is written to a file that is refused.
     """
     p = Path(path)
     if not create and not p.is_file():
@@ -119,22 +139,41 @@ def connect(
         raise StoreError(f"{p}: the folder {str(p.parent)!r} does not exist")
     try:
         con = sqlite3.connect(str(p), timeout=timeout)
-        con.execute("PRAGMA journal_mode=WAL")
-        con.execute("PRAGMA synchronous=NORMAL")
-        if create:
-            with con:
-                con.executescript(_DDL)
-                con.execute("INSERT OR IGNORE INTO meta VALUES ('schema_version', ?)", (str(SCHEMA_VERSION),))
-        row = con.execute("SELECT value FROM meta WHERE key = 'schema_version'").fetchone()
-    except sqlite3.DatabaseError as exc:
+    except sqlite3.Error as exc:
         raise StoreError(f"{p}: cannot open the store: {exc}") from None
-    if row is None or row[0] != str(SCHEMA_VERSION):
+    version = "SELECT value FROM meta WHERE key = 'schema_version'"
+    try:
+        # nothing is written (not even the WAL switch in the header) before the file is known to be a new file
+        # or a store of this version: a refused file is left exactly as it was
+        tables = {r[0] for r in con.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+        other = sorted(tables - {"meta", "sqlite_sequence", "sqlite_stat1"})
+        if "meta" not in tables and other:
+            con.close()
+            raise StoreError(
+                f"{p}: not an agentsim store (an SQLite file with other tables: {', '.join(other[:5])}); "
+                "record to a new file"
+            )
+        row = con.execute(version).fetchone() if "meta" in tables else None
+        if "meta" not in tables and create:
+            _wal(con, timeout)
+            # one transaction: a crash while creating leaves an empty file, never a half-made store
+            con.executescript(
+                f"BEGIN IMMEDIATE;\n{_DDL}\nINSERT OR IGNORE INTO meta VALUES ('schema_version', "
+                f"'{SCHEMA_VERSION}');\nCOMMIT;"
+            )
+            row = con.execute(version).fetchone()
+        if row is None or row[0] != str(SCHEMA_VERSION):
+            con.close()
+            found = "none" if row is None else row[0]
+            raise StoreError(
+                f"{p}: store schema version {found}, but this agentsim-env reads and writes version "
+                f"{SCHEMA_VERSION}; export it with the agentsim-env version that wrote it, or record to a new file"
+            )
+        _wal(con, timeout)
+        con.execute("PRAGMA synchronous=NORMAL")
+    except sqlite3.DatabaseError as exc:
         con.close()
-        found = "none" if row is None else row[0]
-        raise StoreError(
-            f"{p}: store schema version {found}, but this agentsim-env reads and writes version {SCHEMA_VERSION}; "
-            "export it with the agentsim-env version that wrote it, or record to a new file"
-        )
+        raise StoreError(f"{p}: cannot open the store: {exc}") from None
     _recover(con)
     return con
 
@@ -148,8 +187,11 @@ def _recover(con: sqlite3.Connection) -> None:
         if h == host and not _pid_alive(int(pid or 0))
     ]
     if stale:
-        with con:
-            con.executemany("UPDATE runs SET status = 'incomplete' WHERE run = ?", [(r,) for r in stale])
+        try:
+            with con:
+                con.executemany("UPDATE runs SET status = 'incomplete' WHERE run = ?", [(r,) for r in stale])
+        except sqlite3.Error:  # a read-only or locked store is read as it is; the next writer recovers it
+            pass
 
 
 def info_columns(con: sqlite3.Connection) -> set[str]:
