@@ -45,7 +45,10 @@ def test_aec_api_seed_render_state(case: tuple[str, dict]) -> None:
 
 @pytest.mark.parametrize("case", CASES, ids=IDS)
 def test_max_cycles(case: tuple[str, dict]) -> None:
-    parallel, aec = _ctor(*case)
+    # PettingZoo's check drives unseeded random actions and expects every agent to reach max_cycles, so an agent
+    # ended early by a random collision would fail it by chance: it checks truncation, so collisions are off
+    name, cfg = case
+    parallel, aec = _ctor(name, {**cfg, "collisions": False})
     max_cycles_test(types.SimpleNamespace(parallel_env=parallel, env=aec))
 
 
