@@ -29,6 +29,7 @@ LAYERS: dict[str, float] = {
     "policies": 7,
     "train": 8,
     "cli": 8,
+    "outdirs": 0.5,  # output folders checked before work (cli and the store's export); imports nothing of ours
     "cli_set": 7.5,  # the --set parser of cli; imports nothing from the package
     "cli_replay": 7.5,  # the replay subcommand of cli; over the recorder and render
     "cli_store": 7.5,  # the export and runs subcommands of cli; over the recorder

@@ -30,6 +30,7 @@ from pathlib import Path
 from types import TracebackType
 from typing import TYPE_CHECKING, Any, TypeAlias
 
+from agentsim_env.outdirs import prepare_out
 from agentsim_env.recorder.schema import StoreError, connect
 
 if TYPE_CHECKING:  # pragma: no cover - typing only
@@ -289,7 +290,8 @@ class Store:
             raise ValueError(f"format must be one of {', '.join(FORMATS)}, got {fmt!r}")
         chosen = _check_tables(tables)
         pa = _pyarrow() if fmt == "parquet" else None
-        out = _prepare_dir(Path(out_dir))
+        out = Path(out_dir)
+        prepare_out(out, "export folder")
         written = []
         snapshot = (
             not self.con.in_transaction
@@ -363,21 +365,6 @@ def _typed(frame: pd.DataFrame, types: dict[str, str]) -> pd.DataFrame:
         elif decl == "REAL":
             frame[col] = frame[col].astype("float64")
     return frame
-
-
-def _prepare_dir(out: Path) -> Path:
-    """Create folder ``out`` and prove it writable (a probe file is written and deleted)."""
-    if out.exists() and not out.is_dir():
-        raise ValueError(f"export folder {str(out)!r} is a file, not a folder")
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-        probe = out / f".agentsim-write-probe-{os.getpid()}"
-        probe.write_bytes(b"")
-        probe.unlink()
-    except OSError as exc:
-        raise ValueError(f"export folder {str(out)!r} cannot be created or written: {exc.strerror or exc}") \
-            from None  # fmt: skip
-    return out
 
 
 def open_store(path: str | os.PathLike[str]) -> Store:
