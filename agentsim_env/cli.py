@@ -129,6 +129,7 @@ examples:
   agentsim scenarios
   agentsim run navigation --episodes 20 --set n_agents=8
   agentsim evaluate --zones default --strategies all --seeds 3
+  agentsim train navigation
   agentsim warmup
 Run 'agentsim COMMAND --help' for a command's options."""
 
@@ -220,18 +221,13 @@ def _progress(it: Any, total: int, desc: str, enabled: bool) -> Any:
 
 
 def _check_record(path: str | None) -> None:
-    """Fail before any rollout when ``--record PATH`` cannot be recorded to: a missing folder, a file that is not
-    a store or a store of another schema version (a missing file is created by the first recording)."""
+    """Fail before any rollout when ``--record PATH`` cannot be recorded to (``recorder.schema.check_store_path``)."""
     if not path:
         return
-    from agentsim_env.recorder.schema import StoreError, connect
+    from agentsim_env.recorder.schema import StoreError, check_store_path
 
-    p = Path(path)
     try:
-        if p.exists():
-            connect(p, create=False).close()
-        elif not p.parent.is_dir():
-            raise StoreError(f"{p}: the folder {str(p.parent)!r} does not exist")
+        check_store_path(path)
     except StoreError as exc:
         raise ValueError(f"--record {exc}") from None
 
@@ -246,12 +242,19 @@ def cmd_run(args: argparse.Namespace) -> int:
     from agentsim_env.scenarios.registry import scenario_class
 
     config = parse_set(scenario_class(args.scenario).config_cls, args.set or [])
+    from agentsim_env.policies.learned import is_model_path, model_env_config
     from agentsim_env.policies.registry import baseline_names
 
     names = baseline_names(args.scenario)
     policy_name = args.policy or names[0]
-    if policy_name not in names:
-        raise ValueError(f"--policy must be one of {names} for {args.scenario!r}, got {policy_name!r}")
+    if is_model_path(policy_name):  # a trained model: its scenario config, then --set over it
+        trained_on, env_config = model_env_config(policy_name)
+        if trained_on != args.scenario:
+            raise ValueError(f"--policy {policy_name!r} was trained on {trained_on!r}, not {args.scenario!r}")
+        config = {**env_config, **config}
+    elif policy_name not in names:
+        raise ValueError(f"--policy must be one of {names} for {args.scenario!r} or a trained model "
+                         f"(a folder with model.zip, or a .zip), got {policy_name!r}")  # fmt: skip
     _check_record(getattr(args, "record", None))
     created = prepare_out(args.out) if args.out else []
     try:
@@ -304,7 +307,8 @@ def _run(args: argparse.Namespace, config: dict[str, Any], policy_name: str) -> 
         frac = np.array([r[3].get(key, 0.0) / n for r in rows])
         print(f"| {key} per agent | {frac.mean():.3f} | {frac.std():.3f} |")
     if traj is not None:
-        name = f"{args.scenario}_{policy_name}_seed{args.seed}{config_tag(config)}.png"
+        shown = Path(policy_name).name.removesuffix(".zip") or "model"  # a model path: its folder's name
+        name = f"{args.scenario}_{shown}_seed{args.seed}{config_tag(config)}.png"
         title = f"{args.scenario} | policy {policy_name} | seed {args.seed} | {traj.steps} steps"
         if args.set:
             title += "\n" + textwrap.shorten(" ".join(args.set), 110, placeholder=" ...")
@@ -446,7 +450,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("scenario", metavar="SCENARIO", help="a registered scenario ('agentsim scenarios')")
     r.add_argument("--episodes", type=int, default=5, help="episodes (seeds SEED, SEED+1, ...), >= 1")
     r.add_argument("--seed", type=int, default=0, help="seed of the first episode, >= 0")
-    r.add_argument("--policy", default=None, help="baseline name (default: the scenario's first; see below)")
+    r.add_argument("--policy", default=None, help="baseline name (default: the scenario's first; see below) or "
+                   "a trained model (a folder from 'agentsim train', or its .zip)")  # fmt: skip
     r.add_argument("--set", nargs="*", metavar="KEY=VALUE", help=SET_HELP)
     r.add_argument("--render", action="store_true", help="show a live window (graphical mode)")
     r.add_argument("--fps", type=int, default=None, help="frames per second of the live window, > 0 "
@@ -490,6 +495,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     w.add_argument("--quiet", action="store_true", help="print only the compile notice")
     w.set_defaults(func=cmd_warmup)
+    from agentsim_env.train.cli import add_train_command
+
+    add_train_command(sub)
     from agentsim_env.cli_replay import add_replay_command
 
     add_replay_command(sub)

@@ -39,7 +39,15 @@ def baseline_names(scenario: str) -> list[str]:
 
 
 def make_policy(scenario: str, env: Any, name: str | None = None) -> Policy:
-    """Build baseline ``name`` (default: the scenario's first) configured for ``env``."""
+    """Build baseline ``name`` (default: the scenario's first) configured for ``env``.
+
+    ``name`` may also be a trained model (a folder with ``model.zip`` and ``config.json``, or a ``.zip``; see
+    ``agentsim_env.policies.learned``), which then acts like the scripted baselines.
+    """
+    from agentsim_env.policies.learned import is_model_path, load_policy
+
+    if name is not None and is_model_path(name):
+        return load_policy(name, env)
     names = baseline_names(scenario)
     name = name or names[0]
     if name not in BASELINES[scenario]:

@@ -28,7 +28,7 @@ LAYERS: dict[str, float] = {
     "distributed": 6,
     "policies": 7,
     "train": 8,
-    "cli": 8,
+    "cli": 9,  # the command line: over everything, train's subcommand included
     "outdirs": 0.5,  # output folders checked before work (cli and the store's export); imports nothing of ours
     "cli_set": 7.5,  # the --set parser of cli; imports nothing from the package
     "cli_replay": 7.5,  # the replay subcommand of cli; over the recorder and render

@@ -108,6 +108,7 @@ def test_wheel_installs_policies_and_train_inside_the_package(tmp_path: Path) ->
     names = zipfile.ZipFile(wheel).namelist()
     tops = {n.split("/")[0] for n in names if not n.split("/")[0].endswith(".dist-info")}
     assert tops == {"agentsim_env"}
+    assert "agentsim_env/train/configs/navigation.yaml" in names  # the shipped training configs
     for top, dotted in MOVED.items():
         for f in (ROOT / top).rglob("*.py"):
             rel = f.relative_to(ROOT / top).as_posix()

@@ -216,3 +216,17 @@ def add_info_columns(con: sqlite3.Connection, keys: list[str]) -> None:
 
 
 __all__ = ["SCHEMA_VERSION", "STATUSES", "StoreError", "add_info_columns", "connect", "info_columns"]
+
+
+def check_store_path(path: str | Path) -> None:
+    """Fail early when ``path`` cannot be recorded to: a missing folder, a file that is not a store, or a store
+    of another schema version (a missing file in an existing folder is fine: the first recording creates it).
+
+    Raises:
+        StoreError: Naming the path and the problem.
+    """
+    p = Path(path)
+    if p.exists():
+        connect(p, create=False).close()
+    elif not p.parent.is_dir():
+        raise StoreError(f"{p}: the folder {str(p.parent)!r} does not exist")

@@ -1,0 +1,172 @@
+"""Trained models as policies: a stable-baselines3 model saved by ``agentsim train`` acts like a scripted one.
+
+A trained model is a folder (``agentsim train --out DIR`` writes ``DIR/model.zip`` and ``DIR/config.json``) or
+the ``model.zip`` itself (its ``config.json`` beside it; a checkpoint ``DIR/checkpoints/step_N.zip`` finds
+``DIR/config.json`` one folder up). ``config.json`` names the scenario and the scenario config the model was
+trained on (``{"scenario": ..., "env": {...}, ...}``); the observation and action layouts must match the env it is
+asked to drive, else loading fails with both layouts named.
+
+The policy flattens each agent's observation (Dict parts concatenated in the scenario's declaration order, the
+same layout as ``obs_format="flat"`` and the batched env) and predicts every live agent's action in one batch,
+deterministically by default; actions come back as Dicts or flat vectors, as the env takes them.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from agentsim_env.env.spaces import flat_layout
+
+__all__ = ["LearnedPolicy", "is_model_path", "load_policy", "model_env_config", "model_files"]
+
+
+def is_model_path(name: str | Path) -> bool:
+    """Whether a policy name refers to a trained model (a ``.zip`` file or a folder) rather than a baseline."""
+    text = str(name)
+    return text.endswith(".zip") or "/" in text or "\\" in text or Path(text).is_dir()
+
+
+def model_files(path: str | Path) -> tuple[Path, Path]:
+    """The ``model.zip`` and ``config.json`` of a trained model.
+
+    Args:
+        path: The model folder or its ``.zip`` (a checkpoint's config is looked up one folder up).
+
+    Returns:
+        ``(zip_path, config_path)``.
+
+    Raises:
+        ValueError: When either file is missing.
+    """
+    p = Path(path)
+    if p.is_dir():
+        zip_path = p / "model.zip"
+        if not zip_path.is_file():
+            raise ValueError(f"trained model folder {str(p)!r} has no model.zip (train one with 'agentsim train')")
+    elif p.suffix == ".zip":
+        if not p.is_file():
+            raise ValueError(f"trained model {str(p)!r} does not exist")
+        zip_path = p
+    else:
+        raise ValueError(f"a trained model is a folder with model.zip or a .zip file, got {str(p)!r}")
+    for folder in (zip_path.parent, zip_path.parent.parent):
+        if (folder / "config.json").is_file():
+            return zip_path, folder / "config.json"
+    raise ValueError(f"no config.json next to {str(zip_path)!r} (it names the scenario the model was trained on)")
+
+
+def _read_config(path: Path) -> dict[str, Any]:
+    try:
+        meta = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        raise ValueError(f"{str(path)!r} is not a readable JSON file: {exc}") from None
+    if not isinstance(meta, dict) or not isinstance(meta.get("scenario"), str):
+        raise ValueError(f"{str(path)!r} must be a JSON object naming the 'scenario'")
+    if not isinstance(meta.get("env", {}), dict):
+        raise ValueError(f"{str(path)!r}: 'env' must be an object of scenario config keys")
+    return meta
+
+
+def model_env_config(path: str | Path) -> tuple[str, dict[str, Any]]:
+    """The scenario and scenario config keys a trained model was trained with.
+
+    Args:
+        path: The model folder or ``.zip``.
+
+    Returns:
+        ``(scenario, env_config)``.
+    """
+    meta = _read_config(model_files(path)[1])
+    return meta["scenario"], dict(meta.get("env", {}))
+
+
+class LearnedPolicy:
+    """A trained SB3 model acting through the ``Policy`` protocol.
+
+    Args:
+        model: A stable-baselines3 algorithm (anything with ``predict(obs, deterministic=)``).
+        env: The ParallelEnv it drives (its scenario's parts give the layouts).
+        deterministic: Act on the mode of the action distribution (``False``: sample).
+        name: Shown in tables (the model folder's name).
+    """
+
+    def __init__(self, model: Any, env: Any, *, deterministic: bool = True, name: str = "learned") -> None:
+        self.model = model
+        self.name = name
+        self.deterministic = deterministic
+        scenario = env.scenario
+        self._obs_keys = list(scenario.obs_parts())
+        self._obs_dim = sum(p.size for p in scenario.obs_parts().values())
+        self._act_layout = flat_layout(scenario.act_parts())
+        self._dict_actions = getattr(env, "action_format", "dict") == "dict"
+        want = (self._obs_dim,)
+        got_obs = tuple(getattr(model.observation_space, "shape", ()) or ())
+        got_act = tuple(getattr(model.action_space, "shape", ()) or ())
+        act_dim = sum(s.stop - s.start for s in self._act_layout.values())
+        if got_obs != want or got_act != (act_dim,):
+            raise ValueError(
+                f"the model was trained on observations {got_obs} and actions {got_act}, but this "
+                f"{scenario.name} env has observations {want} and actions {(act_dim,)}: build the env with the "
+                "config the model was trained on (its config.json 'env')"
+            )
+
+    @classmethod
+    def for_env(cls, env: Any, path: str | Path, deterministic: bool = True) -> LearnedPolicy:
+        """Load the model at ``path`` (folder or ``.zip``) for ``env``; see ``load_policy``."""
+        return load_policy(path, env, deterministic=deterministic)
+
+    def reset(self, seed: int | None = None) -> None:
+        """Nothing to reset (the network is stateless); a stochastic policy is reseeded."""
+        if seed is not None and not self.deterministic:
+            self.model.set_random_seed(seed)
+
+    def _flat(self, obs: Any) -> np.ndarray:
+        if isinstance(obs, dict):
+            return np.concatenate([np.asarray(obs[k], dtype=np.float32).reshape(-1) for k in self._obs_keys])
+        return np.asarray(obs, dtype=np.float32).reshape(-1)
+
+    def act(self, observations: dict[str, Any]) -> dict[str, Any]:
+        """Actions of every agent in ``observations`` (one batched forward pass)."""
+        if not observations:
+            return {}
+        agents = list(observations)
+        batch = np.stack([self._flat(observations[a]) for a in agents])
+        actions, _ = self.model.predict(batch, deterministic=self.deterministic)
+        actions = np.clip(np.asarray(actions, dtype=np.float32), -1.0, 1.0)
+        if not self._dict_actions:
+            return dict(zip(agents, actions))
+        return {a: {k: row[sl] for k, sl in self._act_layout.items()} for a, row in zip(agents, actions)}
+
+
+def load_policy(path: str | Path, env: Any, *, deterministic: bool = True) -> LearnedPolicy:
+    """Load a model trained by ``agentsim train`` as a policy for ``env``.
+
+    Args:
+        path: The model folder (with ``model.zip`` and ``config.json``) or a ``.zip``.
+        env: A ParallelEnv of the model's scenario, built with the model's config.
+        deterministic: Act on the mode of the action distribution.
+
+    Returns:
+        The policy.
+
+    Raises:
+        ValueError: Missing files, another scenario, or layouts that differ from the model's.
+        ImportError: stable-baselines3 is not installed.
+    """
+    zip_path, config_path = model_files(path)
+    meta = _read_config(config_path)
+    scenario = env.scenario.name
+    if meta["scenario"] != scenario:
+        raise ValueError(f"{str(path)!r} was trained on scenario {meta['scenario']!r}, not {scenario!r}")
+    try:
+        from stable_baselines3 import PPO
+    except ImportError as exc:  # pragma: no cover - depends on the installation
+        raise ImportError('trained policies need stable-baselines3: pip install "agentsim-env[train]"') from exc
+    model = PPO.load(zip_path, device="cpu")
+    folder = zip_path.parent if zip_path.name != "model.zip" else zip_path.parent
+    name = folder.name if zip_path.name == "model.zip" else f"{folder.name}/{zip_path.stem}"
+    return LearnedPolicy(model, env, deterministic=deterministic, name=name)

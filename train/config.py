@@ -1,0 +1,313 @@
+"""Training configs: typed, frozen dataclasses loaded from YAML and validated with the field named.
+
+A config file (shipped ones live in ``train/configs/``, installed as ``agentsim_env/train/configs``)::
+
+    scenario: navigation      # a registered scenario
+    timesteps: 2000000        # agent-steps, summed over every agent of every world
+    worlds: 16                # worlds stepped together; SB3 sees worlds x n_agents entries
+    seed: 0                   # seeds the envs and the network; a seeded run reproduces exactly
+    vec: native               # native (AgentSimVecEnv over BatchedEnv) | supersuit (the PettingZoo tutorial path)
+    env: {n_agents: 4}        # scenario config keys, as agentsim_env.make(scenario, **env) takes them
+    ppo: {n_steps: 64, batch_size: 512, learning_rate: 3.0e-4, net_arch: [64, 64], activation: tanh}
+    checkpoint_every: 500000  # agent-steps between checkpoints (0: none)
+    eval: {seeds: 20, first_seed: 1000, env: {}, baseline_env: {}, baselines: all}
+
+``ppo`` holds the fields of ``PPOConfig`` (the common ``stable_baselines3.PPO`` arguments plus ``net_arch`` and
+``activation``); every key of every section is checked, and an unknown one is an error listing the allowed keys.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, ClassVar
+
+from agentsim_env.core.validation import check_float, check_int, coerce_fields
+
+__all__ = [
+    "ACTIVATIONS",
+    "CONFIG_DIR",
+    "VEC_KINDS",
+    "EvalConfig",
+    "PPOConfig",
+    "TrainConfig",
+    "load_config",
+    "save_config",
+    "shipped_configs",
+]
+
+#: Where the shipped configs live (``<name>.yaml``).
+CONFIG_DIR = Path(__file__).resolve().parent / "configs"
+#: Vector-env paths ``vec`` may name.
+VEC_KINDS = ("native", "supersuit")
+#: Activation functions ``ppo.activation`` may name.
+ACTIVATIONS = ("tanh", "relu")
+
+
+@dataclass(frozen=True)
+class PPOConfig:
+    """PPO hyperparameters (``stable_baselines3.PPO`` keyword arguments of the same names).
+
+    Attributes:
+        n_steps: Steps per env entry per rollout, 1..100,000 (a rollout is ``n_steps x worlds x n_agents``).
+        batch_size: Minibatch size, 1..10,000,000.
+        n_epochs: Passes over each rollout, 1..1,000.
+        learning_rate: Adam step size, in (0, 1].
+        lr_schedule: ``constant`` or ``linear`` (decays to 0 at ``timesteps``).
+        gamma: Discount, in [0, 1].
+        gae_lambda: GAE lambda, in [0, 1].
+        clip_range: PPO clip, in (0, 10].
+        ent_coef: Entropy bonus, 0..10.
+        vf_coef: Value loss weight, 0..100.
+        max_grad_norm: Gradient clipping norm, in (0, 1e6].
+        target_kl: Early stop of an update past this KL (``None``: never), in (0, 10].
+        net_arch: Hidden layer widths of the policy and value networks, 1..8 layers of 1..4096.
+        activation: ``tanh`` or ``relu``.
+        log_std_init: Initial log standard deviation of the Gaussian actions, -10..10.
+    """
+
+    n_steps: int = 64
+    batch_size: int = 512
+    n_epochs: int = 10
+    learning_rate: float = 3e-4
+    lr_schedule: str = "constant"
+    gamma: float = 0.98
+    gae_lambda: float = 0.95
+    clip_range: float = 0.2
+    ent_coef: float = 0.0
+    vf_coef: float = 0.5
+    max_grad_norm: float = 0.5
+    target_kl: float | None = None
+    net_arch: tuple[int, ...] = (64, 64)
+    activation: str = "tanh"
+    log_std_init: float = 0.0
+
+    def __post_init__(self) -> None:
+        coerce_fields(self)
+        check_int("ppo.n_steps", self.n_steps, 1, 100_000)
+        check_int("ppo.batch_size", self.batch_size, 1, 10_000_000)
+        check_int("ppo.n_epochs", self.n_epochs, 1, 1000)
+        check_float("ppo.learning_rate", self.learning_rate, 0.0, 1.0, lo_open=True)
+        _choice("ppo.lr_schedule", self.lr_schedule, ("constant", "linear"))
+        check_float("ppo.gamma", self.gamma, 0.0, 1.0)
+        check_float("ppo.gae_lambda", self.gae_lambda, 0.0, 1.0)
+        check_float("ppo.clip_range", self.clip_range, 0.0, 10.0, lo_open=True)
+        check_float("ppo.ent_coef", self.ent_coef, 0.0, 10.0)
+        check_float("ppo.vf_coef", self.vf_coef, 0.0, 100.0)
+        check_float("ppo.max_grad_norm", self.max_grad_norm, 0.0, 1e6, lo_open=True)
+        if self.target_kl is not None:
+            check_float("ppo.target_kl", self.target_kl, 0.0, 10.0, lo_open=True)
+        if not 1 <= len(self.net_arch) <= 8:
+            raise ValueError(f"ppo.net_arch must list 1..8 layer widths, got {list(self.net_arch)}")
+        for width in self.net_arch:
+            check_int("ppo.net_arch[i]", width, 1, 4096)
+        _choice("ppo.activation", self.activation, ACTIVATIONS)
+        check_float("ppo.log_std_init", self.log_std_init, -10.0, 10.0)
+
+
+@dataclass(frozen=True)
+class EvalConfig:
+    """The evaluation at the end of training (and of ``agentsim train --eval-only``).
+
+    Attributes:
+        seeds: Episodes per policy, on seeds ``first_seed`` .. ``first_seed + seeds - 1``; 1..10,000.
+        first_seed: Seed of the first evaluation episode, >= 0 (apart from training's seeds by default).
+        env: Scenario config keys for every evaluation episode, over the training ``env``.
+        baseline_env: Keys for the scripted baselines' episodes only, over ``env`` (for a learned mode
+            that the scripted policies do not use).
+        baselines: ``all`` (every scripted baseline of the scenario), ``none``, or a comma-separated list.
+    """
+
+    seeds: int = 20
+    first_seed: int = 1000
+    env: dict[str, Any] = field(default_factory=dict)
+    baseline_env: dict[str, Any] = field(default_factory=dict)
+    baselines: str = "all"
+
+    def __post_init__(self) -> None:
+        coerce_fields(self)
+        check_int("eval.seeds", self.seeds, 1, 10_000)
+        check_int("eval.first_seed", self.first_seed, 0, 2**63 - 1)
+
+    def seed_list(self) -> list[int]:
+        """The evaluation seeds."""
+        return list(range(self.first_seed, self.first_seed + self.seeds))
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """One training run: scenario, budget, PPO, checkpoints and the final evaluation.
+
+    Attributes:
+        scenario: A registered scenario name.
+        timesteps: Agent-steps to train, 1..10,000,000,000.
+        worlds: Worlds stepped together (native) or env copies (supersuit), 1..4,096.
+        seed: Seed of the envs and the network, >= 0.
+        vec: ``native`` or ``supersuit``.
+        env: Scenario config keys (checked by building the scenario's config).
+        ppo: PPO hyperparameters.
+        checkpoint_every: Agent-steps between checkpoints (0: only the final model), >= 0.
+        eval: The final evaluation.
+    """
+
+    nested: ClassVar[dict[str, type]] = {"ppo": PPOConfig, "eval": EvalConfig}
+
+    scenario: str = "navigation"
+    timesteps: int = 1_000_000
+    worlds: int = 16
+    seed: int = 0
+    vec: str = "native"
+    env: dict[str, Any] = field(default_factory=dict)
+    ppo: PPOConfig = field(default_factory=PPOConfig)
+    checkpoint_every: int = 500_000
+    eval: EvalConfig = field(default_factory=EvalConfig)
+
+    def __post_init__(self) -> None:
+        for name, cls in self.nested.items():  # sections given as dicts (YAML, --set) become dataclasses
+            value = getattr(self, name)
+            if isinstance(value, dict):
+                object.__setattr__(self, name, _build(cls, value, name + "."))
+            elif not isinstance(value, cls):
+                raise ValueError(f"{name} must be a mapping of {cls.__name__} fields, got {type(value).__name__}")
+        coerce_fields(self)
+        from agentsim_env.scenarios.registry import list_scenarios, make_scenario
+
+        names = list_scenarios()
+        if self.scenario not in names:
+            raise ValueError(f"scenario must be one of {names}, got {self.scenario!r}")
+        check_int("timesteps", self.timesteps, 1, 10_000_000_000)
+        check_int("worlds", self.worlds, 1, 4096)
+        check_int("seed", self.seed, 0, 2**32 - 1)
+        _choice("vec", self.vec, VEC_KINDS)
+        check_int("checkpoint_every", self.checkpoint_every, 0, 10_000_000_000)
+        for where, keys in (("env", self.env), ("eval.env", self.eval_env()),
+                            ("eval.baseline_env", self.eval_env(baseline=True))):  # fmt: skip
+            try:
+                make_scenario(self.scenario, **keys)
+            except (TypeError, ValueError) as exc:
+                raise ValueError(f"{where}: {exc}") from None
+
+    def eval_env(self, baseline: bool = False) -> dict[str, Any]:
+        """Scenario keys of the evaluation episodes: ``env``, then ``eval.env`` (then ``eval.baseline_env``)."""
+        keys = _deep_merge(self.env, self.eval.env)
+        return _deep_merge(keys, self.eval.baseline_env) if baseline else keys
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain data (lists for tuples), as written to ``config.yaml`` next to a trained model."""
+        return _plain(dataclasses.asdict(self))
+
+    def replace(self, **changes: Any) -> TrainConfig:
+        """A copy with ``changes`` (sections may be given as dicts of some of their fields)."""
+        merged = self.to_dict()
+        for key, value in changes.items():
+            if key in self.nested and isinstance(value, dict):
+                merged[key] = {**merged[key], **value}
+            else:
+                merged[key] = value
+        return _build(TrainConfig, merged, "")
+
+
+def _choice(name: str, value: str, allowed: tuple[str, ...]) -> None:
+    if value not in allowed:
+        raise ValueError(f"{name} must be one of {list(allowed)}, got {value!r}")
+
+
+def _plain(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    return value
+
+
+def _build(cls: type, data: Any, where: str) -> Any:
+    """``cls(**data)`` with unknown keys and non-mappings reported by name."""
+    if not isinstance(data, dict):
+        raise ValueError(f"{where.rstrip('.') or 'the config'} must be a mapping of keys, "
+                         f"got {type(data).__name__}")  # fmt: skip
+    allowed = [f.name for f in dataclasses.fields(cls)]
+    unknown = sorted(set(data) - set(allowed))
+    if unknown:
+        raise ValueError(f"unknown key {where}{unknown[0]!s}; allowed: {allowed}")
+    for key, value in data.items():
+        if key in ("env", "baseline_env") and not isinstance(value, dict):
+            raise ValueError(f"{where}{key} must be a mapping of scenario config keys, got {type(value).__name__}")
+    return cls(**data)
+
+
+def shipped_configs() -> dict[str, Path]:
+    """The shipped configs: name -> path (``train/configs/<name>.yaml``)."""
+    return {p.stem: p for p in sorted(CONFIG_DIR.glob("*.yaml"))}
+
+
+def load_config(source: str | Path | dict[str, Any] | None = None, overrides: dict[str, Any] | None = None,
+                *, scenario: str | None = None) -> TrainConfig:  # fmt: skip
+    """Load a training config.
+
+    Args:
+        source: A YAML path, the name of a shipped config (``navigation``, ``relay``, ...), a dict, or ``None``
+            (the shipped config named like ``scenario``, else the defaults).
+        overrides: Keys over the loaded ones (sections as dicts of some fields, e.g. ``{"ppo": {"n_steps": 32}}``).
+        scenario: The scenario, when the file does not name one; it must agree when both do.
+
+    Returns:
+        The validated config.
+
+    Raises:
+        ValueError: A missing file, bad YAML, an unknown key or a bad value (the message names it).
+    """
+    import yaml
+
+    data: dict[str, Any]
+    if source is None:
+        shipped = shipped_configs()
+        source = shipped.get(scenario or "") or {}
+    if isinstance(source, dict):
+        data = dict(source)
+    else:
+        path = Path(source)
+        if not path.suffix and str(source) in shipped_configs():
+            path = shipped_configs()[str(source)]
+        if not path.is_file():
+            raise ValueError(f"config file {str(source)!r} not found; shipped configs: {list(shipped_configs())}")
+        try:
+            loaded = yaml.safe_load(path.read_text(encoding="utf-8"))
+        except (yaml.YAMLError, UnicodeDecodeError) as exc:
+            raise ValueError(f"config file {str(path)!r} is not valid YAML: {exc}") from None
+        if loaded is None:
+            loaded = {}
+        if not isinstance(loaded, dict):
+            raise ValueError(f"config file {str(path)!r} must hold a mapping of keys, got {type(loaded).__name__}")
+        data = loaded
+    if scenario is not None:
+        if data.get("scenario", scenario) != scenario:
+            raise ValueError(f"the config is for scenario {data['scenario']!r}, not {scenario!r}")
+        data["scenario"] = scenario
+    for key, value in (overrides or {}).items():
+        if key in TrainConfig.nested and isinstance(value, dict) and isinstance(data.get(key), dict):
+            data[key] = {**data[key], **value}
+        elif key == "env" and isinstance(value, dict) and isinstance(data.get(key), dict):
+            data[key] = _deep_merge(data[key], value)
+        else:
+            data[key] = value
+    return _build(TrainConfig, data, "")
+
+
+def _deep_merge(base: dict[str, Any], new: dict[str, Any]) -> dict[str, Any]:
+    out = dict(base)
+    for key, value in new.items():
+        if isinstance(value, dict) and isinstance(out.get(key), dict):
+            out[key] = _deep_merge(out[key], value)
+        else:
+            out[key] = value
+    return out
+
+
+def save_config(cfg: TrainConfig, path: str | Path) -> Path:
+    """Write ``cfg`` as YAML (loadable again with ``load_config``)."""
+    import yaml
+
+    p = Path(path)
+    p.write_text(yaml.safe_dump(cfg.to_dict(), sort_keys=False), encoding="utf-8")
+    return p

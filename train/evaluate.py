@@ -1,0 +1,162 @@
+"""Evaluate a trained model against every scripted baseline of its scenario, over fixed seeds.
+
+Each policy plays ``eval.seeds`` episodes (seeds ``eval.first_seed`` ...) in the ParallelEnv: the trained
+model deterministically, in the env built from ``env`` + ``eval.env``; the baselines in that env with
+``eval.baseline_env`` on top. Per policy the table gives the mean return per agent (and its standard deviation
+over episodes), every numeric info counter per agent (``arrived``, ``collided``, ``released`` ...), and for
+``relay`` the share of groups brought to their target and the episodes in which every group got there.
+"""
+
+from __future__ import annotations
+
+import csv
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from agentsim_env.train.config import TrainConfig
+
+__all__ = ["baselines_of", "evaluate_policies", "format_table", "write_table"]
+
+
+def baselines_of(cfg: TrainConfig) -> list[str]:
+    """The scripted baselines ``cfg.eval.baselines`` selects (``all``, ``none`` or a comma list)."""
+    from agentsim_env.policies.registry import BASELINES
+
+    known = list(BASELINES.get(cfg.scenario, {}))
+    sel = cfg.eval.baselines.strip()
+    if sel == "all":
+        return known
+    if sel in ("none", ""):
+        return []
+    names = [s.strip() for s in sel.split(",") if s.strip()]
+    bad = [n for n in names if n not in known]
+    if bad:
+        raise ValueError(f"eval.baselines: {bad[0]!r} is not a baseline of {cfg.scenario!r}; "
+                         f"choose 'all', 'none' or from {known}")  # fmt: skip
+    return names
+
+
+def _episode_extras(env: Any) -> dict[str, float]:
+    """Scenario-specific outcome of the episode just played (relay: groups at their target)."""
+    sc = env.scenario
+    if hasattr(sc, "group_success"):
+        ok = np.asarray(sc.group_success(env.world, 0), dtype=bool)
+        return {"groups_reached": float(ok.mean()), "all_groups_reached": float(ok.all())}
+    return {}
+
+
+def _play(env: Any, policy: Any, name: str, kind: str, seeds: Sequence[int], bar: Any) -> dict[str, Any]:
+    from agentsim_env.policies.rollout import run_episode
+
+    n = len(env.possible_agents)
+    returns, sums, extras = [], [], []
+    counters: set[str] = set()  # integer infos (arrived, collided ...) add up; real-valued ones (distances) do not
+
+    def note_counters(_env: Any, infos: dict[str, dict[str, Any]]) -> None:
+        for info in infos.values():
+            counters.update(k for k, v in info.items() if isinstance(v, (int, np.integer)))
+
+    for s in seeds:
+        ep = run_episode(env, policy, s, on_step=note_counters)
+        returns.append(float(np.mean(list(ep.returns.values()))))
+        sums.append({k: v / n for k, v in ep.info_sums.items() if k in counters})
+        extras.append(_episode_extras(env))
+        if bar is not None:
+            bar.update(1)
+    row: dict[str, Any] = {"policy": name, "kind": kind, "episodes": len(seeds),
+                           "mean_return": float(np.mean(returns)), "std_return": float(np.std(returns))}  # fmt: skip
+    for key in sorted({k for d in sums for k in d}):
+        row[f"{key}_per_agent"] = float(np.mean([d.get(key, 0.0) for d in sums]))
+    for key in sorted({k for d in extras for k in d}):
+        row[key] = float(np.mean([d.get(key, 0.0) for d in extras]))
+    return row
+
+
+def evaluate_policies(cfg: TrainConfig, model: Any = None, *, name: str = "learned",
+                      record: str | Path | None = None, progress: bool = False) -> list[dict[str, Any]]:  # fmt: skip
+    """Play the trained model (if given) and the selected baselines over ``cfg.eval``'s seeds.
+
+    Args:
+        cfg: The training config (scenario, env, eval).
+        model: An SB3 model, a model folder / ``.zip``, or ``None`` (baselines only).
+        name: The model's name in the table.
+        record: An SQLite store to record every evaluation episode to (one run per policy).
+        progress: Show a progress bar over episodes.
+
+    Returns:
+        One row per policy (the model first), as described in the module docstring.
+    """
+    import agentsim_env
+    from agentsim_env.policies.learned import LearnedPolicy, load_policy
+    from agentsim_env.policies.registry import make_policy
+
+    seeds = cfg.eval.seed_list()
+    baselines = baselines_of(cfg)
+    jobs: list[tuple[str, str, Any, dict[str, Any]]] = []
+    if model is not None:
+        jobs.append((name, "learned", model, cfg.eval_env()))
+    jobs += [(b, "baseline", b, cfg.eval_env(baseline=True)) for b in baselines]
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=len(jobs) * len(seeds), desc=f"evaluate {cfg.scenario}", unit="episode")
+    rows = []
+    try:
+        for label, kind, what, env_cfg in jobs:
+            env = agentsim_env.make(cfg.scenario, **env_cfg)
+            if record is not None:
+                from agentsim_env.recorder import record as record_env
+
+                env = record_env(env, record, label=f"agentsim train evaluation: {label} seeds {seeds[0]}-{seeds[-1]}")
+            if kind == "baseline":
+                policy = make_policy(cfg.scenario, env, what)
+            elif isinstance(what, (str, Path)):
+                policy = load_policy(what, env)
+            else:
+                policy = LearnedPolicy(what, env, name=label)
+            try:
+                rows.append(_play(env, policy, label, kind, seeds, bar))
+            except BaseException:
+                if record is not None:
+                    env.recorder.finish("incomplete")
+                raise
+            env.close()
+    finally:
+        if bar is not None:
+            bar.close()
+    return rows
+
+
+def _columns(rows: list[dict[str, Any]]) -> list[str]:
+    cols: list[str] = []
+    for r in rows:
+        cols += [k for k in r if k not in cols]
+    return cols
+
+
+def format_table(rows: list[dict[str, Any]]) -> str:
+    """The rows as a Markdown table (numbers to 3 decimals)."""
+    cols = _columns(rows)
+    lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
+    for r in rows:
+        cells = [f"{r[c]:.3f}" if isinstance(r.get(c), float) else str(r.get(c, "")) for c in cols]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def write_table(rows: list[dict[str, Any]], out: str | Path) -> tuple[Path, Path]:
+    """Write ``eval.csv`` and ``eval.md`` into ``out``; returns both paths."""
+    folder = Path(out)
+    cols = _columns(rows)
+    csv_path = folder / "eval.csv"
+    with open(csv_path, "w", newline="", encoding="utf-8") as f:
+        w = csv.DictWriter(f, fieldnames=cols)
+        w.writeheader()
+        w.writerows(rows)
+    md_path = folder / "eval.md"
+    md_path.write_text(format_table(rows) + "\n", encoding="utf-8")
+    return csv_path, md_path

@@ -1,0 +1,56 @@
+"""The learning-curve figure of a training run: mean return against agent-steps, with the baselines' level."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+__all__ = ["plot_learning_curve"]
+
+
+def plot_learning_curve(curve: Sequence[dict[str, float]], path: str | Path, *, title: str = "",
+                        eval_rows: Sequence[dict[str, Any]] = ()) -> Path:  # fmt: skip
+    """Draw the learning curve and, as horizontal lines, each evaluated policy's mean return.
+
+    Args:
+        curve: Rows of ``curve.csv`` (``timesteps``, ``mean_return``, ``wall_s`` ...).
+        path: PNG to write.
+        title: Figure title.
+        eval_rows: Rows of the final evaluation (``policy``, ``kind``, ``mean_return``).
+
+    Returns:
+        The PNG path.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    pts = [(r["timesteps"], r["mean_return"]) for r in curve if not math.isnan(r["mean_return"])]
+    fig, ax = plt.subplots(figsize=(7.5, 4.2), dpi=110)
+    if pts:
+        xs, ys = zip(*pts)
+        ax.plot(xs, ys, color="tab:blue", lw=1.6, label="training (stochastic policy, last 100 episodes)")
+    styles = ["--", ":", "-."]
+    for i, r in enumerate(eval_rows):
+        colour = "tab:red" if r.get("kind") == "learned" else f"C{(i % 8) + 2}"
+        ax.axhline(float(r["mean_return"]), color=colour, ls=styles[i % 3], lw=1.2,
+                   label=f"{r['policy']} ({r.get('kind', '')}, evaluation): {float(r['mean_return']):.2f}")  # fmt: skip
+    ax.set_xlabel("agent-steps")
+    ax.set_ylabel("mean episode return per agent")
+    if title:
+        ax.set_title(title, fontsize=10)
+    ax.grid(alpha=0.3)
+    if pts and curve:
+        last = curve[-1]
+        ax.text(0.99, 0.02, f"{int(last['timesteps']):,} agent-steps, {last['wall_s']:.0f} s wall, "
+                f"{last['cpu_s']:.0f} s CPU", transform=ax.transAxes, ha="right", va="bottom", fontsize=8,
+                color="0.35")  # fmt: skip
+    ax.legend(fontsize=7, loc="best")
+    fig.tight_layout()
+    out = Path(path)
+    fig.savefig(out)
+    plt.close(fig)
+    return out
