@@ -161,15 +161,17 @@ def test_cli_bad_record_path_fails_before_any_rollout(
 
 def test_training_records_the_training_env(tmp_path: Path) -> None:
     pytest.importorskip("stable_baselines3")
-    from agentsim_env.train.ppo import train
+    from agentsim_env.train.config import load_config
+    from agentsim_env.train.runner import train
 
     db = tmp_path / "train.db"
-    train("navigation", timesteps=256, worlds=2, seed=3, config={"n_agents": 2, "max_steps": 40}, record=db,
-          ppo_kwargs={"n_steps": 64, "batch_size": 64, "n_epochs": 1})  # fmt: skip
+    cfg = load_config("navigation", {"timesteps": 256, "worlds": 2, "seed": 3, "env": {"n_agents": 2, "max_steps": 40},
+                                     "ppo": {"n_steps": 64, "batch_size": 64, "n_epochs": 1}})  # fmt: skip
+    train(cfg, None, record=db)
     con = connect(db)
     try:
         assert con.execute("SELECT status, n_worlds, n_agents, label FROM runs").fetchall() == [
-            ("complete", 2, 2, "train.ppo navigation worlds=2 seed=3")
+            ("complete", 2, 2, "agentsim train navigation worlds=2 seed=3")
         ]  # fmt: skip
         # 256 agent-steps / (2 worlds x 2 agents) = 64 steps: the worlds ran through their 40-step episodes and
         # were reset automatically, each reset a new recorded episode
@@ -184,4 +186,4 @@ def test_training_records_the_training_env(tmp_path: Path) -> None:
     finally:
         con.close()
     with pytest.raises(StoreError, match="does not exist"):
-        train("navigation", timesteps=64, worlds=1, record=tmp_path / "no" / "t.db")
+        train(cfg, None, record=tmp_path / "no" / "t.db")

@@ -78,6 +78,8 @@ def _arguments(t: argparse.ArgumentParser) -> None:
     t.add_argument("--no-eval", action="store_true", help="skip the evaluation against the baselines")
     t.add_argument("--record", default=None, metavar="PATH",
                    help="record the evaluation episodes to this SQLite store (one run per policy)")  # fmt: skip
+    t.add_argument("--record-training", default=None, metavar="PATH",
+                   help="record the training env (every world and step) to this SQLite store")  # fmt: skip
     t.add_argument("--quiet", action="store_true", help="no progress bars")
 
 
@@ -106,13 +108,14 @@ def cmd_train(args: argparse.Namespace) -> int:
     if has_run and not (args.resume or args.eval_only):
         raise ValueError(f"--out {str(out)!r} already holds a run: pass --resume to continue it, --eval-only to "
                          "evaluate it, or choose another --out")  # fmt: skip
-    if args.record:
-        from agentsim_env.recorder.schema import StoreError, check_store_path
+    for option, value in (("--record", args.record), ("--record-training", args.record_training)):
+        if value:
+            from agentsim_env.recorder.schema import StoreError, check_store_path
 
-        try:
-            check_store_path(args.record)
-        except StoreError as exc:
-            raise ValueError(f"--record {exc}") from None
+            try:
+                check_store_path(value)
+            except StoreError as exc:
+                raise ValueError(f"{option} {exc}") from None
     created = prepare_out(out)
     try:
         return _train_and_report(args, cfg, out)
@@ -134,7 +137,7 @@ def _train_and_report(args: argparse.Namespace, cfg: Any, out: Path) -> int:
     else:
         from agentsim_env.train.runner import train
 
-        res = train(cfg, out, resume=args.resume, progress=progress)
+        res = train(cfg, out, resume=args.resume, progress=progress, record=args.record_training)
         model, curve = res.model, res.curve
         summary = (f"trained {res.timesteps:,} agent-steps in {res.wall_s:.0f} s wall / {res.cpu_s:.0f} s CPU "
                    f"-> {out / 'model.zip'}")  # fmt: skip

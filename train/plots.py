@@ -34,8 +34,9 @@ def plot_learning_curve(curve: Sequence[dict[str, float]], path: str | Path, *, 
         xs, ys = zip(*pts)
         ax.plot(xs, ys, color="tab:blue", lw=1.6, label="training (stochastic policy, last 100 episodes)")
     styles = ["--", ":", "-."]
+    others = ["tab:green", "tab:purple", "tab:orange", "tab:brown", "tab:pink", "tab:gray", "tab:olive", "tab:cyan"]
     for i, r in enumerate(eval_rows):
-        colour = "tab:red" if r.get("kind") == "learned" else f"C{(i % 8) + 2}"
+        colour = "tab:red" if r.get("kind") == "learned" else others[i % len(others)]
         ax.axhline(float(r["mean_return"]), color=colour, ls=styles[i % 3], lw=1.2,
                    label=f"{r['policy']} ({r.get('kind', '')}, evaluation): {float(r['mean_return']):.2f}")  # fmt: skip
     ax.set_xlabel("agent-steps")

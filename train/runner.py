@@ -140,7 +140,7 @@ def _truncate_curve(out: Path, timesteps: int) -> None:
 
 
 def train(cfg: TrainConfig, out: str | Path | None = None, *, resume: bool = False, progress: bool = False,
-          desc: str | None = None) -> TrainResult:  # fmt: skip
+          desc: str | None = None, record: str | Path | None = None) -> TrainResult:  # fmt: skip
     """Train PPO as ``cfg`` says.
 
     Args:
@@ -150,6 +150,8 @@ def train(cfg: TrainConfig, out: str | Path | None = None, *, resume: bool = Fal
             an error.
         progress: Show the progress bar with the live mean return.
         desc: Text before the bar (default: the scenario).
+        record: An SQLite store to record the training env to (every world, every step, automatic resets as new
+            episodes; one run, marked ``complete`` when training ends). Native vector env only.
 
     Returns:
         The result; the model is also saved as ``out/model.zip`` with ``config.json``.
@@ -164,6 +166,14 @@ def train(cfg: TrainConfig, out: str | Path | None = None, *, resume: bool = Fal
     if path is not None:
         path.mkdir(parents=True, exist_ok=True)
     vec = make_vec_env(cfg)
+    recorded: Any = None
+    if record is not None:
+        if cfg.vec != "native":
+            raise ValueError("recording the training env needs vec: native")
+        from agentsim_env.recorder import record as record_env
+
+        label = f"agentsim train {cfg.scenario} worlds={cfg.worlds} seed={cfg.seed}"
+        recorded = vec.batch = record_env(vec.batch, record, label=label)  # the VecEnv steps the recorded env
     clocks = {"wall_s": 0.0, "cpu_s": 0.0, "episodes": 0}
     if resume:
         if path is None:
@@ -199,8 +209,15 @@ def train(cfg: TrainConfig, out: str | Path | None = None, *, resume: bool = Fal
                            episodes_done=int(clocks["episodes"]))  # fmt: skip
     left = max(cfg.timesteps - int(model.num_timesteps), 0)
     t0 = time.perf_counter()
-    if left > 0:
-        model.learn(total_timesteps=left, callback=monitor, reset_num_timesteps=not resume, tb_log_name="ppo")
+    try:
+        if left > 0:
+            model.learn(total_timesteps=left, callback=monitor, reset_num_timesteps=not resume, tb_log_name="ppo")
+    except BaseException:
+        if recorded is not None:
+            recorded.recorder.finish("incomplete")
+        raise
+    if recorded is not None:
+        recorded.close()  # the run is complete
     wall = clocks["wall_s"] + (time.perf_counter() - t0)
     cpu = monitor.cpu_s() if monitor._wall0 else clocks["cpu_s"]
     curve: list[dict[str, float]] = []
