@@ -1,4 +1,4 @@
-"""Smoke test of the step benchmark: a --quick run at tiny sizes prints complete tables (no timing checks)."""
+"""Smoke tests of the benchmarks: --quick runs at tiny sizes print complete tables (no timing checks)."""
 
 from __future__ import annotations
 
@@ -80,6 +80,24 @@ def test_quick_run_prints_both_tables_with_every_cell_filled(quick_run: str) -> 
         assert not check[1].startswith("skipped")  # both checks had their sizes measured
 
 
+def test_train_benchmark_quick_run_prints_its_table() -> None:
+    pytest.importorskip("stable_baselines3")
+    pytest.importorskip("supersuit")
+    cmd = [sys.executable, str(ROOT / "benchmarks" / "bench_train.py"), "--quick", "--rounds", "1",
+           "--block-s", "0.005"]  # fmt: skip
+    res = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stderr[-3000:]
+    assert res.stdout.startswith("machine: ") and "\ndate: " in res.stdout
+    ((head, rows),) = _tables(res.stdout)
+    assert head[0] == "slots (WxN)" and [r[0] for r in rows] == ["16 (4x4)", "64 (16x4)"]
+    for row in rows:
+        assert len(row) == len(head)
+        for name, cell in zip(head[1:], row[1:]):
+            if name not in ("target", "result"):
+                assert _number_or_skipped(cell) and not cell.startswith("skipped"), (row[0], name, cell)
+    assert rows[0][head.index("result")] == "-" and rows[1][head.index("result")] in PASS_VALUES - {"-"}
+
+
 def test_markdown_table_and_number_cells() -> None:
     table = common.markdown_table(["a", "bb"], [["1", "22,000"], ["skipped (x)", "3.5"]])
     lines = table.splitlines()
@@ -111,7 +129,7 @@ def test_measure_interleaved_counts_agent_steps() -> None:
 
 def test_run_all_finds_benchmarks_with_main() -> None:
     names = [p.stem for p in run_all.benchmarks()]
-    assert "bench_step" in names
+    assert "bench_step" in names and "bench_train" in names
     assert [p.stem for p in run_all.benchmarks(["step"])] == ["bench_step"]
     assert all(run_all.has_main(p) for p in run_all.benchmarks())
 
