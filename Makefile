@@ -3,7 +3,7 @@ PYTHON ?= $(shell command -v python3.11 || command -v python3)
 VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
-EXTRAS := train,dev,bench,render,store,video
+EXTRAS := train,dev,bench,render,store,video,notebooks
 export NUMBA_NUM_THREADS ?= 1
 export OMP_NUM_THREADS ?= 1
 export SDL_VIDEODRIVER ?= dummy
@@ -44,3 +44,29 @@ lint: $(STAMP)
 
 clean:
 	rm -rf $(VENV) outputs .pytest_cache .hypothesis
+
+# Other RL stacks: one virtual environment per stack under .venv-eco/ (BenchMARL pins an older TorchRL than
+# TorchRL's latest), built once from the versions verified in examples/constraints-<stack>.txt (torch stays the
+# CPU build) and rebuilt when pyproject.toml or those pins change; then each example runs a few hundred frames.
+ECO := .venv-eco
+ECO_FRAMES ?= 400
+ECO_TIMEOUT ?= 300
+ECO_STAMPS := $(ECO)/rllib/.installed $(ECO)/torchrl/.installed $(ECO)/benchmarl/.installed
+
+.PHONY: test-ecosystem
+
+$(ECO)/%/.installed: pyproject.toml examples/constraints-%.txt
+	test -x $(ECO)/$*/bin/python || $(PYTHON) -m venv $(ECO)/$*
+	$(ECO)/$*/bin/python -m pip install -q --upgrade pip
+	$(ECO)/$*/bin/python -m pip install -q -c examples/constraints-$*.txt "torch==2.13.0+cpu"
+	$(ECO)/$*/bin/python -m pip install -q -c examples/constraints-$*.txt -e ".[$*]"
+	touch $@
+
+# $(call eco_run,stack,example and arguments): run under a time limit, print the wall time
+eco_run = @echo "== $(1): $(2)"; s=$$(date +%s); timeout $(ECO_TIMEOUT) $(ECO)/$(1)/bin/python $(2) \
+	&& echo "== $(1): passed in $$(( $$(date +%s) - s )) s"
+
+test-ecosystem: $(ECO_STAMPS)
+	$(call eco_run,rllib,examples/rllib_ppo_shared.py --frames $(ECO_FRAMES) --iterations 2)
+	$(call eco_run,torchrl,examples/torchrl_mappo.py --frames $(ECO_FRAMES) --frames-per-batch 200)
+	$(call eco_run,benchmarl,examples/benchmarl_mappo.py --frames $(ECO_FRAMES) --out outputs/benchmarl)

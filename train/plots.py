@@ -23,10 +23,7 @@ def plot_learning_curve(curve: Sequence[dict[str, float]], path: str | Path, *, 
     Returns:
         The PNG path.
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # the backend is the caller's (Agg when headless; inline in notebooks)
 
     pts = [(r["timesteps"], r["mean_return"]) for r in curve if not math.isnan(r["mean_return"])]
     fig, ax = plt.subplots(figsize=(7.5, 4.2), dpi=110)

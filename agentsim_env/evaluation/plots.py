@@ -1,4 +1,4 @@
-"""PNG plots of a batch evaluation (matplotlib, Agg backend, 120 dpi).
+"""PNG plots of a batch evaluation (matplotlib, 120 dpi; written to files, the backend is the caller's).
 
 Per zone file:
 
@@ -17,17 +17,13 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-import matplotlib
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.lines import Line2D
+from matplotlib.patches import Circle, Patch
 
-matplotlib.use("Agg")  # files only; never open a window
-
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from matplotlib.lines import Line2D  # noqa: E402
-from matplotlib.patches import Circle, Patch  # noqa: E402
-
-from agentsim_env.evaluation.scoring import composite_score, mean_std, rank_strategies, run_rows  # noqa: E402
-from agentsim_env.scenarios.uav_zones import ZoneSet  # noqa: E402
+from agentsim_env.evaluation.scoring import composite_score, mean_std, rank_strategies, run_rows
+from agentsim_env.scenarios.uav_zones import ZoneSet
 
 __all__ = ["BAR_METRICS", "DPI", "density_raster", "plot_landing_maps", "plot_metric_bars", "write_plots"]
 
