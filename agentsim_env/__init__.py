@@ -21,9 +21,6 @@ _ensure_numba_cache()  # before any kernel module: numba picks a function's cach
 
 __version__ = "0.1.0"
 
-ENV_KEYS = ("render_mode", "obs_format", "action_format", "check_finite")
-
-
 def list_scenarios() -> list[str]:
     """Names of every registered scenario."""
     from agentsim_env.scenarios.registry import list_scenarios as _list
@@ -44,11 +41,9 @@ def make(name: str, **config: Any) -> Any:
     Returns:
         An ``AgentSimParallelEnv``.
     """
-    from agentsim_env.env.parallel_env import AgentSimParallelEnv
-    from agentsim_env.scenarios.registry import make_scenario
+    from agentsim_env.env.parallel_env import build_parallel_env
 
-    env_kw = {k: config.pop(k) for k in ENV_KEYS if k in config}
-    return AgentSimParallelEnv(make_scenario(name, **config), **env_kw)
+    return build_parallel_env(name, **config)
 
 
 def parallel_env(name: str, **config: Any) -> Any:

@@ -24,7 +24,8 @@ try:
 except ImportError as exc:  # pragma: no cover - depends on the installation
     raise ImportError(_HINT) from exc
 
-from agentsim_env.env.torchrl import ENV_KEYS, GROUP, torchrl_env  # noqa: E402 - after the hint for benchmarl
+from agentsim_env.env.parallel_env import ENV_KEYS  # noqa: E402
+from agentsim_env.env.torchrl import GROUP, torchrl_env  # noqa: E402 - after the hint for benchmarl
 
 
 def _keep(spec: Any, keep: str) -> Any:

@@ -20,6 +20,7 @@ from agentsim_env.core.pipeline import EpisodeSeeds
 from agentsim_env.core.validation import check_choice
 from agentsim_env.env.spaces import FORMATS, REAL_KINDS, action_space_for, observation_space_for, split_action
 from agentsim_env.scenarios.base import Scenario, assert_finite, check_finite_default, reset_worlds, run_step
+from agentsim_env.scenarios.registry import make_scenario
 
 RENDER_MODES = ("human", "rgb_array")
 
@@ -356,3 +357,23 @@ class AgentSimParallelEnv(ParallelEnv):
 def to_aec(env: AgentSimParallelEnv) -> Any:
     """The AEC version of a parallel env (PettingZoo's ``parallel_to_aec``)."""
     return parallel_to_aec(env)
+
+
+#: The keys of ``build_parallel_env`` (and ``agentsim_env.make``) that configure the env, not the scenario.
+ENV_KEYS = ("render_mode", "obs_format", "action_format", "check_finite")
+
+
+def build_parallel_env(name: str, defaults: dict[str, Any] | None = None, **config: Any) -> AgentSimParallelEnv:
+    """The ParallelEnv of scenario ``name`` (what ``agentsim_env.make`` returns; the adapters build through it).
+
+    Args:
+        name: A registered scenario.
+        defaults: Env keys (``ENV_KEYS``) used when ``config`` does not give them (an adapter's formats).
+        **config: Env keys and the scenario's config fields (unknown keys raise ``ValueError`` naming them).
+
+    Returns:
+        The env.
+    """
+    env_kw = dict(defaults or {})
+    env_kw.update({k: config.pop(k) for k in ENV_KEYS if k in config})
+    return AgentSimParallelEnv(make_scenario(name, **config), **env_kw)

@@ -16,8 +16,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from agentsim_env.env.parallel_env import AgentSimParallelEnv
-from agentsim_env.scenarios.registry import make_scenario
+from agentsim_env.env.parallel_env import build_parallel_env
 
 _HINT = 'the RLlib adapter needs ray[rllib]: pip install "agentsim-env[rllib]"'
 try:
@@ -32,9 +31,6 @@ except ImportError as exc:  # pragma: no cover - depends on the installation
 SHARED_POLICY = "shared"
 """The id of the one policy (RLModule) every agent maps to."""
 
-ENV_KEYS = ("render_mode", "obs_format", "action_format", "check_finite")
-
-
 class AgentSimRLlibEnv(ParallelPettingZooEnv):
     """A scenario as an RLlib multi-agent env (``ParallelPettingZooEnv`` with the corrections above).
 
@@ -47,9 +43,7 @@ class AgentSimRLlibEnv(ParallelPettingZooEnv):
     def __init__(self, config: dict[str, Any] | None = None) -> None:
         cfg = dict(config or {})  # RLlib's EnvContext is a dict with worker attributes: copy the keys only
         scenario = cfg.pop("scenario", "navigation")
-        env_kw: dict[str, Any] = {"obs_format": "dict", "action_format": "flat"}
-        env_kw.update({k: cfg.pop(k) for k in ENV_KEYS if k in cfg})
-        super().__init__(AgentSimParallelEnv(make_scenario(scenario, **cfg), **env_kw))
+        super().__init__(build_parallel_env(scenario, {"obs_format": "dict", "action_format": "flat"}, **cfg))
 
     def step(self, action_dict: dict[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
         """Step the live agents; ``"__all__"`` is set when none is left."""

@@ -13,8 +13,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from agentsim_env.env.parallel_env import AgentSimParallelEnv
-from agentsim_env.scenarios.registry import make_scenario
+from agentsim_env.env.parallel_env import AgentSimParallelEnv, build_parallel_env
 
 _HINT = 'the TorchRL adapter needs torchrl: pip install "agentsim-env[torchrl]"'
 try:
@@ -25,9 +24,6 @@ except ImportError as exc:  # pragma: no cover - depends on the installation
 
 GROUP = "agents"
 """The one group every agent belongs to."""
-
-ENV_KEYS = ("render_mode", "obs_format", "action_format", "check_finite")
-
 
 def parallel_env(scenario: str, **config: Any) -> AgentSimParallelEnv:
     """The ParallelEnv of ``scenario`` in flat formats unless ``obs_format`` / ``action_format`` say otherwise.
@@ -40,9 +36,7 @@ def parallel_env(scenario: str, **config: Any) -> AgentSimParallelEnv:
     Returns:
         The ParallelEnv.
     """
-    env_kw: dict[str, Any] = {"obs_format": "flat", "action_format": "flat"}
-    env_kw.update({k: config.pop(k) for k in ENV_KEYS if k in config})
-    return AgentSimParallelEnv(make_scenario(scenario, **config), **env_kw)
+    return build_parallel_env(scenario, {"obs_format": "flat", "action_format": "flat"}, **config)
 
 
 def torchrl_env(
