@@ -38,14 +38,14 @@ def plot_learning_curve(curve: Sequence[dict[str, float]], path: str | Path, *, 
                    label=f"{r['policy']} ({r.get('kind', '')}, evaluation): {float(r['mean_return']):.2f}")  # fmt: skip
     ax.set_xlabel("agent-steps")
     ax.set_ylabel("mean episode return per agent")
+    if pts and curve:
+        last = curve[-1]
+        budget = (f"{int(last['timesteps']):,} agent-steps, {last['wall_s']:.0f} s wall, "
+                  f"{last['cpu_s']:.0f} s CPU")  # fmt: skip
+        title = f"{title}\n{budget}" if title else budget
     if title:
         ax.set_title(title, fontsize=10)
     ax.grid(alpha=0.3)
-    if pts and curve:
-        last = curve[-1]
-        ax.text(0.99, 0.02, f"{int(last['timesteps']):,} agent-steps, {last['wall_s']:.0f} s wall, "
-                f"{last['cpu_s']:.0f} s CPU", transform=ax.transAxes, ha="right", va="bottom", fontsize=8,
-                color="0.35")  # fmt: skip
     ax.legend(fontsize=7, loc="best")
     fig.tight_layout()
     out = Path(path)
