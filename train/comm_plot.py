@@ -3,13 +3,13 @@
 :func:`record_comm_traffic` rolls a policy out in the flat ``relay`` env (one episode per seed) and keeps, per
 step and agent, the role (scout or not), the channel its ``comm`` action chose, whether a message actually left
 (``world.comms.sent``), the payload and the scout's target vector (target minus the scout's position, in
-metres). :func:`plot_comm_traffic` draws one PNG of three panels:
+metres). :func:`plot_comm_traffic` draws one PNG of four panels:
 
 1. messages sent per live agent and step, scouts vs non-scouts (mean over the episodes);
 2. the channel each role chose (share of its actions);
-3. every payload value the scouts sent against the target vector component it correlates with best, with the
-   R^2 of a linear decoding of the target vector from the whole payload (1: the payload encodes the target,
-   0: it carries nothing about it).
+3. every payload value the scouts sent against the target vector component it correlates with best;
+4. the target vector decoded linearly (least squares) from the whole payload against the true one, with the
+   R^2 of that decoding (1: the payload encodes the target linearly, 0: nothing of it can be read linearly).
 
 The policy is a stable-baselines3 model (anything with ``predict(obs, deterministic=True)``) or a plain
 function ``(n, obs_dim) array -> (n, act_dim) array``.
@@ -18,7 +18,7 @@ function ``(n, obs_dim) array -> (n, act_dim) array``.
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -40,7 +40,7 @@ class CommTraffic:
         channel: Channel index chosen by the action (``comms.stack.CHANNELS``).
         sent: Messages that actually left the agent this step.
         payload: ``(rows, D)`` payload of the action (as sent when ``sent`` > 0).
-        target: ``(rows, 2)`` target minus the agent's position (metres), as the agent's group target lies.
+        target: ``(rows, 2)`` the agent's group target minus the agent's position (metres), before the step.
         max_steps: The config's episode limit.
     """
 
@@ -52,7 +52,21 @@ class CommTraffic:
     payload: np.ndarray
     target: np.ndarray
     max_steps: int
-    extras: dict[str, Any] = field(default_factory=dict)
+
+    def decode(self) -> tuple[np.ndarray, np.ndarray]:
+        """Least-squares linear decoding of the scouts' target vectors from the payloads they sent.
+
+        Returns:
+            ``(true, decoded)`` target vectors, ``(m, 2)`` each, of the ``m`` scout messages (``decoded`` is all
+            ``nan`` with fewer than ``D + 2`` messages).
+        """
+        m = self.scout & (self.sent > 0)
+        x, y = self.payload[m], self.target[m]
+        if len(x) < x.shape[1] + 2:
+            return y, np.full_like(y, np.nan)
+        a = np.column_stack([x, np.ones(len(x))])
+        coef, *_ = np.linalg.lstsq(a, y, rcond=None)
+        return y, a @ coef
 
     def decoding_r2(self) -> float:
         """R^2 of the scouts' target vector linearly decoded (least squares) from the payloads they sent.
@@ -60,13 +74,10 @@ class CommTraffic:
         Returns:
             The R^2 over both components (``nan`` with fewer than ``D + 2`` scout messages).
         """
-        m = self.scout & (self.sent > 0)
-        x, y = self.payload[m], self.target[m]
-        if len(x) < x.shape[1] + 2:
+        y, fit = self.decode()
+        if np.isnan(fit).any():
             return float("nan")
-        a = np.column_stack([x, np.ones(len(x))])
-        coef, *_ = np.linalg.lstsq(a, y, rcond=None)
-        res = ((y - a @ coef) ** 2).sum()
+        res = ((y - fit) ** 2).sum()
         tot = ((y - y.mean(axis=0)) ** 2).sum()
         return float(1.0 - res / max(tot, 1e-12))
 
@@ -99,7 +110,9 @@ def record_comm_traffic(policy: Any, scenario_config: Mapping[str, Any], seeds: 
     cfg = env.scenario.config
     motion = int(env.action_space(env.possible_agents[0]).shape[0]) - cfg.comms.action_dim
     index = {a: i for i, a in enumerate(env.possible_agents)}
-    cols: dict[str, list[Any]] = {k: [] for k in ("step", "episode", "scout", "channel", "sent", "payload", "target")}
+    cols: dict[str, list[Any]] = {
+        k: [] for k in ("step", "episode", "scout", "channel", "sent", "payload", "target")
+    }
     for e, seed in enumerate(seeds):
         obs, _ = env.reset(seed=int(seed))
         t = 0
@@ -116,7 +129,9 @@ def record_comm_traffic(policy: Any, scenario_config: Mapping[str, Any], seeds: 
             cols["step"].append(np.full(len(names), t))
             cols["episode"].append(np.full(len(names), e))
             cols["scout"].append(scout)
-            cols["channel"].append(np.minimum(((comm[:, 0] + 1.0) * (N_CHANNELS / 2.0)).astype(int), N_CHANNELS - 1))
+            cols["channel"].append(
+                np.minimum(((comm[:, 0] + 1.0) * (N_CHANNELS / 2.0)).astype(int), N_CHANNELS - 1)
+            )
             cols["sent"].append(world.comms.sent[slots].copy())
             cols["payload"].append(comm[:, COMM_HEADER:])
             cols["target"].append(target)
@@ -152,7 +167,7 @@ def plot_comm_traffic(policy: Any, scenario_config: Mapping[str, Any], seeds: It
     tr = record_comm_traffic(policy, scenario_config, seeds)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig, axes = plt.subplots(1, 3, figsize=(15, 4.2), dpi=110)
+    fig, axes = plt.subplots(1, 4, figsize=(19, 4.4), dpi=110)
     ax = axes[0]
     steps = np.arange(int(tr.step.max()) + 1 if tr.step.size else 1)
     for role, mask, colour in (("scouts", tr.scout, "tab:orange"), ("non-scouts", ~tr.scout, "tab:blue")):
@@ -178,13 +193,25 @@ def plot_comm_traffic(policy: Any, scenario_config: Mapping[str, Any], seeds: It
     pay, tgt = tr.payload[m], tr.target[m]
     if len(pay) > 2:
         for q in range(pay.shape[1]):
-            c = [abs(np.corrcoef(pay[:, q], tgt[:, j])[0, 1]) if pay[:, q].std() > 0 else 0.0 for j in range(2)]
+            c = [
+                abs(np.corrcoef(pay[:, q], tgt[:, j])[0, 1]) if pay[:, q].std() > 0 else 0.0 for j in range(2)
+            ]
             j = int(np.nanargmax(c))
             ax.scatter(tgt[:, j], pay[:, q], s=4, alpha=0.35,
                        label=f"payload[{q}] vs target {'xy'[j]} (|r| = {np.nan_to_num(c[j]):.2f})")  # fmt: skip
         ax.legend(fontsize=7, markerscale=3)
     ax.set(xlabel="scout's target vector component (m)", ylabel="payload value sent",
-           title=f"scouts' payload vs target (linear decoding R$^2$ = {tr.decoding_r2():.2f})")  # fmt: skip
+           title="scouts' payload values vs their target")  # fmt: skip
+    ax = axes[3]
+    true, fit = tr.decode()
+    for j, colour in enumerate(("tab:purple", "tab:green")):
+        ax.scatter(true[:, j], fit[:, j], s=4, alpha=0.35, color=colour, label=f"target {'xy'[j]}")
+    if len(true):
+        lim = float(np.abs(true).max()) * 1.05 + 1e-9
+        ax.plot([-lim, lim], [-lim, lim], color="grey", lw=0.8, ls="--")
+    ax.legend(fontsize=8, markerscale=3)
+    ax.set(xlabel="scout's target vector (m)", ylabel="linearly decoded from the payload (m)",
+           title=f"target decoded from the payload (R$^2$ = {tr.decoding_r2():.2f})")  # fmt: skip
     if title:
         fig.suptitle(title)
     fig.tight_layout()
