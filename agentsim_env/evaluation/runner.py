@@ -41,6 +41,10 @@ every flown mission is recorded as one run labelled ``zones=<label> strategy=<na
 This package sits beside the recorder (same layer), so it is handed the recording function, never imports it.
 
 Strategy names and policies come from the ``strategies`` registry (``agentsim_env.policies.registry``).
+A strategy token that is a path is a trained model folder (``model.zip`` and ``config.json`` naming scenario
+``uav_release``, checked up front): it is named by its folder name in the tables, and its missions are flown
+in an env built with the model's ``env`` config merged over the run's overrides (so a model trained in
+autopilot mode flies in autopilot mode; its ``zones`` key, if any, is dropped: ``--zones`` chooses them).
 """
 
 from __future__ import annotations
@@ -54,7 +58,13 @@ from typing import Any
 import numpy as np
 
 from agentsim_env.evaluation.mission import MISSION_KEYS, fly_mission, sensor_rows
-from agentsim_env.evaluation.strategies import policy_factory, strategy_names
+from agentsim_env.evaluation.strategies import (
+    is_model_token,
+    model_env,
+    model_label,
+    policy_factory,
+    strategy_names,
+)
 from agentsim_env.scenarios.uav_outcome import oracle_points
 from agentsim_env.scenarios.uav_zones import ZoneSet, default_zones_path, load_zones, tiny_zones_path
 from agentsim_env.wsn.evaluate import WsnConfig, evaluate_deployment
@@ -71,6 +81,7 @@ __all__ = [
     "resolve_zones",
     "run_grid",
     "run_one",
+    "strategy_labels",
     "teleport_reference",
 ]
 
@@ -189,13 +200,14 @@ def resolve_strategies(names: Iterable[str]) -> list[str]:
     """Expand ``"all"`` (every registered strategy, by name) and check names; ``TELEPORT`` is dropped.
 
     Args:
-        names: Strategy names, or ``["all"]``.
+        names: Strategy names, trained model folders (paths), or ``["all"]``.
 
     Returns:
-        The flown strategies, in the order given, without duplicates.
+        The flown strategies (names, and model folders as given), in the order given, without duplicates.
 
     Raises:
-        ValueError: On an unknown name (the message lists the allowed ones) or an empty selection.
+        ValueError: On an unknown name (the message lists the allowed ones), a model folder without
+            ``model.zip`` / ``config.json`` or trained on another scenario, or an empty selection.
     """
     allowed = available_strategies()
     out: list[str] = []
@@ -204,15 +216,52 @@ def resolve_strategies(names: Iterable[str]) -> list[str]:
         for n in picked:
             if n == TELEPORT:
                 continue  # always evaluated
+            if n not in allowed and is_model_token(n):
+                model_env(n, SCENARIO)  # validates the folder
+                if n not in out:
+                    out.append(n)
+                continue
             if n not in allowed:
                 names = ", ".join(allowed)
                 raise ValueError(
-                    f"unknown strategy {n!r}; allowed: 'all', {names} ({TELEPORT} is always added)"
+                    f"unknown strategy {n!r}; allowed: 'all', {names} or a trained model folder (a path holding "
+                    f"model.zip and config.json) ({TELEPORT} is always added)"
                 )
             if n not in out:
                 out.append(n)
     if not out:
         raise ValueError(f"strategies must name at least one of: 'all', {', '.join(allowed)}")
+    return out
+
+
+def _is_model(strategy: str) -> bool:
+    """Whether a resolved strategy is a trained model folder (not a registered name)."""
+    return is_model_token(strategy) and strategy not in available_strategies()
+
+
+def strategy_labels(strategies: Sequence[str]) -> list[str]:
+    """Table names of resolved strategies: registered names as they are, model folders by folder name.
+
+    Labels are made unique (``name_2`` ...) when folder names repeat or match a registered name.
+    """
+    out: list[str] = []
+    for s in strategies:
+        label = model_label(s) if _is_model(s) else s
+        base, i = label, 1
+        while label in out or label == TELEPORT:
+            i += 1
+            label = f"{base}_{i}"
+        out.append(label)
+    return out
+
+
+def _strategy_overrides(strategy: str, overrides: Mapping[str, Any]) -> dict[str, Any]:
+    """The run's overrides, with a trained model's env config merged over them (its ``zones`` dropped)."""
+    out = dict(overrides)
+    if _is_model(strategy):
+        env = model_env(strategy, SCENARIO)
+        env.pop("zones", None)
+        out.update(env)
     return out
 
 
@@ -247,18 +296,20 @@ def mission_label(zones: str, strategy: str, seed: int) -> str:
 def run_one(
     source: ZoneSource, strategy: str, seed: int, overrides: Mapping[str, Any] | None = None,
     reference: Mapping[str, float] | None = None, record_env: Callable[[Any, str], Any] | None = None,
+    label: str | None = None,
 ) -> RunResult:  # fmt: skip
     """Fly one strategy on one zone file with one seed and evaluate the deployment.
 
     Args:
         source: The zone file.
-        strategy: A registered ``uav_release`` baseline name.
+        strategy: A registered ``uav_release`` baseline name or a trained model folder (module docstring).
         seed: Reset seed of the env and the policy.
         overrides: Scenario config values (not ``zones``).
         reference: The teleport reference's metrics, for the ``*_vs_oracle`` keys (NaN without it).
         record_env: Records the mission: called with the env and the mission's ``mission_label``, it returns the
             env to fly, whose ``recorder`` (``run``, ``error``, ``path``, ``finish``) writes it, e.g.
             ``lambda env, label: agentsim_env.recorder.record(env, "run.db", label=label)``.
+        label: The strategy's name in the result (default: ``strategy_labels([strategy])[0]``).
 
     Returns:
         The run's metrics and sensor rows.
@@ -268,8 +319,9 @@ def run_one(
             its env; the mission's rows in the store would be incomplete), or ``record_env`` raised one
             (``StoreError``: the store cannot be opened).
     """
-    env = _make_env(source, overrides or {})
-    label = mission_label(source.label, strategy, seed)
+    name = label if label is not None else strategy_labels([strategy])[0]
+    env = _make_env(source, _strategy_overrides(strategy, overrides or {}))
+    label = mission_label(source.label, name, seed)
     rec = None
     if record_env is not None:
         try:
@@ -288,9 +340,9 @@ def run_one(
         xy, zone, target = ps.get("land_xy")[landed], ps.get("zone")[landed], ps.get("target_xy")[landed]
         metrics.update(_evaluate(source.zones, wsn, xy, zone, target))
         metrics.update(_vs_oracle(metrics, reference))
-        head = {"zones": source.label, "strategy": strategy, "seed": seed}
+        head = {"zones": source.label, "strategy": name, "seed": seed}
         store_run = None if rec is None else rec.run
-        result = RunResult(source.label, strategy, seed, metrics, sensor_rows(ps, head), store_run)
+        result = RunResult(source.label, name, seed, metrics, sensor_rows(ps, head), store_run)
     except BaseException:
         if rec is not None:
             rec.finish("incomplete")
@@ -362,7 +414,7 @@ def run_grid(
 
     Args:
         zone_files: ``"default"``, ``"tiny"`` or JSON paths.
-        strategies: Strategy names or ``["all"]``.
+        strategies: Strategy names, trained model folders, or ``["all"]``.
         seeds: Reset seeds (at least one).
         config_overrides: Scenario config values applied to every run (not ``zones``).
         progress: Show a tqdm progress bar (on stderr).
@@ -373,11 +425,16 @@ def run_grid(
     """
     sources = resolve_zones(zone_files)
     names = resolve_strategies(strategies)
+    labels = strategy_labels(names)
     seed_list = [int(s) for s in seeds]
     if not seed_list:
         raise ValueError("seeds must hold at least one seed")
     overrides = dict(config_overrides or {})
     refs = {src.label: teleport_reference(src, overrides) for src in sources}  # also validates the overrides
+    for name in names:  # a model's env config must build on every zone file
+        if _is_model(name):
+            for src in sources:
+                _make_env(src, _strategy_overrides(name, overrides)).close()
     jobs = [(src, name, seed) for src in sources for name in names for seed in seed_list]
     bar = None
     if progress:
@@ -394,14 +451,16 @@ def run_grid(
                         src.label, TELEPORT, s, dict(ref.metrics), [{**r, "seed": s} for r in ref.sensors]
                     )
                 )
-            for name in names:
+            for name, lab in zip(names, labels, strict=True):
                 for seed in seed_list:
                     if bar is not None:
-                        bar.set_postfix_str(f"{src.label} {name} seed {seed}")
-                    runs.append(run_one(src, name, seed, overrides, ref.metrics, record_env=record_env))
+                        bar.set_postfix_str(f"{src.label} {lab} seed {seed}")
+                    runs.append(
+                        run_one(src, name, seed, overrides, ref.metrics, record_env=record_env, label=lab)
+                    )
                     if bar is not None:
                         bar.update(1)
     finally:
         if bar is not None:
             bar.close()
-    return GridResult(runs, sources, names, seed_list, overrides)
+    return GridResult(runs, sources, labels, seed_list, overrides)

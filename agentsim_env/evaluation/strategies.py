@@ -1,9 +1,14 @@
 """Where the evaluation finds its release strategies: a registry of ``"module:attribute"`` references.
 
-The evaluation package does not import the policies package. It needs two callables, a policy factory
-(``make_policy(scenario, env, name) -> Policy``) and the list of strategy names of a scenario
-(``baseline_names(scenario) -> list[str]``); both are named here as ``"module:attribute"`` strings and loaded
-with importlib on first use.
+The evaluation package does not import the policies package. It needs three callables, a policy factory
+(``make_policy(scenario, env, name) -> Policy``), the list of strategy names of a scenario
+(``baseline_names(scenario) -> list[str]``) and the reader of a trained model's config
+(``model_env_config(path) -> (scenario, env_config)``); all are named here as ``"module:attribute"`` strings
+and loaded with importlib on first use.
+
+A strategy token that is a path (it contains a path separator or names an existing folder) is a trained model
+folder (``model.zip`` and ``config.json``, as ``agentsim train`` writes them): ``is_model_token`` tells them
+apart, ``model_label`` names it (the folder name) and ``model_env`` reads its scenario and env config.
 
 This module imports no other module of the evaluation package.
 """
@@ -11,15 +16,21 @@ This module imports no other module of the evaluation package.
 from __future__ import annotations
 
 import importlib
+import os
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 __all__ = [
+    "MODEL_ENV",
     "NAMES",
     "POLICY_FACTORY",
     "NameLister",
     "PolicyFactory",
+    "is_model_token",
     "load",
+    "model_env",
+    "model_label",
     "policy_factory",
     "strategy_names",
 ]
@@ -33,6 +44,9 @@ NameLister = Callable[[str], list[str]]
 POLICY_FACTORY = "agentsim_env.policies.registry:make_policy"
 #: Default reference of the name lister.
 NAMES = "agentsim_env.policies.registry:baseline_names"
+#: Default reference of the trained-model config reader, ``model_env_config(path) -> (scenario, env)``.
+MODEL_ENV = "agentsim_env.policies.learned:model_env_config"
+
 
 def load(ref: str) -> Any:
     """Import ``"package.module:attribute"`` and return the attribute.
@@ -72,3 +86,50 @@ def strategy_names(scenario: str) -> list[str]:
     """
     lister: NameLister = load(NAMES)
     return list(lister(scenario))
+
+
+def is_model_token(token: str) -> bool:
+    """Whether a strategy token is a trained model folder's path (not a registered strategy name).
+
+    Args:
+        token: The ``--strategies`` token.
+
+    Returns:
+        True when it contains a path separator or names an existing folder.
+    """
+    text = str(token)
+    return "/" in text or os.sep in text or Path(text).is_dir()
+
+
+def model_label(token: str) -> str:
+    """The name of a trained model in tables: its folder's name."""
+    return Path(str(token).rstrip("/" + os.sep)).name or str(token)
+
+
+def model_env(token: str, scenario: str) -> dict[str, Any]:
+    """Check a trained model folder and return the env config it was trained with.
+
+    Args:
+        token: The model folder.
+        scenario: The scenario it must have been trained on.
+
+    Returns:
+        The scenario config keys of its ``config.json`` ``env``.
+
+    Raises:
+        ValueError: The folder is missing, lacks ``model.zip`` or ``config.json``, its config cannot be read, or
+            it was trained on another scenario.
+    """
+    folder = Path(str(token))
+    if not folder.is_dir():
+        raise ValueError(f"strategy {token!r} is a path but not a folder; a trained model is a folder holding "
+                         "model.zip and config.json (as 'agentsim train --out DIR' writes them)")  # fmt: skip
+    missing = [f for f in ("model.zip", "config.json") if not (folder / f).is_file()]
+    if missing:
+        raise ValueError(f"trained model folder {token!r} lacks {' and '.join(missing)} (a trained model folder "
+                         "holds model.zip and config.json, as 'agentsim train --out DIR' writes them)")  # fmt: skip
+    reader: Callable[[str], tuple[str, dict[str, Any]]] = load(MODEL_ENV)
+    trained_on, env = reader(str(folder))
+    if trained_on != scenario:
+        raise ValueError(f"trained model {token!r} was trained on scenario {trained_on!r}, not {scenario!r}")
+    return dict(env)

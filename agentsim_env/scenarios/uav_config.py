@@ -21,8 +21,10 @@ from agentsim_env.scenarios.rewards import RewardConfig
 from agentsim_env.scenarios.uav_zones import ZoneSet, load_zones, validate_against_payload, zones_from_dict
 from agentsim_env.wsn.evaluate import WsnConfig
 
-ZONES_ACCEPTED = ("a zones JSON path (str or Path), a dict in the zones format (docs/zones.md), a ZoneSet, "
-                  "'tiny', 'default' or None")
+ZONES_ACCEPTED = (
+    "a zones JSON path (str or Path), a dict in the zones format (docs/zones.md), a ZoneSet, "
+    "'tiny', 'default' or None"
+)
 """What the ``zones`` field accepts (named in its errors)."""
 
 
@@ -46,6 +48,11 @@ class UavReleaseConfig(ScenarioConfig):
     ``sensor_area`` 1e-6..10 m^2, with the sensors' terminal fall speed ``sqrt(2 m g / (rho cd A))`` at least
     1 m/s; ``battery_j`` 1..1e9 J; ``target_scale`` 1e-3..1e6; ``grid_extent`` 1..1e5 m; ``grid_cells``
     1..64; reward weights ``w_*`` 0..1e6; with ``physics="pymunk"`` the zones' map at most 20 km.
+
+    Autopilot mode (``autopilot=True``, see ``uav_autopilot`` and the scenario docstring): the scenario flies a
+    sweep at ``autopilot_speed`` m/s (0.5..``body.max_speed``) and ``autopilot_altitude`` m (inside
+    ``body.altitude``) over lanes ``autopilot_lane`` m apart (1..1e4); ``release_cost`` (0..100, in units of the mean
+    weighted coverage per required sensor, ``1 / zones.n_sensors``) is the shaping baseline of a release. These fields do nothing when ``autopilot`` is off.
     """
 
     nested: ClassVar[dict[str, type]] = {**ScenarioConfig.nested, "wind": WindConfig, "scatter": ScatterConfig,
@@ -84,6 +91,11 @@ class UavReleaseConfig(ScenarioConfig):
     w_out: float = 1.0
     w_lcc: float = 5.0
     w_lifetime: float = 5.0
+    autopilot: bool = False
+    autopilot_speed: float = 8.0
+    autopilot_altitude: float = 10.0
+    autopilot_lane: float = 16.0
+    release_cost: float = 1.0
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -94,6 +106,12 @@ class UavReleaseConfig(ScenarioConfig):
         for name in ("w_coverage", "w_fidelity", "w_energy", "w_miss", "w_out", "w_lcc", "w_lifetime"):
             check_float(name, getattr(self, name), 0.0, 1e6)
         check_int("grid_cells", self.grid_cells, 1, 64)
+        if not isinstance(self.autopilot, bool):
+            raise ValueError(f"autopilot must be true or false; got {short_repr(self.autopilot)}")
+        check_float("autopilot_speed", self.autopilot_speed, 0.5, float(self.body.max_speed))
+        check_float("autopilot_altitude", self.autopilot_altitude, *map(float, self.body.altitude))
+        check_float("autopilot_lane", self.autopilot_lane, 1.0, 1e4)
+        check_float("release_cost", self.release_cost, 0.0, 100.0)
         v_t = math.sqrt(2.0 * self.sensor_mass * 9.81 / (1.225 * self.sensor_cd * self.sensor_area))
         if v_t < 1.0:
             raise ValueError(
@@ -104,7 +122,9 @@ class UavReleaseConfig(ScenarioConfig):
         zs = self.zone_set()
         object.__setattr__(self, "zones", zs)
         if self.physics == "pymunk" and max(zs.map_size) > 2e4:
-            raise ValueError(f"zones: map_size {list(zs.map_size)} is over 20000 m, the limit with physics='pymunk'")
+            raise ValueError(
+                f"zones: map_size {list(zs.map_size)} is over 20000 m, the limit with physics='pymunk'"
+            )
         validate_against_payload(zs, self.n_agents, self.payload)
 
     @property

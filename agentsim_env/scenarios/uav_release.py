@@ -17,6 +17,7 @@ Observation (Dict; flat Box = parts in this order):
 | landed  | (C, C)       | landed sensors around the UAV (window ``grid_extent`` m, C = ``grid_cells``), count / 4, clipped |
 | inbox   | (M, 11 + D)  | received messages, newest first (``agentsim_env.comms.messages``)                 |
 | comms   | (2,)         | received and dropped this step / M                                               |
+| autopilot | (4,)       | autopilot mode only: predicted coverage gain of releasing now x N / 4 (N = the zones' sensors), route progress, whether the predicted landing point is in a zone (1 / -1), payload left / payload - (1 - progress); all x 2 - 1 but the last, clipped to [-1, 1] |
 
 Action (Dict; flat Box = parts in this order), values in [-1, 1]:
 - ``motion``: (3,) velocity / max_speed (``action_mode="velocity"``) or (8,) primitive (``agentsim_env.motion.actions``).
@@ -25,12 +26,32 @@ Action (Dict; flat Box = parts in this order), values in [-1, 1]:
   recorded as the sensor's target; the zone containing it is the sensor's zone).
 - ``comm``: (3 + D,) channel, receiver, hop limit, payload (``agentsim_env.comms.stack``).
 
+Autopilot mode (``autopilot=True``; ``uav_autopilot``; default off, then nothing below applies): the
+scenario flies every UAV over its share of boustrophedon lanes covering the zones (transit at ``max_speed``,
+sweep at ``autopilot_speed`` and ``autopilot_altitude``) and the ``motion`` action is ignored; the policy only
+decides when to release. Only ``release[0]`` (trigger) counts: the sensor's target is its predicted landing
+point (mean wind, no gusts) and releases are masked out in transit, after the UAV's sweep and with an empty
+payload. The mission also completes once every UAV has finished its sweep and nothing is falling.
+
+| action part | autopilot mode                                                   |
+|-------------|------------------------------------------------------------------|
+| motion      | ignored (the autopilot flies)                                    |
+| release     | trigger > 0 releases at the predicted landing point; dx, dy ignored |
+| comm        | as without autopilot                                             |
+
+Autopilot shaping (the episode's sum is unchanged up to a constant): the coverage term is credited at release
+time with the predicted gain ``g`` (importance of the lattice points within ``r_s`` of the predicted landing
+point not yet claimed by an earlier release or covered) and corrected at landing by ``gain - g``; each release
+costs ``c = w_coverage x release_cost / N`` and carrying a sensor costs ``c`` spread over the route
+(``-c x d(payload_left x progress)`` per step), so that over an episode these terms add up to
+``-c x payload`` whatever the policy does (when every UAV ends its sweep).
+
 Reward per UAV (domain §5.4), through the reward composer: w_coverage x weighted-coverage gain of its landed
 sensors - w_fidelity x change of the zone's radial W1 - w_energy x energy / battery - w_miss x landing miss / zone
 radius - w_out x landings outside every zone; at the end of the episode every UAV still flying gets
 w_lcc x largest-component fraction + w_lifetime x FND / FND of the oracle layout (B8).
 
-Version history: v0, first release.
+Version history: v0, first release; autopilot mode added (off by default, layouts unchanged without it).
 """
 
 from __future__ import annotations
@@ -40,11 +61,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from agentsim_env.motion import MotionLimits
+from agentsim_env.motion.actions import decode_velocity_unchecked
 from agentsim_env.payloads import FallParams
 from agentsim_env.payloads.stage import PayloadStage
 from agentsim_env.scenarios.base import Scenario, SlotState, StepResult, slot
 from agentsim_env.scenarios.landed_grid import local_counts
 from agentsim_env.scenarios.rewards import compose_rewards
+from agentsim_env.scenarios.uav_autopilot import AutopilotMode, ClaimMap
 from agentsim_env.scenarios.uav_config import UavReleaseConfig
 from agentsim_env.scenarios.uav_energy import DEFAULT_ROTOR, energy_step
 from agentsim_env.scenarios.uav_outcome import final_bonus, oracle_fnd
@@ -61,7 +84,12 @@ class UavSlots(SlotState):
     payload_left: np.ndarray = slot(dtype=np.int64)
     released: np.ndarray = slot(dtype=np.int8)
     finished: np.ndarray = slot(dtype=bool, per_world=True)
+    wp: np.ndarray = slot(dtype=np.int64)  # autopilot: waypoint flown to (0: transit)
+    route_done: np.ndarray = slot(dtype=bool)  # autopilot: piece swept
+    release_gain: np.ndarray = slot()  # autopilot: predicted coverage gain of this step's release
+    progress: np.ndarray = slot()  # autopilot: fraction of the piece swept
     tracker: DeploymentTracker | None = None  # coverage and radial fidelity of the landed sensors, per world
+    claims: ClaimMap | None = None  # autopilot: lattice claimed by released sensors' predicted landings
 
 
 class UavReleaseScenario(Scenario[UavReleaseConfig]):
@@ -72,6 +100,8 @@ class UavReleaseScenario(Scenario[UavReleaseConfig]):
     version = 0
     agent_prefix = "uav"
     obs_bounds = {"lidar": (0.0, 1.0), "landed": (0.0, 1.0)}
+    event_keys = ("released", "landed")
+    final_keys = ("coverage_weighted",)
     extra_actions = {"release": 3}
     test_configs = (
         {"zones": "tiny", "n_agents": 2, "payload": 12, "max_steps": 400},
@@ -93,6 +123,7 @@ class UavReleaseScenario(Scenario[UavReleaseConfig]):
         self.diag = float(np.hypot(w, h))
         self.fall = FallParams(mass=c.sensor_mass, cd=c.sensor_cd, area=c.sensor_area)
         self.fnd_oracle = oracle_fnd(self.zones, c.wsn)
+        self.pilot = AutopilotMode(c, self.zones, self.fall) if c.autopilot else None
 
     def extra_bytes(self) -> tuple[int, int]:
         """The payload's sensors (state, fall, landing and deployment records, about 1.7 kB each) per slot."""
@@ -109,9 +140,13 @@ class UavReleaseScenario(Scenario[UavReleaseConfig]):
                       payloads=payloads)  # fmt: skip
         st = world.state
         # one group: the whole fleet
-        st.configure(radius=b.radius, sensor_range=c.sensing.range, max_speed=b.max_speed, max_accel=b.max_accel)
+        st.configure(
+            radius=b.radius, sensor_range=c.sensing.range, max_speed=b.max_speed, max_accel=b.max_accel
+        )
         world.task = UavSlots.allocate(st.n_slots, n_worlds)
         world.task.tracker = DeploymentTracker(self.zones, n_worlds, c.wsn.r_s)
+        if self.pilot is not None:
+            world.task.claims = ClaimMap(world.task.tracker, n_worlds)
         return world
 
     def reset_world(self, world: World, w: int, rng: np.random.Generator) -> None:
@@ -128,6 +163,9 @@ class UavReleaseScenario(Scenario[UavReleaseConfig]):
         t.released[sl] = 0
         t.tracker.reset_world(w)
         t.finished[w] = False
+        t.wp[sl], t.route_done[sl], t.release_gain[sl], t.progress[sl] = 0, False, 0.0, 0.0
+        if t.claims is not None:
+            t.claims.reset_world(w)
 
     def motion_limits(self, world: World) -> MotionLimits:
         """Primitive limits: circles up to a quarter of the map, 30 s segments, goto arrival within 1 m."""
@@ -139,17 +177,29 @@ class UavReleaseScenario(Scenario[UavReleaseConfig]):
 
     def apply_actions(self, world: World, actions: dict[str, np.ndarray], acting: np.ndarray) -> None:
         """Motion commands, then releases from the UAVs' current position and velocity (into stage 4)."""
-        super().apply_actions(world, actions, acting)
         c, st, t = self.config, world.state, world.task
+        may = acting & st.online & (t.payload_left > 0)
+        if self.pilot is None:
+            super().apply_actions(world, actions, acting)
+        else:  # the autopilot flies; releases only while sweeping
+            cmd, t.wp[:] = self.pilot.fly(world, t.wp)
+            decode_velocity_unchecked(world.motion, acting, cmd, st.max_speed)
+            may &= self.pilot.on_route(t.wp, st.n_slots)
         rel = actions["release"]
-        go = np.flatnonzero(acting & st.online & (rel[:, 0] > 0) & (t.payload_left > 0))
+        go = np.flatnonzero(may & (rel[:, 0] > 0))
         t.released[:] = 0
+        t.release_gain[:] = 0.0
         if go.size:
-            target = st.pos[go, :2] + rel[go, 1:3] * c.target_scale
+            if self.pilot is None:
+                target = st.pos[go, :2] + rel[go, 1:3] * c.target_scale
+            else:
+                target = self.pilot.landing(world)[go]
             wld = st.world_id[go]
             assert world.payloads is not None
-            world.payloads.release(go, wld, st.pos[go], st.vel[go], float(world.step_count[wld[0]]) * c.dt,
-                                   self.zones.zone_index(target), target)  # fmt: skip
+            ids = world.payloads.release(go, wld, st.pos[go], st.vel[go], float(world.step_count[wld[0]]) * c.dt,
+                                         self.zones.zone_index(target), target)  # fmt: skip
+            if self.pilot is not None:
+                t.release_gain[go] = t.claims.claim(wld, target, ids)
             t.payload_left[go] -= 1
             t.released[go] = 1
 
@@ -167,6 +217,8 @@ class UavReleaseScenario(Scenario[UavReleaseConfig]):
             owner, wld, zone = ps.get("owner")[idx], ps.get("world")[idx], ps.get("zone")[idx]
             land, target = ps.get("land_xy")[idx], ps.get("target_xy")[idx]
             gain, dw1 = t.tracker.land(wld, land, zone)
+            if self.pilot is not None:  # the predicted gain was credited at release
+                gain = gain - t.claims.landed(landed)
             radius = np.where(zone >= 0, self.zones.radii()[np.maximum(zone, 0)], c.target_scale)
             miss = np.nan_to_num(np.linalg.norm(land - target, axis=1) / radius)
             out = self.zones.zone_index(land) < 0
@@ -177,6 +229,10 @@ class UavReleaseScenario(Scenario[UavReleaseConfig]):
         energy = np.where(st.online, energy_step(st.vel, mass, c.dt), 0.0)
         st.energy += energy
         task -= c.w_energy * energy / c.battery_j
+        route_over = np.zeros(world.n_worlds, dtype=bool)
+        if self.pilot is not None:  # release-time credit, release and carrying costs; sweeps finished
+            task += self.pilot.shaping(world, t)
+            route_over = (t.route_done | ~st.online).reshape(-1, c.n_agents).all(axis=1)
         empty_battery = acting & (st.energy >= c.battery_j)
         collided = np.zeros(s)
         collided[events.went_offline] = 1.0
@@ -186,7 +242,7 @@ class UavReleaseScenario(Scenario[UavReleaseConfig]):
         ps_world = ps.get("world")
         falling = np.bincount(ps_world[ps.get("falling")], minlength=world.n_worlds)
         down = np.bincount(ps_world[ps.get("landed")], minlength=world.n_worlds)
-        complete = (falling == 0) & ((left == 0) | (down >= self.zones.n_sensors))
+        complete = (falling == 0) & ((left == 0) | (down >= self.zones.n_sensors) | route_over)
         done_now = ~t.finished & (complete | (world.step_count >= c.max_steps))
         terminated = empty_battery.copy()
         for w in np.flatnonzero(done_now).tolist():
@@ -232,12 +288,16 @@ class UavReleaseScenario(Scenario[UavReleaseConfig]):
         done = ps.get("landed")
         grid = local_counts(st.pos[:, :2], st.world_id, ps.get("land_xy")[done], ps.get("world")[done],
                             c.grid_cells, c.grid_extent)  # fmt: skip
-        return {
+        out = {
             "self": np.clip(selfp, -1, 1).astype(np.float32),
             "lidar": np.stack([scan.distance, scan.hit_kind / 3.0], axis=-1).astype(np.float32),
             "zones": np.clip(zones, -1, 1).astype(np.float32),
             "landed": grid,
         }
+        if self.pilot is not None:
+            in_zone = self.zones.zone_index(self.pilot.landing(world)) >= 0
+            out["autopilot"] = self.pilot.observe(world, t.claims, t.wp, t.payload_left / c.payload, in_zone)
+        return out
 
     def _demand(self, world: World) -> np.ndarray:
         """Unmet demand per (world, zone): sensors not yet landed or falling there / n_sensors."""
@@ -272,4 +332,3 @@ class UavReleaseScenario(Scenario[UavReleaseConfig]):
 
 
 SCENARIO = UavReleaseScenario
-
