@@ -3,8 +3,10 @@
 Each policy plays ``eval.seeds`` episodes (seeds ``eval.first_seed`` ...) in the ParallelEnv: the trained
 model deterministically, in the env built from ``env`` + ``eval.env``; the baselines in that env with
 ``eval.baseline_env`` on top. Per policy the table gives the mean return per agent (and its standard deviation
-over episodes), every numeric info counter per agent (``arrived``, ``collided``, ``released`` ...), and for
-``relay`` the share of groups brought to their target and the episodes in which every group got there.
+over episodes), the scenario's event counters per agent (``Scenario.event_keys``: ``arrived``, ``collided``,
+``released`` ...), its outcomes at the end of an episode (``Scenario.final_keys``: ``uav_release``'s weighted
+coverage), and for ``relay`` the share of groups brought to their target and the episodes in which every group
+got there.
 """
 
 from __future__ import annotations
@@ -53,17 +55,21 @@ def _play(env: Any, policy: Any, name: str, kind: str, seeds: Sequence[int], bar
 
     n = len(env.possible_agents)
     returns, sums, extras = [], [], []
-    counters: set[str] = set()  # integer infos (arrived, collided ...) add up; real-valued ones (distances) do not
+    events, finals = set(env.scenario.event_keys), env.scenario.final_keys
+    last: dict[str, float] = {}
 
-    def note_counters(_env: Any, infos: dict[str, dict[str, Any]]) -> None:
-        for info in infos.values():
-            counters.update(k for k, v in info.items() if isinstance(v, (int, np.integer)))
+    def note_finals(_env: Any, infos: dict[str, dict[str, Any]]) -> None:
+        for k in finals:
+            vals = [float(i[k]) for i in infos.values() if k in i]
+            if vals:
+                last[k] = float(np.mean(vals))
 
     for s in seeds:
-        ep = run_episode(env, policy, s, on_step=note_counters)
+        last.clear()
+        ep = run_episode(env, policy, s, on_step=note_finals if finals else None)
         returns.append(float(np.mean(list(ep.returns.values()))))
-        sums.append({k: v / n for k, v in ep.info_sums.items() if k in counters})
-        extras.append(_episode_extras(env))
+        sums.append({k: v / n for k, v in ep.info_sums.items() if k in events})
+        extras.append({**last, **_episode_extras(env)})
         if bar is not None:
             bar.update(1)
     row: dict[str, Any] = {"policy": name, "kind": kind, "episodes": len(seeds),

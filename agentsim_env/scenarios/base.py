@@ -106,6 +106,10 @@ class Scenario(ABC, Generic[ConfigT]):
     obs_bounds: ClassVar[dict[str, tuple[float, float]]] = {"lidar": (0.0, 1.0)}
     #: Scenario action parts after ``motion`` (name -> size), each a box in [-1, 1].
     extra_actions: ClassVar[dict[str, int]] = {}
+    #: Info keys that count events (an evaluation sums them over an episode, per agent).
+    event_keys: ClassVar[tuple[str, ...]] = ("arrived", "collided")
+    #: Info keys whose value at the end of an episode is an outcome (an evaluation reports the last one).
+    final_keys: ClassVar[tuple[str, ...]] = ()
 
     def __init__(self, config: ConfigT) -> None:
         self.config = config

@@ -107,7 +107,8 @@ class ReleasePolicy:
         strategy: A key of ``STRATEGIES``.
         cruise_speed: Transit speed in m/s (capped at the scenario's ``max_speed``).
         release_speed: Speed at fly-through releases; ``None``: ``DEFAULT_RELEASE_SPEED[strategy]``.
-        coordinate: Exchange CLAIM/RELEASED/DONE/HELLO messages and reclaim lost UAVs' work.
+        coordinate: Exchange CLAIM/RELEASED/DONE/HELLO messages and reclaim lost UAVs' work (``None``: when the
+            env has comms; ``True`` without comms is an error).
         options: Strategy options passed to ``make_plan``.
         hello_every: Steps of silence after which a UAV sends a heartbeat.
         lost_after: Steps of silence (without DONE) after which a UAV is considered lost.
@@ -125,7 +126,7 @@ class ReleasePolicy:
 
     def __init__(
         self, env: Any, strategy: str = "B5_cvt", *, cruise_speed: float = 12.0, release_speed: float | None = None,
-        coordinate: bool = True, options: dict | None = None, hello_every: int = 10, lost_after: int = 50,
+        coordinate: bool | None = None, options: dict | None = None, hello_every: int = 10, lost_after: int = 50,
         release_tol: float = 1.0, default_altitude: float = 15.0, layer_spacing: float = 2.0,
         rim_margin: float = 1.0,
     ) -> None:  # fmt: skip
@@ -152,6 +153,13 @@ class ReleasePolicy:
         for name, v in (("hello_every", hello_every), ("lost_after", lost_after)):
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise ValueError(f"{name} must be an integer >= 1, got {v!r}")
+        if getattr(c, "autopilot", False):
+            raise ValueError("ReleasePolicy flies the UAVs itself: it needs autopilot=False (with autopilot the "
+                             "scenario flies them and only the release is decided)")  # fmt: skip
+        if coordinate is None:
+            coordinate = c.comms is not None
+        if coordinate and c.comms is None:
+            raise ValueError("coordinate=True needs comms (the env was built with comms=None)")
         if coordinate and c.comms.payload_dim < PAYLOAD_DIM:
             raise ValueError(
                 f"comms.payload_dim must be >= {PAYLOAD_DIM} with coordinate=True, got {c.comms.payload_dim}"
