@@ -156,3 +156,21 @@ def test_trained_model_flies_in_evaluate_with_its_env(tmp_path: Path) -> None:
     assert run.metrics["steps"] > 0 and np.isfinite(run.metrics["coverage_weighted"])
     # the model's env (autopilot) was used: the fleet flew its sweep, far from the base
     assert run.metrics["path_length_m"] > 100.0
+
+
+def test_scripted_release_without_comms_and_refused_with_autopilot() -> None:
+    import agentsim_env
+    from agentsim_env.policies.registry import make_policy
+    from agentsim_env.policies.rollout import run_episode
+
+    env = agentsim_env.make("uav_release", zones="tiny", n_uavs=1, payload=20, comms=None)
+    policy = make_policy("uav_release", env, "B0_uniform")  # no comms: the UAVs do not coordinate
+    assert policy.coordinate is False
+    ep = run_episode(env, policy, 0)
+    assert ep.info_sums["landed"] == 20
+    with pytest.raises(ValueError, match="coordinate=True needs comms"):
+        from agentsim_env.policies.release.policy import ReleasePolicy
+
+        ReleasePolicy(env, "B0_uniform", coordinate=True)
+    with pytest.raises(ValueError, match="needs autopilot=False"):
+        make_policy("uav_release", agentsim_env.make("uav_release", zones="tiny", autopilot=True), "B5_cvt")
