@@ -167,6 +167,6 @@ def load_policy(path: str | Path, env: Any, *, deterministic: bool = True) -> Le
     except ImportError as exc:  # pragma: no cover - depends on the installation
         raise ImportError('trained policies need stable-baselines3: pip install "agentsim-env[train]"') from exc
     model = PPO.load(zip_path, device="cpu")
-    folder = zip_path.parent if zip_path.name != "model.zip" else zip_path.parent
+    folder = zip_path.parent
     name = folder.name if zip_path.name == "model.zip" else f"{folder.name}/{zip_path.stem}"
     return LearnedPolicy(model, env, deterministic=deterministic, name=name)

@@ -9,9 +9,9 @@ finished agent-episodes, filled from the ``episode`` entries of the VecEnv's inf
 from __future__ import annotations
 
 import csv
+import json
 import time
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
@@ -58,6 +58,11 @@ class TrainMonitor(BaseCallback):
         self.checkpoints: list[Path] = []
 
     # clocks -------------------------------------------------------------------------------------------------
+    @property
+    def started(self) -> bool:
+        """Whether ``learn`` started (the clocks run)."""
+        return self._wall0 > 0.0
+
     def wall_s(self) -> float:
         """Wall seconds of training so far (this run and what it resumed)."""
         return self._start_wall + time.perf_counter() - self._wall0
@@ -122,12 +127,7 @@ class TrainMonitor(BaseCallback):
         path = folder / f"step_{self.num_timesteps}.zip"
         self.model.save(path)
         clocks = {"wall_s": self.wall_s(), "cpu_s": self.cpu_s(), "episodes": self.episodes}
-        path.with_suffix(".json").write_text(_json(clocks), encoding="utf-8")
+        path.with_suffix(".json").write_text(json.dumps(clocks, indent=2), encoding="utf-8")
         self.checkpoints.append(path)
         return path
 
-
-def _json(data: dict[str, Any]) -> str:
-    import json
-
-    return json.dumps(data, indent=2)

@@ -181,10 +181,14 @@ class TrainConfig:
         check_int("seed", self.seed, 0, 2**32 - 1)
         _choice("vec", self.vec, VEC_KINDS)
         check_int("checkpoint_every", self.checkpoint_every, 0, 10_000_000_000)
+        checked: list[dict[str, Any]] = []
         for where, keys in (("env", self.env), ("eval.env", self.eval_env()),
                             ("eval.baseline_env", self.eval_env(baseline=True))):  # fmt: skip
+            if keys in checked:  # the evaluation adds nothing: already built once
+                continue
+            checked.append(keys)
             try:
-                make_scenario(self.scenario, **keys)
+                make_scenario(self.scenario, **dict(keys))
             except (TypeError, ValueError) as exc:
                 raise ValueError(f"{where}: {exc}") from None
 

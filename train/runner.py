@@ -17,7 +17,6 @@ Seeded runs reproduce exactly (one thread; the env, the network and the rollouts
 
 from __future__ import annotations
 
-import csv
 import json
 import platform
 import time
@@ -25,7 +24,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from agentsim_env.train.callbacks import CURVE_FIELDS, TrainMonitor, read_curve
+from agentsim_env.train.callbacks import TrainMonitor, read_curve
 from agentsim_env.train.config import TrainConfig, save_config
 
 __all__ = ["TrainResult", "latest_checkpoint", "make_model", "make_vec_env", "train"]
@@ -126,17 +125,12 @@ def _versions() -> dict[str, str]:
 
 
 def _truncate_curve(out: Path, timesteps: int) -> None:
-    """Drop curve rows past a checkpoint (they are trained again when resuming from it)."""
+    """Drop curve rows past a checkpoint (they are trained again when resuming from it); kept rows stay as written."""
     path = out / "curve.csv"
     if not path.exists():
         return
-    rows = [r for r in read_curve(path) if r["timesteps"] <= timesteps]
-    with open(path, "w", newline="", encoding="utf-8") as f:
-        w = csv.writer(f)
-        w.writerow(CURVE_FIELDS)
-        for r in rows:
-            w.writerow(["" if v != v else f"{v:.6g}" if k in ("mean_return", "mean_length") else
-                        f"{v:.3f}" if k.endswith("_s") else int(v) for k, v in r.items()])  # fmt: skip
+    header, *rows = path.read_text(encoding="utf-8").splitlines(keepends=True)
+    path.write_text(header + "".join(r for r in rows if int(r.split(",", 1)[0]) <= timesteps), encoding="utf-8")
 
 
 def train(cfg: TrainConfig, out: str | Path | None = None, *, resume: bool = False, progress: bool = False,
@@ -219,7 +213,7 @@ def train(cfg: TrainConfig, out: str | Path | None = None, *, resume: bool = Fal
     if recorded is not None:
         recorded.close()  # the run is complete
     wall = clocks["wall_s"] + (time.perf_counter() - t0)
-    cpu = monitor.cpu_s() if monitor._wall0 else clocks["cpu_s"]
+    cpu = monitor.cpu_s() if monitor.started else clocks["cpu_s"]
     curve: list[dict[str, float]] = []
     if path is not None:
         model.save(path / "model.zip")

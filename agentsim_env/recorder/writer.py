@@ -38,7 +38,7 @@ _CHECKPOINT_PAGES = 10_000
 
 @lru_cache(maxsize=512)
 def _values_sql(head: str, ncols: int, rows: int, nconst: int = 0) -> str:
-    """``head`` followed by ``rows`` groups of ``ncols`` placeholders (after ``nconst`` leading constants)."""
+    """``head`` followed by ``rows`` groups of ``ncols`` SQL parameters ``?`` (after ``nconst`` leading constants)."""
     groups = ", ".join(["(" + ", ".join("?" * ncols) + ")"] * rows)
     if not nconst:
         return f"{head}VALUES {groups}"
