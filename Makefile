@@ -3,13 +3,13 @@ PYTHON ?= $(shell command -v python3.11 || command -v python3)
 VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
-EXTRAS := train,dev,bench,render,store,video,notebooks
+EXTRAS := train,dev,bench,render,store,video,notebooks,viewer
 export NUMBA_NUM_THREADS ?= 1
 export OMP_NUM_THREADS ?= 1
 export SDL_VIDEODRIVER ?= dummy
 export MPLBACKEND ?= Agg
 
-.PHONY: run test test-fast bench fuzz lint install clean
+.PHONY: run test test-fast bench fuzz lint install clean browser
 
 $(STAMP): pyproject.toml constraints.txt
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -25,7 +25,15 @@ install: $(STAMP)
 run: $(STAMP)
 	$(VENV)/bin/agentsim evaluate --zones default --strategies all --seeds 3 --out outputs/evaluation
 
-test: $(STAMP)
+# The browser tests (tests/test_web_*.py) drive the system's Chromium through Playwright; Debian's package is
+# installed here when missing (Playwright's own browser download is never used).
+browser:
+	@command -v chromium >/dev/null 2>&1 || command -v chromium-browser >/dev/null 2>&1 || { \
+	  echo "installing Chromium (Debian package) for the browser tests"; \
+	  if [ "$$(id -u)" = 0 ]; then SUDO=; else SUDO=sudo; fi; \
+	  $$SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -qq chromium >/dev/null; }
+
+test: $(STAMP) browser
 	$(PY) -m pytest -n 2 -q tests
 
 test-fast: $(STAMP)

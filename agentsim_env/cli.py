@@ -7,6 +7,8 @@ Subcommands:
     evaluate   batch evaluation of the UAV sensor-release strategies (zone files x strategies x seeds):
                sensors.csv, runs.csv, summary.md (ranking) and PNG plots
     warmup     compile and cache every simulation kernel (steps each scenario briefly); ``make install`` runs it
+    view       the 3D web viewer: a live run with a policy, or a replay from the store (``cli_view``)
+    zones      the hot-zone designer page, and a zone-file check (``cli_view``)
 
 ``--set KEY=VALUE`` values are parsed by the type of the config field they set (``agentsim_env.cli_set``).
 Bad input (counts, folders, config values) ends with one ``agentsim: error: ...`` line and exit code 2, before
@@ -504,6 +506,9 @@ def build_parser() -> argparse.ArgumentParser:
     from agentsim_env.cli_store import add_store_commands
 
     add_store_commands(sub)
+    from agentsim_env.cli_view import add_view_commands
+
+    add_view_commands(sub, SET_HELP, announce_compile)
     return p
 
 

@@ -33,6 +33,7 @@ LAYERS: dict[str, float] = {
     "cli_set": 7.5,  # the --set parser of cli; imports nothing from the package
     "cli_replay": 7.5,  # the replay subcommand of cli; over the recorder and render
     "cli_store": 7.5,  # the export and runs subcommands of cli; over the recorder
+    "cli_view": 7.7,  # the view and zones subcommands of cli; over the recorder, render, policies and cli_set
 }
 # folders installed under the package's name (pyproject's package-dir)
 MAPPED = {"policies": ROOT / "policies", "train": ROOT / "train"}

@@ -22,7 +22,7 @@ from agentsim_env.env.spaces import FORMATS, REAL_KINDS, action_space_for, obser
 from agentsim_env.scenarios.base import Scenario, assert_finite, check_finite_default, reset_worlds, run_step
 from agentsim_env.scenarios.registry import make_scenario
 
-RENDER_MODES = ("human", "rgb_array")
+RENDER_MODES = ("human", "rgb_array", "web")
 
 
 @functools.lru_cache(maxsize=64)
@@ -58,8 +58,9 @@ class AgentSimParallelEnv(ParallelEnv):
 
     Args:
         scenario: The scenario (with its validated config).
-        render_mode: ``None``, ``"rgb_array"`` (``render()`` returns a frame) or ``"human"`` (a live pygame-ce
-            window, updated on every step).
+        render_mode: ``None``, ``"rgb_array"`` (``render()`` returns a frame), ``"human"`` (a live pygame-ce
+            window, updated on every step) or ``"web"`` (the 3D browser viewer: the first ``reset`` starts a local
+            server and prints its URL, ``env.viewer.url``; every step streams to the page; docs/viewer.md).
         obs_format: ``"dict"`` (a Dict of the scenario's observation parts) or ``"flat"`` (one float32 Box).
         action_format: ``"dict"`` (a Dict of action parts) or ``"flat"`` (one float32 Box in [-1, 1]).
         check_finite: Debug switch: after every reset and step, raise ``FloatingPointError`` naming the part and
@@ -109,6 +110,7 @@ class AgentSimParallelEnv(ParallelEnv):
         self._steps = 0
         self._started = False
         self._window: Any = None
+        self.viewer: Any = None  # the web viewer (render_mode="web"), started by the first reset
 
     # ------------------------------------------------------------------ spaces
     def observation_space(self, agent: str) -> spaces.Space:
@@ -143,6 +145,8 @@ class AgentSimParallelEnv(ParallelEnv):
             assert_finite(self.scenario, self.world.state.online, 0, parts)
         if self.render_mode == "human":
             self.render()
+        elif self.render_mode == "web":
+            self._web_episode()
         infos = self._reset_infos()
         return self._obs_dicts(parts), infos
 
@@ -331,9 +335,21 @@ class AgentSimParallelEnv(ParallelEnv):
         """Global state of the world for centralised critics (see ``state_space``)."""
         return self.scenario.state(self.world, 0)
 
+    def _web_episode(self) -> None:
+        """Start the web viewer on the first reset; tell it every new episode."""
+        if self.viewer is None:
+            from agentsim_env.render.web.viewer import WebViewer
+
+            self.viewer = WebViewer(title=self.metadata["name"])
+            self.viewer.attach(self.world, self.scenario)
+        self.viewer.new_episode()
+
     def render(self) -> np.ndarray | None:
-        """A top-down RGB frame (altitude shown as shading); in ``"human"`` mode it is shown and None returned."""
-        if self.render_mode is None:
+        """A top-down RGB frame (altitude shown as shading); in ``"human"`` mode it is shown and None returned.
+
+        In ``"web"`` mode the page follows every step by itself: ``render()`` returns None.
+        """
+        if self.render_mode is None or self.render_mode == "web":
             return None
         from agentsim_env.render.topdown import render_topdown
 
@@ -348,7 +364,10 @@ class AgentSimParallelEnv(ParallelEnv):
         return None
 
     def close(self) -> None:
-        """Close the live window, if any."""
+        """Close the live window or stop the web viewer, if any."""
+        if self.viewer is not None:
+            self.viewer.close()
+            self.viewer = None
         if self._window is not None:
             self._window.close()
             self._window = None

@@ -1,0 +1,249 @@
+"""The live viewer: a stage-10 step hook that streams one world to the web page, and the page's controls.
+
+``WebViewer.attach(world, scenario)`` starts the server (``server.WebServer``) and adds the hook. Each step the hook
+(in the simulation's thread) appends the step's log lines when a page is connected, packs a frame only when a
+page can take one (``WebServer.wants_frame``: latest state wins, a slow page never blocks the step), and then
+honours the page's controls: while paused it waits (a *step* lets one step through), and with a speed set it paces
+the simulation to that many steps per second. ``render_mode="web"`` and ``agentsim view`` both use it.
+"""
+
+from __future__ import annotations
+
+import sys
+import threading
+import time
+from typing import Any
+
+from agentsim_env.render.web.frames import agent_message, log_lines, pack_frame, scene_message, state_arrays
+from agentsim_env.render.web.server import ClientError, WebServer
+from agentsim_env.sim.world import StepEvents, World
+
+STATUS_EVERY = 0.5  # seconds between status / selected-agent updates
+MAX_SPEED = 10000.0
+
+
+class Controls:
+    """Pause, single steps, speed and the selected agent, set by the page (server thread), read by the driver.
+
+    Args:
+        speed: Steps per second (0: as fast as possible).
+    """
+
+    def __init__(self, speed: float = 0.0) -> None:
+        self.paused = False
+        self.speed = float(speed)
+        self.selected: int | None = None
+        self.n_agents = 0
+        self.closed = False
+        self._tokens = 0
+        self._cond = threading.Condition()
+        self._next = 0.0
+
+    def handlers(self, extra: dict[str, Any] | None = None) -> dict[str, Any]:
+        """The server's command handlers for pause, resume, step, speed and select."""
+        return {"pause": self._pause, "resume": self._resume, "step": self._step, "speed": self._speed,
+                "select": self._select, **(extra or {})}  # fmt: skip
+
+    @staticmethod
+    def _only(msg: dict[str, Any], keys: tuple[str, ...]) -> None:
+        extra = sorted(set(msg) - {"cmd", *keys})
+        if extra:
+            raise ClientError(f"{msg['cmd']}: unknown field(s) {extra}; allowed: {list(keys)}")
+
+    def _pause(self, msg: dict[str, Any]) -> dict[str, Any]:
+        self._only(msg, ())
+        with self._cond:
+            self.paused = True
+        return self.status()
+
+    def _resume(self, msg: dict[str, Any]) -> dict[str, Any]:
+        self._only(msg, ())
+        with self._cond:
+            self.paused = False
+            self._next = 0.0
+            self._cond.notify_all()
+        return self.status()
+
+    def _step(self, msg: dict[str, Any]) -> dict[str, Any]:
+        self._only(msg, ())
+        with self._cond:
+            self.paused = True
+            self._tokens += 1
+            self._cond.notify_all()
+        return self.status()
+
+    def _speed(self, msg: dict[str, Any]) -> dict[str, Any]:
+        self._only(msg, ("value",))
+        v = msg.get("value")
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 <= v <= MAX_SPEED:
+            raise ClientError(f"speed: 'value' must be a number of steps per second in 0..{MAX_SPEED:g} "
+                              f"(0 = as fast as possible), got {v!r}")  # fmt: skip
+        with self._cond:
+            self.speed = float(v)
+            self._next = 0.0
+        return self.status()
+
+    def _select(self, msg: dict[str, Any]) -> dict[str, Any] | None:
+        self._only(msg, ("slot",))
+        slot = msg.get("slot")
+        if slot is not None and (isinstance(slot, bool) or not isinstance(slot, int) or not 0 <= slot < self.n_agents):
+            raise ClientError(f"select: 'slot' must be an agent index in 0..{self.n_agents - 1} or null, got {slot!r}")
+        self.selected = slot
+        return None
+
+    def status(self) -> dict[str, Any]:
+        """A ``status`` message with the controls' state (the driver adds step numbers)."""
+        return {"type": "status", "paused": self.paused, "speed": self.speed}
+
+    def gate(self) -> None:
+        """Wait while paused (a step token lets one step through); returns at once when closed."""
+        with self._cond:
+            while self.paused and not self.closed:
+                if self._tokens:
+                    self._tokens -= 1
+                    return
+                self._cond.wait(0.25)
+
+    def pace(self) -> None:
+        """Sleep so that steps follow at ``speed`` per second (no-op at speed 0 or when behind)."""
+        if self.speed <= 0:
+            return
+        now = time.perf_counter()
+        if self._next <= 0.0 or now - self._next > 1.0:  # first step, or far behind: restart the clock
+            self._next = now
+        self._next += 1.0 / self.speed
+        if self._next > now:
+            time.sleep(self._next - now)
+
+    def close(self) -> None:
+        """Release a waiting driver for good."""
+        with self._cond:
+            self.closed = True
+            self._cond.notify_all()
+
+
+class WebViewer:
+    """Streams world ``w`` of a simulation to a browser page (the step hook of ``render_mode="web"``).
+
+    Args:
+        host: Address to bind (127.0.0.1: this machine only; anything else prints a warning).
+        port: Port (0: a free one).
+        speed: Initial steps per second (0: as fast as the simulation runs).
+        title: Page title (default: the scenario's name).
+        w: Which world of a batched world to show.
+        quiet: Print nothing (otherwise the URL is printed when the server starts).
+        max_fps: Most frames a second sent to a page.
+    """
+
+    def __init__(self, *, host: str = "127.0.0.1", port: int = 0, speed: float = 0.0, title: str = "",
+                 w: int = 0, quiet: bool = False, max_fps: float = 60.0) -> None:  # fmt: skip
+        self.controls = Controls(speed)
+        handlers = self.controls.handlers({"select": self._select})
+        self.server = WebServer("viewer.html", host=host, port=port, title=title or "agentsim viewer",
+                                handlers=handlers, on_connect=self._hello,
+                                max_fps=max_fps)  # fmt: skip
+        self.title = title
+        self.w = w
+        self.quiet = quiet
+        self.world: World | None = None
+        self.scenario: Any = None
+        self.episode = -1
+        self.seq = 0
+        self._scene: dict[str, Any] | None = None
+        self._last_status = 0.0
+        self._steps_since = 0
+        self._rate = 0.0
+        self._events: StepEvents | None = None  # the step a paused simulation waits after
+
+    @property
+    def url(self) -> str:
+        """The page's address ("" before ``attach``)."""
+        return self.server.url
+
+    def attach(self, world: World, scenario: Any) -> str:
+        """Start the server (once) and stream ``world``; returns the URL."""
+        if self.world is not None and self.world is not world:
+            self.world.remove_hook(self.hook)
+        self.world, self.scenario = world, scenario
+        self.controls.n_agents = world.n_agents
+        if self.hook not in world.hooks:
+            world.add_hook(self.hook)
+        if not self.server.url:
+            url = self.server.start()
+            if not self.quiet:
+                print(f"agentsim viewer: {url}", file=sys.stderr, flush=True)
+                if self.server.host not in ("127.0.0.1", "localhost", "::1"):
+                    print(f"agentsim viewer: WARNING: serving on {self.server.host}, reachable from other machines; "
+                          "the page has no authentication", file=sys.stderr, flush=True)  # fmt: skip
+        return self.server.url
+
+    def new_episode(self, episode: int | None = None) -> None:
+        """A reset happened: send the new scene (objects may have moved) and the first frame."""
+        assert self.world is not None, "attach() first"
+        self.episode = self.episode + 1 if episode is None else episode
+        self._scene = scene_message(self.world, self.scenario, self.w, title=self.title)
+        self.server.broadcast(self._scene)
+        self.server.publish_log([{"step": 0, "episode": self.episode, "kind": "episode",
+                                  "text": f"episode {self.episode} started", "slots": []}])  # fmt: skip
+        self._send_frame(None)
+
+    def _select(self, msg: dict[str, Any]) -> dict[str, Any] | None:
+        """Select an agent: its state and inbox at once; while paused, a frame with its rays too."""
+        self.controls._select(msg)
+        sel, world = self.controls.selected, self.world
+        if sel is None or world is None:
+            return None
+        if self.controls.paused:  # the simulation waits in gate(): its state holds still
+            self._send_frame(self._events)
+        return agent_message(world, self.scenario, self.w, sel)
+
+    def _hello(self) -> list[dict[str, Any]]:
+        out = [self._scene] if self._scene is not None else []
+        return out + [self._status()]
+
+    def _status(self) -> dict[str, Any]:
+        step = int(self.world.step_count[self.w]) if self.world is not None else 0
+        return {**self.controls.status(), "step": step, "episode": self.episode, "steps_per_s": round(self._rate, 1)}
+
+    def _send_frame(self, events: StepEvents | None) -> None:
+        world = self.world
+        assert world is not None
+        self.seq += 1
+        arrays = state_arrays(world, self.w, events, self.controls.selected)
+        self.server.publish_frame(self.seq, pack_frame(self.seq, int(world.step_count[self.w]), self.episode, arrays))
+
+    def hook(self, world: World, events: StepEvents) -> None:
+        """Stage 10: log lines, a frame when a page can take one, status; then pause and pace."""
+        srv = self.server
+        if srv.n_pages:
+            srv.publish_log(log_lines(world, self.scenario, events, self.w, self.episode))
+            if srv.wants_frame():
+                self._send_frame(events)
+        self._steps_since += 1
+        now = time.perf_counter()
+        if now - self._last_status >= STATUS_EVERY:
+            if self._last_status > 0:
+                self._rate = self._steps_since / (now - self._last_status)
+            self._last_status, self._steps_since = now, 0
+            if srv.n_pages:
+                srv.broadcast(self._status())
+                sel = self.controls.selected
+                if sel is not None:
+                    srv.broadcast(agent_message(world, self.scenario, self.w, sel))
+        if self.controls.paused:
+            self._events = events
+            self._send_frame(events)  # the page shows the step the simulation is paused on
+            srv.broadcast(self._status())
+            self.controls.gate()
+            self._events = None
+        self.controls.pace()
+
+    def close(self) -> None:
+        """Remove the hook, release a paused step and stop the server."""
+        self.controls.close()
+        if self.world is not None and self.hook in self.world.hooks:
+            self.world.hooks = [h for h in self.world.hooks if h != self.hook]
+        self.server.stop()
+
+
+__all__ = ["Controls", "WebViewer"]
