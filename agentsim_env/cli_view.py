@@ -156,7 +156,10 @@ def cmd_zones_check(args: argparse.Namespace) -> int:
     """Validate a zone file; print its zones."""
     from agentsim_env.scenarios.uav_zones import load_zones, overlaps
 
-    zs = load_zones(args.file)
+    try:
+        zs = load_zones(args.file)
+    except OSError as exc:
+        raise ValueError(f"{args.file}: {exc.strerror or exc}") from None
     w, h = zs.map_size
     print(f"{args.file}: valid; map {w:g} x {h:g} m, {len(zs.zones)} zones, {zs.n_sensors} sensors")
     print("| # | name | centre | radius | sensors | profile | weight |")

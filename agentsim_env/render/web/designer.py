@@ -1,0 +1,320 @@
+"""Hot-zone designer: the handlers behind ``static/designer.html`` and ``run_designer`` (``agentsim zones design``).
+
+The page draws zones on a top-down map, edits them in a form and asks the server for previews; the server
+validates with the zone file's own validator (``uav_zones.zones_from_dict``), so every message the page shows is
+the one ``load_zones`` would give. Messages (JSON objects, ``cmd`` names the request):
+
+* ``{"cmd": "zones.preview", "zones": {zone file}}`` -> ``{"type": "zones.preview", "ok": true, "zones": [...],
+  "overlaps": [[i, j], ...]}``, or ``{"ok": false, "error": message}`` when the zone file is invalid.
+* ``{"cmd": "zones.save", "zones": {zone file}}`` -> ``{"type": "zones.saved", "path", "n_zones"}``; writes only the
+  file the designer was started with (atomically), never a path named by the page.
+* ``{"cmd": "zones.load"}`` -> ``{"type": "zones.loaded", "zones": {zone file}, "path"}``.
+
+Malformed messages raise ``ClientError`` (sent to the page as ``{"type": "error", "message": ...}``).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import tempfile
+import threading
+import webbrowser
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from agentsim_env.render.web.server import ClientError, WebServer
+from agentsim_env.scenarios import uav_zones
+from agentsim_env.scenarios.uav_zones import ZoneSet, load_zones, save_zones, zones_from_dict, zones_to_dict
+from agentsim_env.wsn.profiles import GOLDEN_ANGLE, PROFILE_KINDS
+
+__all__ = [
+    "DENSITY_SAMPLES",
+    "MAX_POINTS_PER_ZONE",
+    "MAX_POINTS_TOTAL",
+    "designer_handlers",
+    "designer_hello",
+    "preview",
+    "run_designer",
+]
+
+#: Density samples per zone over ``r = 0 .. radius`` in a preview.
+DENSITY_SAMPLES = 64
+#: Most layout points of each kind (B1, B8) sent per zone, and over all zones together.
+MAX_POINTS_PER_ZONE = 2000
+MAX_POINTS_TOTAL = 40_000
+
+Handler = Callable[[dict[str, Any]], "dict[str, Any] | None"]
+
+_KEYS = {"zones.preview": ("cmd", "zones"), "zones.save": ("cmd", "zones"), "zones.load": ("cmd",)}
+
+
+def _fail(message: str) -> ClientError:
+    """A ``ClientError`` carrying ``message`` (sent to the page as ``{"type": "error"}``)."""
+    return ClientError(message)
+
+
+def _check_message(msg: Any, cmd: str) -> dict[str, Any]:
+    """Validate a message's shape: an object with exactly the keys ``cmd`` takes and, where taken, a zone file."""
+    if not isinstance(msg, dict):
+        raise _fail(f"{cmd}: a message must be a JSON object, got {type(msg).__name__}")
+    if "path" in msg:
+        raise _fail(
+            f"{cmd}: the page cannot choose the file ('path' is not accepted); the designer writes only "
+            "the file it was started with"
+        )
+    unknown = sorted(str(k) for k in msg if k not in _KEYS[cmd])
+    if unknown:
+        raise _fail(f"{cmd}: unknown key(s) {unknown}; allowed keys: {list(_KEYS[cmd])}")
+    if "zones" in _KEYS[cmd]:
+        if "zones" not in msg:
+            raise _fail(f"{cmd}: missing 'zones' (the zone file object)")
+        if not isinstance(msg["zones"], dict):
+            raise _fail(f"{cmd}: 'zones' must be a zone file object, got {type(msg['zones']).__name__}")
+    return msg
+
+
+def _validate(d: dict[str, Any]) -> ZoneSet:
+    """``zones_from_dict`` whose every failure is a ``ValueError`` (the validator's own message when it is one)."""
+    try:
+        return zones_from_dict(d)
+    except ValueError:
+        raise
+    except Exception as exc:  # a malformed object must never escape as a server crash
+        raise ValueError(f"invalid zone file: {type(exc).__name__}: {exc}") from exc
+
+
+def _point_count(n_sensors: int, n_zones: int) -> int:
+    """Points of each kind shown for a zone: all of them up to the per-zone and total caps."""
+    return min(n_sensors, MAX_POINTS_PER_ZONE, max(1, MAX_POINTS_TOTAL // max(n_zones, 1)))
+
+
+def _rounded(points: np.ndarray) -> list[list[float]]:
+    """Points as JSON lists, to the millimetre."""
+    return np.round(points, 3).tolist()
+
+
+def preview(zs: ZoneSet) -> dict[str, Any]:
+    """The preview of a zone set: density curves, expected layouts and overlapping pairs.
+
+    For each zone: ``density`` is the areal density at ``DENSITY_SAMPLES`` radii evenly spaced over
+    ``0 .. radius``, scaled to a maximum of 1 (a power law's infinite centre takes the value half a step out);
+    ``b1`` are random points (B1, inverse-CDF sampling, ``np.random.default_rng(0)`` per zone, so a preview is
+    stable) and ``b8`` the sunflower set (B8, ``RadialProfile.low_discrepancy(n_sensors)``), both in absolute
+    map metres. When a zone has more than ``shown`` sensors, ``b1`` holds ``shown`` draws and ``b8`` every
+    ``n_sensors / shown``-th sunflower point (so the picture keeps its extent).
+
+    Args:
+        zs: A validated zone set.
+
+    Returns:
+        ``{"type": "zones.preview", "ok": True, "zones": [...], "overlaps": [[i, j], ...]}``.
+    """
+    out = []
+    for z in zs.zones:
+        prof = z.radial_profile()
+        r = np.linspace(0.0, z.radius, DENSITY_SAMPLES)
+        dens = np.asarray(prof.density(r), dtype=np.float64)
+        if not math.isfinite(dens[0]):
+            dens[0] = float(prof.density(0.5 * r[1]))
+        top = float(dens.max())
+        dens = dens / top if top > 0.0 and math.isfinite(top) else np.ones_like(dens)
+        n, shown = z.n_sensors, _point_count(z.n_sensors, len(zs.zones))
+        centre = np.asarray(z.centre, dtype=np.float64)
+        b1 = prof.sample(shown, np.random.default_rng(0)) + centre
+        # The sunflower points i = idx + 1 of low_discrepancy(n), computed for the shown indices only.
+        idx = (
+            np.arange(n) if shown == n else np.unique(np.round(np.linspace(0, n - 1, shown)).astype(np.int64))
+        )
+        i = idx.astype(np.float64) + 1.0
+        rad = np.asarray(prof.inverse_cdf((i - 0.5) / n), dtype=np.float64)
+        b8 = np.stack([rad * np.cos(i * GOLDEN_ANGLE), rad * np.sin(i * GOLDEN_ANGLE)], axis=1) + centre
+        out.append(
+            {
+                "density": np.round(dens, 6).tolist(),
+                "b1": _rounded(b1),
+                "b8": _rounded(b8),
+                "shown": int(len(idx)),
+                "n_sensors": n,
+            }
+        )
+    pairs = [[i, j] for i, j in uav_zones.overlaps(zs)]
+    return {"type": "zones.preview", "ok": True, "zones": out, "overlaps": pairs}
+
+
+def _write_atomically(zs: ZoneSet, path: Path) -> None:
+    """Write ``zs`` to a temporary file beside ``path``, then rename it over ``path``."""
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    os.close(fd)
+    try:
+        save_zones(zs, tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def designer_handlers(path: Path | None) -> dict[str, Handler]:
+    """The designer's message handlers for ``WebServer(handlers=...)``.
+
+    Args:
+        path: The zone file the designer reads and writes, or ``None`` (saving is then refused).
+
+    Returns:
+        ``{"zones.preview": fn, "zones.save": fn, "zones.load": fn}``.
+    """
+    target = None if path is None else Path(path)
+    lock = threading.Lock()
+
+    def on_preview(msg: dict[str, Any]) -> dict[str, Any]:
+        """Validate the page's zone file and return its preview, or the validator's message."""
+        d = _check_message(msg, "zones.preview")["zones"]
+        try:
+            zs = _validate(d)
+        except ValueError as exc:
+            return {"type": "zones.preview", "ok": False, "error": str(exc)}
+        return preview(zs)
+
+    def on_save(msg: dict[str, Any]) -> dict[str, Any]:
+        """Validate and write the zone file to ``path`` (only there)."""
+        d = _check_message(msg, "zones.save")["zones"]
+        if target is None:
+            raise _fail(
+                "started without a file: nothing is written; use Download, or start "
+                "`agentsim zones design FILE`"
+            )
+        try:
+            zs = _validate(d)
+        except ValueError as exc:
+            raise _fail(str(exc)) from exc
+        with lock:
+            try:
+                _write_atomically(zs, target)
+            except OSError as exc:
+                raise _fail(f"cannot write {target}: {exc.strerror or exc}") from exc
+        return {"type": "zones.saved", "path": str(target), "n_zones": len(zs.zones)}
+
+    def on_load(msg: dict[str, Any]) -> dict[str, Any]:
+        """Re-read ``path`` and return its zones."""
+        _check_message(msg, "zones.load")
+        if target is None:
+            raise _fail(
+                "started without a file: there is nothing to load; start `agentsim zones design FILE`"
+            )
+        if not target.exists():
+            raise _fail(f"{target} does not exist yet: Save creates it")
+        try:
+            with lock:
+                zs = load_zones(target)
+        except (ValueError, OSError) as exc:
+            raise _fail(str(exc)) from exc
+        return {"type": "zones.loaded", "zones": zones_to_dict(zs), "path": str(target)}
+
+    return {"zones.preview": on_preview, "zones.save": on_save, "zones.load": on_load}
+
+
+def _limits() -> dict[str, Any]:
+    """Field limits for the page's form (the validator's, restated; the validator has the last word)."""
+    return {
+        "radius": [0.5, uav_zones.MAX_MAP_SIDE],
+        "n_sensors": [1, uav_zones.MAX_SENSORS_PER_ZONE],
+        "alpha": [0.0, 2.0],
+        "sigma_over_radius": [1e-3, 1e3],
+        "floor": [0.0, 1.0],
+        "weight": [1e-3, 1e3],
+        "altitude": [0.0, uav_zones.MAX_ALTITUDE],
+        "map_side": [0.0, uav_zones.MAX_MAP_SIDE],
+        "max_zones": uav_zones.MAX_ZONES,
+    }
+
+
+def designer_hello(path: Path | None) -> list[dict[str, Any]]:
+    """The messages sent to each page when it connects.
+
+    The first is ``{"type": "zones.hello", "zones": {zone file}, "path", "source", "can_save",
+    "profile_kinds", "limits", "defaults"}``: the zones come from ``path`` when it exists and is valid
+    (``source`` "file"), else from the package's default file (``source`` "default"). When ``path`` exists but
+    is invalid, a second message ``{"type": "error", "message": ...}`` gives the loader's message.
+
+    Args:
+        path: The designer's zone file, or ``None``.
+
+    Returns:
+        The messages, in order.
+    """
+    target = None if path is None else Path(path)
+    messages: list[dict[str, Any]] = []
+    zs, source = None, "default"
+    if target is not None and target.exists():
+        try:
+            zs, source = load_zones(target), "file"
+        except (ValueError, OSError) as exc:
+            messages.append({"type": "error", "message": f"{exc} (showing the default zones instead)"})
+    if zs is None:
+        zs = load_zones(uav_zones.default_zones_path())
+    hello = {
+        "type": "zones.hello",
+        "zones": zones_to_dict(zs),
+        "path": None if target is None else str(target),
+        "source": source,
+        "can_save": target is not None,
+        "profile_kinds": list(PROFILE_KINDS),
+        "limits": _limits(),
+        "defaults": {"n_sensors": 50, "profile": "gauss", "alpha": 1.0, "floor": 0.0, "weight": 1.0},
+    }
+    return [hello, *messages]
+
+
+def _wait_forever() -> None:
+    """Block the calling thread until it is interrupted (Ctrl-C raises ``KeyboardInterrupt`` here)."""
+    threading.Event().wait()
+
+
+def run_designer(
+    path: str | None, host: str = "127.0.0.1", port: int = 0, open_browser: bool = False
+) -> None:
+    """Serve the designer until Ctrl-C.
+
+    Args:
+        path: The zone file to edit (read when it exists, written by Save), or ``None`` (Download only).
+        host: Interface to listen on.
+        port: TCP port (0: any free port).
+        open_browser: Open the page in the default browser.
+
+    Raises:
+        ValueError: If ``path`` exists but is not a valid zone file, or is a folder.
+    """
+    target = None if path is None else Path(path)
+    if target is not None:
+        if target.is_dir():
+            raise ValueError(f"{target}: is a folder, not a zone file")
+        if target.exists():
+            load_zones(target)  # refuse to start on a file the designer would overwrite unseen
+        elif not target.parent.is_dir():
+            raise ValueError(f"{target}: the folder {target.parent} does not exist")
+    srv = WebServer(
+        page="designer.html",
+        host=host,
+        port=port,
+        title="Hot-zone designer",
+        handlers=designer_handlers(target),
+        on_connect=lambda: designer_hello(target),
+    )
+    url = srv.start()
+    try:
+        print(f"hot-zone designer at {url}")
+        if target is None:
+            print("no file given: Save is off (use Download); `agentsim zones design FILE` edits FILE")
+        else:
+            print(f"Save writes {target.resolve()}" + ("" if target.exists() else " (a new file)"))
+        print("press Ctrl-C to stop")
+        if open_browser:
+            webbrowser.open(url)
+        _wait_forever()
+    except KeyboardInterrupt:
+        print("\nstopped")
+    finally:
+        srv.stop()
