@@ -81,10 +81,10 @@ def _replay(args: argparse.Namespace) -> int:
     return 0
 
 
-def _warn_host(host: str) -> None:
+def _warn_host(host: str, what: str = "watch and control the simulation") -> None:
     if host not in ("127.0.0.1", "localhost", "::1"):
-        print(f"agentsim view: WARNING: serving on {host}: any machine that reaches it can watch and control the "
-              "simulation (there is no authentication)", file=sys.stderr)  # fmt: skip
+        print(f"agentsim: WARNING: serving on {host}: any machine that reaches it can {what} (there is no "
+              "authentication)", file=sys.stderr)  # fmt: skip
 
 
 def _live(args: argparse.Namespace) -> int:
@@ -147,7 +147,7 @@ def cmd_zones_design(args: argparse.Namespace) -> int:
     _check_network(args)
     from agentsim_env.render.web.designer import run_designer
 
-    _warn_host(args.host)
+    _warn_host(args.host, "edit and save the zones")
     run_designer(args.file, host=args.host, port=args.port, open_browser=args.open)
     return 0
 
