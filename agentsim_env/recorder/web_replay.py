@@ -88,7 +88,7 @@ class ReplayData:
             by_step: dict[int, list[tuple[int, int, int]]] = {}
             for s, k, snd, rcv in msgs:
                 by_step.setdefault(int(s), []).append((int(snd), int(rcv), MSG_KIND.get(int(k or 1), 0)))
-            for i, s in enumerate(self.steps.tolist()):
+            for s in self.steps.tolist():
                 m = by_step.get(s, [])
                 self.messages.append((np.array([(a, b) for a, b, _ in m], np.int32).reshape(-1, 2),
                                       np.array([k for *_, k in m], np.uint8)))  # fmt: skip

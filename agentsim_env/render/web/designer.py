@@ -15,7 +15,6 @@ Malformed messages raise ``ClientError`` (sent to the page as ``{"type": "error"
 
 from __future__ import annotations
 
-import math
 import os
 import tempfile
 import threading
@@ -26,6 +25,7 @@ from typing import Any
 
 import numpy as np
 
+from agentsim_env.render.web.frames import density_curve
 from agentsim_env.render.web.server import ClientError, WebServer
 from agentsim_env.scenarios import uav_zones
 from agentsim_env.scenarios.uav_zones import ZoneSet, load_zones, save_zones, zones_from_dict, zones_to_dict
@@ -116,12 +116,7 @@ def preview(zs: ZoneSet) -> dict[str, Any]:
     out = []
     for z in zs.zones:
         prof = z.radial_profile()
-        r = np.linspace(0.0, z.radius, DENSITY_SAMPLES)
-        dens = np.asarray(prof.density(r), dtype=np.float64)
-        if not math.isfinite(dens[0]):
-            dens[0] = float(prof.density(0.5 * r[1]))
-        top = float(dens.max())
-        dens = dens / top if top > 0.0 and math.isfinite(top) else np.ones_like(dens)
+        dens = density_curve(z, DENSITY_SAMPLES)
         n, shown = z.n_sensors, _point_count(z.n_sensors, len(zs.zones))
         centre = np.asarray(z.centre, dtype=np.float64)
         b1 = prof.sample(shown, np.random.default_rng(0)) + centre

@@ -86,6 +86,20 @@ def unpack_frame(frame: bytes) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
     return header, out
 
 
+def density_curve(zone: Any, samples: int = DENSITY_SAMPLES) -> np.ndarray:
+    """A zone's areal density at ``samples`` radii from its centre to its rim, scaled to a maximum of 1.
+
+    A power law is infinite at the centre: the first sample takes the value half a step out.
+    """
+    prof = zone.radial_profile()
+    r = np.linspace(0.0, zone.radius, samples)
+    d = np.asarray(prof.density(r), dtype=np.float64)
+    if not np.isfinite(d[0]):
+        d[0] = float(prof.density(0.5 * r[1]))
+    top = float(d.max())
+    return d / top if top > 0.0 and np.isfinite(top) else np.ones_like(d)
+
+
 def _zones(scenario: Any) -> list[dict[str, Any]]:
     """The scenario's hot zones with their density profiles sampled from the centre to the rim."""
     zs = getattr(scenario, "zones", None)
@@ -93,9 +107,7 @@ def _zones(scenario: Any) -> list[dict[str, Any]]:
         return []
     out = []
     for i, z in enumerate(zs.zones):
-        r = np.linspace(0.0, z.radius, DENSITY_SAMPLES)
-        d = np.asarray(z.radial_profile().density(r), dtype=float)
-        d = d / d.max() if d.max() > 0 else d
+        d = density_curve(z)
         out.append({"name": z.name or f"zone {i}", "centre": list(z.centre), "radius": z.radius,
                     "n_sensors": z.n_sensors, "density": np.round(d, 4).tolist()})  # fmt: skip
     return out
@@ -299,5 +311,5 @@ def agent_message(world: World, scenario: Any, w: int, slot: int) -> dict[str, A
             "inbox": inbox}  # fmt: skip
 
 
-__all__ = ["LOG_KINDS", "MAGIC", "agent_message", "log_lines", "pack_frame", "scene_message", "state_arrays",
+__all__ = ["LOG_KINDS", "MAGIC", "agent_message", "density_curve", "log_lines", "pack_frame", "scene_message", "state_arrays",
            "unpack_frame"]  # fmt: skip

@@ -33,6 +33,7 @@ from urllib.parse import unquote, urlsplit
 STATIC_DIR = Path(__file__).resolve().parent / "static"
 MAX_IN_FLIGHT = 2  # frames a page may have unacknowledged; more are skipped for it (latest state wins)
 MAX_MESSAGE_BYTES = 1 << 20  # the largest message a page may send (a zone file of 1,000 zones fits)
+TICK_S = 0.05  # period of on_tick
 LOG_BUFFER = 5000  # log lines kept for pages that are behind
 INSTALL_HINT = 'the web viewer needs the "viewer" extra: pip install "agentsim-env[viewer]" (websockets)'
 
@@ -86,6 +87,8 @@ class WebServer:
         handlers: Command name -> handler, run on the server's thread (see ``Handler``).
         on_connect: Messages (JSON objects) sent to each page when it connects.
         max_fps: Most frames a second offered to the simulation (``wants_frame``); pages get at most this many.
+        on_tick: Called on the server's thread every ``TICK_S`` seconds (the live viewer sends the last step of
+            a burst that the frame-rate cap held back); exceptions are ignored.
     """
 
     def __init__(
@@ -98,6 +101,7 @@ class WebServer:
         handlers: Mapping[str, Handler] | None = None,
         on_connect: Callable[[], list[dict[str, Any]]] | None = None,
         max_fps: float = 60.0,
+        on_tick: Callable[[], None] | None = None,
     ) -> None:
         self._files = static_files()
         if f"/static/{page}" not in self._files:
@@ -110,6 +114,7 @@ class WebServer:
         self.title = title
         self.handlers: dict[str, Handler] = dict(handlers or {})
         self.on_connect = on_connect
+        self.on_tick = on_tick
         self.min_interval = 1.0 / max_fps if max_fps > 0 else 0.0
         self.url = ""
         self._loop: asyncio.AbstractEventLoop | None = None
@@ -151,7 +156,9 @@ class WebServer:
             self.url = f"http://{shown}:{port}/"
             self.port = port
             started.set()
+            ticker = asyncio.ensure_future(self._ticker())
             await self._stopped.wait()
+            ticker.cancel()
             self._server.close()
             await self._server.wait_closed()
 
@@ -248,6 +255,10 @@ class WebServer:
 
         path = urlsplit(request.path).path
         if path == "/ws":
+            # a page from another site must not drive this one (a browser sends its Origin; other clients none)
+            origin = request.headers.get("Origin")
+            if origin is not None and urlsplit(origin).netloc not in self._origins():
+                return connection.respond(403, "this page's origin may not connect\n")
             return None
         if path in ("/", "/index.html"):
             file = self._files[f"/static/{self.page}"]
@@ -263,6 +274,19 @@ class WebServer:
         headers = Headers([("Content-Type", ctype), ("Content-Length", str(len(body))),
                            ("Cache-Control", "no-cache"), ("X-Content-Type-Options", "nosniff")])  # fmt: skip
         return Response(200, "OK", headers, body)
+
+    def _origins(self) -> set[str]:
+        """The ``host:port`` forms under which a page of this server is served."""
+        names = {"127.0.0.1", "localhost", "[::1]", self.host if ":" not in self.host else f"[{self.host}]"}
+        if self.host in ("0.0.0.0", "::"):  # all interfaces: any name this machine answers to
+            import socket
+
+            names |= {socket.gethostname(), socket.getfqdn()}
+            try:
+                names |= set(socket.gethostbyname_ex(socket.gethostname())[2])
+            except OSError:
+                pass
+        return {f"{n}:{self.port}" for n in names}
 
     async def _session(self, ws: Any) -> None:
         """One page: greet it, then run its sender while reading its commands."""
@@ -317,6 +341,15 @@ class WebServer:
             text = f"internal error in {str(raw)[:40]!r}: {type(exc).__name__}: {exc}"
             self.errors.append(text)
             return {"type": "error", "message": text}
+
+    async def _ticker(self) -> None:
+        while self.on_tick is not None:
+            await asyncio.sleep(TICK_S)
+            if self._clients:
+                try:
+                    self.on_tick()
+                except Exception:  # a torn read of a state that is being reset: the next tick tries again
+                    pass
 
     async def _safe_send(self, client: _Client, data: str | bytes) -> None:
         try:

@@ -15,7 +15,7 @@ import time
 from typing import Any
 
 from agentsim_env.render.web.frames import agent_message, log_lines, pack_frame, scene_message, state_arrays
-from agentsim_env.render.web.server import ClientError, WebServer
+from agentsim_env.render.web.server import TICK_S, ClientError, WebServer
 from agentsim_env.sim.world import StepEvents, World
 
 STATUS_EVERY = 0.5  # seconds between status / selected-agent updates
@@ -83,6 +83,16 @@ class Controls:
             self._next = 0.0
         return self.status()
 
+    def _flush(self) -> None:
+        """Server thread: when steps stopped after one the frame-rate cap held back, send that step's frame.
+
+        The simulation has been idle for a while (no hook ran), so its state holds still while it is read.
+        """
+        held = self._held
+        if held is not None and time.perf_counter() - self._last_hook > 2 * TICK_S and self.server.ready_pages:
+            self._held = None
+            self._send_frame(held)
+
     def _select(self, msg: dict[str, Any]) -> dict[str, Any] | None:
         self._only(msg, ("slot",))
         slot = msg.get("slot")
@@ -140,8 +150,8 @@ class WebViewer:
         self.controls = Controls(speed)
         handlers = self.controls.handlers({"select": self._select})
         self.server = WebServer("viewer.html", host=host, port=port, title=title or "agentsim viewer",
-                                handlers=handlers, on_connect=self._hello,
-                                max_fps=max_fps)  # fmt: skip
+                                handlers=handlers, on_connect=self._hello, max_fps=max_fps,
+                                on_tick=self._flush)  # fmt: skip
         self.title = title
         self.w = w
         self.quiet = quiet
@@ -154,6 +164,9 @@ class WebViewer:
         self._steps_since = 0
         self._rate = 0.0
         self._events: StepEvents | None = None  # the step a paused simulation waits after
+        self._held: StepEvents | None = None  # a step the frame-rate cap held back (sent if no step follows)
+        self._last_hook = 0.0
+        self._frame_lock = threading.Lock()
 
     @property
     def url(self) -> str:
@@ -187,6 +200,16 @@ class WebViewer:
                                   "text": f"episode {self.episode} started", "slots": []}])  # fmt: skip
         self._send_frame(None)
 
+    def _flush(self) -> None:
+        """Server thread: when steps stopped after one the frame-rate cap held back, send that step's frame.
+
+        The simulation has been idle for a while (no hook ran), so its state holds still while it is read.
+        """
+        held = self._held
+        if held is not None and time.perf_counter() - self._last_hook > 2 * TICK_S and self.server.ready_pages:
+            self._held = None
+            self._send_frame(held)
+
     def _select(self, msg: dict[str, Any]) -> dict[str, Any] | None:
         """Select an agent: its state and inbox at once; while paused, a frame with its rays too."""
         self.controls._select(msg)
@@ -208,9 +231,11 @@ class WebViewer:
     def _send_frame(self, events: StepEvents | None) -> None:
         world = self.world
         assert world is not None
-        self.seq += 1
-        arrays = state_arrays(world, self.w, events, self.controls.selected)
-        self.server.publish_frame(self.seq, pack_frame(self.seq, int(world.step_count[self.w]), self.episode, arrays))
+        with self._frame_lock:  # the simulation's thread and the server's (_flush, _select) both send frames
+            self.seq += 1
+            arrays = state_arrays(world, self.w, events, self.controls.selected)
+            frame = pack_frame(self.seq, int(world.step_count[self.w]), self.episode, arrays)
+            self.server.publish_frame(self.seq, frame)
 
     def hook(self, world: World, events: StepEvents) -> None:
         """Stage 10: log lines, a frame when a page can take one, status; then pause and pace."""
@@ -219,6 +244,10 @@ class WebViewer:
             srv.publish_log(log_lines(world, self.scenario, events, self.w, self.episode))
             if srv.wants_frame():
                 self._send_frame(events)
+                self._held = None
+            elif srv.ready_pages:
+                self._held = events
+        self._last_hook = time.perf_counter()
         self._steps_since += 1
         now = time.perf_counter()
         if now - self._last_status >= STATUS_EVERY:

@@ -1,0 +1,513 @@
+// The three.js side of the viewer: builds the scene from a `scene` message and writes each frame's typed
+// arrays straight into preallocated instance / line buffers (no per-agent objects, no per-frame allocation).
+import * as THREE from 'three';
+import { OrbitControls } from '/static/vendor/OrbitControls.js';
+
+// Colours (sRGB hex). Groups cycle through GROUP_COLOURS; group -1 is NO_GROUP; offline agents are OFFLINE.
+export const GROUP_COLOURS = [0xff7f0e, 0x2ca02c, 0xd62728, 0x9467bd, 0x8c564b, 0xe377c2, 0xbcbd22, 0x17becf,
+  0xf1c40f, 0x1abc9c];
+export const NO_GROUP = 0x3f6fb5;
+export const OFFLINE = 0x9a9a9a;
+export const MSG_KINDS = ['agent', 'group', 'environment', 'overlay'];
+export const MSG_COLOURS = [0x0097a7, 0x7b1fa2, 0x2e7d32, 0xd81b60];
+export const PAYLOAD_FALLING = 0xff8c00;
+export const PAYLOAD_LANDED = 0x2b2b2b;
+const OBJECT_COLOUR = 0x9ea3aa;
+const ZONE_LOW = 0xfff3b0; // density 0
+const ZONE_HIGH = 0xd7301f; // density 1
+const RAY_HIT = [0.9, 0.05, 0.05, 1]; // linear RGBA
+const RAY_MISS = [0.3, 0.3, 0.3, 0.3];
+const MAX_SEGMENTS = 2000; // message lines kept in the ring buffer
+const FADE_MS = 600; // a message line fades out over this time
+
+/** Linear-space [r, g, b] of an sRGB hex colour (instance and vertex colours are read as linear). */
+function rgb(hex) {
+  const c = new THREE.Color(hex);
+  return [c.r, c.g, c.b];
+}
+const PALETTE = GROUP_COLOURS.map(rgb);
+const NO_GROUP_RGB = rgb(NO_GROUP);
+const OFFLINE_RGB = rgb(OFFLINE);
+const MSG_RGB = MSG_COLOURS.map(rgb);
+const FALLING_RGB = rgb(PAYLOAD_FALLING);
+const LANDED_RGB = rgb(PAYLOAD_LANDED);
+
+/** A LineSegments with preallocated position (xyz) and RGBA colour buffers, drawn up to setDrawRange. */
+function makeLines(capacity, opacity = 1) {
+  const geometry = new THREE.BufferGeometry();
+  geometry.setAttribute('position', new THREE.BufferAttribute(new Float32Array(capacity * 6), 3)
+    .setUsage(THREE.DynamicDrawUsage));
+  geometry.setAttribute('color', new THREE.BufferAttribute(new Float32Array(capacity * 8), 4)
+    .setUsage(THREE.DynamicDrawUsage));
+  geometry.setDrawRange(0, 0);
+  const material = new THREE.LineBasicMaterial({ vertexColors: true, transparent: true, opacity, depthWrite: false });
+  const lines = new THREE.LineSegments(geometry, material);
+  lines.frustumCulled = false;
+  lines.userData.capacity = capacity;
+  return lines;
+}
+
+/** An InstancedMesh with a dynamic per-instance colour buffer; never frustum-culled (instances move). */
+function makeInstanced(geometry, material, capacity) {
+  const mesh = new THREE.InstancedMesh(geometry, material, Math.max(1, capacity));
+  mesh.instanceMatrix.setUsage(THREE.DynamicDrawUsage);
+  mesh.instanceColor = new THREE.InstancedBufferAttribute(new Float32Array(Math.max(1, capacity) * 3), 3)
+    .setUsage(THREE.DynamicDrawUsage);
+  mesh.frustumCulled = false;
+  mesh.count = 0;
+  return mesh;
+}
+
+/** Write a yaw rotation + uniform scale + translation into a column-major 4x4 at m[o..o+15]. */
+function writeMatrix(m, o, x, y, z, yaw, s) {
+  const c = Math.cos(yaw) * s;
+  const n = Math.sin(yaw) * s;
+  m[o] = c; m[o + 1] = n; m[o + 2] = 0; m[o + 3] = 0;
+  m[o + 4] = -n; m[o + 5] = c; m[o + 6] = 0; m[o + 7] = 0;
+  m[o + 8] = 0; m[o + 9] = 0; m[o + 10] = s; m[o + 11] = 0;
+  m[o + 12] = x; m[o + 13] = y; m[o + 14] = z; m[o + 15] = 1;
+}
+
+/** A "nice" grid spacing (1, 2 or 5 x 10^k) giving roughly `lines` lines over `extent`. */
+function niceStep(extent, lines) {
+  const raw = extent / lines;
+  const p = 10 ** Math.floor(Math.log10(raw));
+  return [1, 2, 5, 10].map((k) => k * p).find((s) => s >= raw);
+}
+
+export class Scene3D {
+  /** canvas: the WebGL canvas; top: a fixed straight-down orthographic view instead of the orbit camera. */
+  constructor(canvas, { top = false } = {}) {
+    this.canvas = canvas;
+    this.top = top;
+    this.renderer = new THREE.WebGLRenderer({ canvas, antialias: true });
+    this.renderer.setPixelRatio(Math.min(window.devicePixelRatio || 1, 2));
+    this.scene = new THREE.Scene();
+    this.scene.background = new THREE.Color(0xf3f4f6);
+    const hemi = new THREE.HemisphereLight(0xffffff, 0x8a8f80, 1.6);
+    hemi.position.set(0, 0, 1); // z is up
+    const sun = new THREE.DirectionalLight(0xffffff, 1.6);
+    sun.position.set(0.4, -0.7, 1);
+    this.scene.add(hemi, sun);
+    if (top) {
+      this.camera = new THREE.OrthographicCamera(-1, 1, 1, -1, 0.1, 1000);
+      this.camera.up.set(0, 1, 0); // looking straight down: north is up in the image
+    } else {
+      this.camera = new THREE.PerspectiveCamera(45, 1, 0.1, 1000);
+      this.camera.up.set(0, 0, 1);
+      this.controls = new OrbitControls(this.camera, canvas);
+      this.controls.addEventListener('change', () => { this.dirty = true; });
+    }
+    this.world = null; // everything rebuilt per scene
+    this.bounds = [-1, 1, -1, 1];
+    this.radius = new Float32Array(0);
+    this.frame = null; // the frame currently shown
+    this.selected = null;
+    this.dirty = true;
+    this.raycaster = new THREE.Raycaster();
+    this.tmp = new THREE.Vector3();
+    this.ndc = new THREE.Vector2();
+    new ResizeObserver(() => this.resize()).observe(canvas);
+    this.resize();
+  }
+
+  // ----- scene ------------------------------------------------------------------------------------------------
+  /** (Re)build the whole scene from a `scene` message. */
+  build(msg) {
+    if (this.world) {
+      this.scene.remove(this.world);
+      this.world.traverse((o) => { o.geometry?.dispose(); o.material?.dispose(); });
+    }
+    const world = new THREE.Group();
+    this.world = world;
+    this.scene.add(world);
+    const [x0, x1, y0, y1] = msg.bounds;
+    this.bounds = msg.bounds;
+    const bw = x1 - x0;
+    const bh = y1 - y0;
+    const size = Math.max(bw, bh);
+    this.size = size;
+    const lift = size * 0.0015; // small z offsets that keep flat layers apart without z-fighting
+
+    // Ground, a light grid and the bounds outline.
+    const ground = new THREE.Mesh(new THREE.PlaneGeometry(bw, bh),
+      new THREE.MeshLambertMaterial({ color: 0xe3e7dc }));
+    ground.position.set((x0 + x1) / 2, (y0 + y1) / 2, 0);
+    world.add(ground);
+    const step = niceStep(size, 12);
+    const grid = [];
+    for (let x = Math.ceil(x0 / step) * step; x <= x1; x += step) grid.push(x, y0, lift, x, y1, lift);
+    for (let y = Math.ceil(y0 / step) * step; y <= y1; y += step) grid.push(x0, y, lift, x1, y, lift);
+    const gridGeometry = new THREE.BufferGeometry();
+    gridGeometry.setAttribute('position', new THREE.Float32BufferAttribute(grid, 3));
+    world.add(new THREE.LineSegments(gridGeometry, new THREE.LineBasicMaterial({ color: 0xc9cfc0 })));
+    const outline = new THREE.BufferGeometry();
+    outline.setAttribute('position', new THREE.Float32BufferAttribute(
+      [x0, y0, 3 * lift, x1, y0, 3 * lift, x1, y1, 3 * lift, x0, y1, 3 * lift], 3));
+    world.add(new THREE.LineLoop(outline, new THREE.LineBasicMaterial({ color: 0x303030 })));
+
+    this.buildObjects(msg.objects || { kind: [], centre: [], half: [] });
+    for (const zone of msg.zones || []) this.buildZone(zone, 2 * lift);
+
+    // Agents: one InstancedMesh of a cone pointing along +x (heading 0), scaled by the agent radius.
+    const n = msg.n_agents || 0;
+    // Display radius: the agent's radius, but at least 1/200 of the map so agents stay visible on big maps.
+    const minRadius = size / 200;
+    this.radius = new Float32Array(n).fill(Math.max(0.5, minRadius));
+    (msg.agent_radius || []).forEach((r, i) => { if (i < n) this.radius[i] = Math.max(r, minRadius); });
+    this.meanRadius = n ? this.radius.reduce((a, b) => a + b, 0) / n : 0.5;
+    this.buildAgents(n);
+
+    // Selection marker, drawn over everything: a flat ring around the agent and a pin standing above it
+    // (in agent-radius units: the marker is scaled by the selected agent's display radius).
+    this.marker = new THREE.Mesh(new THREE.RingGeometry(2.0, 2.8, 32),
+      new THREE.MeshBasicMaterial({ color: 0xffc400, depthTest: false, side: THREE.DoubleSide }));
+    const pin = new THREE.Line(new THREE.BufferGeometry().setFromPoints([new THREE.Vector3(0, 0, 0),
+      new THREE.Vector3(0, 0, 12)]), new THREE.LineBasicMaterial({ color: 0x111111, depthTest: false }));
+    pin.renderOrder = 10;
+    this.marker.add(pin);
+    this.marker.renderOrder = 10;
+    this.marker.visible = false;
+    world.add(this.marker);
+
+    // Payloads (small spheres), messages (fading ring buffer of segments) and the selected agent's rays.
+    this.payloads = makeInstanced(new THREE.SphereGeometry(1, 8, 6), new THREE.MeshLambertMaterial(), 64);
+    world.add(this.payloads);
+    this.messages = makeLines(MAX_SEGMENTS);
+    this.msgBorn = new Float64Array(MAX_SEGMENTS);
+    this.msgHead = 0; // next slot to write
+    this.msgCount = 0; // slots in use (<= MAX_SEGMENTS)
+    this.msgLastBorn = -Infinity;
+    world.add(this.messages);
+    this.rays = makeLines(64);
+    world.add(this.rays);
+
+    // Frame the camera on the first scene and when the bounds change, not at every episode (keeps the user's view).
+    const key = JSON.stringify(msg.bounds);
+    if (this.top || key !== this.framedBounds) this.frameCamera();
+    this.framedBounds = key;
+    this.frame = null;
+    this.dirty = true;
+  }
+
+  buildObjects(objects) {
+    const geometries = [
+      new THREE.BoxGeometry(2, 2, 2), // scaled by the half extents
+      new THREE.CylinderGeometry(1, 1, 2, 20).rotateX(Math.PI / 2), // axis along z
+      new THREE.SphereGeometry(1, 20, 14),
+    ];
+    const material = new THREE.MeshLambertMaterial({ color: OBJECT_COLOUR });
+    const m = new THREE.Matrix4();
+    const q = new THREE.Quaternion();
+    const p = new THREE.Vector3();
+    const s = new THREE.Vector3();
+    for (let kind = 0; kind < 3; kind++) {
+      const idx = objects.kind.map((k, i) => (k === kind ? i : -1)).filter((i) => i >= 0);
+      if (!idx.length) continue;
+      const mesh = new THREE.InstancedMesh(geometries[kind], material, idx.length);
+      idx.forEach((i, j) => {
+        const [cx, cy, cz] = objects.centre[i];
+        const [hx, hy, hz] = objects.half[i];
+        if (kind === 0) s.set(hx, hy, hz);
+        else if (kind === 1) s.set(hx, hx, hz);
+        else s.set(hx, hx, hx);
+        mesh.setMatrixAt(j, m.compose(p.set(cx, cy, cz), q, s));
+      });
+      this.world.add(mesh);
+    }
+  }
+
+  /** A flat disc shaded radially by the zone's density samples (r = 0 .. radius), warm = dense. */
+  buildZone(zone, z) {
+    const geometry = new THREE.RingGeometry(0, zone.radius, 48, 24);
+    const position = geometry.attributes.position;
+    const colours = new Float32Array(position.count * 4);
+    const low = new THREE.Color(ZONE_LOW);
+    const high = new THREE.Color(ZONE_HIGH);
+    const c = new THREE.Color();
+    const d = zone.density || [];
+    for (let i = 0; i < position.count; i++) {
+      const r = Math.hypot(position.getX(i), position.getY(i)) / zone.radius;
+      const t = Math.min(Math.max(r, 0), 1) * (d.length - 1); // linear interpolation between samples
+      const k = Math.min(Math.floor(t), Math.max(d.length - 2, 0));
+      const v = d.length ? (d.length > 1 ? d[k] + (d[k + 1] - d[k]) * (t - k) : d[0]) : 0;
+      c.copy(low).lerp(high, v);
+      colours.set([c.r, c.g, c.b, 0.25 + 0.6 * v], i * 4);
+    }
+    geometry.setAttribute('color', new THREE.BufferAttribute(colours, 4));
+    const disc = new THREE.Mesh(geometry, new THREE.MeshBasicMaterial({
+      vertexColors: true, transparent: true, depthWrite: false, side: THREE.DoubleSide,
+    }));
+    disc.position.set(zone.centre[0], zone.centre[1], z);
+    const edge = new THREE.LineLoop(new THREE.BufferGeometry().setFromPoints(
+      Array.from({ length: 64 }, (_, i) => new THREE.Vector3(
+        zone.radius * Math.cos((i / 64) * 2 * Math.PI), zone.radius * Math.sin((i / 64) * 2 * Math.PI), 0))),
+    new THREE.LineBasicMaterial({ color: ZONE_HIGH, transparent: true, opacity: 0.6 }));
+    edge.position.copy(disc.position);
+    this.world.add(disc, edge);
+  }
+
+  buildAgents(capacity) {
+    if (this.agents) {
+      this.world.remove(this.agents);
+      this.agents.geometry.dispose();
+      this.agents.material.dispose();
+    }
+    const cone = new THREE.ConeGeometry(1, 2.4, 8).rotateZ(-Math.PI / 2); // tip along +x
+    this.agents = makeInstanced(cone, new THREE.MeshLambertMaterial({ flatShading: true }), capacity);
+    this.world.add(this.agents);
+  }
+
+  /** Initial camera: a 3/4 perspective view of the bounds, or (top) the whole bounds straight down. */
+  frameCamera() {
+    const [x0, x1, y0, y1] = this.bounds;
+    const cx = (x0 + x1) / 2;
+    const cy = (y0 + y1) / 2;
+    const size = this.size;
+    if (this.top) {
+      this.camera.position.set(cx, cy, size * 10);
+      this.camera.near = size * 0.01;
+      this.camera.far = size * 20;
+      this.camera.lookAt(cx, cy, 0);
+      this.fitTop();
+      return;
+    }
+    // Back the camera off along a fixed 3/4 direction until the four bounds corners project inside 90% of the view.
+    const dir = new THREE.Vector3(0.25, -0.75, 0.62).normalize();
+    const corners = [[x0, y0], [x1, y0], [x1, y1], [x0, y1]];
+    let dist = size * 0.5;
+    for (let i = 0; i < 40; i++) {
+      this.camera.position.set(cx + dir.x * dist, cy + dir.y * dist, dir.z * dist);
+      this.camera.near = dist * 0.005;
+      this.camera.far = dist * 20;
+      this.camera.lookAt(cx, cy, 0);
+      this.camera.updateMatrixWorld();
+      this.camera.updateProjectionMatrix();
+      const fits = corners.every(([x, y]) => {
+        const v = this.tmp.set(x, y, 0).project(this.camera);
+        return Math.abs(v.x) <= 0.9 && Math.abs(v.y) <= 0.9;
+      });
+      if (fits) break;
+      dist *= 1.08;
+    }
+    this.controls.target.set(cx, cy, 0);
+    this.controls.update();
+  }
+
+  /** Orthographic frustum holding the bounds (5% margin), centred, at the canvas aspect ratio. */
+  fitTop() {
+    const [x0, x1, y0, y1] = this.bounds;
+    const aspect = this.aspect();
+    let w = (x1 - x0) * 1.05;
+    let h = (y1 - y0) * 1.05;
+    if (w / h < aspect) w = h * aspect;
+    else h = w / aspect;
+    Object.assign(this.camera, { left: -w / 2, right: w / 2, top: h / 2, bottom: -h / 2 });
+    this.camera.updateProjectionMatrix();
+  }
+
+  aspect() {
+    return Math.max(this.canvas.clientWidth, 1) / Math.max(this.canvas.clientHeight, 1);
+  }
+
+  resize() {
+    const w = this.canvas.clientWidth;
+    const h = this.canvas.clientHeight;
+    if (!w || !h) return;
+    this.renderer.setSize(w, h, false);
+    if (this.top) this.fitTop();
+    else {
+      this.camera.aspect = w / h;
+      this.camera.updateProjectionMatrix();
+    }
+    this.dirty = true;
+  }
+
+  // ----- frames -----------------------------------------------------------------------------------------------
+  /** Show one parsed frame: agents, payloads, new message segments, rays. */
+  setFrame(frame) {
+    if (!this.world) return;
+    const a = frame.arrays;
+    const pos = a.pos || new Float32Array(0);
+    const n = pos.length / 3;
+    if (n > this.agents.instanceMatrix.count) this.buildAgents(n); // grows only
+    this.frame = frame;
+    const m = this.agents.instanceMatrix.array;
+    const col = this.agents.instanceColor.array;
+    const { heading, group, online } = a;
+    for (let i = 0; i < n; i++) {
+      const r = i < this.radius.length ? this.radius[i] : this.meanRadius;
+      writeMatrix(m, i * 16, pos[3 * i], pos[3 * i + 1], pos[3 * i + 2], heading ? heading[i] : 0, r);
+      const g = group ? group[i] : -1;
+      const c = online && online[i] === 0 ? OFFLINE_RGB : g < 0 ? NO_GROUP_RGB : PALETTE[g % PALETTE.length];
+      col[3 * i] = c[0]; col[3 * i + 1] = c[1]; col[3 * i + 2] = c[2];
+    }
+    this.agents.count = n;
+    this.agents.instanceMatrix.needsUpdate = true;
+    this.agents.instanceColor.needsUpdate = true;
+    this.agents.boundingSphere = null; // recomputed lazily for picking
+
+    this.setPayloads(a.payload_pos, a.payload_state);
+    if (a.msg) this.addMessages(a.msg, a.msg_kind, pos, n);
+    this.setRays(a.rays, a.ray_hit, pos, n);
+    this.updateMarker();
+    this.dirty = true;
+  }
+
+  setPayloads(ppos, pstate) {
+    const p = ppos ? ppos.length / 3 : 0;
+    if (p > this.payloads.instanceMatrix.count) { // grow (doubling) and replace the mesh
+      this.world.remove(this.payloads);
+      this.payloads.dispose();
+      const bigger = makeInstanced(this.payloads.geometry, this.payloads.material,
+        Math.max(p, 2 * this.payloads.instanceMatrix.count));
+      this.payloads = bigger;
+      this.world.add(bigger);
+    }
+    const s = this.meanRadius * 0.45;
+    const m = this.payloads.instanceMatrix.array;
+    const col = this.payloads.instanceColor.array;
+    for (let i = 0; i < p; i++) {
+      writeMatrix(m, i * 16, ppos[3 * i], ppos[3 * i + 1], ppos[3 * i + 2], 0, s);
+      const c = pstate && pstate[i] === 2 ? LANDED_RGB : FALLING_RGB;
+      col[3 * i] = c[0]; col[3 * i + 1] = c[1]; col[3 * i + 2] = c[2];
+    }
+    this.payloads.count = p;
+    this.payloads.instanceMatrix.needsUpdate = true;
+    this.payloads.instanceColor.needsUpdate = true;
+  }
+
+  /** Append this frame's deliveries to the ring buffer of segments (receiver or sender -1: a vertical tick). */
+  addMessages(msg, kinds, pos, n) {
+    const P = this.messages.geometry.attributes.position.array;
+    const C = this.messages.geometry.attributes.color.array;
+    const now = performance.now();
+    for (let k = 0; k < msg.length / 2; k++) {
+      const s = msg[2 * k];
+      const r = msg[2 * k + 1];
+      const sOk = s >= 0 && s < n;
+      const rOk = r >= 0 && r < n;
+      if (!sOk && !rOk) continue;
+      const i = this.msgHead;
+      const o = i * 6;
+      const a = sOk ? s : r;
+      P[o] = pos[3 * a]; P[o + 1] = pos[3 * a + 1]; P[o + 2] = pos[3 * a + 2];
+      if (sOk && rOk) {
+        P[o + 3] = pos[3 * r]; P[o + 4] = pos[3 * r + 1]; P[o + 5] = pos[3 * r + 2];
+      } else { // to or from the environment: a short vertical line above the agent
+        const h = 4 * (a < this.radius.length ? this.radius[a] : this.meanRadius);
+        P[o + 3] = P[o]; P[o + 4] = P[o + 1]; P[o + 5] = P[o + 2] + h;
+      }
+      const c = MSG_RGB[kinds ? kinds[k] % MSG_RGB.length : 0];
+      C.set(c, i * 8); C.set(c, i * 8 + 4);
+      this.msgBorn[i] = now;
+      this.msgHead = (i + 1) % MAX_SEGMENTS;
+      this.msgCount = Math.min(this.msgCount + 1, MAX_SEGMENTS);
+      this.msgLastBorn = now;
+    }
+    this.messages.geometry.attributes.position.needsUpdate = true;
+    this.messages.geometry.setDrawRange(0, this.msgCount * 2);
+  }
+
+  /** Update the message alphas; returns true while some segment is still visible. */
+  fadeMessages(now) {
+    if (!this.messages || now - this.msgLastBorn > FADE_MS + 50) {
+      if (this.messages && this.msgCount) { // everything has faded: stop drawing the buffer
+        this.msgCount = 0;
+        this.msgHead = 0;
+        this.messages.geometry.setDrawRange(0, 0);
+        return true; // one last render without them
+      }
+      return false;
+    }
+    const C = this.messages.geometry.attributes.color.array;
+    for (let i = 0; i < this.msgCount; i++) {
+      const alpha = Math.max(0, 1 - (now - this.msgBorn[i]) / FADE_MS);
+      C[i * 8 + 3] = alpha;
+      C[i * 8 + 7] = alpha;
+    }
+    this.messages.geometry.attributes.color.needsUpdate = true;
+    return true;
+  }
+
+  /** The selected agent's proximity rays: red for hits, faint for misses. */
+  setRays(rays, hits, pos, n) {
+    const sel = this.selected;
+    const k = rays && sel !== null && sel < n ? rays.length / 3 : 0;
+    if (k > this.rays.userData.capacity) {
+      this.world.remove(this.rays);
+      this.rays.geometry.dispose();
+      this.rays.material.dispose();
+      this.rays = makeLines(Math.max(k, 2 * this.rays.userData.capacity));
+      this.world.add(this.rays);
+    }
+    const P = this.rays.geometry.attributes.position.array;
+    const C = this.rays.geometry.attributes.color.array;
+    for (let i = 0; i < k; i++) {
+      for (let j = 0; j < 3; j++) {
+        P[i * 6 + j] = pos[3 * sel + j];
+        P[i * 6 + 3 + j] = rays[3 * i + j];
+      }
+      const c = hits && hits[i] === 1 ? RAY_HIT : RAY_MISS;
+      C.set(c, i * 8); C.set(c, i * 8 + 4);
+    }
+    this.rays.geometry.attributes.position.needsUpdate = true;
+    this.rays.geometry.attributes.color.needsUpdate = true;
+    this.rays.geometry.setDrawRange(0, k * 2);
+  }
+
+  setSelected(slot) {
+    this.selected = slot;
+    if (slot === null && this.rays) this.rays.geometry.setDrawRange(0, 0);
+    this.updateMarker();
+    this.dirty = true;
+  }
+
+  updateMarker() {
+    if (!this.marker) return;
+    const f = this.frame;
+    const s = this.selected;
+    const n = f && f.arrays.pos ? f.arrays.pos.length / 3 : 0;
+    this.marker.visible = s !== null && s < n;
+    if (!this.marker.visible) return;
+    const p = f.arrays.pos;
+    this.marker.position.set(p[3 * s], p[3 * s + 1], p[3 * s + 2]);
+    this.marker.scale.setScalar(s < this.radius.length ? this.radius[s] : this.meanRadius);
+  }
+
+  // ----- drawing, picking, projection -------------------------------------------------------------------------
+  /** Render when something changed (or messages are fading); returns whether it rendered. */
+  render(now) {
+    const fading = this.fadeMessages(now);
+    if (!this.dirty && !fading) return false;
+    this.dirty = false;
+    this.renderer.render(this.scene, this.camera);
+    return true;
+  }
+
+  /** The agent slot under a page point, or null: a ray cast on the instances, else the nearest within 10 px. */
+  pick(clientX, clientY) {
+    if (!this.agents || !this.agents.count) return null;
+    const rect = this.canvas.getBoundingClientRect();
+    this.ndc.set(((clientX - rect.left) / rect.width) * 2 - 1, -((clientY - rect.top) / rect.height) * 2 + 1);
+    this.raycaster.setFromCamera(this.ndc, this.camera);
+    const hit = this.raycaster.intersectObject(this.agents, false)[0];
+    if (hit && hit.instanceId !== undefined) return hit.instanceId;
+    const pos = this.frame.arrays.pos;
+    let best = null;
+    let bestD = 100; // (10 px)^2
+    for (let i = 0; i < this.agents.count; i++) {
+      const [px, py] = this.project([pos[3 * i], pos[3 * i + 1], pos[3 * i + 2]], rect);
+      const d = (px - clientX) ** 2 + (py - clientY) ** 2;
+      if (d < bestD) { bestD = d; best = i; }
+    }
+    return best;
+  }
+
+  /** CSS pixel position in the page of a world point with the current camera. */
+  project(p, rect = this.canvas.getBoundingClientRect()) {
+    this.camera.updateMatrixWorld();
+    const v = this.tmp.set(p[0], p[1], p[2]).project(this.camera);
+    return [rect.left + ((v.x + 1) / 2) * rect.width, rect.top + ((1 - v.y) / 2) * rect.height];
+  }
+}
