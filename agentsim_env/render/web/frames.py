@@ -214,13 +214,15 @@ def _line(step: int, episode: int, kind: str, text: str, slots: list[int]) -> di
     return {"step": step, "episode": episode, "kind": kind, "text": text, "slots": slots}
 
 
-def log_lines(world: World, scenario: Any, events: StepEvents, w: int, episode: int) -> list[dict[str, Any]]:
+def log_lines(world: World, scenario: Any, events: StepEvents, w: int, episode: int,
+              names: list[str] | None = None) -> list[dict[str, Any]]:  # fmt: skip
     """The log stream's lines for one step of world ``w``: collisions, timeouts, group changes, releases,
-    landings, terminations and (up to ``MAX_MESSAGE_LINES``) messages."""
+    landings, terminations and (up to ``MAX_MESSAGE_LINES``) messages. ``names``: the agents' ids (default:
+    the scenario's; pass them to save building the list every step)."""
     n = world.state.n_agents
     lo, hi = w * n, (w + 1) * n
     step = int(world.step_count[w])
-    names = scenario.agent_names()
+    names = names if names is not None else scenario.agent_names()
     out: list[dict[str, Any]] = []
 
     def name(slot: int) -> str:

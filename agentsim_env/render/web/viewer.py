@@ -167,6 +167,7 @@ class WebViewer:
         self._held: StepEvents | None = None  # a step the frame-rate cap held back (sent if no step follows)
         self._last_hook = 0.0
         self._frame_lock = threading.Lock()
+        self._names: list[str] = []
 
     @property
     def url(self) -> str:
@@ -178,6 +179,7 @@ class WebViewer:
         if self.world is not None and self.world is not world:
             self.world.remove_hook(self.hook)
         self.world, self.scenario = world, scenario
+        self._names = scenario.agent_names()
         self.controls.n_agents = world.n_agents
         if self.hook not in world.hooks:
             world.add_hook(self.hook)
@@ -241,7 +243,7 @@ class WebViewer:
         """Stage 10: log lines, a frame when a page can take one, status; then pause and pace."""
         srv = self.server
         if srv.n_pages:
-            srv.publish_log(log_lines(world, self.scenario, events, self.w, self.episode))
+            srv.publish_log(log_lines(world, self.scenario, events, self.w, self.episode, self._names))
             if srv.wants_frame():
                 self._send_frame(events)
                 self._held = None

@@ -75,13 +75,28 @@ function niceStep(extent, lines) {
   return [1, 2, 5, 10].map((k) => k * p).find((s) => s >= raw);
 }
 
+/** True when WebGL runs on the CPU (SwiftShader, llvmpipe): draw with fewer triangles and no antialiasing. */
+function softwareRenderer() {
+  try {
+    const gl = document.createElement('canvas').getContext('webgl2');
+    const info = gl && gl.getExtension('WEBGL_debug_renderer_info');
+    const name = info ? gl.getParameter(info.UNMASKED_RENDERER_WEBGL) : '';
+    gl?.getExtension('WEBGL_lose_context')?.loseContext();
+    return /swiftshader|llvmpipe|software/i.test(String(name));
+  } catch (e) {
+    return false;
+  }
+}
+const SOFTWARE = softwareRenderer();
+const MANY = 2000; // above this many agents (or objects), bodies are drawn with fewer faces
+
 export class Scene3D {
   /** canvas: the WebGL canvas; top: a fixed straight-down orthographic view instead of the orbit camera. */
   constructor(canvas, { top = false } = {}) {
     this.canvas = canvas;
     this.top = top;
-    this.renderer = new THREE.WebGLRenderer({ canvas, antialias: true });
-    this.renderer.setPixelRatio(Math.min(window.devicePixelRatio || 1, 2));
+    this.renderer = new THREE.WebGLRenderer({ canvas, antialias: !SOFTWARE });
+    this.renderer.setPixelRatio(SOFTWARE ? 1 : Math.min(window.devicePixelRatio || 1, 2));
     this.scene = new THREE.Scene();
     this.scene.background = new THREE.Color(0xf3f4f6);
     const hemi = new THREE.HemisphereLight(0xffffff, 0x8a8f80, 1.6);
@@ -191,10 +206,11 @@ export class Scene3D {
   }
 
   buildObjects(objects) {
+    const few = objects.kind.length > MANY / 4; // many objects: rounder shapes cost more than they show
     const geometries = [
       new THREE.BoxGeometry(2, 2, 2), // scaled by the half extents
-      new THREE.CylinderGeometry(1, 1, 2, 20).rotateX(Math.PI / 2), // axis along z
-      new THREE.SphereGeometry(1, 20, 14),
+      new THREE.CylinderGeometry(1, 1, 2, few ? 8 : 20).rotateX(Math.PI / 2), // axis along z
+      new THREE.SphereGeometry(1, few ? 10 : 20, few ? 7 : 14),
     ];
     const material = new THREE.MeshLambertMaterial({ color: OBJECT_COLOUR });
     const m = new THREE.Matrix4();
@@ -253,7 +269,8 @@ export class Scene3D {
       this.agents.geometry.dispose();
       this.agents.material.dispose();
     }
-    const cone = new THREE.ConeGeometry(1, 2.4, 8).rotateZ(-Math.PI / 2); // tip along +x
+    const faces = capacity > MANY ? 4 : 8; // a 4-sided cone still shows the heading
+    const cone = new THREE.ConeGeometry(1, 2.4, faces).rotateZ(-Math.PI / 2); // tip along +x
     this.agents = makeInstanced(cone, new THREE.MeshLambertMaterial({ flatShading: true }), capacity);
     this.world.add(this.agents);
   }

@@ -33,6 +33,7 @@ const state = {
 const hooks = {
   ready: false,
   framesDrawn: 0,
+  framesReceived: 0,
   lastStep: -1,
   lastSeq: -1,
   episode: -1,
@@ -57,7 +58,11 @@ const conn = new Connection({
   },
   onBadMessage: (text) => showError(text),
   onFrame(frame) {
-    state.latest = frame; // latest state wins: frames arriving between two draws replace each other
+    // latest state wins: frames arriving between two draws replace each other. The frame is acknowledged on
+    // arrival, so the stream's rate does not depend on how fast this machine draws (software WebGL is slow).
+    state.latest = frame;
+    hooks.framesReceived += 1;
+    conn.send({ cmd: 'ack', seq: frame.seq });
   },
   onJson(msg) {
     const handler = HANDLERS[msg.type];
@@ -102,7 +107,7 @@ const HANDLERS = {
   },
 };
 
-// ----- drawing loop: draw the newest frame, then acknowledge it -------------------------------------------------
+// ----- drawing loop: draw the newest frame -------------------------------------------------
 function tick(now) {
   const frame = state.latest;
   const fresh = frame !== null && frame !== state.drawn && state.scene !== null;
@@ -117,7 +122,6 @@ function tick(now) {
     hooks.ready = true;
     state.fpsCount += 1;
     if (!state.sliderBusy && state.scene?.replay) updateSlider(frame.step);
-    conn.send({ cmd: 'ack', seq: frame.seq });
   }
   requestAnimationFrame(tick);
 }
