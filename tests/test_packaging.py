@@ -114,6 +114,10 @@ def test_wheel_installs_policies_and_train_inside_the_package(tmp_path: Path) ->
             rel = f.relative_to(ROOT / top).as_posix()
             assert f"{dotted.replace('.', '/')}/{rel}" in names
     assert "agentsim_env/data/zones_default.json" in names
+    # the web pages and three.js ship in the package (the viewer works with no network)
+    static = ROOT / "agentsim_env" / "render" / "web" / "static"
+    for f in [*static.glob("*.*"), *(static / "vendor").glob("*.*")]:
+        assert f"agentsim_env/{f.relative_to(ROOT / 'agentsim_env').as_posix()}" in names, f
 
 
 # ------------------------------------------------------------------------------------------ registry
