@@ -235,6 +235,34 @@ def test_render_mode_web_streams_steps_and_obeys_pause_and_step() -> None:
     assert env.viewer is None
 
 
+def test_the_last_step_of_a_burst_reaches_the_page_when_the_simulation_goes_idle() -> None:
+    import threading
+
+    env = agentsim_env.make("navigation", n_agents=4, collisions=False)
+    env.reset(seed=0)
+    v = WebViewer(quiet=True)
+    v.attach(env.world, env.scenario)
+    v.new_episode()
+    got: list[int] = []
+
+    def page() -> None:
+        _, frames = _talk(v.url, [], seconds=1.5)
+        got.extend(unpack_frame(f)[0]["step"] for f in frames)
+
+    t = threading.Thread(target=page)
+    t.start()
+    try:
+        while v.server.n_pages == 0:
+            time.sleep(0.01)
+        time.sleep(0.2)
+        for _ in range(12):  # a burst much faster than the frame-rate cap, then nothing
+            env.step({a: env.action_space(a).sample() for a in env.agents})
+        t.join()
+    finally:
+        v.close()
+    assert got and got[-1] == 12, got
+
+
 def test_viewer_hook_costs_nothing_without_a_page() -> None:
     env = agentsim_env.make("navigation", n_agents=4)
     env.reset(seed=0)

