@@ -183,3 +183,31 @@ def test_replay_shows_the_recorded_positions_at_the_chosen_step(tmp_path: Path) 
     # at step 30 each moved agent is drawn where the store puts it, and was not there at step 0
     assert all(_differs(shots[30], shots[0], px[30][i]) for i in moved)
     assert all(_differs(shots[30], shots[0], px[0][i]) for i in moved)
+
+
+def test_agentsim_view_shows_uavs_releasing_sensors(tmp_path: Path) -> None:
+    import re
+    import subprocess
+    import sys
+
+    cmd = [sys.executable, "-m", "agentsim_env.cli", "view", "uav_release", "--policy", "B5_cvt", "--set",
+           "zones=tiny", "--speed", "100"]  # fmt: skip
+    proc = subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True)
+    try:
+        url = None
+        assert proc.stderr is not None
+        for line in proc.stderr:
+            m = re.search(r"(http://127\.0\.0\.1:\d+/)", line)
+            if m:
+                url = m.group(1)
+                break
+        assert url, "agentsim view printed no URL"
+        with browser_page() as (page, errors):
+            page.goto(url)
+            page.wait_for_function("window.agentsim && window.agentsim.ready", timeout=30000)
+            page.wait_for_function("window.agentsim.logLines().some(l => l.includes('released')) && "
+                                   "window.agentsim.logLines().some(l => l.includes('landed'))", timeout=60000)  # fmt: skip
+            assert not errors, errors
+    finally:
+        proc.terminate()
+        proc.wait(timeout=20)
