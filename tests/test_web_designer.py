@@ -360,6 +360,11 @@ def test_page_draws_edits_and_saves_two_zones(tmp_path: Path) -> None:
             assert zs.zones[1].profile == "power" and zs.zones[1].alpha == 1.2 and zs.zones[1].weight == 2.0
             assert zs.zones[0].profile == "gauss" and zs.zones[0].floor == 0.0 and zs.zones[0].weight == 1.0
             assert zs.map_size == (600.0, 400.0) and zs.base == (20.0, 20.0)
+            import agentsim_env  # the saved file runs in uav_release (what `agentsim evaluate --zones FILE` builds)
+
+            uav = agentsim_env.make("uav_release", zones=str(path))
+            assert uav.scenario.zones == zs
+            uav.reset(seed=0)
 
             page.fill("#f-radius", "700")  # a bad value: the validator's own message, verbatim
             settle(page)
