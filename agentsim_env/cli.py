@@ -244,19 +244,9 @@ def cmd_run(args: argparse.Namespace) -> int:
     from agentsim_env.scenarios.registry import scenario_class
 
     config = parse_set(scenario_class(args.scenario).config_cls, args.set or [])
-    from agentsim_env.policies.learned import is_model_path, model_env_config
-    from agentsim_env.policies.registry import baseline_names
+    from agentsim_env.policies.registry import resolve_policy
 
-    names = baseline_names(args.scenario)
-    policy_name = args.policy or names[0]
-    if is_model_path(policy_name):  # a trained model: its scenario config, then --set over it
-        trained_on, env_config = model_env_config(policy_name)
-        if trained_on != args.scenario:
-            raise ValueError(f"--policy {policy_name!r} was trained on {trained_on!r}, not {args.scenario!r}")
-        config = {**env_config, **config}
-    elif policy_name not in names:
-        raise ValueError(f"--policy must be one of {names} for {args.scenario!r} or a trained model "
-                         f"(a folder with model.zip, or a .zip), got {policy_name!r}")  # fmt: skip
+    policy_name, config = resolve_policy(args.scenario, args.policy, config)
     _check_record(getattr(args, "record", None))
     created = prepare_out(args.out) if args.out else []
     try:

@@ -90,23 +90,13 @@ def _warn_host(host: str, what: str = "watch and control the simulation") -> Non
 def _live(args: argparse.Namespace) -> int:
     import agentsim_env
     from agentsim_env.cli_set import parse_set
-    from agentsim_env.policies.learned import is_model_path, model_env_config
-    from agentsim_env.policies.registry import baseline_names, make_policy
+    from agentsim_env.policies.registry import make_policy, resolve_policy
     from agentsim_env.policies.rollout import run_episode
     from agentsim_env.render.web.viewer import WebViewer
     from agentsim_env.scenarios.registry import scenario_class
 
     config = parse_set(scenario_class(args.scenario).config_cls, args.set or [])
-    names = baseline_names(args.scenario)
-    policy_name = args.policy or names[0]
-    if is_model_path(policy_name):
-        trained_on, env_config = model_env_config(policy_name)
-        if trained_on != args.scenario:
-            raise ValueError(f"--policy {policy_name!r} was trained on {trained_on!r}, not {args.scenario!r}")
-        config = {**env_config, **config}
-    elif policy_name not in names:
-        raise ValueError(f"--policy must be one of {names} for {args.scenario!r} or a trained model "
-                         f"(a folder with model.zip, or a .zip), got {policy_name!r}")  # fmt: skip
+    policy_name, config = resolve_policy(args.scenario, args.policy, config)
     args.announce()
     env = agentsim_env.make(args.scenario, **config)
     policy = make_policy(args.scenario, env, policy_name)

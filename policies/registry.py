@@ -56,3 +56,32 @@ def make_policy(scenario: str, env: Any, name: str | None = None) -> Policy:
     path, kwargs = (entry, {}) if isinstance(entry, str) else entry
     module, cls = path.split(":")
     return getattr(importlib.import_module(module), cls).for_env(env, **kwargs)  # type: ignore[no-any-return]
+
+
+def resolve_policy(scenario: str, policy: str | None, config: dict[str, Any]) -> tuple[str, dict[str, Any]]:
+    """The policy a command runs and the scenario config it runs with (``--policy`` of ``run`` and ``view``).
+
+    Args:
+        scenario: The scenario.
+        policy: A baseline name, a trained model (folder or ``.zip``), or None for the scenario's first baseline.
+        config: The config from ``--set``.
+
+    Returns:
+        The policy name and the config: a trained model's env config with ``config`` over it, or ``config``.
+
+    Raises:
+        ValueError: An unknown baseline, or a model trained on another scenario.
+    """
+    from agentsim_env.policies.learned import is_model_path, model_env_config
+
+    names = baseline_names(scenario)
+    name = policy or names[0]
+    if is_model_path(name):  # a trained model: its scenario config, then --set over it
+        trained_on, env_config = model_env_config(name)
+        if trained_on != scenario:
+            raise ValueError(f"--policy {name!r} was trained on {trained_on!r}, not {scenario!r}")
+        return name, {**env_config, **config}
+    if name not in names:
+        raise ValueError(f"--policy must be one of {names} for {scenario!r} or a trained model "
+                         f"(a folder with model.zip, or a .zip), got {name!r}")  # fmt: skip
+    return name, config

@@ -55,17 +55,18 @@ def _project(page: Any, p: np.ndarray) -> tuple[float, float]:
     return tuple(page.evaluate("(p) => window.agentsim.project(p)", [float(v) for v in p]))  # type: ignore[return-value]
 
 
-def _nav(n: int = 6, **cfg: Any) -> Any:
+def _nav(n: int = 6, **cfg: Any) -> tuple[Any, WebViewer, str]:
+    """A navigation env reset with seed 3, streamed by a viewer: (env, viewer, url)."""
     env = agentsim_env.make("navigation", n_agents=n, **cfg)
     env.reset(seed=3)
-    return env
-
-
-def test_page_draws_agents_and_obstacles_where_they_are_with_no_console_errors() -> None:
-    env = _nav(6, map_size=60.0, obstacle_density=1.0 / 300.0)
     viewer = WebViewer(quiet=True)
     url = viewer.attach(env.world, env.scenario)
     viewer.new_episode()
+    return env, viewer, url
+
+
+def test_page_draws_agents_and_obstacles_where_they_are_with_no_console_errors() -> None:
+    env, viewer, url = _nav(6, map_size=60.0, obstacle_density=1.0 / 300.0)
     try:
         with browser_page() as (page, errors):
             _open(page, url)
@@ -98,10 +99,7 @@ def test_page_draws_agents_and_obstacles_where_they_are_with_no_console_errors()
 
 
 def test_log_stream_shows_the_collision_and_its_pause_holds_lines_while_steps_go_on() -> None:
-    env = _nav(4, map_size=60.0, obstacle_density=0.0)
-    viewer = WebViewer(quiet=True)
-    url = viewer.attach(env.world, env.scenario)
-    viewer.new_episode()
+    env, viewer, url = _nav(4, map_size=60.0, obstacle_density=0.0)
     acts = {a: {k: np.zeros(s.shape, np.float32) for k, s in env.action_space(a).items()} for a in env.agents}
     try:
         with browser_page() as (page, errors):
@@ -135,10 +133,7 @@ def test_log_stream_shows_the_collision_and_its_pause_holds_lines_while_steps_go
 
 
 def test_clicking_an_agent_shows_its_state() -> None:
-    env = _nav(3, map_size=40.0, obstacle_density=0.0)
-    viewer = WebViewer(quiet=True)
-    url = viewer.attach(env.world, env.scenario)
-    viewer.new_episode()
+    env, viewer, url = _nav(3, map_size=40.0, obstacle_density=0.0)
     try:
         with browser_page() as (page, errors):
             _open(page, url)
