@@ -39,7 +39,7 @@ test: $(STAMP) browser
 test-fast: $(STAMP)
 	$(PY) -m pytest -n 2 -q -m "not slow" tests
 
-bench: $(STAMP)
+bench: $(STAMP) browser
 	$(PY) benchmarks/run_all.py
 
 # hypothesis fuzz of every scenario, long profile: AGENTSIM_FUZZ_EXAMPLES examples in all (tests/test_fuzz.py)

@@ -98,6 +98,22 @@ def test_train_benchmark_quick_run_prints_its_table() -> None:
     assert rows[0][head.index("result")] == "-" and rows[1][head.index("result")] in PASS_VALUES - {"-"}
 
 
+@pytest.mark.slow
+def test_viewer_benchmark_quick_run_prints_its_table() -> None:
+    pytest.importorskip("playwright")
+    cmd = [sys.executable, str(ROOT / "benchmarks" / "bench_viewer.py"), "--quick"]
+    res = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stderr[-3000:]
+    assert res.stdout.startswith("machine: ") and "\ndate: " in res.stdout
+    ((head, rows),) = _tables(res.stdout)
+    assert head[:2] == ["agents", "frame KiB"] and [r[0] for r in rows] == ["100"]
+    for name, cell in zip(head, rows[0]):
+        if name not in ("agents", "target", "result", "slowdown"):
+            assert _number_or_skipped(cell) and not cell.startswith("skipped"), (name, cell)
+    assert float(rows[0][head.index("page updates/s")]) > 0  # the browser received frames
+    assert rows[0][head.index("result")] in PASS_VALUES - {"-"}
+
+
 def test_markdown_table_and_number_cells() -> None:
     table = common.markdown_table(["a", "bb"], [["1", "22,000"], ["skipped (x)", "3.5"]])
     lines = table.splitlines()
