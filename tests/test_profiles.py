@@ -205,3 +205,10 @@ def test_bad_arguments_raise() -> None:
         p.sample(-1, np.random.default_rng(0))
     with pytest.raises(ValueError, match="n must"):
         p.low_discrepancy(2.5)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("kind", PROFILE_KINDS)
+def test_low_discrepancy_indices_pick_the_same_points(kind: str) -> None:
+    prof = RadialProfile(kind, 30.0, alpha=0.7, floor=0.2)
+    idx = np.array([0, 3, 4, 97, 199])
+    np.testing.assert_array_equal(prof.low_discrepancy(200, idx), prof.low_discrepancy(200)[idx])

@@ -228,7 +228,7 @@ class RadialProfile:
         theta = rng.random(n) * (2.0 * math.pi)
         return _polar(self.inverse_cdf(u), theta)
 
-    def low_discrepancy(self, n: int) -> NDArray[np.float64]:
+    def low_discrepancy(self, n: int, indices: ArrayLike | None = None) -> NDArray[np.float64]:
         """Deterministic sunflower (Vogel spiral) set that follows the profile exactly.
 
         Radii come from the quantiles ``u_i = (i - 1/2) / n`` and angles are ``theta_i = i *
@@ -237,12 +237,15 @@ class RadialProfile:
 
         Args:
             n: Number of points (>= 0).
+            indices: Only these points of the set (0-based, in ``0..n-1``), e.g. a thinned preview of a large
+                set without computing the rest; None: all ``n``.
 
         Returns:
-            ``(n, 2)`` offsets from the zone centre in metres.
+            ``(n, 2)`` offsets from the zone centre in metres (``(len(indices), 2)`` with ``indices``).
         """
         n = _check_count(n)
-        i = np.arange(1, n + 1, dtype=np.float64)
+        i = np.arange(n, dtype=np.float64) if indices is None else np.asarray(indices, dtype=np.float64)
+        i = i + 1.0
         return _polar(self.inverse_cdf((i - 0.5) / max(n, 1)), i * GOLDEN_ANGLE)
 
     def mass_between(self, r0: ArrayLike, r1: ArrayLike) -> NDArray[np.float64]:

@@ -19,17 +19,16 @@ import os
 import tempfile
 import threading
 import webbrowser
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from agentsim_env.render.web.frames import density_curve
-from agentsim_env.render.web.server import ClientError, WebServer
+from agentsim_env.render.web.frames import DENSITY_SAMPLES, density_curve
+from agentsim_env.render.web.server import ClientError, Handler, WebServer
 from agentsim_env.scenarios import uav_zones
 from agentsim_env.scenarios.uav_zones import ZoneSet, load_zones, save_zones, zones_from_dict, zones_to_dict
-from agentsim_env.wsn.profiles import GOLDEN_ANGLE, PROFILE_KINDS
+from agentsim_env.wsn.profiles import PROFILE_KINDS
 
 __all__ = [
     "DENSITY_SAMPLES",
@@ -41,39 +40,30 @@ __all__ = [
     "run_designer",
 ]
 
-#: Density samples per zone over ``r = 0 .. radius`` in a preview.
-DENSITY_SAMPLES = 64
 #: Most layout points of each kind (B1, B8) sent per zone, and over all zones together.
 MAX_POINTS_PER_ZONE = 2000
 MAX_POINTS_TOTAL = 40_000
 
-Handler = Callable[[dict[str, Any]], "dict[str, Any] | None"]
-
 _KEYS = {"zones.preview": ("cmd", "zones"), "zones.save": ("cmd", "zones"), "zones.load": ("cmd",)}
-
-
-def _fail(message: str) -> ClientError:
-    """A ``ClientError`` carrying ``message`` (sent to the page as ``{"type": "error"}``)."""
-    return ClientError(message)
 
 
 def _check_message(msg: Any, cmd: str) -> dict[str, Any]:
     """Validate a message's shape: an object with exactly the keys ``cmd`` takes and, where taken, a zone file."""
     if not isinstance(msg, dict):
-        raise _fail(f"{cmd}: a message must be a JSON object, got {type(msg).__name__}")
+        raise ClientError(f"{cmd}: a message must be a JSON object, got {type(msg).__name__}")
     if "path" in msg:
-        raise _fail(
+        raise ClientError(
             f"{cmd}: the page cannot choose the file ('path' is not accepted); the designer writes only "
             "the file it was started with"
         )
     unknown = sorted(str(k) for k in msg if k not in _KEYS[cmd])
     if unknown:
-        raise _fail(f"{cmd}: unknown key(s) {unknown}; allowed keys: {list(_KEYS[cmd])}")
+        raise ClientError(f"{cmd}: unknown key(s) {unknown}; allowed keys: {list(_KEYS[cmd])}")
     if "zones" in _KEYS[cmd]:
         if "zones" not in msg:
-            raise _fail(f"{cmd}: missing 'zones' (the zone file object)")
+            raise ClientError(f"{cmd}: missing 'zones' (the zone file object)")
         if not isinstance(msg["zones"], dict):
-            raise _fail(f"{cmd}: 'zones' must be a zone file object, got {type(msg['zones']).__name__}")
+            raise ClientError(f"{cmd}: 'zones' must be a zone file object, got {type(msg['zones']).__name__}")
     return msg
 
 
@@ -120,13 +110,8 @@ def preview(zs: ZoneSet) -> dict[str, Any]:
         n, shown = z.n_sensors, _point_count(z.n_sensors, len(zs.zones))
         centre = np.asarray(z.centre, dtype=np.float64)
         b1 = prof.sample(shown, np.random.default_rng(0)) + centre
-        # The sunflower points i = idx + 1 of low_discrepancy(n), computed for the shown indices only.
-        idx = (
-            np.arange(n) if shown == n else np.unique(np.round(np.linspace(0, n - 1, shown)).astype(np.int64))
-        )
-        i = idx.astype(np.float64) + 1.0
-        rad = np.asarray(prof.inverse_cdf((i - 0.5) / n), dtype=np.float64)
-        b8 = np.stack([rad * np.cos(i * GOLDEN_ANGLE), rad * np.sin(i * GOLDEN_ANGLE)], axis=1) + centre
+        idx = np.unique(np.round(np.linspace(0, n - 1, shown)).astype(np.int64))  # all n when shown == n
+        b8 = prof.low_discrepancy(n, idx) + centre
         out.append(
             {
                 "density": np.round(dens, 6).tolist(),
@@ -177,35 +162,35 @@ def designer_handlers(path: Path | None) -> dict[str, Handler]:
         """Validate and write the zone file to ``path`` (only there)."""
         d = _check_message(msg, "zones.save")["zones"]
         if target is None:
-            raise _fail(
+            raise ClientError(
                 "started without a file: nothing is written; use Download, or start "
                 "`agentsim zones design FILE`"
             )
         try:
             zs = _validate(d)
         except ValueError as exc:
-            raise _fail(str(exc)) from exc
+            raise ClientError(str(exc)) from exc
         with lock:
             try:
                 _write_atomically(zs, target)
             except OSError as exc:
-                raise _fail(f"cannot write {target}: {exc.strerror or exc}") from exc
+                raise ClientError(f"cannot write {target}: {exc.strerror or exc}") from exc
         return {"type": "zones.saved", "path": str(target), "n_zones": len(zs.zones)}
 
     def on_load(msg: dict[str, Any]) -> dict[str, Any]:
         """Re-read ``path`` and return its zones."""
         _check_message(msg, "zones.load")
         if target is None:
-            raise _fail(
+            raise ClientError(
                 "started without a file: there is nothing to load; start `agentsim zones design FILE`"
             )
         if not target.exists():
-            raise _fail(f"{target} does not exist yet: Save creates it")
+            raise ClientError(f"{target} does not exist yet: Save creates it")
         try:
             with lock:
                 zs = load_zones(target)
         except (ValueError, OSError) as exc:
-            raise _fail(str(exc)) from exc
+            raise ClientError(str(exc)) from exc
         return {"type": "zones.loaded", "zones": zones_to_dict(zs), "path": str(target)}
 
     return {"zones.preview": on_preview, "zones.save": on_save, "zones.load": on_load}
