@@ -290,8 +290,12 @@ def test_replay_serves_the_recorded_positions(tmp_path: Any) -> None:
     try:
         texts, frames = _talk(url, [{"cmd": "pause"}, {"cmd": "seek", "step": 5}, {"cmd": "seek", "step": 10**6}],
                               seconds=0.8)  # fmt: skip
+        _, stepped = _talk(url, [{"cmd": "step"}], seconds=0.5)  # paused at 5: one step shows 6, no more
+        _, played = _talk(url, [{"cmd": "play"}], seconds=0.5)
     finally:
         v.close()
+    assert unpack_frame(stepped[-1])[0]["step"] == 6
+    assert unpack_frame(played[-1])[0]["step"] > 6
     scene = next(t for t in texts if t["type"] == "scene")
     assert scene["mode"] == "replay" and scene["replay"]["first_step"] == 0 and len(scene["objects"]["kind"]) > 0
     errors = [t["message"] for t in texts if t["type"] == "error"]

@@ -17,18 +17,16 @@ import json
 import os
 import sys
 import threading
-import time
 from typing import Any
 
 import numpy as np
 
+from agentsim_env.comms.messages import AGENT, KIND_NAMES
 from agentsim_env.recorder.replay import ReplayInfo, replay_info
 from agentsim_env.recorder.schema import connect
-from agentsim_env.render.web.frames import MSG_KIND, pack_frame, scene_message
+from agentsim_env.render.web.frames import MAX_MESSAGE_LINES, pack_frame, page_kinds, scene_message
 from agentsim_env.render.web.server import ClientError, WebServer
 from agentsim_env.render.web.viewer import Controls
-
-_BUS_KIND_NAMES = {1: "AGENT", 2: "GROUP", 3: "ENV", 4: "OVERLAY", 5: "HEARTBEAT"}
 
 
 class ReplayData:
@@ -87,16 +85,15 @@ class ReplayData:
                 "AND world = ? AND event = 'delivered' AND receiver IS NOT NULL ORDER BY step", key).fetchall()  # fmt: skip
             by_step: dict[int, list[tuple[int, int, int]]] = {}
             for s, k, snd, rcv in msgs:
-                by_step.setdefault(int(s), []).append((int(snd), int(rcv), MSG_KIND.get(int(k or 1), 0)))
+                by_step.setdefault(int(s), []).append((int(snd), int(rcv), int(k or AGENT)))
             for s in self.steps.tolist():
                 m = by_step.get(s, [])
                 self.messages.append((np.array([(a, b) for a, b, _ in m], np.int32).reshape(-1, 2),
-                                      np.array([k for *_, k in m], np.uint8)))  # fmt: skip
-                for a, b, k in m[:20]:
-                    kind = _BUS_KIND_NAMES.get(next((c for c, v in MSG_KIND.items() if v == k), 1), "AGENT")
-                    self._add(s, "message", f"{kind} {self._name(a)} -> {self._name(b)}", [b])
-                if len(m) > 20:
-                    self._add(s, "message", f"... and {len(m) - 20} more deliveries this step", [])
+                                      page_kinds(np.array([k for *_, k in m], np.int64))))  # fmt: skip
+                for a, b, k in m[:MAX_MESSAGE_LINES]:
+                    self._add(s, "message", f"{KIND_NAMES.get(k, k)} {self._name(a)} -> {self._name(b)}", [b])
+                if len(m) > MAX_MESSAGE_LINES:
+                    self._add(s, "message", f"... and {len(m) - MAX_MESSAGE_LINES} more deliveries this step", [])
             for s, ev, a, b, obj, old, new in con.execute(
                 "SELECT step, event, agent, other_agent, object, old, new FROM events WHERE run = ? AND "
                 "episode = ? AND world = ? ORDER BY step", key):  # fmt: skip
@@ -239,8 +236,7 @@ class ReplayViewer:
         self.controls = Controls(rate)
         self.controls.n_agents = self.info.n_agents
         self.server = WebServer("viewer.html", host=host, port=port, title="agentsim replay",
-                                handlers=self.controls.handlers({"seek": self._seek, "play": self._play,
-                                                                 "select": self._select}),
+                                handlers=self.controls.handlers({"seek": self._seek, "play": self.controls._resume}),
                                 on_connect=self._hello)  # fmt: skip
         self.quiet = quiet
         self.index = 0
@@ -254,20 +250,11 @@ class ReplayViewer:
         return self.server.url
 
     def _hello(self) -> list[dict[str, Any]]:
-        self._seek_to = self.index  # a new page gets the current frame at once
         return [self.scene, self._status()]
 
     def _status(self) -> dict[str, Any]:
         return {**self.controls.status(), "step": int(self.data.steps[self.index]), "episode": self.info.episode,
                 "index": self.index, "steps_per_s": self.controls.speed}  # fmt: skip
-
-    def _play(self, msg: dict[str, Any]) -> dict[str, Any]:
-        return self.controls.handlers()["resume"](msg)
-
-    def _select(self, msg: dict[str, Any]) -> None:
-        self.controls.handlers()["select"](msg)
-        self._seek_to = self.index
-        return None
 
     def _seek(self, msg: dict[str, Any]) -> dict[str, Any]:
         extra = sorted(set(msg) - {"cmd", "step"})
@@ -298,11 +285,8 @@ class ReplayViewer:
                 self._show(i)
                 last_shown = i
                 continue
-            if c.paused and not c._tokens:
-                time.sleep(0.02)
+            if not c.wait_turn(0.02):  # paused: look for seeks again shortly
                 continue
-            if c._tokens:
-                c.gate()  # takes the step token
             nxt = last_shown + 1
             if nxt >= len(self.data.steps):
                 c.paused = True  # the end: hold the last frame

@@ -19,8 +19,11 @@ from agentsim_env.sim.world import StepEvents, World
 
 MAGIC = b"ASF1"
 _DTYPES = {np.dtype("<f4"): "f4", np.dtype("<i4"): "i4", np.dtype("<i2"): "i2", np.dtype("u1"): "u1"}
-#: Page-side message kind codes (``msg_kind``): agent, group, environment, overlay.
+#: Page-side message kind codes (``msg_kind``) by bus kind: agent 0, group 1, environment 2, overlay 3.
 MSG_KIND = {AGENT: 0, GROUP: 1, ENV: 2, OVERLAY: 3}
+_PAGE_KIND = np.zeros(max(KIND_NAMES) + 1, np.uint8)  # any other kind (heartbeats) draws as an agent message
+for _k, _v in MSG_KIND.items():
+    _PAGE_KIND[_k] = _v
 LOG_KINDS = ("collision", "timeout", "group", "release", "landing", "terminated", "episode", "message")
 MAX_MESSAGE_LINES = 40  # message log lines per step (the rest are counted in one line)
 MAX_DRAWN_MESSAGES = 4000  # message segments per frame
@@ -144,6 +147,11 @@ def scene_message(world: World, scenario: Any, w: int = 0, *, title: str = "", m
     }
 
 
+def page_kinds(kinds: np.ndarray) -> np.ndarray:
+    """The page's ``msg_kind`` codes of bus kind codes (``comms.messages``)."""
+    return _PAGE_KIND[np.clip(np.asarray(kinds, dtype=np.int64), 0, len(_PAGE_KIND) - 1)]
+
+
 def _messages(events: StepEvents, lo: int, hi: int) -> tuple[np.ndarray, np.ndarray]:
     """This step's deliveries inside world slots ``[lo, hi)``: (M, 2) sender/receiver (world-local) and kinds."""
     c = events.comms
@@ -153,8 +161,7 @@ def _messages(events: StepEvents, lo: int, hi: int) -> tuple[np.ndarray, np.ndar
         keep = (d.receiver >= lo) & (d.receiver < hi)
         send = np.where(d.sender[keep] >= 0, d.sender[keep] - lo, -1)
         pairs.append(np.column_stack([send, d.receiver[keep] - lo]))
-        kinds.append(np.vectorize(lambda k: MSG_KIND.get(int(k), 0), otypes=[np.uint8])(d.kind[keep])
-                     if keep.any() else np.zeros(0, np.uint8))  # fmt: skip
+        kinds.append(page_kinds(d.kind[keep]))
     if c is not None and c.overlay is not None and len(c.overlay.receiver):
         o = c.overlay
         keep = (o.receiver >= lo) & (o.receiver < hi)
@@ -313,5 +320,5 @@ def agent_message(world: World, scenario: Any, w: int, slot: int) -> dict[str, A
             "inbox": inbox}  # fmt: skip
 
 
-__all__ = ["LOG_KINDS", "MAGIC", "agent_message", "density_curve", "log_lines", "pack_frame", "scene_message", "state_arrays",
+__all__ = ["LOG_KINDS", "MAGIC", "page_kinds", "agent_message", "density_curve", "log_lines", "pack_frame", "scene_message", "state_arrays",
            "unpack_frame"]  # fmt: skip

@@ -95,14 +95,23 @@ class Controls:
         """A ``status`` message with the controls' state (the driver adds step numbers)."""
         return {"type": "status", "paused": self.paused, "speed": self.speed}
 
+    def wait_turn(self, timeout: float) -> bool:
+        """Whether the driver may take a step now (running, or a step token, which this takes); while paused
+        it waits up to ``timeout`` seconds for one. False when closed."""
+        with self._cond:
+            if self.paused and not self._tokens and not self.closed:
+                self._cond.wait(timeout)
+            if self.closed:
+                return False
+            if self._tokens:
+                self._tokens -= 1
+                return True
+            return not self.paused
+
     def gate(self) -> None:
         """Wait while paused (a step token lets one step through); returns at once when closed."""
-        with self._cond:
-            while self.paused and not self.closed:
-                if self._tokens:
-                    self._tokens -= 1
-                    return
-                self._cond.wait(0.25)
+        while not self.closed and not self.wait_turn(0.25):
+            pass
 
     def pace(self) -> None:
         """Sleep so that steps follow at ``speed`` per second (no-op at speed 0 or when behind)."""
