@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
+import threading
 import webbrowser
 from typing import Any
 
@@ -35,16 +35,6 @@ def _check_network(args: argparse.Namespace) -> None:
         raise ValueError(f"--port must be an integer in 0..65535 (0: a free port), got {args.port}")
     if not args.host:
         raise ValueError("--host must be an address such as 127.0.0.1 (this machine only) or 0.0.0.0")
-
-
-def _wait(stop_after: float | None) -> None:
-    """Block until Ctrl-C (or ``stop_after`` seconds)."""
-    end = None if stop_after is None else time.monotonic() + stop_after
-    try:
-        while end is None or time.monotonic() < end:
-            time.sleep(0.2)
-    except KeyboardInterrupt:
-        pass
 
 
 def cmd_view(args: argparse.Namespace) -> int:
@@ -75,7 +65,9 @@ def _replay(args: argparse.Namespace) -> int:
     if args.open:
         webbrowser.open(url)
     try:
-        _wait(None)
+        threading.Event().wait()  # until Ctrl-C
+    except KeyboardInterrupt:
+        pass
     finally:
         viewer.close()
     return 0

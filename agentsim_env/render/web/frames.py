@@ -123,19 +123,19 @@ def scene_message(world: World, scenario: Any, w: int = 0, *, title: str = "", m
     mine = np.flatnonzero(sc.world == w)
     st = world.state
     slots = st.slots_of_world(w)
-    names = scenario.agent_names() if hasattr(scenario, "agent_names") else [str(i) for i in range(len(slots))]
+    names = scenario.agent_names()
     return {
         "type": "scene",
         "mode": mode,
-        "title": title or getattr(scenario, "name", "agentsim"),
-        "scenario": getattr(scenario, "name", ""),
+        "title": title or scenario.name,
+        "scenario": scenario.name,
         "dt": float(world.config.dt),
         "bounds": [float(b) for b in world.config.bounds],
         "z_range": [float(z) for z in world.config.z_range],
         "n_agents": int(len(slots)),
         "agent_names": list(names),
         "agent_radius": np.round(st.radius[slots].astype(float), 3).tolist(),
-        "n_groups": int(getattr(scenario, "n_groups", 1)),
+        "n_groups": int(scenario.n_groups),
         "objects": {
             "kind": sc.kind[mine].astype(int).tolist(),
             "centre": np.round(sc.centre[mine], 3).tolist(),
