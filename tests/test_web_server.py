@@ -155,6 +155,25 @@ def test_bad_messages_get_an_error_and_the_server_goes_on() -> None:
         srv.stop()
 
 
+def test_every_log_line_reaches_the_page_once_in_order() -> None:
+    srv = WebServer("viewer.html")
+    url = srv.start()
+    try:
+        lines: list[dict] = []
+        t = threading.Thread(target=lambda: lines.extend(_talk(url, [], seconds=1.0)[0]))
+        t.start()
+        while srv.n_pages == 0:
+            time.sleep(0.01)
+        for k in range(300):
+            srv.publish_log([{"step": k, "kind": "message", "text": f"line {k}.{j}", "slots": []} for j in range(3)])
+        t.join()
+    finally:
+        srv.stop()
+    texts = [ln["text"] for m in lines if m["type"] == "log" for ln in m["lines"]]
+    assert texts == [f"line {k}.{j}" for k in range(300) for j in range(3)]
+    assert all(m["dropped"] == 0 for m in lines if m["type"] == "log")
+
+
 def test_a_slow_page_gets_only_the_latest_frames_and_never_blocks_the_publisher() -> None:
     srv = WebServer("viewer.html", max_fps=0)
     url = srv.start()

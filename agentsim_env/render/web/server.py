@@ -26,6 +26,7 @@ import time
 from collections import deque
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
+from itertools import islice
 from pathlib import Path
 from typing import Any
 from urllib.parse import unquote, urlsplit
@@ -365,8 +366,10 @@ class WebServer:
             client.wake.clear()
             with self._lock:
                 behind = self._log_total - client.log_pos
-                lines = list(self._log)[-behind:] if 0 < behind <= len(self._log) else list(self._log)
-                dropped = max(0, behind - len(self._log))
+                kept = len(self._log)
+                # only the lines this page has not had (the buffer may hold thousands it has)
+                lines = list(islice(reversed(self._log), min(behind, kept)))[::-1]
+                dropped = max(0, behind - kept)
                 client.log_pos = self._log_total
             if behind > 0:
                 await self._safe_send(client, json.dumps({"type": "log", "lines": lines, "dropped": dropped},
