@@ -249,6 +249,7 @@ class RangeGraph:
         empty = np.zeros(0, dtype=np.int64)
         self._grid, self._pairs = grid, (empty, empty, np.zeros(0))
         self._pos, self._online, self._world = pos, online, world
+        self._links_ok = False  # links of earlier positions must not answer a later links() call
         self._scan(link_range, links)
 
     def _scan(self, link_range: np.ndarray, links: bool) -> None:

@@ -136,7 +136,7 @@ class AgentSimParallelEnv(ParallelEnv):
         """Start an episode; ``seed`` re-seeds the env's generator (otherwise it continues)."""
         if seed is not None:
             self._seeds.reset(seed)
-        reset_worlds(self.scenario, self.world, [0], [self._seeds.next()])
+        self._reset_core(self._seeds.next())
         self._steps = 0
         self._started = True
         self._set_agents(list(self.possible_agents))
@@ -166,7 +166,7 @@ class AgentSimParallelEnv(ParallelEnv):
         acting = np.zeros(world.state.n_slots, dtype=bool)
         acting[self._live_idx] = True
         # 1. decode; 2-8. the world pipeline; 9. the scenario scores
-        res, terminated = run_step(sc, world, parts, acting)
+        res, terminated = self._step_core(parts, acting)
         self._steps += 1
         truncated = acting & ~terminated & (self._steps >= sc.max_steps)
         obs_parts = sc.observation(world)
@@ -189,6 +189,14 @@ class AgentSimParallelEnv(ParallelEnv):
         if self.render_mode == "human":
             self.render()
         return obs, rewards, terms, truncs, infos
+
+    def _reset_core(self, seed: np.random.SeedSequence) -> None:
+        """Start the episode of ``seed`` in the world (the distributed env runs it over its shards)."""
+        reset_worlds(self.scenario, self.world, [0], [seed])
+
+    def _step_core(self, parts: dict[str, np.ndarray], acting: np.ndarray) -> tuple[Any, np.ndarray]:
+        """Stages 1-10 for validated action parts (the distributed env runs them over its shards)."""
+        return run_step(self.scenario, self.world, parts, acting)
 
     def _set_agents(self, agents: list[str]) -> None:
         """Set the live agents and the lookups derived from them (rebuilt only when the list changes)."""

@@ -110,6 +110,9 @@ class Scenario(ABC, Generic[ConfigT]):
     event_keys: ClassVar[tuple[str, ...]] = ("arrived", "collided")
     #: Info keys whose value at the end of an episode is an outcome (an evaluation reports the last one).
     final_keys: ClassVar[tuple[str, ...]] = ()
+    #: Whether the scenario runs over shards (``agentsim_env.distributed``): its stage 1 decodes motion from the
+    #: agent's own state only, and its spatial work is the proximity scan, collisions and the comms range graph.
+    shardable: ClassVar[bool] = False
 
     def __init__(self, config: ConfigT) -> None:
         self.config = config

@@ -204,6 +204,7 @@ class NavigationScenario(Scenario[NavigationConfig]):
     config_cls = NavigationConfig
     version = 0
     agent_prefix = "agent"
+    shardable = True
     test_configs = (
         {"n_agents": 4},
         {"n_agents": 5, "n_groups": 1, "action_mode": "primitive"},

@@ -79,6 +79,7 @@ class RelayScenario(Scenario[RelayConfig]):
     config_cls = RelayConfig
     version = 0
     agent_prefix = "agent"
+    shardable = True
     test_configs = (
         {"n_groups": 2, "group_size": 3},
         {"n_groups": 2, "group_size": 2, "max_steps": 120,

@@ -81,6 +81,7 @@ class StepEvents:
         payloads: Landings (stage 4), or None without payloads.
         readings: Every sensor's reading by sensor name (stage 8).
         scores: Stage 9's rewards, terminations and infos (``None`` when the world was stepped on its own).
+        lost: Slots taken offline because their shard stopped answering (distributed runs only).
     """
 
     collisions: CollisionEvents
@@ -91,6 +92,7 @@ class StepEvents:
     payloads: PayloadEvents | None = None
     readings: dict[str, Any] = field(default_factory=dict)
     scores: StepScores | None = None
+    lost: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
 
 
 class World:
@@ -230,7 +232,7 @@ class World:
             self.comms.update_graph(self.agent_grid, st.pos, st.online, st.world_id)
         if self.physics is not None:
             self.physics.sync(st, self.scene)  # a reset's new scene: rebuild now rather than inside a step
-        ctx = self._context()
+        ctx = self.context()
         ctx.fresh = None if worlds is None else np.asarray(worlds, dtype=np.int64)
         self._sense(ctx)
 
@@ -241,7 +243,8 @@ class World:
         self.comms.send_actions(self.tick, comm, acting, self.state.group)
 
     # ------------------------------------------------------------------ pipeline
-    def _context(self) -> StepContext:
+    def context(self) -> StepContext:
+        """A fresh step context over the current state, scene, grid and counters."""
         return StepContext(self.state, self.scene, self.agent_grid, self.object_grid(), self.config.dt,
                            self.tick, self.step_count)  # fmt: skip
 
@@ -250,56 +253,92 @@ class World:
         self.readings = {s.name: s.step(ctx) for s in self.sensors}
         return self.readings
 
-    def _regrid(self, ctx: StepContext) -> None:
+    def regrid(self, ctx: StepContext) -> None:
+        """Rebuild the step's agent grid over the online slots (into ``ctx.grid`` too)."""
         st = self.state
         self.agent_grid = ctx.grid = build_grid(self.grid_spec, st.pos, st.world_id, st.online)
 
     def step(self, *, hooks: bool = True) -> StepEvents:
         """Advance every world by one ``dt``: stages 2-8, then the step hooks (10).
 
+        The stages run through the phase methods below (``run_motion``, ``run_collisions``, ``run_groups``,
+        ``run_comms``, ``run_sensors``), which the distributed shards and coordinator call one by one.
+
         Args:
             hooks: Run the step hooks now; ``scenarios.base.run_step`` passes False and calls ``run_hooks``
                 after the scenario scored the step.
         """
+        ctx = self.context()
+        contacts, landed = self.run_motion(ctx)  # 2-4
+        events, went = self.run_collisions(ctx, contacts)  # 5
+        timed_out, group_events = self.run_groups(ctx)  # 6
+        if went.size or timed_out.size:
+            self.regrid(ctx)
+        comm_events = self.run_comms(ctx)  # 7
+        readings = self.run_sensors(ctx)  # 8
+        return self.end_step(StepEvents(events, went, timed_out, comm_events, group_events, landed, readings), hooks)
+
+    def run_motion(self, ctx: StepContext) -> tuple[CollisionEvents | None, PayloadEvents | None]:
+        """Stages 2-4: motion, physics (its contacts are returned), the map clip, payloads (their landings)."""
         cfg, st = self.config, self.state
-        ctx = self._context()
-        out = ctx.outputs
-        out["motion"] = self.motion_stage.step(ctx)  # 2. motion
+        ctx.outputs["motion"] = self.motion_stage.step(ctx)  # 2. motion
         contacts = self.physics.step(ctx) if self.physics is not None else None  # 3. physics
         xmin, xmax, ymin, ymax = cfg.bounds  # agents stay inside the map and the altitude band
         np.clip(st.pos[:, 0], xmin, xmax, out=st.pos[:, 0])
         np.clip(st.pos[:, 1], ymin, ymax, out=st.pos[:, 1])
         np.clip(st.pos[:, 2], cfg.z_range[0], cfg.z_range[1], out=st.pos[:, 2])
         landed = self.payloads.step(ctx) if self.payloads is not None else None  # 4. payloads
-        self._regrid(ctx)
+        return contacts, landed
+
+    def run_collisions(
+        self, ctx: StepContext, contacts: CollisionEvents | None = None
+    ) -> tuple[CollisionEvents, np.ndarray]:
+        """Stage 5 on a fresh grid: collision events (with ``contacts`` appended); the hit slots go offline.
+
+        Returns:
+            The events (also in ``ctx.collisions``) and the slots taken offline (sorted).
+        """
+        self.regrid(ctx)
         events = self.collide.step(ctx)  # 5. collisions
         if contacts is not None:
             events = events.concat(contacts)
         ctx.collisions = events
-        went = np.unique(events.agent) if cfg.collision_ends_agent and len(events) else _NONE
+        went = np.unique(events.agent) if self.config.collision_ends_agent and len(events) else _NONE
         if went.size:
             self.set_offline(went)
-        timed_out = _NONE
-        group_events = None
-        if self.groups is not None:  # 6. groups: heartbeat tick; timed-out slots go offline
-            g: GroupStepEvents = self.groups.step(ctx)
-            out["groups"], timed_out, group_events = g, g.timed_out, g.changes
-            if timed_out.size:
-                self.set_offline(timed_out)
-        if went.size or timed_out.size:
-            self._regrid(ctx)
-        comm_events = None
-        if self.comms is not None:  # 7. comms: the answers go back to the groups stage
-            comm_events = self.comms.step(ctx)
-            assert self.groups is not None
-            self.groups.receive_answers(comm_events.answers)
-        readings = self._sense(ctx)  # 8. sensors
+        return events, went
+
+    def run_groups(self, ctx: StepContext) -> tuple[np.ndarray, GroupEvents | None]:
+        """Stage 6 (with comms): the heartbeat tick; timed-out slots go offline (the caller regrids)."""
+        if self.groups is None:
+            return _NONE, None
+        g: GroupStepEvents = self.groups.step(ctx)
+        ctx.outputs["groups"] = g
+        if g.timed_out.size:
+            self.set_offline(g.timed_out)
+        return g.timed_out, g.changes
+
+    def run_comms(self, ctx: StepContext) -> CommsEvents | None:
+        """Stage 7 (with comms): collision messages, heartbeats, deliveries, one overlay hop; answers to stage 6."""
+        if self.comms is None:
+            return None
+        comm_events = self.comms.step(ctx)
+        assert self.groups is not None
+        self.groups.receive_answers(comm_events.answers)
+        return comm_events
+
+    def run_sensors(self, ctx: StepContext) -> dict[str, Any]:
+        """Stage 8: every sensor on the step's grid."""
+        return self._sense(ctx)
+
+    def end_step(self, events: StepEvents, hooks: bool = True) -> StepEvents:
+        """Count the step, keep its events and run the hooks (when ``hooks``)."""
         self.step_count += 1
         self.tick += 1
-        self.last_events = StepEvents(events, went, timed_out, comm_events, group_events, landed, readings)
+        self.last_events = events
         if hooks:
-            self.run_hooks(self.last_events)
-        return self.last_events
+            self.run_hooks(events)
+        return events
 
     def run_hooks(self, events: StepEvents) -> None:
         """Stage 10: every step hook, in the order they were added."""

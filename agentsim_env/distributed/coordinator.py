@@ -1,0 +1,337 @@
+"""The coordinator: steps the shards in lock step and runs the non-spatial stages over the gathered arrays.
+
+It holds a whole-map ``World`` of the scenario (the "mirror"): the kinematics the shards send back each step,
+the static scene, and everything that is not spatial: stage 1's comm part, the groups stage (heartbeats), the
+bus and the overlay (the bridged bus: one bus for every shard's agents), the non-spatial sensors, and stage 9
+(rewards, terminations, observations), all with the single-process code. So results do not depend on the split:
+the spatial stages are exact on a shard whose halo holds everything its agents interact with, and every random
+draw (placement, bus losses, sensor noise) is made once, here or identically everywhere, never per shard.
+
+One step (see ``distributed.shard`` for the shard's side):
+
+1. ``move`` on every shard; the kinematics go into the mirror; agents that crossed a strip edge are routed to
+   their new shard; each shard's ghosts are the agents of other shards within its halo (from the mirror).
+2. ``collide``: handed-over agents and ghosts in, collisions of own agents out (a contact across an edge is
+   found by both shards, each reporting its own agent: it is counted once per agent, as in one process). The
+   groups stage (heartbeat timeouts) runs here.
+3. ``sense`` with every slot that went offline; the nearest neighbours and frontier links come back for the
+   comms stage (which runs here), and the proximity rows for the observations.
+
+Faults: every reply carries a heartbeat (shard, address, step, compute time) kept in ``shards``; a shard that
+dies or misses the deadline is declared offline at once: its agents go offline (they report ``terminations``
+once), its strips pass to the nearest live shard, the rest goes on. ``reset`` restarts offline shards.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from agentsim_env.core.collisions import CollisionEvents
+from agentsim_env.distributed.backends import Backend, Failure
+from agentsim_env.distributed.graph import GatheredGraph
+from agentsim_env.distributed.partition import Strips
+from agentsim_env.distributed.shard import Packed
+from agentsim_env.scenarios.base import Scenario, StepResult, StepScores
+from agentsim_env.sensors.proximity import ProximitySensor, ScanResult
+from agentsim_env.sim import StepEvents, World
+
+log = logging.getLogger("agentsim_env.distributed")
+_NONE = np.zeros(0, dtype=np.int64)
+
+
+@dataclass(slots=True)
+class ShardInfo:
+    """What the coordinator knows of one shard (the integrator's map of machines).
+
+    Attributes:
+        index: Shard index k.
+        address: ``host:pid`` of its process (from its heartbeats).
+        alive: Whether it still answers.
+        last_answer: ``time.time()`` of its latest heartbeat.
+        last_step: The simulation tick of its latest heartbeat.
+        step_s: Compute seconds of its latest step (the three calls together).
+        reason: Why it went offline (empty while alive).
+        restarts: How many times it was started anew.
+    """
+
+    index: int
+    address: str = ""
+    alive: bool = True
+    last_answer: float = 0.0
+    last_step: int = -1
+    step_s: float = 0.0
+    reason: str = ""
+    restarts: int = 0
+
+
+@dataclass(slots=True)
+class Traffic:
+    """Bytes that crossed between coordinator and shards in the latest step, by kind."""
+
+    actions: int = 0
+    kinematics: int = 0
+    handover: int = 0
+    halo: int = 0
+    readings: int = 0
+    other: int = 0
+    per_shard: list[int] = field(default_factory=list)
+
+    @property
+    def total(self) -> int:
+        """Every byte of the step."""
+        return self.actions + self.kinematics + self.handover + self.halo + self.readings + self.other
+
+
+def nbytes(obj: Any) -> int:
+    """Bytes of the numpy arrays inside ``obj`` (dicts, lists, tuples; other values count 8)."""
+    if isinstance(obj, np.ndarray):
+        return int(obj.nbytes)
+    if isinstance(obj, dict):
+        return sum(nbytes(v) for v in obj.values())
+    if isinstance(obj, (list, tuple)):
+        return sum(nbytes(v) for v in obj)
+    return 8
+
+
+class Coordinator:
+    """Steps K shards in lock step over one world (see the module docstring).
+
+    Args:
+        scenario: The scenario (its config validated, its shardability checked by the caller).
+        world: The coordinator's mirror world (``scenario.build(1)``).
+        strips: The partition.
+        backend: The shards.
+        timeout_s: Deadline of every call, in seconds.
+    """
+
+    def __init__(self, scenario: Scenario, world: World, strips: Strips, backend: Backend, timeout_s: float) -> None:
+        self.scenario = scenario
+        self.world = world
+        self.strips = strips
+        self.backend = backend
+        self.timeout_s = float(timeout_s)
+        self.shards = [ShardInfo(k) for k in range(backend.n_shards)]
+        s = world.state.n_slots
+        self.owner = np.full(s, -1, dtype=np.int64)
+        self.graph: GatheredGraph | None = None
+        if world.comms is not None:
+            self.graph = GatheredGraph(s, world.comms.cfg.nearest_range)
+            world.comms.graph = self.graph  # type: ignore[assignment]
+            self._range0 = world.comms.overlay.link_range.copy()
+        self._spatial = [x for x in world.sensors if isinstance(x, ProximitySensor)]
+        self._others = [x for x in world.sensors if not isinstance(x, ProximitySensor)]
+        n_rays = {x.name: x.n_rays for x in self._spatial}
+        world.readings.update({name: ScanResult.empty(s, k) for name, k in n_rays.items()})
+        self._ended = _NONE
+        self._objects: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+        self.lost = _NONE
+        self.traffic = Traffic()
+        self.events_log: list[dict[str, Any]] = []
+
+    # ------------------------------------------------------------------ faults
+    @property
+    def alive(self) -> np.ndarray:
+        """``(K,)`` bool: the shards still answering."""
+        return np.array([i.alive for i in self.shards], dtype=bool)
+
+    def _declare_offline(self, k: int, reason: str) -> None:
+        info = self.shards[k]
+        if not info.alive:
+            return
+        info.alive, info.reason = False, reason
+        slots = np.flatnonzero(self.owner == k)
+        self.owner[slots] = -1
+        self.world.set_offline(slots)
+        self.lost = np.union1d(self.lost, slots)
+        self.strips.reassign(k, self.alive)
+        self.events_log.append({"event": "shard_offline", "shard": k, "address": info.address,
+                                "tick": int(self.world.tick), "agents": int(slots.size), "reason": reason})  # fmt: skip
+        log.warning("shard %d (%s) is offline: %s; its %d agents terminate, the simulation goes on",
+                    k, info.address, reason, slots.size)  # fmt: skip
+
+    def _call(self, method: str, calls: dict[int, tuple[Any, ...]]) -> dict[int, Packed]:
+        """Run ``method`` on the live shards; declare the ones that fail offline; the answers of the others."""
+        calls = {k: a for k, a in calls.items() if self.shards[k].alive}
+        replies = self.backend.call(method, calls, self.timeout_s)
+        out: dict[int, Packed] = {}
+        now = time.time()
+        for k, r in replies.items():
+            if isinstance(r, Failure):
+                self._declare_offline(k, r.reason)
+                continue
+            beat, info = r["beat"], self.shards[k]
+            info.address, info.last_answer, info.last_step = beat["address"], now, beat["step"]
+            info.step_s = beat["compute_s"] if method in ("move", "reset") else info.step_s + beat["compute_s"]
+            out[k] = r
+        return out
+
+    def restart_offline(self) -> None:
+        """Start every offline shard anew and give each its strips back (before an episode)."""
+        for info in self.shards:
+            if not info.alive:
+                self.backend.restart(info.index)
+                info.alive, info.reason = True, ""
+                info.restarts += 1
+                log.info("shard %d restarted", info.index)
+        self.strips.owner = np.arange(self.strips.n_strips, dtype=np.int64)
+
+    # ------------------------------------------------------------------ scene
+    def add_objects(self, kind: np.ndarray, centre: np.ndarray, half: np.ndarray) -> None:
+        """Add static objects to the world now; every shard gets them before the next step's motion."""
+        self.world.scene.add(kind, centre, half, 0)
+        sc = self.world.scene
+        k = np.asarray(kind).reshape(-1).shape[0]
+        self._objects.append((sc.kind[-k:].copy(), sc.centre[-k:].copy(), sc.half[-k:].copy()))
+
+    # ------------------------------------------------------------------ gathering
+    def _take_rows(self, replies: dict[int, Packed]) -> None:
+        """The proximity rows and the range-graph rows of every reply into the mirror."""
+        world = self.world
+        if self.graph is not None:
+            self.graph.clear()
+        for r in replies.values():
+            slots = r["slots"]
+            for sensor in self._spatial:
+                scan = world.readings[sensor.name]
+                scan.distance[slots] = r[f"{sensor.name}.distance"]
+                scan.hit_kind[slots] = r[f"{sensor.name}.hit_kind"]
+                scan.hit_id[slots] = r[f"{sensor.name}.hit_id"]
+            if self.graph is not None:
+                self.graph.put(slots, r.get("nearest"), r.get("front"), r.get("count"), r.get("links"))
+
+    def _sense_others(self, fresh: bool) -> None:
+        ctx = self.world.context()
+        if fresh:
+            ctx.fresh = np.zeros(1, dtype=np.int64)
+        for sensor in self._others:
+            self.world.readings[sensor.name] = sensor.step(ctx)
+
+    def _link_range(self) -> np.ndarray | None:
+        comms = self.world.comms
+        if comms is None:
+            return None
+        rng = comms.overlay.link_range
+        if rng.max(initial=0.0) > self.strips.halo:
+            raise ValueError(f"the overlay range {rng.max():g} m is wider than the shards' halo of "
+                             f"{self.strips.halo:g} m: set the range before make(), or use one shard")  # fmt: skip
+        return None if np.array_equal(rng, self._range0) else rng.copy()
+
+    # ------------------------------------------------------------------ episode
+    def reset(self, seed: np.random.SeedSequence) -> None:
+        """Start the episode of ``seed`` on the mirror and on every shard (offline shards are restarted first)."""
+        self.restart_offline()
+        world, sc = self.world, self.scenario
+        placement = world.reset_world(0, seed)
+        sc.reset_world(world, 0, placement)
+        self._ended, self._objects, self.lost = _NONE, [], _NONE
+        self.owner[:] = -1
+        replies = self._call("reset", {k: (seed, self.strips.owner) for k in range(len(self.shards))})
+        for k, r in replies.items():
+            self.owner[r["slots"]] = k
+        for info in self.shards:  # a shard that failed its reset loses its agents at once
+            if not info.alive:
+                lost = np.flatnonzero(world.state.online & (self.owner < 0))
+                world.set_offline(lost)
+                self.lost = np.union1d(self.lost, lost)
+        self._take_rows(replies)
+        self._sense_others(fresh=True)
+
+    # ------------------------------------------------------------------ step
+    def step(self, parts: dict[str, np.ndarray], acting: np.ndarray) -> tuple[StepResult, np.ndarray]:
+        """Stages 1-10 of one step over the shards (the distributed ``run_step``).
+
+        Args:
+            parts: Validated action parts ``(S, size)`` of every slot.
+            acting: ``(S,)`` the live slots.
+
+        Returns:
+            The scenario's result and the slots that terminated (those of an offline shard included).
+        """
+        world, sc, st = self.world, self.scenario, self.world.state
+        self.lost = _NONE
+        tr = self.traffic = Traffic(per_shard=[0] * len(self.shards))
+        link_range = self._link_range()
+        if "comm" in parts:  # 1. the comm part: one bus for every shard (nearest from the shards' graphs)
+            world.apply_comm(parts["comm"], acting)
+        motion = {k: v for k, v in parts.items() if k != "comm"}
+        calls = {}
+        for k in range(len(self.shards)):
+            slots = np.flatnonzero(acting & (self.owner == k))
+            calls[k] = (slots, {p: v[slots] for p, v in motion.items()}, self._ended, self._objects,
+                        self.strips.owner)  # fmt: skip
+            tr.actions += nbytes(calls[k][:2])
+            tr.other += nbytes(calls[k][2:])
+        self._objects = []
+        moved = self._call("move", calls)  # 2-4 on the shards
+        for r in moved.values():
+            sl = r["slots"]
+            st.pos[sl], st.vel[sl], st.heading[sl] = r["pos"], r["vel"], r["heading"]
+            tr.kinematics += nbytes([sl, r["pos"], r["vel"], r["heading"]])
+        live = np.flatnonzero(self.owner >= 0)
+        x = st.pos[live, 0]
+        self.owner[live] = self.strips.owner_of(x)
+        arrivals: dict[int, list[Packed]] = {}
+        for r in moved.values():  # hand-overs, routed by the new owner of each agent
+            out = r["out"]
+            if out.size:
+                dest = self.owner[out]
+                for d in np.unique(dest).tolist():
+                    sel = dest == d
+                    arrivals.setdefault(int(d), []).append({k: v[sel] for k, v in r.items() if k[:2] in ("a.", "m.")}
+                                                           | {"out": out[sel]})  # fmt: skip
+        calls = {}
+        for k in range(len(self.shards)):
+            got = arrivals.get(k)
+            merged = None if not got else {key: np.concatenate([g[key] for g in got]) for key in got[0]}
+            g = self.strips.ghosts(x, live, k)
+            calls[k] = (merged, g, st.pos[g])
+            tr.handover += nbytes(merged) if merged is not None else 0
+            tr.halo += nbytes(calls[k][1:])
+        hit = self._call("collide", calls)  # 5 on the shards
+        events = _merge_collisions(list(hit.values()))
+        ctx = world.context()
+        ctx.collisions = events
+        went = np.unique(events.agent) if world.config.collision_ends_agent and len(events) else _NONE
+        if went.size:
+            world.set_offline(went)
+        timed_out, group_events = world.run_groups(ctx)  # 6 here
+        offline = np.union1d(np.union1d(went, timed_out), self.lost)
+        frontier = _NONE
+        if world.comms is not None and world.comms.overlay.frontier_size:
+            frontier = np.unique(world.comms.overlay._front_n)
+        calls = {k: (offline, frontier, link_range) for k in range(len(self.shards))}
+        tr.other += sum(nbytes(c) for c in calls.values())
+        sensed = self._call("sense", calls)  # 8 (and the range graph) on the shards
+        tr.readings += sum(nbytes(r) for r in sensed.values())
+        self._take_rows(sensed)
+        comm_events = world.run_comms(ctx)  # 7 here
+        self._sense_others(fresh=False)
+        ev = StepEvents(events, went, timed_out, comm_events, group_events, None, world.readings)
+        ev.lost = self.lost
+        world.end_step(ev, hooks=False)
+        res = sc.score(world, ev, acting)  # 9
+        terminated = acting & (res.terminated | ~st.online)
+        ended = np.flatnonzero(terminated)
+        world.set_offline(ended)
+        self.owner[ended] = -1
+        self._ended = ended
+        if world.hooks:  # 10
+            ev.scores = StepScores(acting, res.rewards, terminated, res.info)
+            world.run_hooks(ev)
+        return res, terminated
+
+
+def _merge_collisions(replies: list[Packed]) -> CollisionEvents:
+    """Every shard's collisions of its own agents, in slot order of the hit agent (the single-process order)."""
+    if not replies:
+        return CollisionEvents.empty()
+    agent = np.concatenate([r["agent"] for r in replies])
+    other = np.concatenate([r["other_agent"] for r in replies])
+    obj = np.concatenate([r["obj"] for r in replies])
+    order = np.argsort(agent, kind="stable")
+    return CollisionEvents(agent[order], other[order], obj[order])

@@ -1,0 +1,149 @@
+"""The distributed env: the same PettingZoo ``ParallelEnv`` (and array front end) over K shards.
+
+``make(name, shards=K, ray_address=None, **config)`` builds the scenario's env whose steps run over K shard
+processes (Ray actors; ``backend="local"`` keeps them in this process): the API, spaces, agent ids, infos and
+results are those of ``agentsim_env.make``, so training code does not change. ``env.world`` is the
+coordinator's mirror (positions, scene, inboxes, groups), so ``render``, ``state()``, ``send_message``, the
+recorder and the web viewer work as on one process. ``env.shards`` lists each shard's address, last answer and
+step time; ``env.add_objects`` adds static objects at run time (every shard has them before the next step).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from agentsim_env.core.validation import check_choice, check_float, check_int
+from agentsim_env.distributed.backends import Backend, LocalShards
+from agentsim_env.distributed.coordinator import Coordinator, ShardInfo
+from agentsim_env.distributed.partition import Strips, halo_width
+from agentsim_env.distributed.shard import Shard
+from agentsim_env.env.parallel_env import ENV_KEYS, AgentSimParallelEnv
+from agentsim_env.scenarios.base import Scenario
+from agentsim_env.scenarios.registry import list_scenarios, make_scenario, scenario_class
+
+BACKENDS = ("ray", "local")
+DEFAULT_TIMEOUT_S = 5.0
+"""Seconds a shard may take to answer one call before it is declared offline."""
+
+
+def check_shardable(scenario: Scenario, shards: int) -> None:
+    """Refuse, with the option to change, a scenario or config that cannot run over shards.
+
+    Raises:
+        ValueError: Naming the scenario (and the shardable ones), ``physics`` or ``comms.overlay_full``.
+    """
+    c = scenario.config
+    if not scenario.shardable:
+        ok = [n for n in list_scenarios() if scenario_class(n).shardable]
+        raise ValueError(f"scenario {scenario.name!r} cannot run over shards (shards={shards}); the scenarios that "
+                         f"can are {ok}; use shards=None for one process")  # fmt: skip
+    if getattr(c, "physics", "kinematic") == "pymunk":
+        raise ValueError(f"physics='pymunk' cannot run over shards (shards={shards}): its contact solver needs every "
+                         f"body in one space; use physics='kinematic', or shards=None")  # fmt: skip
+    comms = getattr(c, "comms", None)
+    if comms is not None and comms.overlay_full:
+        raise ValueError(f"comms.overlay_full=True cannot run over shards (shards={shards}): a flood would cross "
+                         f"every shard within one step; use overlay_full=False, or shards=None")  # fmt: skip
+
+
+class DistributedParallelEnv(AgentSimParallelEnv):
+    """``AgentSimParallelEnv`` whose steps run over shards (see the module docstring).
+
+    Args:
+        scenario: The scenario (validated config).
+        shards: Number of shards K (>= 1).
+        backend: ``"ray"`` (shard actors on a Ray cluster) or ``"local"`` (shards in this process).
+        ray_address: A Ray cluster's address (``"host:port"``, ``"ray://host:port"`` or ``"auto"``); ``None``
+            starts a local cluster on 127.0.0.1.
+        timeout_s: Deadline of every call to a shard; a shard that misses it is declared offline.
+        **env_kw: ``render_mode``, ``obs_format``, ``action_format``, ``check_finite``.
+    """
+
+    def __init__(
+        self,
+        scenario: Scenario,
+        *,
+        shards: int,
+        backend: str = "ray",
+        ray_address: str | None = None,
+        timeout_s: float = DEFAULT_TIMEOUT_S,
+        **env_kw: Any,
+    ) -> None:
+        check_int("shards", shards, 1, 1024)
+        check_choice("backend", backend, BACKENDS)
+        check_float("timeout_s", timeout_s, 0.0, 3600.0, lo_open=True)
+        if ray_address is not None and backend != "ray":
+            raise ValueError(f"ray_address is for backend='ray', got backend={backend!r}")
+        check_shardable(scenario, shards)
+        super().__init__(scenario, **env_kw)
+        world = self.world
+        strips = Strips.build(world.config.bounds, int(shards), halo_width(world))
+        name, config = scenario.name, _config_fields(scenario)
+        if backend == "local":
+            be: Backend = LocalShards(lambda k: Shard(k, name, config, strips), int(shards))
+        else:
+            from agentsim_env.distributed.ray_backend import RayShards
+
+            be = RayShards(name, config, strips, int(shards), ray_address)
+        self.coordinator = Coordinator(scenario, world, strips, be, timeout_s)
+        self.metadata["shards"] = int(shards)
+
+    @property
+    def shards(self) -> list[ShardInfo]:
+        """Each shard's index, address, liveness, last answer, last step and step time."""
+        return self.coordinator.shards
+
+    def add_objects(self, kind: Any, centre: Any, half: Any) -> None:
+        """Add static objects (``core.scene`` kinds, centres ``(n, 3)``, half-extents ``(n, 3)``) at run time."""
+        self.coordinator.add_objects(np.atleast_1d(kind), np.atleast_2d(centre), np.atleast_2d(half))
+
+    def _reset_core(self, seed: np.random.SeedSequence) -> None:
+        self.coordinator.reset(seed)
+
+    def _step_core(self, parts: dict[str, np.ndarray], acting: np.ndarray) -> tuple[Any, np.ndarray]:
+        return self.coordinator.step(parts, acting)
+
+    def close(self) -> None:
+        """Stop the shards (and the viewer or window, if any)."""
+        self.coordinator.backend.close()
+        super().close()
+
+
+def _config_fields(scenario: Scenario) -> dict[str, Any]:
+    """The scenario's config as keyword arguments that rebuild it (nested configs as dicts)."""
+    import dataclasses
+
+    c = scenario.config
+    return {f.name: getattr(c, f.name) for f in dataclasses.fields(c)}
+
+
+def make(
+    name: str,
+    shards: int = 2,
+    ray_address: str | None = None,
+    *,
+    backend: str = "ray",
+    timeout_s: float = DEFAULT_TIMEOUT_S,
+    **config: Any,
+) -> DistributedParallelEnv:
+    """The ParallelEnv of scenario ``name`` over ``shards`` shard processes.
+
+    Args:
+        name: A registered scenario that can run over shards (``navigation``, ``relay``).
+        shards: Number of shards (strips of the map), >= 1.
+        ray_address: A Ray cluster to join; ``None`` starts a local one bound to 127.0.0.1.
+        backend: ``"ray"`` or ``"local"`` (every shard in this process: for debugging; no speed-up).
+        timeout_s: Deadline of every call to a shard, in seconds.
+        **config: Env keys (``render_mode``, ``obs_format``, ``action_format``, ``check_finite``) and the
+            scenario's config fields, as for ``agentsim_env.make``.
+
+    Raises:
+        ValueError: For a bad option (named), a scenario or config that cannot run over shards, or strips
+            narrower than the halo.
+        ImportError: With the install hint, when ``backend="ray"`` and Ray is not installed.
+    """
+    env_kw = {k: config.pop(k) for k in ENV_KEYS if k in config}
+    return DistributedParallelEnv(make_scenario(name, **config), shards=shards, backend=backend,
+                                  ray_address=ray_address, timeout_s=timeout_s, **env_kw)  # fmt: skip
