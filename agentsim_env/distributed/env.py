@@ -20,6 +20,7 @@ from agentsim_env.distributed.coordinator import Coordinator, ShardInfo
 from agentsim_env.distributed.partition import Strips, halo_width
 from agentsim_env.distributed.shard import Shard
 from agentsim_env.env.parallel_env import ENV_KEYS, AgentSimParallelEnv
+from agentsim_env.env.vector import BatchedEnv
 from agentsim_env.scenarios.base import Scenario
 from agentsim_env.scenarios.registry import list_scenarios, make_scenario, scenario_class
 
@@ -48,6 +49,38 @@ def check_shardable(scenario: Scenario, shards: int) -> None:
                          f"every shard within one step; use overlay_full=False, or shards=None")  # fmt: skip
 
 
+def check_options(shards: Any, backend: Any, ray_address: Any, timeout_s: Any) -> None:
+    """Validate the distribution options before anything is built.
+
+    Raises:
+        ValueError: Naming ``shards``, ``backend``, ``timeout_s`` or ``ray_address`` and what is allowed.
+    """
+    check_int("shards", shards, 1, 1024)
+    check_choice("backend", backend, BACKENDS)
+    check_float("timeout_s", timeout_s, 0.0, 3600.0, lo_open=True)
+    if ray_address is not None:
+        if backend != "ray":
+            raise ValueError(f"ray_address is for backend='ray', got backend={backend!r}")
+        from agentsim_env.distributed.ray_backend import check_address
+
+        check_address(ray_address)
+
+
+def build_coordinator(
+    scenario: Scenario, world: Any, shards: int, backend: str, ray_address: str | None, timeout_s: float
+) -> Coordinator:
+    """Start the shards of ``world`` (the mirror of a front end); the options were checked (``check_options``)."""
+    strips = Strips.build(world.config.bounds, int(shards), halo_width(world))
+    name, config = scenario.name, _config_fields(scenario)
+    if backend == "local":
+        be: Backend = LocalShards(lambda k: Shard(k, name, config, strips), int(shards))
+    else:
+        from agentsim_env.distributed.ray_backend import RayShards
+
+        be = RayShards(name, config, strips, int(shards), ray_address)
+    return Coordinator(scenario, world, strips, be, timeout_s)
+
+
 class DistributedParallelEnv(AgentSimParallelEnv):
     """``AgentSimParallelEnv`` whose steps run over shards (see the module docstring).
 
@@ -71,23 +104,10 @@ class DistributedParallelEnv(AgentSimParallelEnv):
         timeout_s: float = DEFAULT_TIMEOUT_S,
         **env_kw: Any,
     ) -> None:
-        check_int("shards", shards, 1, 1024)
-        check_choice("backend", backend, BACKENDS)
-        check_float("timeout_s", timeout_s, 0.0, 3600.0, lo_open=True)
-        if ray_address is not None and backend != "ray":
-            raise ValueError(f"ray_address is for backend='ray', got backend={backend!r}")
+        check_options(shards, backend, ray_address, timeout_s)
         check_shardable(scenario, shards)
         super().__init__(scenario, **env_kw)
-        world = self.world
-        strips = Strips.build(world.config.bounds, int(shards), halo_width(world))
-        name, config = scenario.name, _config_fields(scenario)
-        if backend == "local":
-            be: Backend = LocalShards(lambda k: Shard(k, name, config, strips), int(shards))
-        else:
-            from agentsim_env.distributed.ray_backend import RayShards
-
-            be = RayShards(name, config, strips, int(shards), ray_address)
-        self.coordinator = Coordinator(scenario, world, strips, be, timeout_s)
+        self.coordinator = build_coordinator(scenario, self.world, shards, backend, ray_address, timeout_s)
         self.metadata["shards"] = int(shards)
 
     @property
@@ -109,6 +129,51 @@ class DistributedParallelEnv(AgentSimParallelEnv):
         """Stop the shards (and the viewer or window, if any)."""
         self.coordinator.backend.close()
         super().close()
+
+
+class DistributedBatchedEnv(BatchedEnv):
+    """The array front end (``BatchedEnv`` of one world) over shards: ``(1, N, ...)`` arrays in and out.
+
+    Args:
+        name: A scenario that can run over shards.
+        shards: Number of shards.
+        backend: ``"ray"`` or ``"local"``.
+        ray_address: A Ray cluster's address, or ``None`` for a local one.
+        timeout_s: Deadline of every call to a shard.
+        check_finite: As for ``BatchedEnv``.
+        **config: Scenario config keys.
+    """
+
+    def __init__(
+        self,
+        name: str,
+        shards: int = 2,
+        *,
+        backend: str = "ray",
+        ray_address: str | None = None,
+        timeout_s: float = DEFAULT_TIMEOUT_S,
+        check_finite: bool | None = None,
+        **config: Any,
+    ) -> None:
+        check_options(shards, backend, ray_address, timeout_s)
+        check_shardable(make_scenario(name, **config), shards)
+        super().__init__(name, 1, check_finite=check_finite, **config)
+        self.coordinator = build_coordinator(self.scenario, self.world, shards, backend, ray_address, timeout_s)
+
+    @property
+    def shards(self) -> list[ShardInfo]:
+        """Each shard's index, address, liveness, last answer, last step and step time."""
+        return self.coordinator.shards
+
+    def _reset_core(self, worlds: list[int], seeds: list[np.random.SeedSequence]) -> None:
+        self.coordinator.reset(seeds[0])
+
+    def _step_core(self, parts: dict[str, np.ndarray], acting: np.ndarray) -> tuple[Any, np.ndarray]:
+        return self.coordinator.step(parts, acting)
+
+    def close(self) -> None:
+        """Stop the shards."""
+        self.coordinator.backend.close()
 
 
 def _config_fields(scenario: Scenario) -> dict[str, Any]:

@@ -91,9 +91,17 @@ class BatchedEnv:
         return flat.reshape(self.n_worlds, self.n_agents, self.obs_dim)
 
     def _reset_worlds(self, worlds: np.ndarray) -> None:
-        reset_worlds(self.scenario, self.world, worlds.tolist(), [self._seeds[w].next() for w in worlds])
+        self._reset_core(worlds.tolist(), [self._seeds[w].next() for w in worlds])
         self.steps[worlds] = 0
         self.alive[worlds] = True
+
+    def _reset_core(self, worlds: list[int], seeds: list[np.random.SeedSequence]) -> None:
+        """Start the episodes of ``worlds`` (the distributed front end runs them over its shards)."""
+        reset_worlds(self.scenario, self.world, worlds, seeds)
+
+    def _step_core(self, parts: dict[str, np.ndarray], acting: np.ndarray) -> tuple[Any, np.ndarray]:
+        """Stages 1-10 for clipped action parts (the distributed front end runs them over its shards)."""
+        return run_step(self.scenario, self.world, parts, acting)
 
     def reset(self, seed: int | Sequence[int] | None = None) -> np.ndarray:
         """Reset every world; world ``w`` then behaves exactly like a ``ParallelEnv`` reset with its seed.
@@ -154,8 +162,8 @@ class BatchedEnv:
         a = np.clip(np.where(self.alive[:, :, None], a, 0.0), -1.0, 1.0).reshape(-1, self.act_dim)
         acting = self.alive.reshape(-1).copy()
         parts = {k: a[:, sl] for k, sl in self._act_layout.items()}
-        sc, world = self.scenario, self.world
-        res, term = run_step(sc, world, parts, acting)
+        sc = self.scenario
+        res, term = self._step_core(parts, acting)
         self.steps += 1
         trunc = acting & ~term & np.repeat(self.steps >= sc.max_steps, self.n_agents)
         shape = (self.n_worlds, self.n_agents)

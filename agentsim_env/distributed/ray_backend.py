@@ -1,0 +1,140 @@
+"""Shards as Ray actors: the only module of the project that imports Ray (the ``ray`` extra).
+
+``RayShards`` starts one actor per shard on a Ray cluster: a local one bound to 127.0.0.1 when no address is
+given (started here, stopped when the last env using it closes), or the cluster at ``ray_address``. A call
+runs on every shard at once; ``ray.wait`` bounds it by the deadline, so a step never hangs on a dead or slow
+machine: a shard that misses it is killed and reported as a :class:`~agentsim_env.distributed.backends.Failure`,
+as is one whose process died. An exception raised by the shard's own code propagates as itself.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from typing import Any
+
+from agentsim_env.distributed.backends import Failure
+from agentsim_env.distributed.partition import Strips
+from agentsim_env.distributed.shard import Packed, Shard
+
+INSTALL_HINT = "shards need Ray: pip install 'agentsim-env[ray]' (or pip install 'ray>=2.40')"
+STARTUP_TIMEOUT_S = 300.0
+"""Seconds a shard may take to start (import, kernels) and answer its first reset."""
+_ADDRESS = re.compile(r"^(auto|local|(ray://)?[A-Za-z0-9_.\-]+:\d{1,5})$")
+_users = 0  # envs using the local cluster this process started
+
+
+def import_ray() -> Any:
+    """The ``ray`` module, or an ImportError with the install hint."""
+    try:
+        import ray
+    except ImportError as e:  # pragma: no cover - depends on the environment
+        raise ImportError(INSTALL_HINT) from e
+    return ray
+
+
+def check_address(address: str) -> str:
+    """``address`` when it is ``auto``, ``local``, ``host:port`` or ``ray://host:port``.
+
+    Raises:
+        ValueError: Naming ``ray_address`` and the allowed forms.
+    """
+    if not isinstance(address, str) or not _ADDRESS.match(address.strip()):
+        raise ValueError(f"ray_address must be 'auto', 'host:port' or 'ray://host:port' (or None for a local "
+                         f"cluster on 127.0.0.1), got {address!r}")  # fmt: skip
+    return address.strip()
+
+
+class RayShards:
+    """K shard actors on a Ray cluster (see the module docstring).
+
+    Args:
+        name: Scenario name.
+        config: The scenario's config fields.
+        strips: The partition.
+        n_shards: Number of shards K.
+        address: Cluster address, or ``None`` for a local cluster on 127.0.0.1.
+    """
+
+    def __init__(self, name: str, config: dict[str, Any], strips: Strips, n_shards: int, address: str | None) -> None:
+        global _users
+        ray = import_ray()
+        self.n_shards = int(n_shards)
+        self._ray = ray
+        self._own = False
+        if address is not None:
+            address = check_address(address)
+        if not ray.is_initialized():
+            if address is None:
+                ray.init(num_cpus=max(os.cpu_count() or 1, self.n_shards), include_dashboard=False,
+                         _node_ip_address="127.0.0.1", logging_level="ERROR", log_to_driver=False)  # fmt: skip
+                self._own = True
+                _users += 1
+            else:
+                try:
+                    ray.init(address=address, logging_level="ERROR", log_to_driver=False)
+                except Exception as e:  # ray raises ConnectionError, RuntimeError or its own kinds here
+                    raise ConnectionError(f"cannot reach the Ray cluster at ray_address={address!r}: "
+                                          f"{type(e).__name__}: {e}") from e  # fmt: skip
+        elif _users:
+            self._own = True
+            _users += 1
+        # a shard is one process running single-threaded kernels: one CPU of the cluster each
+        self._cls = ray.remote(num_cpus=1 if address is not None else 0, max_restarts=0)(Shard)
+        self._args = (name, config, strips)
+        self.actors: dict[int, Any] = {k: self._start(k) for k in range(self.n_shards)}
+        self.address = address or "local cluster on 127.0.0.1"
+
+    def _start(self, k: int) -> Any:
+        name, config, strips = self._args
+        return self._cls.remote(k, name, config, strips)
+
+    def call(self, method: str, calls: dict[int, tuple[Any, ...]], timeout_s: float) -> dict[int, Packed | Failure]:
+        """Run ``method`` on every named shard at once; ``Failure`` for the dead and the late."""
+        ray = self._ray
+        if method == "reset":
+            timeout_s = max(timeout_s, STARTUP_TIMEOUT_S)
+        refs = {k: getattr(self.actors[k], method).remote(*args) for k, args in calls.items()}
+        _, late = ray.wait(list(refs.values()), num_returns=len(refs), timeout=timeout_s)
+        late_set = set(late)
+        out: dict[int, Packed | Failure] = {}
+        for k, ref in refs.items():
+            if ref in late_set:
+                ray.kill(self.actors[k], no_restart=True)
+                out[k] = Failure(f"missed the {timeout_s:g} s deadline of {method}")
+                continue
+            try:
+                out[k] = ray.get(ref)
+            except ray.exceptions.RayActorError as e:
+                out[k] = Failure(f"died: {type(e).__name__}")
+            except ray.exceptions.RayTaskError as e:
+                raise e.as_instanceof_cause() from None
+        return out
+
+    def restart(self, index: int) -> None:
+        """A new actor for shard ``index`` (the old one is killed if it still runs)."""
+        self.kill(index)
+        self.actors[index] = self._start(index)
+
+    def kill(self, index: int) -> None:
+        """Kill shard ``index``'s actor at once (its process stops)."""
+        try:
+            self._ray.kill(self.actors[index], no_restart=True)
+        except Exception:  # already gone
+            pass
+
+    def set_delay(self, index: int, delay_s: float) -> None:
+        """Test hook: shard ``index`` sleeps ``delay_s`` in every call."""
+        self._ray.get(self.actors[index].set_delay.remote(delay_s))
+
+    def close(self) -> None:
+        """Kill every actor; stop the local cluster when no other env uses it."""
+        global _users
+        for k in list(self.actors):
+            self.kill(k)
+        self.actors = {}
+        if self._own:
+            self._own = False
+            _users -= 1
+            if _users == 0 and self._ray.is_initialized():
+                self._ray.shutdown()
