@@ -33,6 +33,7 @@ import numpy as np
 
 from agentsim_env.core.collisions import CollisionEvents
 from agentsim_env.distributed.backends import Backend, Failure
+from agentsim_env.distributed.flooding import ShardedOverlay
 from agentsim_env.distributed.graph import GatheredGraph
 from agentsim_env.distributed.partition import Strips
 from agentsim_env.distributed.shard import Packed
@@ -122,6 +123,7 @@ class Coordinator:
         if world.comms is not None:
             self.graph = GatheredGraph(s, world.comms.cfg.nearest_range)
             world.comms.graph = self.graph  # type: ignore[assignment]
+            world.comms.overlay = ShardedOverlay.like(world.comms.overlay)
             self._range0 = world.comms.overlay.link_range.copy()
         self._spatial = [x for x in world.sensors if isinstance(x, ProximitySensor)]
         self._others = [x for x in world.sensors if not isinstance(x, ProximitySensor)]
@@ -202,7 +204,12 @@ class Coordinator:
                 scan.hit_kind[slots] = r[f"{sensor.name}.hit_kind"]
                 scan.hit_id[slots] = r[f"{sensor.name}.hit_id"]
             if self.graph is not None:
-                self.graph.put(slots, r.get("nearest"), r.get("front"), r.get("count"), r.get("links"))
+                self.graph.put(slots, r["nearest"])
+        if self.graph is not None and any("ov.slot" in r for r in replies.values()):
+            got = [r for r in replies.values() if "ov.slot" in r]
+            overlay = world.comms.overlay  # type: ignore[union-attr]
+            overlay.put(np.concatenate([r["ov.slot"] for r in got]), np.concatenate([r["ov.flood"] for r in got]),
+                        sum(int(r["ov.links"]) for r in got))  # fmt: skip
 
     def _sense_others(self, fresh: bool) -> None:
         ctx = self.world.context()
@@ -210,6 +217,20 @@ class Coordinator:
             ctx.fresh = np.zeros(1, dtype=np.int64)
         for sensor in self._others:
             self.world.readings[sensor.name] = sensor.step(ctx)
+
+    def _hop_for(self, k: int, ghosts: np.ndarray) -> Packed | None:
+        """What shard ``k`` needs for this step's overlay hop (``None`` when no flood spreads)."""
+        comms = self.world.comms
+        if comms is None or not comms.overlay.frontier_size:
+            return None
+        overlay: ShardedOverlay = comms.overlay  # type: ignore[assignment]
+        fr_f, fr_u = overlay.frontier()
+        new = overlay._hops[fr_f] == 0  # a flood's first hop: its origin entry
+        mine = self.owner[fr_u] == k
+        if ghosts.size:
+            mine |= np.isin(fr_u, ghosts)
+        return {"active": overlay._active, "started": fr_f[new], "origin": fr_u[new], "fr_f": fr_f[mine],
+                "fr_u": fr_u[mine]}  # fmt: skip
 
     def _link_range(self) -> np.ndarray | None:
         comms = self.world.comms
@@ -275,22 +296,13 @@ class Coordinator:
         live = np.flatnonzero(self.owner >= 0)
         x = st.pos[live, 0]
         self.owner[live] = self.strips.owner_of(x)
-        arrivals: dict[int, list[Packed]] = {}
-        for r in moved.values():  # hand-overs, routed by the new owner of each agent
-            out = r["out"]
-            if out.size:
-                dest = self.owner[out]
-                for d in np.unique(dest).tolist():
-                    sel = dest == d
-                    arrivals.setdefault(int(d), []).append({k: v[sel] for k, v in r.items() if k[:2] in ("a.", "m.")}
-                                                           | {"out": out[sel]})  # fmt: skip
+        arrivals = _route_arrivals(list(moved.values()), self.owner)
         calls = {}
+        ghost_of: dict[int, np.ndarray] = {}
         for k in range(len(self.shards)):
-            got = arrivals.get(k)
-            merged = None if not got else {key: np.concatenate([g[key] for g in got]) for key in got[0]}
-            g = self.strips.ghosts(x, live, k)
-            calls[k] = (merged, g, st.pos[g])
-            tr.handover += nbytes(merged) if merged is not None else 0
+            g = ghost_of[k] = self.strips.ghosts(x, live, k)
+            calls[k] = (arrivals.get(k), g, st.pos[g])
+            tr.handover += nbytes(calls[k][0]) if calls[k][0] is not None else 0
             tr.halo += nbytes(calls[k][1:])
         hit = self._call("collide", calls)  # 5 on the shards
         events = _merge_collisions(list(hit.values()))
@@ -301,12 +313,9 @@ class Coordinator:
             world.set_offline(went)
         timed_out, group_events = world.run_groups(ctx)  # 6 here
         offline = np.union1d(np.union1d(went, timed_out), self.lost)
-        frontier = _NONE
-        if world.comms is not None and world.comms.overlay.frontier_size:
-            frontier = np.unique(world.comms.overlay._front_n)
-        calls = {k: (offline, frontier, link_range) for k in range(len(self.shards))}
+        calls = {k: (offline, self._hop_for(k, ghost_of[k]), link_range) for k in range(len(self.shards))}
         tr.other += sum(nbytes(c) for c in calls.values())
-        sensed = self._call("sense", calls)  # 8 (and the range graph) on the shards
+        sensed = self._call("sense", calls)  # 8 (and the range graph, the overlay hop) on the shards
         tr.readings += sum(nbytes(r) for r in sensed.values())
         self._take_rows(sensed)
         comm_events = world.run_comms(ctx)  # 7 here
@@ -324,6 +333,22 @@ class Coordinator:
             ev.scores = StepScores(acting, res.rewards, terminated, res.info)
             world.run_hooks(ev)
         return res, terminated
+
+
+def _route_arrivals(replies: list[Packed], owner: np.ndarray) -> dict[int, Packed]:
+    """The agents handed over by every shard, with their rows and reads, grouped by their new shard."""
+    parts: dict[int, list[Packed]] = {}
+    for r in replies:
+        out = r["out"]
+        if not out.size:
+            continue
+        dest, rdest = owner[out], owner[r["r.slot"]]
+        for d in np.unique(dest).tolist():
+            sel, rsel = dest == d, rdest == d
+            pack = {k: v[sel] for k, v in r.items() if k[:2] in ("a.", "m.")}
+            pack.update({"out": out[sel], "r.flood": r["r.flood"][rsel], "r.slot": r["r.slot"][rsel]})
+            parts.setdefault(int(d), []).append(pack)
+    return {d: {key: np.concatenate([g[key] for g in got]) for key in got[0]} for d, got in parts.items()}
 
 
 def _merge_collisions(replies: list[Packed]) -> CollisionEvents:

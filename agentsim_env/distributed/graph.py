@@ -1,11 +1,10 @@
-"""The coordinator's range graph: the rows the shards computed, in the shape the comms stack reads.
+"""The coordinator's range graph: the nearest neighbours the shards found, in the shape the comms stack reads.
 
-On the coordinator the comms stack (bus, overlay, inboxes) runs over every slot, but the range graph is spatial
-work: each shard computes it over its own agents and ghosts and sends back each own agent's nearest neighbour
-and, for the agents on the overlay's frontier, their links. ``GatheredGraph`` stands in for
-``comms.rangegraph.RangeGraph`` in ``CommsStack.graph``: it ignores the grid the stack passes and answers
-``nearest()`` and ``links()`` from those rows. Only the frontier's rows are filled: a flood's next hop reads no
-other (``comms.flooding.spread``; full propagation, which would, is refused with shards).
+On the coordinator the comms stack (bus, overlay table, inboxes) runs over every slot, but the range graph is
+spatial work: each shard computes it over its own agents and ghosts and sends back each own agent's nearest
+neighbour (for the next step's "nearest" sends). ``GatheredGraph`` stands in for ``comms.rangegraph.RangeGraph``
+in ``CommsStack.graph``: it ignores the grid the stack passes, answers ``nearest()`` from those rows, and has no
+links (the shards walk them for the overlay: ``distributed.flooding``).
 """
 
 from __future__ import annotations
@@ -27,9 +26,8 @@ class GatheredGraph:
         self.n_slots = int(n_slots)
         self.nearest_range = float(nearest_range)
         self._near = np.full(self.n_slots, -1, dtype=np.int64)
-        self._start = np.zeros(self.n_slots, dtype=np.int64)
-        self._end = np.zeros(self.n_slots, dtype=np.int64)
-        self._idx = np.zeros(0, dtype=np.int64)
+        self._none = (np.zeros(self.n_slots, dtype=np.int64), np.zeros(self.n_slots, dtype=np.int64),
+                      np.zeros(0, dtype=np.int64))  # fmt: skip
         empty = np.zeros(0, dtype=np.int64)
         self._pairs: tuple[np.ndarray, ...] = (empty, empty, np.zeros(0))
 
@@ -37,28 +35,10 @@ class GatheredGraph:
     def clear(self) -> None:
         """Forget the previous step's rows (every slot: no nearest neighbour, no links)."""
         self._near.fill(-1)
-        self._start.fill(0)
-        self._end.fill(0)
-        self._idx = np.zeros(0, dtype=np.int64)
 
-    def put(self, slots: np.ndarray, nearest: np.ndarray | None, front: Any, count: Any, links: Any) -> None:
-        """One shard's rows: the nearest neighbour of ``slots``; the links of its frontier slots ``front``.
-
-        Args:
-            slots: The shard's own slots.
-            nearest: Their nearest neighbour (or -1), or ``None`` without comms.
-            front: Its frontier slots (or ``None``).
-            count: Links per frontier slot.
-            links: The linked slots, row after row.
-        """
-        if nearest is not None:
-            self._near[slots] = nearest
-        if front is not None and len(front):
-            base = self._idx.shape[0]
-            ends = base + np.cumsum(count)
-            self._start[front] = ends - count
-            self._end[front] = ends
-            self._idx = np.concatenate([self._idx, np.asarray(links, dtype=np.int64)])
+    def put(self, slots: np.ndarray, nearest: np.ndarray) -> None:
+        """One shard's rows: the nearest neighbour (or -1) of each of its own ``slots``."""
+        self._near[slots] = nearest
 
     # -- what the comms stack reads ---------------------------------------------------------------------
     @property
@@ -79,6 +59,6 @@ class GatheredGraph:
         return self._near
 
     def links(self, link_range: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``(start, end, indices)`` of the frontier slots' links (the other rows are empty)."""
+        """No links: the shards walk them (``distributed.flooding``); the sharded overlay ignores these."""
         del link_range
-        return self._start, self._end, self._idx
+        return self._none

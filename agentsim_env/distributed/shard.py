@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 
 from agentsim_env.core.pipeline import StepContext
+from agentsim_env.distributed.flooding import ShardReaders
 from agentsim_env.distributed.partition import Strips
 from agentsim_env.motion import MotionState
 from agentsim_env.scenarios.registry import make_scenario
@@ -67,6 +68,7 @@ class Shard:
         self.address = f"{socket.gethostname()}:{os.getpid()}"
         self._ctx: StepContext | None = None
         self._scan = [x for x in self.world.sensors if isinstance(x, ProximitySensor)]
+        self.readers = ShardReaders(s)
 
     # ------------------------------------------------------------------ helpers
     def _beat(self, t0: float) -> Packed:
@@ -90,8 +92,8 @@ class Shard:
         st.online[:] = False
         st.online[self.own | self.ghost] = True
 
-    def _sense(self, ctx: StepContext, frontier: np.ndarray, link_range: np.ndarray | None) -> Packed:
-        """Range graph and proximity scan of the current positions; the own agents' rows."""
+    def _sense(self, ctx: StepContext, ov: Packed | None, link_range: np.ndarray | None) -> Packed:
+        """Range graph, one overlay hop into the own agents and the proximity scan; the own agents' rows."""
         world, st = self.world, self.world.state
         mine = np.flatnonzero(self.own)
         out: Packed = {"slots": mine}
@@ -99,15 +101,16 @@ class Shard:
             comms = world.comms
             if link_range is not None:
                 comms.overlay.set_range(link_range)
-            front = frontier[self.own[frontier]] if frontier.size else frontier
-            comms.graph.set_grid(ctx.grid, st.pos, st.online, st.world_id, comms.overlay.link_range, front.size > 0)
+            walk = ov is not None and ov["fr_u"].size > 0
+            comms.graph.set_grid(ctx.grid, st.pos, st.online, st.world_id, comms.overlay.link_range, walk)
             out["nearest"] = comms.graph.nearest()[mine].copy()
-            if front.size:
-                start, end, idx = comms.graph.links(comms.overlay.link_range)
-                count = (end[front] - start[front]).astype(np.int64)
-                rows = [idx[start[f] : end[f]] for f in front.tolist()]
-                out["front"], out["count"] = front, count
-                out["links"] = np.concatenate(rows) if rows else np.zeros(0, dtype=np.int64)
+            if ov is not None:
+                s = st.n_slots
+                links = comms.graph.links(comms.overlay.link_range) if walk else (
+                    np.zeros(s, np.int64), np.zeros(s, np.int64), np.zeros(0, np.int64))  # fmt: skip
+                v, f, e = self.readers.hop(links, self.own, ov["active"], ov["started"], ov["origin"], ov["fr_f"],
+                                           ov["fr_u"])  # fmt: skip
+                out["ov.slot"], out["ov.flood"], out["ov.links"] = v, f, e
         readings = {}
         for sensor in self._scan:
             readings[sensor.name] = sensor.step(ctx)
@@ -136,6 +139,7 @@ class Shard:
         world, st = self.world, self.world.state
         placement = world.reset_world(0, seed)
         self.scenario.reset_world(world, 0, placement)
+        self.readers.reset()
         self.strips.owner = np.asarray(owner, dtype=np.int64).copy()
         alive = st.online.copy()
         slots = np.flatnonzero(alive)
@@ -149,7 +153,7 @@ class Shard:
             world.physics.sync(st, world.scene)
         ctx = world.context()
         world.regrid(ctx)
-        out = self._sense(ctx, np.zeros(0, dtype=np.int64), None)
+        out = self._sense(ctx, None, None)
         out["beat"] = self._beat(t0)
         return out
 
@@ -206,6 +210,9 @@ class Shard:
             out[f"a.{f}"] = getattr(st, f)[leave]
         for f in MOTION_FIELDS:
             out[f"m.{f}"] = getattr(world.motion, f)[leave]
+        gone = np.zeros(s, dtype=bool)
+        gone[leave] = True
+        out["r.flood"], out["r.slot"] = self.readers.take_leaving(gone)
         self.own[leave] = False
         st.online[leave] = False
         out["beat"] = self._beat(t0)
@@ -234,6 +241,7 @@ class Shard:
             for f in MOTION_FIELDS:
                 getattr(world.motion, f)[new] = arrivals[f"m.{f}"]
             self.own[new] = True
+            self.readers.add(arrivals["r.flood"], arrivals["r.slot"])
         self.ghost[:] = False
         self.ghost[ghost_slots] = True
         st.pos[ghost_slots] = ghost_pos
@@ -246,17 +254,18 @@ class Shard:
                 "beat": self._beat(t0)}  # fmt: skip
 
     # ------------------------------------------------------------------ step, call 3
-    def sense(self, offline: np.ndarray, frontier: np.ndarray, link_range: np.ndarray | None) -> Packed:
-        """Take the slots that went offline this step anywhere, then the range graph and the proximity scan.
+    def sense(self, offline: np.ndarray, ov: Packed | None, link_range: np.ndarray | None) -> Packed:
+        """Take the slots that went offline this step anywhere, then the range graph, the hop and the scan.
 
         Args:
             offline: Slots taken offline this step (collisions found by any shard, heartbeat timeouts).
-            frontier: The overlay's frontier (slots whose links the next hop reads).
+            ov: The overlay's hop (``None`` when no flood spreads): ``active`` floods, the ``started`` ones and
+                their ``origin``, and the frontier entries this shard can walk (``fr_f``, ``fr_u``).
             link_range: The overlay's per-slot range when it is no longer uniform, else ``None``.
 
         Returns:
-            The own slots with their nearest neighbour, the links of the own frontier slots (``front``,
-            ``count``, ``links``), the scan rows, and a heartbeat.
+            The own slots with their nearest neighbour, the hop's deliveries to own slots (``ov.slot``,
+            ``ov.flood``) and links walked (``ov.links``), the scan rows, and a heartbeat.
         """
         t0 = time.perf_counter()
         self._pause()
@@ -267,7 +276,7 @@ class Shard:
             world.set_offline(offline)
             self.ghost[offline] = False
         world.regrid(ctx)
-        out = self._sense(ctx, frontier, link_range)
+        out = self._sense(ctx, ov, link_range)
         world.step_count += 1
         world.tick += 1
         self._ctx = None
