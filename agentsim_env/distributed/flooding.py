@@ -10,8 +10,9 @@ agent handed over to another shard). So each shard computes exactly the deliveri
 The coordinator keeps the flood table (origins, hop limits, hop counts, payloads, the frontier) in a
 ``ShardedOverlay``: its ``advance_graph`` takes the deliveries the shards found instead of walking links, and
 does the single-process bookkeeping (hop counts, floods that end, the next frontier, statistics; duplicates =
-links walked - deliveries). Deliveries come out grouped by flood in frontier order, as in one process, and by
-slot within a flood: a receiver's inbox gets the same messages in the same order for any split.
+links walked - deliveries). Deliveries come out grouped by flood in frontier order, as in one process (within a
+flood the order of the receivers may differ, which nothing observes): a receiver gets at most one copy of a
+flood per hop, so its inbox gets the same messages in the same order for any split.
 """
 
 from __future__ import annotations
@@ -271,7 +272,9 @@ class ShardedOverlay(Overlay):
         floods = cur_f[np.sort(first)]  # frontier order
         rank = np.zeros(self.capacity, dtype=np.int64)
         rank[floods] = np.arange(floods.shape[0])
-        order = np.lexsort((slot, rank[flood]))
+        # each shard's deliveries come grouped by flood in frontier order: a stable sort by that rank merges the
+        # runs (a receiver gets at most one copy of a flood, so its inbox order is the floods' order)
+        order = np.argsort(rank[flood], kind="stable")
         slot, flood = slot[order], flood[order]
         self._hops[floods] += 1
         n_new = np.bincount(flood, minlength=self.capacity)[floods]
