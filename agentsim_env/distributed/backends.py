@@ -28,7 +28,9 @@ class Backend(Protocol):
 
     n_shards: int
 
-    def call(self, method: str, calls: dict[int, tuple[Any, ...]], timeout_s: float) -> dict[int, Packed | Failure]:
+    def call(
+        self, method: str, calls: dict[int, tuple[Any, ...]], timeout_s: float
+    ) -> dict[int, Packed | Failure]:
         """Run ``method(*args)`` on every shard named in ``calls``; wait at most ``timeout_s`` for all."""
 
     def restart(self, index: int) -> None:
@@ -58,7 +60,9 @@ class LocalShards:
         self.shards: dict[int, Shard | None] = {k: factory(k) for k in range(self.n_shards)}
         self.address = "local"
 
-    def call(self, method: str, calls: dict[int, tuple[Any, ...]], timeout_s: float) -> dict[int, Packed | Failure]:
+    def call(
+        self, method: str, calls: dict[int, tuple[Any, ...]], timeout_s: float
+    ) -> dict[int, Packed | Failure]:
         """Run ``method`` on each named shard in turn (see :class:`Backend`)."""
         out: dict[int, Packed | Failure] = {}
         for k, args in calls.items():

@@ -110,7 +110,9 @@ class Coordinator:
         timeout_s: Deadline of every call, in seconds.
     """
 
-    def __init__(self, scenario: Scenario, world: World, strips: Strips, backend: Backend, timeout_s: float) -> None:
+    def __init__(
+        self, scenario: Scenario, world: World, strips: Strips, backend: Backend, timeout_s: float
+    ) -> None:
         self.scenario = scenario
         self.world = world
         self.strips = strips
@@ -168,7 +170,9 @@ class Coordinator:
                 continue
             beat, info = r["beat"], self.shards[k]
             info.address, info.last_answer, info.last_step = beat["address"], now, beat["step"]
-            info.step_s = beat["compute_s"] if method in ("move", "reset") else info.step_s + beat["compute_s"]
+            info.step_s = (
+                beat["compute_s"] if method in ("move", "reset") else info.step_s + beat["compute_s"]
+            )
             out[k] = r
         return out
 
@@ -187,7 +191,7 @@ class Coordinator:
         """Add static objects to the world now; every shard gets them before the next step's motion."""
         self.world.scene.add(kind, centre, half, 0)
         sc = self.world.scene
-        k = np.asarray(kind).reshape(-1).shape[0]
+        k = np.atleast_2d(np.asarray(centre)).shape[0]
         self._objects.append((sc.kind[-k:].copy(), sc.centre[-k:].copy(), sc.half[-k:].copy()))
 
     # ------------------------------------------------------------------ gathering
@@ -207,7 +211,7 @@ class Coordinator:
                 self.graph.put(slots, r["nearest"])
         if self.graph is not None and any("ov.slot" in r for r in replies.values()):
             got = [r for r in replies.values() if "ov.slot" in r]
-            overlay = world.comms.overlay  # type: ignore[union-attr]
+            overlay: ShardedOverlay = world.comms.overlay  # type: ignore[union-attr, assignment]
             overlay.put(np.concatenate([r["ov.slot"] for r in got]), np.concatenate([r["ov.flood"] for r in got]),
                         sum(int(r["ov.links"]) for r in got))  # fmt: skip
 
@@ -280,7 +284,7 @@ class Coordinator:
         if "comm" in parts:  # 1. the comm part: one bus for every shard (nearest from the shards' graphs)
             world.apply_comm(parts["comm"], acting)
         motion = {k: v for k, v in parts.items() if k != "comm"}
-        calls = {}
+        calls: dict[int, tuple[Any, ...]] = {}
         for k in range(len(self.shards)):
             slots = np.flatnonzero(acting & (self.owner == k))
             calls[k] = (slots, {p: v[slots] for p, v in motion.items()}, self._ended, self._objects,

@@ -116,8 +116,9 @@ class DistributedParallelEnv(AgentSimParallelEnv):
         return self.coordinator.shards
 
     def add_objects(self, kind: Any, centre: Any, half: Any) -> None:
-        """Add static objects (``core.scene`` kinds, centres ``(n, 3)``, half-extents ``(n, 3)``) at run time."""
-        self.coordinator.add_objects(np.atleast_1d(kind), np.atleast_2d(centre), np.atleast_2d(half))
+        """Add static objects at run time, as ``core.scene.Scene.add`` takes them (``"box"``, ``"cylinder"`` or
+        ``"sphere"``, centres ``(n, 3)``, half-extents ``(n, 3)``): every shard has them before the next step."""
+        self.coordinator.add_objects(kind, centre, half)
 
     def _reset_core(self, seed: np.random.SeedSequence) -> None:
         self.coordinator.reset(seed)
@@ -158,7 +159,9 @@ class DistributedBatchedEnv(BatchedEnv):
         check_options(shards, backend, ray_address, timeout_s)
         check_shardable(make_scenario(name, **config), shards)
         super().__init__(name, 1, check_finite=check_finite, **config)
-        self.coordinator = build_coordinator(self.scenario, self.world, shards, backend, ray_address, timeout_s)
+        self.coordinator = build_coordinator(
+            self.scenario, self.world, shards, backend, ray_address, timeout_s
+        )
 
     @property
     def shards(self) -> list[ShardInfo]:

@@ -56,7 +56,9 @@ class RayShards:
         address: Cluster address, or ``None`` for a local cluster on 127.0.0.1.
     """
 
-    def __init__(self, name: str, config: dict[str, Any], strips: Strips, n_shards: int, address: str | None) -> None:
+    def __init__(
+        self, name: str, config: dict[str, Any], strips: Strips, n_shards: int, address: str | None
+    ) -> None:
         global _users
         ray = import_ray()
         self.n_shards = int(n_shards)
@@ -89,7 +91,9 @@ class RayShards:
         name, config, strips = self._args
         return self._cls.remote(k, name, config, strips)
 
-    def call(self, method: str, calls: dict[int, tuple[Any, ...]], timeout_s: float) -> dict[int, Packed | Failure]:
+    def call(
+        self, method: str, calls: dict[int, tuple[Any, ...]], timeout_s: float
+    ) -> dict[int, Packed | Failure]:
         """Run ``method`` on every named shard at once; ``Failure`` for the dead and the late."""
         ray = self._ray
         if method == "reset":

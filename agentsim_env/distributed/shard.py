@@ -56,7 +56,9 @@ class Shard:
         delay_s: Test hook: sleep this long in every call (a slow machine).
     """
 
-    def __init__(self, index: int, name: str, config: dict[str, Any], strips: Strips, delay_s: float = 0.0) -> None:
+    def __init__(
+        self, index: int, name: str, config: dict[str, Any], strips: Strips, delay_s: float = 0.0
+    ) -> None:
         self.index = int(index)
         self.scenario = make_scenario(name, **config)
         self.world = self.scenario.build(1)

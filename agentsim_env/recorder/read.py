@@ -251,7 +251,7 @@ class Store:
         return self._frame("messages", run, episode, world)
 
     def events(self, run: IdFilter = None, episode: IdFilter = None, world: IdFilter = None) -> pd.DataFrame:
-        """``collision``, ``offline``, ``group``, ``release`` and ``landing`` events."""
+        """``collision``, ``offline``, ``shard_offline`` (distributed runs), ``group``, ``release`` and ``landing`` events."""
         return self._frame("events", run, episode, world)
 
     def sensors(self, run: IdFilter = None, episode: IdFilter = None, world: IdFilter = None) -> pd.DataFrame:

@@ -447,6 +447,11 @@ class Recorder:
             step = world.step_count[np.asarray(w, dtype=np.int64)].tolist()
             rows += zip(repeat(self.run), ep, w, step, repeat("offline"), (ev.timed_out % n).tolist(),
                         repeat(None), repeat(None), repeat(None), repeat(None))  # fmt: skip
+        if ev.lost.size:  # agents of a shard that stopped answering (distributed runs)
+            ep, w = self._where(ev.lost)
+            step = world.step_count[np.asarray(w, dtype=np.int64)].tolist()
+            rows += zip(repeat(self.run), ep, w, step, repeat("shard_offline"), (ev.lost % n).tolist(),
+                        repeat(None), repeat(None), repeat(None), repeat(None))  # fmt: skip
         g = ev.groups
         if g is not None and len(g):
             ep, w = self._where(g.slot)

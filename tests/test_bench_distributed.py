@@ -1,0 +1,27 @@
+"""The distributed benchmark's bytes table at a tiny size: 2 local shards, every byte count positive."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+import bench_distributed as bd  # noqa: E402
+
+
+@pytest.mark.slow
+def test_border_bytes_rows_have_positive_byte_counts() -> None:
+    rows = bd.border_bytes([500], steps=2, shards=2)
+    assert len(rows) == 1
+    row = rows[0]
+    assert row["n"] == 500
+    assert row["halo"] > 0 and row["total"] > row["halo"]
+    assert row["handover"] >= 0
+    assert row["ghosts"] == row["halo"] / bd.GHOST_BYTES > 0
+    assert row["expected"] > 0
+    table = bd.border_table(rows)
+    assert table.count("\n") == 2 and "500" in table

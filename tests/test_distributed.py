@@ -1,0 +1,250 @@
+"""One simulation over shards, in process (the local backend): equivalence with one process, hand-overs,
+run-time objects, faults, and bad options. The same on a Ray cluster: tests/test_distributed_ray.py (slow)."""
+
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+import pytest
+
+import agentsim_env
+from agentsim_env.distributed import DistributedBatchedEnv, Strips
+from agentsim_env.distributed import make as make_sharded
+from agentsim_env.env.vector import BatchedEnv
+from agentsim_env.recorder import record
+from agentsim_env.recorder.read import Store
+from tests.distributed_helpers import compare, random_actions, run
+
+COMMS = {"loss": 0.1, "latency": 1, "heartbeat_period": 5, "heartbeat_timeout": 16}
+CASES = [
+    ("navigation", {"n_agents": 300}),
+    ("navigation", {"n_agents": 300, "comms": COMMS}),
+    ("navigation", {"n_agents": 200, "action_mode": "primitive", "comms": {"max_range": 40.0}}),
+    ("navigation", {"n_agents": 120, "gnss": {"sigma_h": 2.0}, "comms": {}}),
+    ("relay", {"n_groups": 4, "group_size": 6}),
+]
+
+
+@pytest.mark.parametrize("shards", [1, 2, 4])
+@pytest.mark.parametrize(("name", "config"), CASES, ids=[f"{n}-{i}" for i, (n, _) in enumerate(CASES)])
+def test_sharded_run_equals_one_process(name: str, config: dict, shards: int) -> None:
+    ref, got = compare(name, shards, 120, **config)
+    if shards > 1 and name == "navigation" and config["n_agents"] >= 200:
+        assert got.handovers > 0, "no agent crossed a strip edge: the test would not check hand-overs"
+    if config.get("comms"):
+        assert any(ref.bus) and any(ref.overlay), "no message was delivered: the test would not check comms"
+
+
+def _placed(env, x: list[float], y: float = 40.0):  # type: ignore[no-untyped-def]
+    """Reset, then put the first agents at ``x`` (same y and altitude) in the env and, sharded, in every shard."""
+    env.reset(seed=0)
+    k = len(x)
+    st = env.world.state
+    st.pos[:k, 0], st.pos[:k, 1], st.pos[:k, 2] = x, y, 6.0
+    if hasattr(env, "coordinator"):
+        for shard in env.coordinator.backend.shards.values():
+            shard.world.state.pos[:k] = st.pos[:k]
+
+
+def _toward(env, vx: dict[int, float]):  # type: ignore[no-untyped-def]
+    return {a: {"motion": np.array([vx.get(i, 0.0), 0.0, 0.0], dtype=np.float32)}
+            for i, a in enumerate(env.possible_agents) if a in env.agents}  # fmt: skip
+
+
+KW_EMPTY = {"n_agents": 4, "map_size": 120.0, "obstacle_density": 0.0}
+
+
+def test_a_collision_across_a_strip_edge_is_counted_once() -> None:
+    # agents 0 and 1 fly into each other over the edge at x = 60 (agent 0 in strip 0, agent 1 in strip 1)
+    results = []
+    for env in (agentsim_env.make("navigation", **KW_EMPTY), make_sharded("navigation", shards=2, backend="local",
+                                                                         **KW_EMPTY)):  # fmt: skip
+        _placed(env, [59.2, 60.8])
+        steps = [env.step(_toward(env, {0: 1.0, 1: -1.0})) for _ in range(3)]
+        col = env.world.last_events.collisions
+        results.append(([s[2] for s in steps], [s[4] for s in steps]))
+        del col
+    assert results[0] == results[1]
+    terms = results[1][0]
+    assert any(t.get("agent_0") and t.get("agent_1") for t in terms), "the two agents did not collide"
+    hit = [i for i in results[1][1] if "agent_0" in i and i["agent_0"]["collided"]]
+    assert len(hit) == 1 and hit[0]["agent_1"]["collided"] == 1
+
+
+def test_agents_cross_back_and_forth() -> None:
+    kw = {**KW_EMPTY, "collisions": False}
+    owners: list[list[int]] = []
+
+    def trace(env):  # type: ignore[no-untyped-def]
+        _placed(env, [58.5, 59.0, 59.5, 60.5], y=40.0)
+        env.world.state.pos[:4, 1] = [20.0, 40.0, 60.0, 80.0]
+        if hasattr(env, "coordinator"):
+            for shard in env.coordinator.backend.shards.values():
+                shard.world.state.pos[:4] = env.world.state.pos[:4]
+        out = []
+        way = np.ones(4)
+        for _ in range(80):  # east until x > 61.5, then west until x < 58.5, and again
+            x = env.world.state.pos[:4, 0]
+            way = np.where(x > 61.5, -1.0, np.where(x < 58.5, 1.0, way))
+            env.step(_toward(env, dict(enumerate(way.tolist()))))
+            out.append(env.world.state.pos[:4].copy())
+            if hasattr(env, "coordinator"):
+                owners.append(env.coordinator.owner[:4].tolist())
+        return out
+
+    ref = trace(agentsim_env.make("navigation", **kw))
+    got = trace(make_sharded("navigation", shards=2, backend="local", **kw))
+    for t, (a, b) in enumerate(zip(ref, got, strict=True)):
+        assert np.array_equal(a, b), f"step {t}"
+    changes = sum(o1 != o2 for o1, o2 in zip(owners, owners[1:]))
+    assert changes >= 5, f"the agents changed shard only {changes} times"
+
+
+def test_objects_added_at_run_time_reach_every_shard() -> None:
+    kw = {"n_agents": 200}
+    box = ("box", [[0.0, 0.0, 0.0]], [[6.0, 6.0, 30.0]])
+
+    def add(env, t):  # type: ignore[no-untyped-def]
+        if t == 5:  # a tall box on the first live agent, wherever it is
+            centre = [[*env.world.state.pos[0, :2], 0.0]]
+            if hasattr(env, "add_objects"):
+                env.add_objects(box[0], centre, box[2])
+            else:
+                env.world.scene.add(box[0], centre, box[2], 0)
+
+    ref = run(agentsim_env.make("navigation", **kw), 30, hook=add)
+    env = make_sharded("navigation", shards=4, backend="local", **kw)
+    got = run(env, 30, hook=add)
+    from tests.distributed_helpers import first_difference
+
+    assert first_difference(ref, got) is None
+    new_id = env.world.scene.n_objects - 1
+    assert all(sh.world.scene.n_objects == new_id + 1 for sh in env.coordinator.backend.shards.values())
+    assert any(info.get("collided") for info in got.infos[5].values()), "nothing hit the new box"
+    del new_id
+
+
+def test_batched_front_end_equals_one_process() -> None:
+    kw = {"n_agents": 150, "comms": COMMS}
+    a, b = BatchedEnv("navigation", 1, **kw), DistributedBatchedEnv("navigation", 2, backend="local", **kw)
+    oa, ob = a.reset(seed=1), b.reset(seed=1)
+    assert np.array_equal(oa, ob)
+    rng = np.random.default_rng(0)
+    for _ in range(40):
+        act = rng.uniform(-1, 1, (1, 150, a.act_dim))
+        ra, rb = a.step(act), b.step(act)
+        for f in ("obs", "rewards", "terminated", "truncated", "alive"):
+            assert np.array_equal(getattr(ra, f), getattr(rb, f)), f
+    b.close()
+
+
+# ---------------------------------------------------------------------------------------------- faults
+def _live_steps(env, steps: int, rng: np.random.Generator) -> list[tuple]:  # type: ignore[no-untyped-def]
+    out = []
+    for _ in range(steps):
+        if not env.agents:
+            break
+        out.append(env.step(random_actions(env, rng)))
+    return out
+
+
+def test_a_dead_shard_terminates_its_agents_once_and_the_rest_goes_on(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    env = record(make_sharded("navigation", shards=2, backend="local", n_agents=200, collisions=False),
+                 tmp_path / "run.db")  # fmt: skip
+    inner = env.env
+    co = inner.coordinator
+    rng = np.random.default_rng(0)
+    env.reset(seed=0)
+    _live_steps(env, 5, rng)
+    doomed = {inner.possible_agents[i] for i in np.flatnonzero(co.owner == 1)}
+    assert doomed
+    co.backend.kill(1)
+    obs, rew, term, trunc, info = env.step(random_actions(env, rng))
+    assert {a for a, t in term.items() if t} == doomed
+    assert set(obs) >= doomed  # their last observation is handed out with the termination
+    assert not doomed & set(env.agents)
+    assert not inner.shards[1].alive and "died" in inner.shards[1].reason
+    assert inner.shards[0].alive
+    later = _live_steps(env, 10, rng)
+    assert len(later) == 10 and all(not (set(s[2]) & doomed) for s in later)  # never reported again
+    env.close()
+    store = Store(tmp_path / "run.db")
+    ev = store.events().reset_index()
+    lost = ev[ev.event == "shard_offline"]
+    assert len(lost) == len(doomed) and (lost.step == 6).all()
+    steps = store.steps().reset_index()
+    assert steps.step.max() == 16  # nothing recorded before or after the fault is lost
+
+
+def test_a_slow_shard_is_declared_offline_at_its_deadline() -> None:
+    env = make_sharded("navigation", shards=2, backend="local", n_agents=100, timeout_s=0.5)
+    rng = np.random.default_rng(0)
+    env.reset(seed=0)
+    env.step(random_actions(env, rng))
+    env.coordinator.backend.set_delay(0, 0.8)
+    _, _, term, _, _ = env.step(random_actions(env, rng))
+    assert any(term.values())
+    assert not env.shards[0].alive and "deadline" in env.shards[0].reason
+    assert len(_live_steps(env, 5, rng)) == 5
+    # the next episode starts the shard anew with every agent
+    env.reset(seed=1)
+    assert all(s.alive for s in env.shards) and env.shards[0].restarts == 1
+    assert len(env.agents) == 100
+    assert len(_live_steps(env, 3, rng)) == 3
+
+
+def test_every_shard_offline_is_an_error_naming_reset() -> None:
+    env = make_sharded("navigation", shards=2, backend="local", n_agents=50)
+    rng = np.random.default_rng(0)
+    env.reset(seed=0)
+    env.coordinator.backend.kill(0)
+    env.coordinator.backend.kill(1)
+    with pytest.raises(RuntimeError, match="every shard is offline.*reset"):
+        env.step(random_actions(env, rng))
+
+
+# ---------------------------------------------------------------------------------------------- bad input
+BAD = [
+    ({"shards": 0}, ValueError, "shards"),
+    ({"shards": "2"}, ValueError, "shards"),
+    ({"shards": 2.5}, ValueError, "shards"),
+    ({"backend": "mpi"}, ValueError, "backend"),
+    ({"timeout_s": 0}, ValueError, "timeout_s"),
+    ({"timeout_s": "fast"}, ValueError, "timeout_s"),
+    ({"ray_address": "not an address"}, ValueError, "ray_address"),
+    ({"ray_address": "127.0.0.1:6379", "backend": "local"}, ValueError, "ray_address"),
+    ({"physics": "pymunk"}, ValueError, "physics='pymunk'"),
+    ({"comms": {"overlay_full": True}}, ValueError, "overlay_full"),
+    ({"shards": 64, "map_size": 100.0}, ValueError, "narrower than the halo"),
+    ({"n_agents": 0}, ValueError, "n_agents"),
+]
+
+
+@pytest.mark.parametrize(("kw", "exc", "match"), BAD, ids=[str(b[0]) for b in BAD])
+def test_bad_options_name_the_field(kw: dict, exc: type, match: str) -> None:
+    args = {"shards": 2, "backend": "local", "n_agents": 20, **kw}
+    with pytest.raises(exc, match=match):
+        make_sharded("navigation", **args)
+
+
+def test_a_scenario_that_cannot_be_sharded_is_refused_with_the_ones_that_can() -> None:
+    with pytest.raises(ValueError, match=r"'uav_release' cannot run over shards.*navigation.*relay"):
+        make_sharded("uav_release", shards=2, backend="local")
+
+
+def test_missing_ray_gives_the_install_hint(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setitem(sys.modules, "ray", None)
+    with pytest.raises(ImportError, match=r"pip install 'agentsim-env\[ray\]'"):
+        make_sharded("navigation", shards=2, n_agents=20)
+
+
+def test_strips_and_halos() -> None:
+    st = Strips.build((0.0, 100.0, 0.0, 50.0), 4, 5.0)
+    x = np.array([0.0, 24.9, 25.0, 60.0, 99.0, 100.0])
+    assert st.strip_of(x).tolist() == [0, 0, 1, 2, 3, 3]
+    slots = np.arange(6)
+    assert st.ghosts(x, slots, 1).tolist() == [1]  # 24.9 is within 5 m of strip 1 (25..50)
+    assert st.ghosts(x, slots, 2).tolist() == []
+    st.reassign(2, np.array([True, True, False, True]))
+    assert st.owner.tolist() == [0, 1, 1, 3]  # nearest live strip, the left one on a tie
