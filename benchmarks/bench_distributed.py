@@ -179,7 +179,11 @@ def one_world_table(n: int, warmup: int, steps: int, ray: Any) -> tuple[str, str
         if co >= need:
             why += f", over the {need:.0f} ms that 1.6x allows, whatever the shards do"
         else:
-            why += f"; with the slowest shard's {slow:.0f} ms the step is over the {need:.0f} ms that 1.6x allows"
+            why += (
+                f"; with the slowest shard's {slow:.0f} ms on top it does not fit in the {need:.0f} ms that 1.6x "
+                f"allows"
+            )
+        why += f"; with this serial share no number of shards beats {one['step_ms'] / max(co, 1e-9):.2f}x"
         if speed >= 1.6:
             why = f"the slowest shard computes {slow:.0f} ms and the coordinator + transfers take {co:.0f} ms"
         notes.append(

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import os
 import re
+import socket
 from typing import Any
 
 from agentsim_env.distributed.backends import Failure
@@ -31,6 +32,22 @@ def import_ray() -> Any:
     except ImportError as e:  # pragma: no cover - depends on the environment
         raise ImportError(INSTALL_HINT) from e
     return ray
+
+
+def check_reachable(address: str, timeout_s: float = 3.0) -> None:
+    """Open a TCP connection to ``host:port`` (Ray itself would retry an unreachable address for minutes).
+
+    Raises:
+        ConnectionError: Naming ``ray_address`` and why it cannot be reached.
+    """
+    if address in ("auto", "local"):
+        return
+    host, port = address.removeprefix("ray://").rsplit(":", 1)
+    try:
+        with socket.create_connection((host, int(port)), timeout=timeout_s):
+            pass
+    except OSError as e:
+        raise ConnectionError(f"cannot reach the Ray cluster at ray_address={address!r}: {e}") from None
 
 
 def check_address(address: str) -> str:
@@ -73,6 +90,7 @@ class RayShards:
                 self._own = True
                 _users += 1
             else:
+                check_reachable(address)
                 try:
                     ray.init(address=address, logging_level="ERROR", log_to_driver=False)
                 except Exception as e:  # ray raises ConnectionError, RuntimeError or its own kinds here

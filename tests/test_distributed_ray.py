@@ -1,0 +1,106 @@
+"""One simulation over Ray shard actors on a local cluster bound to 127.0.0.1 (slow: it starts Ray).
+
+Equivalence with one process for 1, 2 and 4 shards over 200 steps on every shardable scenario; a shard killed
+mid-episode (``ray.kill``); a shard that sleeps past its deadline; a restart for the next episode; a bad
+address. The same logic in process, faster and in more cases: tests/test_distributed.py.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from agentsim_env.distributed import make as make_sharded
+from agentsim_env.recorder import record
+from agentsim_env.recorder.read import Store
+from agentsim_env.scenarios.registry import list_scenarios, scenario_class
+from tests.distributed_helpers import compare, random_actions
+
+pytestmark = pytest.mark.slow
+ray = pytest.importorskip("ray")
+
+SHARDABLE = {
+    "navigation": {"n_agents": 300, "comms": {"loss": 0.1, "latency": 1, "heartbeat_period": 5,
+                                              "heartbeat_timeout": 16}},  # fmt: skip
+    "relay": {"n_groups": 4, "group_size": 6},
+}
+
+
+@pytest.fixture(scope="module", autouse=True)
+def local_cluster():  # type: ignore[no-untyped-def]
+    """One local Ray cluster on 127.0.0.1 for the module (each env then joins it instead of starting one)."""
+    ray.init(num_cpus=4, include_dashboard=False, _node_ip_address="127.0.0.1", logging_level="ERROR",
+             log_to_driver=False)  # fmt: skip
+    yield
+    ray.shutdown()
+
+
+def test_every_shardable_scenario_is_covered() -> None:
+    assert sorted(n for n in list_scenarios() if scenario_class(n).shardable) == sorted(SHARDABLE)
+
+
+@pytest.mark.parametrize("shards", [1, 2, 4])
+@pytest.mark.parametrize("name", sorted(SHARDABLE))
+def test_ray_shards_equal_one_process_over_200_steps(name: str, shards: int) -> None:
+    ref, got = compare(name, shards, 200, backend="ray", **SHARDABLE[name])
+    assert len(ref.obs) == 200 or not ref.obs[-1]
+    if shards > 1 and name == "navigation":
+        assert got.handovers > 0
+
+
+def _steps(env, n: int, rng: np.random.Generator) -> list[tuple]:  # type: ignore[no-untyped-def]
+    out = []
+    for _ in range(n):
+        if not env.agents:
+            break
+        out.append(env.step(random_actions(env, rng)))
+    return out
+
+
+def test_a_killed_shard_actor_loses_only_its_agents(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    env = record(make_sharded("navigation", shards=2, n_agents=200, collisions=False), tmp_path / "run.db")
+    inner = env.env
+    rng = np.random.default_rng(0)
+    env.reset(seed=0)
+    _steps(env, 5, rng)
+    doomed = {inner.possible_agents[i] for i in np.flatnonzero(inner.coordinator.owner == 0)}
+    ray.kill(inner.coordinator.backend.actors[0], no_restart=True)
+    _, _, term, _, _ = env.step(random_actions(env, rng))
+    assert {a for a, t in term.items() if t} == doomed
+    assert not inner.shards[0].alive and "died" in inner.shards[0].reason
+    later = _steps(env, 10, rng)
+    assert len(later) == 10 and len(env.agents) == 200 - len(doomed)
+    env.reset(seed=1)  # the next episode restarts the shard
+    assert all(s.alive for s in inner.shards) and len(env.agents) == 200
+    _steps(env, 3, rng)
+    env.close()
+    ev = Store(tmp_path / "run.db").events().reset_index()
+    assert (ev.event == "shard_offline").sum() == len(doomed)
+
+
+def test_a_shard_sleeping_past_the_deadline_does_not_hang_the_step() -> None:
+    env = make_sharded("navigation", shards=2, n_agents=100, timeout_s=1.0)
+    rng = np.random.default_rng(0)
+    env.reset(seed=0)
+    _steps(env, 2, rng)
+    env.coordinator.backend.set_delay(1, 30.0)
+    t0 = time.perf_counter()
+    _, _, term, _, _ = env.step(random_actions(env, rng))
+    took = time.perf_counter() - t0
+    assert took < 25.0, f"the step waited {took:.1f} s for a shard that sleeps 30 s"
+    assert any(term.values()) and not env.shards[1].alive and "deadline" in env.shards[1].reason
+    assert len(_steps(env, 5, rng)) == 5
+    env.close()
+
+
+def test_an_unreachable_address_is_one_clear_error() -> None:
+    # a fresh process (this one has a cluster already); port 1 on loopback: nothing listens there
+    code = ("from agentsim_env.distributed import make\n"
+            "make('navigation', shards=2, ray_address='127.0.0.1:1', n_agents=10)\n")  # fmt: skip
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode != 0
+    assert "ConnectionError: cannot reach the Ray cluster at ray_address='127.0.0.1:1'" in out.stderr
