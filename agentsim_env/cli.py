@@ -222,6 +222,30 @@ def _progress(it: Any, total: int, desc: str, enabled: bool) -> Any:
     return tqdm(it, total=total, desc=desc, unit="ep")
 
 
+BIG_WORLD = 10_000
+"""Agents from which ``agentsim run`` shows its progress in steps rather than episodes."""
+
+
+def _step_bar(total: int, desc: str) -> Any:
+    from tqdm.auto import tqdm
+
+    return tqdm(total=total, desc=desc, unit="step")
+
+
+def _observers(recorder: Any, bar: Any) -> Any:
+    """One ``run_episode`` observer: the trajectory recorder (or None) and a step bar (or None)."""
+    if bar is None:
+        return recorder
+
+    def on_step(env: Any, infos: dict[str, Any]) -> None:
+        if recorder is not None:
+            recorder(env, infos)
+        if int(env.world.step_count[0]):  # not the call right after the reset
+            bar.update(1)
+
+    return on_step
+
+
 def _check_record(path: str | None) -> None:
     """Fail before any rollout when ``--record PATH`` cannot be recorded to (``recorder.schema.check_store_path``)."""
     if not path:
@@ -241,6 +265,11 @@ def cmd_run(args: argparse.Namespace) -> int:
         raise ValueError(f"--seed must be an integer >= 0, got {args.seed}")
     if args.fps is not None and args.fps <= 0:
         raise ValueError(f"--fps must be an integer > 0, got {args.fps}")
+    shards = getattr(args, "shards", None)
+    if shards is not None and shards < 1:
+        raise ValueError(f"--shards must be an integer >= 1, got {shards}")
+    if getattr(args, "ray_address", None) is not None and shards is None:
+        raise ValueError("--ray-address needs --shards K (the number of shard processes)")
     from agentsim_env.scenarios.registry import scenario_class
 
     config = parse_set(scenario_class(args.scenario).config_cls, args.set or [])
@@ -263,7 +292,15 @@ def _run(args: argparse.Namespace, config: dict[str, Any], policy_name: str) -> 
     from agentsim_env.render.trajectories import TrajectoryRecorder, plot_trajectories
 
     announce_compile()
-    env = agentsim_env.make(args.scenario, render_mode="human" if args.render else None, **config)
+    mode = "human" if args.render else None
+    if getattr(args, "shards", None) is not None:
+        from agentsim_env.distributed import make as make_sharded
+
+        env = make_sharded(args.scenario, shards=args.shards, ray_address=args.ray_address, render_mode=mode, **config)
+        print(f"{args.scenario}: {args.shards} shards ({env.coordinator.backend.address}), halo "
+              f"{env.coordinator.strips.halo:.1f} m", flush=True)  # fmt: skip
+    else:
+        env = agentsim_env.make(args.scenario, render_mode=mode, **config)
     if args.fps is not None:
         env.metadata["render_fps"] = args.fps  # the live window paces itself with this rate
     store = getattr(args, "record", None)
@@ -276,10 +313,15 @@ def _run(args: argparse.Namespace, config: dict[str, Any], policy_name: str) -> 
     policy = make_policy(args.scenario, env, policy_name)
     rows = []
     traj = None
+    # large worlds: a bar over steps (an episode of 100,000 agents takes minutes), else over episodes
+    bar = _step_bar(args.episodes * env.scenario.max_steps, args.scenario) if (
+        env.scenario.n_agents >= BIG_WORLD and not args.quiet) else None  # fmt: skip
+    episodes = range(args.episodes) if bar is not None else _progress(range(args.episodes), args.episodes,
+                                                                      args.scenario, not args.quiet)  # fmt: skip
     try:
-        for k in _progress(range(args.episodes), args.episodes, args.scenario, not args.quiet):
+        for k in episodes:
             recorder = TrajectoryRecorder() if k == 0 and args.out else None
-            ep = run_episode(env, policy, args.seed + k, on_step=recorder)
+            ep = run_episode(env, policy, args.seed + k, on_step=_observers(recorder, bar))
             if recorder is not None:
                 traj = recorder.result(env)
             rows.append((ep.seed, ep.steps, float(np.mean(list(ep.returns.values()))), ep.info_sums))
@@ -287,6 +329,9 @@ def _run(args: argparse.Namespace, config: dict[str, Any], policy_name: str) -> 
         if store:
             env.recorder.finish("incomplete")
         raise
+    if bar is not None:
+        bar.total = bar.n
+        bar.close()
     mark_warm()
     n = env.scenario.n_agents
     keys = sorted({k for *_, s in rows for k in s if k in ("arrived", "collided", "released", "landed")})
@@ -452,6 +497,10 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--quiet", action="store_true", help="no progress bar")
     r.add_argument("--record", default=None, metavar="PATH", help="record every episode to this SQLite store "
                    "(one run; created when missing; see 'agentsim runs')")  # fmt: skip
+    r.add_argument("--shards", type=int, default=None, metavar="K", help="run the simulation over K shard "
+                   "processes on Ray (navigation, relay; see docs/distributed.md)")  # fmt: skip
+    r.add_argument("--ray-address", default=None, metavar="ADDR", help="with --shards: a Ray cluster's "
+                   "host:port (default: a local cluster on 127.0.0.1)")  # fmt: skip
     r.set_defaults(func=cmd_run)
     s = sub.add_parser("scenarios", help="list the registered scenarios")
     s.set_defaults(func=cmd_scenarios)
