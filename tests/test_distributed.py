@@ -248,3 +248,18 @@ def test_strips_and_halos() -> None:
     assert st.ghosts(x, slots, 2).tolist() == []
     st.reassign(2, np.array([True, True, False, True]))
     assert st.owner.tolist() == [0, 1, 1, 3]  # nearest live strip, the left one on a tie
+
+
+@pytest.mark.parametrize(
+    ("argv", "match"),
+    [
+        (["--shards", "0"], "--shards must be an integer >= 1"),
+        (["--ray-address", "127.0.0.1:6379"], "--ray-address needs --shards"),
+        (["--shards", "2", "--set", "physics=pymunk"], "physics='pymunk'"),
+    ],
+)
+def test_cli_run_shards_bad_options(argv: list[str], match: str, capsys: pytest.CaptureFixture[str]) -> None:
+    from agentsim_env.cli import main
+
+    assert main(["run", "navigation", "--episodes", "1", "--out", "", "--quiet", *argv]) == 2
+    assert match in capsys.readouterr().err

@@ -104,3 +104,13 @@ def test_an_unreachable_address_is_one_clear_error() -> None:
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode != 0
     assert "ConnectionError: cannot reach the Ray cluster at ray_address='127.0.0.1:1'" in out.stderr
+
+
+def test_cli_run_over_two_shards(capsys: pytest.CaptureFixture[str]) -> None:
+    from agentsim_env.cli import main
+
+    argv = ["run", "navigation", "--shards", "2", "--episodes", "1", "--out", "", "--quiet",
+            "--set", "n_agents=300", "max_steps=30"]  # fmt: skip
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    assert "2 shards" in out and "navigation: 1 episodes x 300 agents" in out
