@@ -20,6 +20,7 @@ COMMS = {"loss": 0.1, "latency": 1, "heartbeat_period": 5, "heartbeat_timeout": 
 CASES = [
     ("navigation", {"n_agents": 300}),
     ("navigation", {"n_agents": 300, "comms": COMMS}),
+    ("navigation", {"n_agents": 300, "collisions": False, "comms": COMMS}),  # calls 2 and 3 as one
     ("navigation", {"n_agents": 200, "action_mode": "primitive", "comms": {"max_range": 40.0}}),
     ("navigation", {"n_agents": 120, "gnss": {"sigma_h": 2.0}, "comms": {}}),
     ("relay", {"n_groups": 4, "group_size": 6}),

@@ -127,6 +127,8 @@ class Coordinator:
             world.comms.graph = self.graph  # type: ignore[assignment]
             world.comms.overlay = ShardedOverlay.like(world.comms.overlay)
             self._range0 = world.comms.overlay.link_range.copy()
+        # collisions that take nobody offline let the groups stage run first and calls 2 and 3 go as one
+        self._fused = not (world.config.collisions and world.config.collision_ends_agent)
         self._spatial = [x for x in world.sensors if isinstance(x, ProximitySensor)]
         self._others = [x for x in world.sensors if not isinstance(x, ProximitySensor)]
         n_rays = {x.name: x.n_rays for x in self._spatial}
@@ -206,7 +208,8 @@ class Coordinator:
                 scan = world.readings[sensor.name]
                 scan.distance[slots] = r[f"{sensor.name}.distance"]
                 scan.hit_kind[slots] = r[f"{sensor.name}.hit_kind"]
-                scan.hit_id[slots] = r[f"{sensor.name}.hit_id"]
+                if f"{sensor.name}.hit_id" in r:
+                    scan.hit_id[slots] = r[f"{sensor.name}.hit_id"]
             if self.graph is not None:
                 self.graph.put(slots, r["nearest"])
         if self.graph is not None and any("ov.slot" in r for r in replies.values()):
@@ -308,18 +311,29 @@ class Coordinator:
             calls[k] = (arrivals.get(k), g, st.pos[g])
             tr.handover += nbytes(calls[k][0]) if calls[k][0] is not None else 0
             tr.halo += nbytes(calls[k][1:])
-        hit = self._call("collide", calls)  # 5 on the shards
-        events = _merge_collisions(list(hit.values()))
         ctx = world.context()
-        ctx.collisions = events
-        went = np.unique(events.agent) if world.config.collision_ends_agent and len(events) else _NONE
-        if went.size:
-            world.set_offline(went)
-        timed_out, group_events = world.run_groups(ctx)  # 6 here
-        offline = np.union1d(np.union1d(went, timed_out), self.lost)
-        calls = {k: (offline, self._hop_for(k, ghost_of[k]), link_range) for k in range(len(self.shards))}
-        tr.other += sum(nbytes(c) for c in calls.values())
-        sensed = self._call("sense", calls)  # 8 (and the range graph, the overlay hop) on the shards
+        hit_ids = bool(world.hooks)  # the viewer and the recorder may read them; the observations do not
+        if self._fused:  # collisions take nobody offline: the groups stage first, then one call
+            timed_out, group_events = world.run_groups(ctx)  # 6 here
+            offline = np.union1d(timed_out, self.lost)
+            for k in range(len(self.shards)):
+                calls[k] = (*calls[k], offline, self._hop_for(k, ghost_of[k]), link_range, hit_ids)
+            sensed = hit = self._call("collide_sense", calls)  # 5 and 8 (range graph, overlay hop) on the shards
+            events = _merge_collisions(list(hit.values()))
+            ctx.collisions = events
+            went = _NONE
+        else:
+            hit = self._call("collide", calls)  # 5 on the shards
+            events = _merge_collisions(list(hit.values()))
+            ctx.collisions = events
+            went = np.unique(events.agent) if len(events) else _NONE
+            if went.size:
+                world.set_offline(went)
+            timed_out, group_events = world.run_groups(ctx)  # 6 here
+            offline = np.union1d(np.union1d(went, timed_out), self.lost)
+            calls = {k: (offline, self._hop_for(k, ghost_of[k]), link_range, hit_ids) for k in range(len(self.shards))}
+            tr.other += sum(nbytes(c) for c in calls.values())
+            sensed = self._call("sense", calls)  # 8 (and the range graph, the overlay hop) on the shards
         tr.readings += sum(nbytes(r) for r in sensed.values())
         self._take_rows(sensed)
         comm_events = world.run_comms(ctx)  # 7 here

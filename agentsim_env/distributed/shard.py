@@ -94,7 +94,9 @@ class Shard:
         st.online[:] = False
         st.online[self.own | self.ghost] = True
 
-    def _sense(self, ctx: StepContext, ov: Packed | None, link_range: np.ndarray | None) -> Packed:
+    def _sense(
+        self, ctx: StepContext, ov: Packed | None, link_range: np.ndarray | None, hit_ids: bool = True
+    ) -> Packed:
         """Range graph, one overlay hop into the own agents and the proximity scan; the own agents' rows."""
         world, st = self.world, self.world.state
         mine = np.flatnonzero(self.own)
@@ -120,7 +122,8 @@ class Shard:
         for name, scan in readings.items():
             out[f"{name}.distance"] = scan.distance[mine]
             out[f"{name}.hit_kind"] = scan.hit_kind[mine]
-            out[f"{name}.hit_id"] = scan.hit_id[mine]
+            if hit_ids:
+                out[f"{name}.hit_id"] = scan.hit_id[mine]
         return out
 
     # ------------------------------------------------------------------ episode
@@ -256,7 +259,9 @@ class Shard:
                 "beat": self._beat(t0)}  # fmt: skip
 
     # ------------------------------------------------------------------ step, call 3
-    def sense(self, offline: np.ndarray, ov: Packed | None, link_range: np.ndarray | None) -> Packed:
+    def sense(
+        self, offline: np.ndarray, ov: Packed | None, link_range: np.ndarray | None, hit_ids: bool = True
+    ) -> Packed:
         """Take the slots that went offline this step anywhere, then the range graph, the hop and the scan.
 
         Args:
@@ -264,6 +269,7 @@ class Shard:
             ov: The overlay's hop (``None`` when no flood spreads): ``active`` floods, the ``started`` ones and
                 their ``origin``, and the frontier entries this shard can walk (``fr_f``, ``fr_u``).
             link_range: The overlay's per-slot range when it is no longer uniform, else ``None``.
+            hit_ids: Send the scan's hit ids too (the observations do not read them; the viewer does).
 
         Returns:
             The own slots with their nearest neighbour, the hop's deliveries to own slots (``ov.slot``,
@@ -277,10 +283,29 @@ class Shard:
         if offline.size:
             world.set_offline(offline)
             self.ghost[offline] = False
-        world.regrid(ctx)
-        out = self._sense(ctx, ov, link_range)
+            world.regrid(ctx)
+        out = self._sense(ctx, ov, link_range, hit_ids)
         world.step_count += 1
         world.tick += 1
         self._ctx = None
         out["beat"] = self._beat(t0)
+        return out
+
+    # ------------------------------------------------------------------ step, calls 2 and 3 in one
+    def collide_sense(
+        self,
+        arrivals: Packed | None,
+        ghost_slots: np.ndarray,
+        ghost_pos: np.ndarray,
+        offline: np.ndarray,
+        ov: Packed | None,
+        link_range: np.ndarray | None,
+        hit_ids: bool = True,
+    ) -> Packed:
+        """``collide`` then ``sense`` in one call, when collisions take no agent offline (the coordinator then
+        knows every slot that goes offline before the collisions: the heartbeat timeouts)."""
+        t0 = time.perf_counter()
+        out = self.collide(arrivals, ghost_slots, ghost_pos)
+        out.update(self.sense(offline, ov, link_range, hit_ids))
+        out["beat"]["compute_s"] = time.perf_counter() - t0
         return out
