@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -80,7 +80,6 @@ class Traffic:
     halo: int = 0
     readings: int = 0
     other: int = 0
-    per_shard: list[int] = field(default_factory=list)
 
     @property
     def total(self) -> int:
@@ -231,13 +230,17 @@ class Coordinator:
         if comms is None or not comms.overlay.frontier_size:
             return None
         overlay: ShardedOverlay = comms.overlay  # type: ignore[assignment]
-        fr_f, fr_u = overlay.frontier()
-        new = overlay._hops[fr_f] == 0  # a flood's first hop: its origin entry
+        active, fr_f, fr_u, new = overlay.hop_plan()
         mine = self.owner[fr_u] == k
         if ghosts.size:
             mine |= np.isin(fr_u, ghosts)
-        return {"active": overlay._active, "started": fr_f[new], "origin": fr_u[new], "fr_f": fr_f[mine],
-                "fr_u": fr_u[mine]}  # fmt: skip
+        return {
+            "active": active,
+            "started": fr_f[new],
+            "origin": fr_u[new],
+            "fr_f": fr_f[mine],
+            "fr_u": fr_u[mine],
+        }
 
     def _link_range(self) -> np.ndarray | None:
         comms = self.world.comms
@@ -282,7 +285,7 @@ class Coordinator:
         """
         world, sc, st = self.world, self.scenario, self.world.state
         self.lost = _NONE
-        tr = self.traffic = Traffic(per_shard=[0] * len(self.shards))
+        tr = self.traffic = Traffic()
         link_range = self._link_range()
         if "comm" in parts:  # 1. the comm part: one bus for every shard (nearest from the shards' graphs)
             world.apply_comm(parts["comm"], acting)
@@ -318,7 +321,9 @@ class Coordinator:
             offline = np.union1d(timed_out, self.lost)
             for k in range(len(self.shards)):
                 calls[k] = (*calls[k], offline, self._hop_for(k, ghost_of[k]), link_range, hit_ids)
-            sensed = hit = self._call("collide_sense", calls)  # 5 and 8 (range graph, overlay hop) on the shards
+            sensed = hit = self._call(
+                "collide_sense", calls
+            )  # 5 and 8 (range graph, overlay hop) on the shards
             events = _merge_collisions(list(hit.values()))
             ctx.collisions = events
             went = _NONE
@@ -331,7 +336,10 @@ class Coordinator:
                 world.set_offline(went)
             timed_out, group_events = world.run_groups(ctx)  # 6 here
             offline = np.union1d(np.union1d(went, timed_out), self.lost)
-            calls = {k: (offline, self._hop_for(k, ghost_of[k]), link_range, hit_ids) for k in range(len(self.shards))}
+            calls = {
+                k: (offline, self._hop_for(k, ghost_of[k]), link_range, hit_ids)
+                for k in range(len(self.shards))
+            }
             tr.other += sum(nbytes(c) for c in calls.values())
             sensed = self._call("sense", calls)  # 8 (and the range graph, the overlay hop) on the shards
         tr.readings += sum(nbytes(r) for r in sensed.values())

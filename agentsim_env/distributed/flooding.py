@@ -270,9 +270,14 @@ class ShardedOverlay(Overlay):
         """The deliveries every shard found for the coming hop (any order) and the links they walked."""
         self._put = (slot, flood, links)
 
-    def frontier(self) -> tuple[np.ndarray, np.ndarray]:
-        """``(flood, slot)`` of every frontier entry, grouped by flood in frontier order (read only)."""
-        return self._front_f, self._front_n
+    def hop_plan(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """What the shards need for the coming hop (read only).
+
+        Returns:
+            ``(active, flood, slot, new)``: the active flood ids ``(C,)`` bool; every frontier entry's flood and
+            slot, grouped by flood in frontier order; whether the entry is its flood's origin (started this step).
+        """
+        return self._active, self._front_f, self._front_n, self._hops[self._front_f] == 0
 
     def advance_graph(self, start: np.ndarray, end: np.ndarray, indices: np.ndarray) -> Deliveries:
         """One hop from the gathered deliveries (the graph arguments are ignored)."""

@@ -127,18 +127,16 @@ class Shard:
         return out
 
     # ------------------------------------------------------------------ episode
-    def reset(self, seed: np.random.SeedSequence, owner: np.ndarray, frontier_links: bool = False) -> Packed:
+    def reset(self, seed: np.random.SeedSequence, owner: np.ndarray) -> Packed:
         """Start the episode of ``seed`` exactly as a single process does, then keep this shard's part online.
 
         Args:
             seed: The episode's seed sequence (the same on every shard and on the coordinator).
             owner: ``(K,)`` the shard owning each strip.
-            frontier_links: Unused at reset (no flood is active); kept for a uniform call shape.
 
         Returns:
             The own slots with their range-graph and proximity rows, and a heartbeat.
         """
-        del frontier_links
         t0 = time.perf_counter()
         self._pause()
         world, st = self.world, self.world.state

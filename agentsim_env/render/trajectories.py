@@ -22,7 +22,10 @@ import numpy as np
 
 from agentsim_env.core.scene import BOX
 
-__all__ = ["OUTCOMES", "TrajectoryRecorder", "Trajectories", "plot_trajectories"]
+__all__ = ["MAX_PATHS", "OUTCOMES", "TrajectoryRecorder", "Trajectories", "plot_trajectories"]
+
+MAX_PATHS = 5_000
+"""Most agent paths drawn (evenly spaced agents beyond that; the legend says how many); counts cover all."""
 
 #: Agent outcomes, in drawing priority, with their colour and end marker.
 OUTCOMES: dict[str, tuple[str, str]] = {
@@ -160,10 +163,12 @@ def plot_trajectories(traj: Trajectories, path: str | os.PathLike[str], title: s
     Returns:
         The written path.
     """
+    from matplotlib.collections import LineCollection, PatchCollection
     from matplotlib.figure import Figure
     from matplotlib.lines import Line2D
     from matplotlib.patches import Circle, Patch, Rectangle
 
+    # one artist per kind (collections), not one per agent or object: 100,000 agents draw in seconds
     xmin, xmax, ymin, ymax = traj.bounds
     w, h = xmax - xmin, ymax - ymin
     side = 7.0
@@ -172,38 +177,47 @@ def plot_trajectories(traj: Trajectories, path: str | os.PathLike[str], title: s
     ax.add_patch(Rectangle((xmin, ymin), w, h, fill=False, edgecolor="black", linewidth=1.2))
     handles: list[Any] = [Patch(facecolor="none", edgecolor="black", label="map bounds")]
     ztop = max(float(traj.obstacle_top.max()) if len(traj.obstacle_top) else 1.0, 1.0)
+    shapes, greys = [], []
     for (is_box, cx, cy, hx, hy), top in zip(traj.obstacles, traj.obstacle_top):
-        grey = str(float(np.clip(0.75 - 0.45 * top / ztop, 0.2, 0.75)))
-        if is_box:
-            ax.add_patch(Rectangle((cx - hx, cy - hy), 2 * hx, 2 * hy, facecolor=grey, edgecolor="none"))
-        else:
-            ax.add_patch(Circle((cx, cy), hx, facecolor=grey, edgecolor="none"))
-    if len(traj.obstacles):
+        greys.append(float(np.clip(0.75 - 0.45 * top / ztop, 0.2, 0.75)))
+        shapes.append(Rectangle((cx - hx, cy - hy), 2 * hx, 2 * hy) if is_box else Circle((cx, cy), hx))
+    if shapes:
+        g = np.repeat(np.asarray(greys)[:, None], 3, axis=1)
+        ax.add_collection(PatchCollection(shapes, facecolors=g, edgecolors="none"))
         handles.append(Patch(facecolor="0.5", label=f"obstacles ({len(traj.obstacles)})"))
     if traj.markers is not None and len(traj.markers[0]):
         mxy, rgb, rad = traj.markers
-        for (x, y), c, r in zip(mxy, np.asarray(rgb, dtype=float) / 255.0, rad):
-            ax.add_patch(Circle((x, y), max(float(r), 0.3), facecolor=tuple(c), edgecolor="none", alpha=0.6))
+        discs = [Circle((float(x), float(y)), max(float(r), 0.3)) for (x, y), r in zip(mxy, rad)]
+        ax.add_collection(PatchCollection(discs, facecolors=np.asarray(rgb, dtype=float) / 255.0, edgecolors="none",
+                                          alpha=0.6))  # fmt: skip
         handles.append(Patch(facecolor=tuple(np.asarray(rgb[0], dtype=float) / 255.0), alpha=0.6,
                              label="scenario markers (goals, zones, sensors)"))  # fmt: skip
     counts = dict.fromkeys(OUTCOMES, 0)
-    for i, outcome in enumerate(traj.outcome):
-        colour, end = OUTCOMES[outcome]
-        path_xy = traj.xy[: traj.last[i] + 1, i]
-        ax.plot(path_xy[:, 0], path_xy[:, 1], color=colour, linewidth=1.1, alpha=0.85, zorder=3)
-        ax.plot(
-            *path_xy[0], marker="o", markersize=5, markerfacecolor="white", markeredgecolor=colour, zorder=4
-        )
-        ax.plot(*path_xy[-1], marker=end, markersize=9, color=colour, markeredgecolor="black",
-                markeredgewidth=0.4, zorder=5)  # fmt: skip
-        counts[outcome] += 1
+    n = len(traj.outcome)
+    shown = np.unique(np.linspace(0, n - 1, min(n, MAX_PATHS)).astype(np.int64)) if n else np.zeros(0, np.int64)
+    outcome = np.asarray(traj.outcome, dtype=object)
+    for name, k in zip(*np.unique(outcome, return_counts=True)):
+        counts[str(name)] = int(k)
+    for name, (colour, end) in OUTCOMES.items():
+        mine = shown[outcome[shown] == name]
+        if not mine.size:
+            continue
+        paths = [traj.xy[: traj.last[i] + 1, i] for i in mine.tolist()]
+        ax.add_collection(LineCollection(paths, colors=colour, linewidths=1.1, alpha=0.85, zorder=3))
+        first = np.array([p[0] for p in paths])
+        last = np.array([p[-1] for p in paths])
+        ax.scatter(first[:, 0], first[:, 1], s=25, marker="o", facecolors="white", edgecolors=colour, zorder=4)
+        ax.scatter(last[:, 0], last[:, 1], s=81, marker=end, c=colour, edgecolors="black", linewidths=0.4,
+                   zorder=5)  # fmt: skip
     handles.append(Line2D([], [], linestyle="none", marker="o", markerfacecolor="white",
                           markeredgecolor="black", label="start"))  # fmt: skip
-    for outcome, n in counts.items():
-        if n:
-            colour, end = OUTCOMES[outcome]
+    for name, k in counts.items():
+        if k:
+            colour, end = OUTCOMES[name]
             handles.append(Line2D([], [], color=colour, marker=end, markeredgecolor="black",
-                                  markeredgewidth=0.4, label=f"{outcome} ({n})"))  # fmt: skip
+                                  markeredgewidth=0.4, label=f"{name} ({k})"))  # fmt: skip
+    if shown.size < n:
+        handles.append(Patch(facecolor="none", edgecolor="none", label=f"paths of {shown.size:,} of {n:,} agents"))
     pad = 0.03 * max(w, h)
     ax.set_xlim(xmin - pad, xmax + pad)
     ax.set_ylim(ymin - pad, ymax + pad)
