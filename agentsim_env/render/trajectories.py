@@ -198,17 +198,20 @@ def plot_trajectories(traj: Trajectories, path: str | os.PathLike[str], title: s
     outcome = np.asarray(traj.outcome, dtype=object)
     for name, k in zip(*np.unique(outcome, return_counts=True)):
         counts[str(name)] = int(k)
+    crowd = min(1.0, 200.0 / max(shown.size, 1))  # markers and lines shrink past 200 paths, to stay readable
     for name, (colour, end) in OUTCOMES.items():
         mine = shown[outcome[shown] == name]
         if not mine.size:
             continue
         paths = [traj.xy[: traj.last[i] + 1, i] for i in mine.tolist()]
-        ax.add_collection(LineCollection(paths, colors=colour, linewidths=1.1, alpha=0.85, zorder=3))
+        ax.add_collection(LineCollection(paths, colors=colour, linewidths=max(0.3, 1.1 * crowd ** 0.5), alpha=0.85,
+                                         zorder=3))  # fmt: skip
         first = np.array([p[0] for p in paths])
         last = np.array([p[-1] for p in paths])
-        ax.scatter(first[:, 0], first[:, 1], s=25, marker="o", facecolors="white", edgecolors=colour, zorder=4)
-        ax.scatter(last[:, 0], last[:, 1], s=81, marker=end, c=colour, edgecolors="black", linewidths=0.4,
-                   zorder=5)  # fmt: skip
+        ax.scatter(first[:, 0], first[:, 1], s=max(1.0, 25 * crowd), marker="o", facecolors="white",
+                   edgecolors=colour, linewidths=max(0.2, crowd), zorder=4)  # fmt: skip
+        ax.scatter(last[:, 0], last[:, 1], s=max(2.0, 81 * crowd), marker=end, c=colour, edgecolors="black",
+                   linewidths=0.4 * crowd, zorder=5)  # fmt: skip
     handles.append(Line2D([], [], linestyle="none", marker="o", markerfacecolor="white",
                           markeredgecolor="black", label="start"))  # fmt: skip
     for name, k in counts.items():
