@@ -39,6 +39,16 @@ def random_actions(env: Any, rng: np.random.Generator) -> dict[str, Any]:
     }
 
 
+def live_steps(env: Any, steps: int, rng: np.random.Generator) -> list[tuple]:
+    """Up to ``steps`` steps with random actions, fewer if the episode ends; the step results."""
+    out = []
+    for _ in range(steps):
+        if not env.agents:
+            break
+        out.append(env.step(random_actions(env, rng)))
+    return out
+
+
 def run(env: Any, steps: int, seed: int = 3, hook: Any = None) -> Trace:
     """Reset with ``seed`` and step with seeded random actions; ``hook(env, t)`` runs before step ``t``."""
     tr = Trace()

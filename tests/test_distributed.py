@@ -14,7 +14,7 @@ from agentsim_env.distributed import make as make_sharded
 from agentsim_env.env.vector import BatchedEnv
 from agentsim_env.recorder import record
 from agentsim_env.recorder.read import Store
-from tests.distributed_helpers import compare, random_actions, run
+from tests.distributed_helpers import compare, live_steps, random_actions, run
 
 COMMS = {"loss": 0.1, "latency": 1, "heartbeat_period": 5, "heartbeat_timeout": 16}
 CASES = [
@@ -141,15 +141,6 @@ def test_batched_front_end_equals_one_process() -> None:
 
 
 # ---------------------------------------------------------------------------------------------- faults
-def _live_steps(env, steps: int, rng: np.random.Generator) -> list[tuple]:  # type: ignore[no-untyped-def]
-    out = []
-    for _ in range(steps):
-        if not env.agents:
-            break
-        out.append(env.step(random_actions(env, rng)))
-    return out
-
-
 def test_a_dead_shard_terminates_its_agents_once_and_the_rest_goes_on(tmp_path) -> None:  # type: ignore[no-untyped-def]
     env = record(make_sharded("navigation", shards=2, backend="local", n_agents=200, collisions=False),
                  tmp_path / "run.db")  # fmt: skip
@@ -157,7 +148,7 @@ def test_a_dead_shard_terminates_its_agents_once_and_the_rest_goes_on(tmp_path) 
     co = inner.coordinator
     rng = np.random.default_rng(0)
     env.reset(seed=0)
-    _live_steps(env, 5, rng)
+    live_steps(env, 5, rng)
     doomed = {inner.possible_agents[i] for i in np.flatnonzero(co.owner == 1)}
     assert doomed
     co.backend.kill(1)
@@ -167,7 +158,7 @@ def test_a_dead_shard_terminates_its_agents_once_and_the_rest_goes_on(tmp_path) 
     assert not doomed & set(env.agents)
     assert not inner.shards[1].alive and "died" in inner.shards[1].reason
     assert inner.shards[0].alive
-    later = _live_steps(env, 10, rng)
+    later = live_steps(env, 10, rng)
     assert len(later) == 10 and all(not (set(s[2]) & doomed) for s in later)  # never reported again
     env.close()
     store = Store(tmp_path / "run.db")
@@ -187,12 +178,12 @@ def test_a_slow_shard_is_declared_offline_at_its_deadline() -> None:
     _, _, term, _, _ = env.step(random_actions(env, rng))
     assert any(term.values())
     assert not env.shards[0].alive and "deadline" in env.shards[0].reason
-    assert len(_live_steps(env, 5, rng)) == 5
+    assert len(live_steps(env, 5, rng)) == 5
     # the next episode starts the shard anew with every agent
     env.reset(seed=1)
     assert all(s.alive for s in env.shards) and env.shards[0].restarts == 1
     assert len(env.agents) == 100
-    assert len(_live_steps(env, 3, rng)) == 3
+    assert len(live_steps(env, 3, rng)) == 3
 
 
 def test_every_shard_offline_is_an_error_naming_reset() -> None:

@@ -18,7 +18,7 @@ from agentsim_env.distributed import make as make_sharded
 from agentsim_env.recorder import record
 from agentsim_env.recorder.read import Store
 from agentsim_env.scenarios.registry import list_scenarios, scenario_class
-from tests.distributed_helpers import compare, random_actions
+from tests.distributed_helpers import compare, live_steps, random_actions
 
 pytestmark = pytest.mark.slow
 ray = pytest.importorskip("ray")
@@ -52,31 +52,22 @@ def test_ray_shards_equal_one_process_over_200_steps(name: str, shards: int) -> 
         assert got.handovers > 0
 
 
-def _steps(env, n: int, rng: np.random.Generator) -> list[tuple]:  # type: ignore[no-untyped-def]
-    out = []
-    for _ in range(n):
-        if not env.agents:
-            break
-        out.append(env.step(random_actions(env, rng)))
-    return out
-
-
 def test_a_killed_shard_actor_loses_only_its_agents(tmp_path) -> None:  # type: ignore[no-untyped-def]
     env = record(make_sharded("navigation", shards=2, n_agents=200, collisions=False), tmp_path / "run.db")
     inner = env.env
     rng = np.random.default_rng(0)
     env.reset(seed=0)
-    _steps(env, 5, rng)
+    live_steps(env, 5, rng)
     doomed = {inner.possible_agents[i] for i in np.flatnonzero(inner.coordinator.owner == 0)}
     ray.kill(inner.coordinator.backend.actors[0], no_restart=True)
     _, _, term, _, _ = env.step(random_actions(env, rng))
     assert {a for a, t in term.items() if t} == doomed
     assert not inner.shards[0].alive and "died" in inner.shards[0].reason
-    later = _steps(env, 10, rng)
+    later = live_steps(env, 10, rng)
     assert len(later) == 10 and len(env.agents) == 200 - len(doomed)
     env.reset(seed=1)  # the next episode restarts the shard
     assert all(s.alive for s in inner.shards) and len(env.agents) == 200
-    _steps(env, 3, rng)
+    live_steps(env, 3, rng)
     env.close()
     ev = Store(tmp_path / "run.db").events().reset_index()
     assert (ev.event == "shard_offline").sum() == len(doomed)
@@ -86,14 +77,14 @@ def test_a_shard_sleeping_past_the_deadline_does_not_hang_the_step() -> None:
     env = make_sharded("navigation", shards=2, n_agents=100, timeout_s=1.0)
     rng = np.random.default_rng(0)
     env.reset(seed=0)
-    _steps(env, 2, rng)
+    live_steps(env, 2, rng)
     env.coordinator.backend.set_delay(1, 30.0)
     t0 = time.perf_counter()
     _, _, term, _, _ = env.step(random_actions(env, rng))
     took = time.perf_counter() - t0
     assert took < 25.0, f"the step waited {took:.1f} s for a shard that sleeps 30 s"
     assert any(term.values()) and not env.shards[1].alive and "deadline" in env.shards[1].reason
-    assert len(_steps(env, 5, rng)) == 5
+    assert len(live_steps(env, 5, rng)) == 5
     env.close()
 
 

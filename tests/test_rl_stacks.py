@@ -73,7 +73,10 @@ def test_core_install_and_default_extras_leave_the_stacks_out() -> None:
     for extra in default.group(1).split(","):
         deps += extras[extra]
     names = {re.split(r"[\[<>=!~; ]", d, maxsplit=1)[0].lower() for d in deps}
-    assert not names & {"ray", "torchrl", "tensordict", "benchmarl"}, names
+    assert not names & {"torchrl", "tensordict", "benchmarl"}, names
+    # plain Ray (the distributed shards' extra, whose tests run in make test) is in; RLlib stays out
+    assert not [d for d in deps if "rllib" in d.lower()], deps
+    assert "ray" not in {re.split(r"[\[<>=!~; ]", d, maxsplit=1)[0].lower() for d in project["dependencies"]}
 
 
 @pytest.mark.parametrize("stack", sorted(set(EXAMPLES.values())))

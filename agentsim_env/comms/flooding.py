@@ -20,6 +20,16 @@ _TOKEN_MAX = np.iinfo(np.int32).max
 
 
 @nb.njit(cache=True)
+def next_token(stamp, token):  # type: ignore[no-untyped-def]
+    """The next stamp token (a flood's "already read" mark); past the int32 range the stamps start over."""
+    token += 1
+    if token == _TOKEN_MAX:
+        stamp[:] = 0
+        token = 1
+    return token
+
+
+@nb.njit(cache=True)
 def _room(a, need, keep):  # type: ignore[no-untyped-def]
     # ``a`` with room for ``need`` entries (doubling), its first ``keep`` entries kept.
     if need <= a.shape[0]:
@@ -102,10 +112,7 @@ def spread(start, end, indices, hops, limit, active, rd_start, rd_len, pool, cur
         while b < ncur and cur_f[b] == f:
             b += 1
         seen[f] = True
-        token += 1
-        if token == _TOKEN_MAX:  # start the tokens over rather than overflow
-            stamp[:] = 0
-            token = 1
+        token = next_token(stamp, token)
         tok = np.int32(token)
         if full:  # earlier floods' later hops may have used the room reserved above: check this one's
             b0 = 0

@@ -20,9 +20,28 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from agentsim_env.comms.flooding import next_token
 from agentsim_env.comms.overlay import Deliveries, Overlay, OverlayStats
 
-_TOKEN_MAX = np.iinfo(np.int32).max
+
+@nb.njit(cache=True)
+def _keep_readers(f, rd_start, rd_len, pool, own, add_start, add_len, add_v, new_pool, npool, stamp, tok):  # type: ignore[no-untyped-def]  # noqa: E501
+    # Flood f's own readers (the ones still own, then the added ones) into new_pool, stamped with tok (when
+    # tok >= 0); returns the new pool length.
+    for k in range(rd_start[f], rd_start[f] + rd_len[f]):
+        x = pool[k]
+        if own[x]:
+            new_pool[npool] = x
+            npool += 1
+            if tok >= 0:
+                stamp[x] = tok
+    for k in range(add_start[f], add_start[f] + add_len[f]):
+        x = add_v[k]
+        new_pool[npool] = x
+        npool += 1
+        if tok >= 0:
+            stamp[x] = tok
+    return npool
 
 
 @nb.njit(cache=True)
@@ -55,23 +74,12 @@ def _hop_kernel(start, end, indices, own, fr_f, fr_u, active, rd_start, rd_len, 
         while b < n_fr and fr_f[b] == f:
             b += 1
         seen[f] = True
-        token += 1
-        if token == _TOKEN_MAX:
-            stamp[:] = 0
-            token = 1
+        token = next_token(stamp, token)
         tok = np.int32(token)
         p0 = npool
-        for k in range(rd_start[f], rd_start[f] + rd_len[f]):
-            x = pool[k]
-            if own[x]:
-                new_pool[npool] = x
-                npool += 1
-                stamp[x] = tok
-        for k in range(add_start[f], add_start[f] + add_len[f]):
-            x = add_v[k]
-            new_pool[npool] = x
-            npool += 1
-            stamp[x] = tok
+        npool = _keep_readers(
+            f, rd_start, rd_len, pool, own, add_start, add_len, add_v, new_pool, npool, stamp, tok
+        )
         for q in range(a, b):
             u = fr_u[q]
             if own[u]:
@@ -91,14 +99,8 @@ def _hop_kernel(start, end, indices, own, fr_f, fr_u, active, rd_start, rd_len, 
     for f in range(cap):  # active floods without a relevant frontier entry keep their own readers
         if active[f] and not seen[f]:
             p0 = npool
-            for k in range(rd_start[f], rd_start[f] + rd_len[f]):
-                x = pool[k]
-                if own[x]:
-                    new_pool[npool] = x
-                    npool += 1
-            for k in range(add_start[f], add_start[f] + add_len[f]):
-                new_pool[npool] = add_v[k]
-                npool += 1
+            npool = _keep_readers(f, rd_start, rd_len, pool, own, add_start, add_len, add_v, new_pool, npool, stamp,
+                                  np.int32(-1))  # fmt: skip
             new_start[f] = p0
             new_len[f] = npool - p0
     return new_pool[:npool], new_start, new_len, out_v[:nd], out_f[:nd], edges, token
