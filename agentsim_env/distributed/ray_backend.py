@@ -5,6 +5,9 @@ given (started here, stopped when the last env using it closes), or the cluster 
 runs on every shard at once; ``ray.wait`` bounds it by the deadline, so a step never hangs on a dead or slow
 machine: a shard that misses it is killed and reported as a :class:`~agentsim_env.distributed.backends.Failure`,
 as is one whose process died. An exception raised by the shard's own code propagates as itself.
+
+When this process has already called ``ray.init`` (a test's cluster, a trainer's), the shards join that cluster
+and ``ray_address`` is not used.
 """
 
 from __future__ import annotations
