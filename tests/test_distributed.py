@@ -255,3 +255,15 @@ def test_cli_run_shards_bad_options(argv: list[str], match: str, capsys: pytest.
 
     assert main(["run", "navigation", "--episodes", "1", "--out", "", "--quiet", *argv]) == 2
     assert match in capsys.readouterr().err
+
+
+def test_the_mirror_serves_render_state_and_messages_as_one_process() -> None:
+    kw = {"n_agents": 40, "comms": {}, "render_mode": "rgb_array"}
+    one, two = agentsim_env.make("navigation", **kw), make_sharded("navigation", shards=2, backend="local", **kw)
+    for env in (one, two):
+        env.reset(seed=5)
+        env.send_message("agent_0", [0.5, 0.5, 0.5, 0.5], to="agent_1")
+        env.step(random_actions(env, np.random.default_rng(0)))
+    assert np.array_equal(one.render(), two.render())
+    assert np.array_equal(one.state(), two.state())
+    assert np.array_equal(one.world.comms.bus.inbox.payload, two.world.comms.bus.inbox.payload)
