@@ -267,3 +267,20 @@ def test_the_mirror_serves_render_state_and_messages_as_one_process() -> None:
     assert np.array_equal(one.render(), two.render())
     assert np.array_equal(one.state(), two.state())
     assert np.array_equal(one.world.comms.bus.inbox.payload, two.world.comms.bus.inbox.payload)
+
+
+def test_sb3_trains_over_shards_as_over_one_process() -> None:
+    pytest.importorskip("stable_baselines3")
+    from stable_baselines3 import PPO
+
+    from agentsim_env.env.sb3 import AgentSimVecEnv
+
+    kw = {"n_agents": 16, "max_steps": 40}
+    runs = []
+    for batch in (BatchedEnv("navigation", 1, **kw), DistributedBatchedEnv("navigation", 2, backend="local", **kw)):
+        venv = AgentSimVecEnv("navigation", 1, seed=0, batch=batch)
+        model = PPO("MlpPolicy", venv, n_steps=32, batch_size=64, n_epochs=1, seed=0, device="cpu")
+        model.learn(total_timesteps=16 * 64)
+        runs.append([p.detach().numpy().copy() for p in model.policy.parameters()])
+        venv.close()
+    assert all(np.array_equal(a, b) for a, b in zip(runs[0], runs[1], strict=True))

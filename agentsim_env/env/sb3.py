@@ -29,12 +29,17 @@ class AgentSimVecEnv(VecEnv):
         name: Scenario name.
         n_worlds: Worlds B.
         seed: Seed of the first reset.
+        batch: A batched env to drive instead of building one from ``name`` and ``n_worlds`` (e.g. a
+            ``distributed.DistributedBatchedEnv``: the same training over shards); ``close()`` closes it.
         **config: Scenario config keys.
     """
 
-    def __init__(self, name: str, n_worlds: int, seed: int | None = 0, **config: Any) -> None:
-        self.batch = BatchedEnv(name, n_worlds, **config)
+    def __init__(
+        self, name: str, n_worlds: int, seed: int | None = 0, *, batch: BatchedEnv | None = None, **config: Any
+    ) -> None:
+        self.batch = batch if batch is not None else BatchedEnv(name, n_worlds, **config)
         b = self.batch
+        n_worlds = b.n_worlds
         obs_space = spaces.Box(-np.inf, np.inf, shape=(b.obs_dim,), dtype=np.float32)
         lows = np.concatenate([np.full(p.size, p.low) for p in b._obs_parts.values()]).astype(np.float32)
         highs = np.concatenate([np.full(p.size, p.high) for p in b._obs_parts.values()]).astype(np.float32)
@@ -88,7 +93,10 @@ class AgentSimVecEnv(VecEnv):
         return obs, rew, dones, infos
 
     def close(self) -> None:
-        """Nothing to release."""
+        """Close the batched env when it holds anything (the shards of a distributed one)."""
+        close = getattr(self.batch, "close", None)
+        if close is not None:
+            close()
 
     def seed(self, seed: int | None = None) -> list[int | None]:
         """Seed of the next reset."""
