@@ -120,6 +120,8 @@ class RayShards:
         if method == "reset":
             timeout_s = max(timeout_s, STARTUP_TIMEOUT_S)
         refs = {k: getattr(self.actors[k], method).remote(*args) for k, args in calls.items()}
+        if not refs:
+            return {}
         _, late = ray.wait(list(refs.values()), num_returns=len(refs), timeout=timeout_s)
         late_set = set(late)
         out: dict[int, Packed | Failure] = {}
