@@ -321,9 +321,8 @@ class Coordinator:
             offline = np.union1d(timed_out, self.lost)
             for k in range(len(self.shards)):
                 calls[k] = (*calls[k], offline, self._hop_for(k, ghost_of[k]), link_range, hit_ids)
-            sensed = hit = self._call(
-                "collide_sense", calls
-            )  # 5 and 8 (range graph, overlay hop) on the shards
+            # 5 and 8 (with the range graph and the overlay hop) on the shards
+            sensed = hit = self._call("collide_sense", calls)
             events = _merge_collisions(list(hit.values()))
             ctx.collisions = events
             went = _NONE
