@@ -27,6 +27,7 @@ class Backend(Protocol):
     """The calls a coordinator makes on its shards."""
 
     n_shards: int
+    address: str  # where the shards run, for messages ("local", a cluster address)
 
     def call(
         self, method: str, calls: dict[int, tuple[Any, ...]], timeout_s: float

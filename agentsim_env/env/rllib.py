@@ -45,7 +45,8 @@ class AgentSimRLlibEnv(ParallelPettingZooEnv):
         scenario = cfg.pop("scenario", "navigation")
         super().__init__(build_parallel_env(scenario, {"obs_format": "dict", "action_format": "flat"}, **cfg))
 
-    def step(self, action_dict: dict[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
+    # RLlib's stubs type the ids as Hashable and the returns as gymnasium's single-agent tuple
+    def step(self, action_dict: dict[str, Any]) -> tuple[dict, dict, dict, dict, dict]:  # type: ignore[override]
         """Step the live agents; ``"__all__"`` is set when none is left."""
         obs, rewards, terms, truncs, infos = self.par_env.step(action_dict)
         over = not self.par_env.agents
@@ -89,6 +90,6 @@ def ppo_config(scenario: str = "navigation", **config: Any) -> PPOConfig:
         PPOConfig()
         .environment(AgentSimRLlibEnv, env_config=env_config)
         .env_runners(num_env_runners=0, env_to_module_connector=connector)
-        .multi_agent(policies={SHARED_POLICY}, policy_mapping_fn=shared_policy)
+        .multi_agent(policies={SHARED_POLICY}, policy_mapping_fn=shared_policy)  # type: ignore[arg-type]
         .rl_module(rl_module_spec=MultiRLModuleSpec(rl_module_specs={SHARED_POLICY: RLModuleSpec()}))
     )
