@@ -14,8 +14,9 @@ One step (see ``distributed.shard`` for the shard's side):
 2. ``collide``: handed-over agents and ghosts in, collisions of own agents out (a contact across an edge is
    found by both shards, each reporting its own agent: it is counted once per agent, as in one process). The
    groups stage (heartbeat timeouts) runs here.
-3. ``sense`` with every slot that went offline; the nearest neighbours and frontier links come back for the
-   comms stage (which runs here), and the proximity rows for the observations.
+3. ``sense`` with every slot that went offline and the overlay frontier each shard can walk; the nearest
+   neighbours and the hop's deliveries come back for the comms stage (which runs here), and the proximity rows
+   for the observations. When collisions take nobody offline, calls 2 and 3 go as one (``collide_sense``).
 
 Faults: every reply carries a heartbeat (shard, address, step, compute time) kept in ``shards``; a shard that
 dies or misses the deadline is declared offline at once: its agents go offline (they report ``terminations``
@@ -136,7 +137,6 @@ class Coordinator:
         self._objects: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
         self.lost = _NONE
         self.traffic = Traffic()
-        self.events_log: list[dict[str, Any]] = []
 
     # ------------------------------------------------------------------ faults
     @property
@@ -154,8 +154,6 @@ class Coordinator:
         self.world.set_offline(slots)
         self.lost = np.union1d(self.lost, slots)
         self.strips.reassign(k, self.alive)
-        self.events_log.append({"event": "shard_offline", "shard": k, "address": info.address,
-                                "tick": int(self.world.tick), "agents": int(slots.size), "reason": reason})  # fmt: skip
         log.warning("shard %d (%s) is offline: %s; its %d agents terminate, the simulation goes on",
                     k, info.address, reason, slots.size)  # fmt: skip
 
@@ -264,11 +262,9 @@ class Coordinator:
         replies = self._call("reset", {k: (seed, self.strips.owner) for k in range(len(self.shards))})
         for k, r in replies.items():
             self.owner[r["slots"]] = k
-        for info in self.shards:  # a shard that failed its reset loses its agents at once
-            if not info.alive:
-                lost = np.flatnonzero(world.state.online & (self.owner < 0))
-                world.set_offline(lost)
-                self.lost = np.union1d(self.lost, lost)
+        if not self.alive.all():  # a shard that failed its reset loses its agents at once
+            self.lost = np.flatnonzero(world.state.online & (self.owner < 0))
+            world.set_offline(self.lost)
         self._take_rows(replies)
         self._sense_others(fresh=True)
 
@@ -320,7 +316,9 @@ class Coordinator:
             timed_out, group_events = world.run_groups(ctx)  # 6 here
             offline = np.union1d(timed_out, self.lost)
             for k in range(len(self.shards)):
-                calls[k] = (*calls[k], offline, self._hop_for(k, ghost_of[k]), link_range, hit_ids)
+                sense = (offline, self._hop_for(k, ghost_of[k]), link_range, hit_ids)
+                tr.other += nbytes(sense)
+                calls[k] = (*calls[k], *sense)
             # 5 and 8 (with the range graph and the overlay hop) on the shards
             sensed = hit = self._call("collide_sense", calls)
             events = _merge_collisions(list(hit.values()))

@@ -10,6 +10,7 @@ step time; ``env.add_objects`` adds static objects at run time (every shard has 
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any
 
 import numpy as np
@@ -180,9 +181,7 @@ class DistributedBatchedEnv(BatchedEnv):
 
 
 def _config_fields(scenario: Scenario) -> dict[str, Any]:
-    """The scenario's config as keyword arguments that rebuild it (nested configs as dicts)."""
-    import dataclasses
-
+    """The scenario's config as keyword arguments that rebuild it (nested configs as their dataclasses)."""
     c = scenario.config
     return {f.name: getattr(c, f.name) for f in dataclasses.fields(c)}
 

@@ -263,10 +263,9 @@ class ShardedOverlay(Overlay):
     @classmethod
     def like(cls, other: Overlay) -> ShardedOverlay:
         """A sharded overlay with the settings (slots, payload width, ranges) of ``other``."""
-        new = cls(
+        return cls(
             other.n_slots, other.payload_dim, other.comm_range.copy(), full_propagation=other.full_propagation
         )
-        return new
 
     def put(self, slot: np.ndarray, flood: np.ndarray, links: int) -> None:
         """The deliveries every shard found for the coming hop (any order) and the links they walked."""

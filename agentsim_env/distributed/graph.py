@@ -15,7 +15,7 @@ import numpy as np
 
 
 class GatheredGraph:
-    """Nearest neighbours and frontier links gathered from the shards (see the module docstring).
+    """The nearest neighbours gathered from the shards, read by the comms stack (see the module docstring).
 
     Args:
         n_slots: Number of slots S.
@@ -33,7 +33,7 @@ class GatheredGraph:
 
     # -- what the shards send ---------------------------------------------------------------------------
     def clear(self) -> None:
-        """Forget the previous step's rows (every slot: no nearest neighbour, no links)."""
+        """Forget the previous step's rows (every slot: no nearest neighbour)."""
         self._near.fill(-1)
 
     def put(self, slots: np.ndarray, nearest: np.ndarray) -> None:

@@ -14,7 +14,9 @@ A step is three calls, each answered with packed arrays and a heartbeat (``distr
 2. ``collide``: takes in the agents handed over to it and the step's ghosts, then runs stage 5; returns the
    collisions of its own agents.
 3. ``sense``: takes the slots that went offline anywhere (collisions, heartbeat timeouts), then the range graph
-   (each own agent's nearest neighbour, and the links of the overlay's frontier) and stage 8's proximity scan.
+   (each own agent's nearest neighbour), one overlay hop into the own agents and stage 8's proximity scan.
+
+(``collide_sense`` is calls 2 and 3 in one, for collisions that take nobody offline.)
 
 This module imports no Ray: ``distributed.ray_backend`` wraps a ``Shard`` in an actor; the local backend calls
 it in process.
@@ -84,10 +86,6 @@ class Shard:
     def set_delay(self, delay_s: float) -> None:
         """Test hook: sleep ``delay_s`` seconds in every later call (0: none)."""
         self.delay_s = float(delay_s)
-
-    def ping(self) -> Packed:
-        """A heartbeat with no work (the coordinator's liveness probe)."""
-        return self._beat(time.perf_counter())
 
     def _set_online(self) -> None:
         st = self.world.state
@@ -213,9 +211,14 @@ class Shard:
             out[f"a.{f}"] = getattr(st, f)[leave]
         for f in MOTION_FIELDS:
             out[f"m.{f}"] = getattr(world.motion, f)[leave]
-        gone = np.zeros(s, dtype=bool)
-        gone[leave] = True
-        out["r.flood"], out["r.slot"] = self.readers.take_leaving(gone)
+        if (
+            leave.size
+        ):  # their reads of the floods go with them (a scan of the reader lists: only when needed)
+            gone = np.zeros(s, dtype=bool)
+            gone[leave] = True
+            out["r.flood"], out["r.slot"] = self.readers.take_leaving(gone)
+        else:
+            out["r.flood"] = out["r.slot"] = np.zeros(0, dtype=np.int64)
         self.own[leave] = False
         st.online[leave] = False
         out["beat"] = self._beat(t0)
