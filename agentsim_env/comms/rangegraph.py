@@ -110,6 +110,9 @@ def _graph_kernel(pos, online, world, cell_start, items, ox, oy, cell, nx, ny, r
     # cells (the same cells): a reach far beyond the map must not overflow the integer cell index
     lo_x, lo_y = ox - cell, oy - cell
     hi_x, hi_y = ox + (nx + 1) * cell, oy + (ny + 1) * cell
+    if cand.shape[0] < 3 * m + 3:  # room for any window (<= m candidates) and the two row scratch lists
+        cand = _grown(cand, 3 * m + 3, 0)
+    d2c = np.empty(m + 1)  # squared distance of each kept candidate
     n = 0
     for idx in range(m):
         u = items[idx]
@@ -117,12 +120,6 @@ def _graph_kernel(pos, online, world, cell_start, items, ox, oy, cell, nx, ny, r
         x0, y0 = cell_of(max(xu - reach, lo_x), max(yu - reach, lo_y), ox, oy, cell, nx, ny)
         x1, y1 = cell_of(min(xu + reach, hi_x), min(yu + reach, hi_y), ox, oy, cell, nx, ny)
         base0 = world[u] * nx
-        n_cand = 0
-        for a in range(x0, x1 + 1):
-            base = (base0 + a) * ny
-            n_cand += cell_start[base + y1 + 1] - cell_start[base + y0]
-        if n_cand > cand.shape[0]:
-            cand = _grown(cand, n_cand, 0)
         k = 0
         for a in range(x0, x1 + 1):
             base = (base0 + a) * ny
@@ -130,14 +127,14 @@ def _graph_kernel(pos, online, world, cell_start, items, ox, oy, cell, nx, ny, r
                 dx = sp[q, 0] - xu
                 dy = sp[q, 1] - yu
                 dz = sp[q, 2] - zu
+                d2 = dx * dx + dy * dy + dz * dz
                 cand[k] = q
-                k += dx * dx + dy * dy + dz * dz <= r2
+                d2c[k] = d2
+                k += d2 <= r2
         # phase 2 over the k candidates in range (u itself among them, at q == idx); A goes straight to the
         # row, B and C to cand[k:2k] and cand[2k:3k], branch free as well
         if n + k > indices.shape[0]:
             indices = _grown(indices, n + k, n)
-        if 3 * k > cand.shape[0]:
-            cand = _grown(cand, 3 * k, k)
         lu = ok_link[idx]
         m2 = np.inf  # smallest squared distance to another slot
         row0 = n
@@ -146,11 +143,8 @@ def _graph_kernel(pos, online, world, cell_start, items, ox, oy, cell, nx, ny, r
         for c in range(k):
             q = cand[c]
             v = items[q]
-            dx = sp[q, 0] - xu
-            dy = sp[q, 1] - yu
-            dz = sp[q, 2] - zu
-            d2 = dx * dx + dy * dy + dz * dz
-            other = v != u
+            d2 = d2c[c]
+            other = q != idx
             m2 = min(m2, d2 if other else np.inf)
             r = min(ru, sp[q, 3])
             link = other & lu & ok_link[q] & (d2 <= r * r)
@@ -166,17 +160,12 @@ def _graph_kernel(pos, online, world, cell_start, items, ox, oy, cell, nx, ny, r
         # can round to the same or a smaller distance
         bslot = -1
         if m2 <= near_hi:
-            lim = m2 * (1.0 + 1e-9)
+            lim = min(m2 * (1.0 + 1e-9), pair_d2)
             best = np.inf
             for c in range(k):
-                q = cand[c]
-                v = items[q]
-                dx = sp[q, 0] - xu
-                dy = sp[q, 1] - yu
-                dz = sp[q, 2] - zu
-                d2 = dx * dx + dy * dy + dz * dz
-                if d2 <= lim and d2 <= pair_d2 and v != u:
-                    d = np.sqrt(d2)
+                if d2c[c] <= lim and cand[c] != idx:
+                    v = items[cand[c]]
+                    d = np.sqrt(d2c[c])
                     if d <= near_r and (d < best or (d == best and v < bslot)):
                         best = d
                         bslot = v
@@ -256,15 +245,15 @@ class RangeGraph:
         g = self._grid
         assert g is not None
         sp = g.spec
-        reach = self.max_dist
-        if links and link_range.shape[0]:
-            reach = max(reach, float(link_range.max()))  # a reduction, no allocation
+        top = float(link_range.max()) if link_range.shape[0] else 0.0  # a reduction, no allocation
+        reach = max(self.max_dist, top) if links else self.max_dist
+        pos = np.ascontiguousarray(self._pos, dtype=np.float64)
+        online = np.ascontiguousarray(self._online, dtype=np.bool_)
+        world = np.ascontiguousarray(self._world, dtype=np.int64)
         start, end, near, indices, cand, sp4, ok_link = self._buf
         indices, cand = _graph_kernel(
-            np.ascontiguousarray(self._pos, dtype=np.float64), np.ascontiguousarray(self._online, dtype=np.bool_),
-            np.ascontiguousarray(self._world, dtype=np.int64), g.cell_start, g.items, sp.origin_x, sp.origin_y,
-            sp.cell, sp.nx, sp.ny, reach, self.max_dist, link_range, self.nearest_range, links, start, end, near,
-            indices, cand, sp4, ok_link,
+            pos, online, world, g.cell_start, g.items, sp.origin_x, sp.origin_y, sp.cell, sp.nx, sp.ny, reach,
+            self.max_dist, link_range, self.nearest_range, links, start, end, near, indices, cand, sp4, ok_link,
         )  # fmt: skip
         self._buf = (start, end, near, indices, cand, sp4, ok_link)
         self._near, self._near_ok = near, True

@@ -15,6 +15,7 @@ import numpy as np
 
 from agentsim_env.core.scene import BOX, CYLINDER
 from agentsim_env.core.spatial import Grid, cell_of, grow
+from agentsim_env.core.threads import RowThreads
 
 # Kernels compile with error_model="numpy": every division in them is guarded or by a validated positive
 # value, and dropping the per-division zero check of the default model made the scan ~20 % faster.
@@ -68,22 +69,27 @@ def surface_distance(px: float, py: float, pz: float, kind: int, c: np.ndarray, 
     return max(d, 0.0)
 
 
-@nb.njit(cache=True, error_model="numpy")
-def _agent_agent(pos, radius, online, world, cell_start, items, ox, oy, cell, nx, ny, margin):  # type: ignore[no-untyped-def]
+@nb.njit(cache=True, error_model="numpy", nogil=True)
+def _max_radius(radius, online):  # type: ignore[no-untyped-def]
+    # The largest radius of an online slot, -1 when none is online.
+    rmax = -1.0
+    for i in range(radius.shape[0]):
+        if online[i] and radius[i] > rmax:
+            rmax = radius[i]
+    return rmax
+
+
+@nb.njit(cache=True, error_model="numpy", nogil=True)
+def _agent_agent(lo, hi, rmax, pos, radius, world, cell_start, items, ox, oy, cell, nx, ny, margin):  # type: ignore[no-untyped-def]
     # Pairs (i < j, found from i's side in grid order, as spatial.neighbor_pairs) whose centres are closer
-    # than r_i + r_j + margin; 2 r_max + margin bounds every threshold, so one cell range serves all.
+    # than r_i + r_j + margin, for the grid items lo..hi-1; 2 r_max + margin bounds every threshold, so one
+    # cell range serves all.
     n = 0
     out_i = np.empty(16, dtype=np.int64)
     out_j = np.empty(16, dtype=np.int64)
-    rmax = -1.0
-    for i in range(pos.shape[0]):
-        if online[i] and radius[i] > rmax:
-            rmax = radius[i]
-    if rmax < 0.0:
-        return out_i[:0], out_j[:0]
     max_dist = 2.0 * rmax + margin
     r2 = max_dist * max_dist
-    for idx in range(items.shape[0]):
+    for idx in range(lo, hi):
         i = items[idx]
         w = world[i]
         x0, y0 = cell_of(pos[i, 0] - max_dist, pos[i, 1] - max_dist, ox, oy, cell, nx, ny)
@@ -107,15 +113,32 @@ def _agent_agent(pos, radius, online, world, cell_start, items, ox, oy, cell, nx
     return out_i[:n], out_j[:n]
 
 
-@nb.njit(cache=True, error_model="numpy")
+@nb.njit(cache=True, error_model="numpy", nogil=True)
 def _agent_object(
-    pos, radius, online, world, okind, ocentre, ohalf, oworld, cell_start, items, ox, oy, cell, nx, ny, margin
+    lo,
+    hi,
+    pos,
+    radius,
+    online,
+    world,
+    okind,
+    ocentre,
+    ohalf,
+    oworld,
+    cell_start,
+    items,
+    ox,
+    oy,
+    cell,
+    nx,
+    ny,
+    margin,
 ):  # type: ignore[no-untyped-def]
-    # One pass into growable buffers, agents in slot order.
+    # One pass into growable buffers, agents lo..hi-1 in slot order.
     n = 0
     out_a = np.empty(16, dtype=np.int64)
     out_o = np.empty(16, dtype=np.int64)
-    for i in range(pos.shape[0]):
+    for i in range(lo, hi):
         if not online[i]:
             continue
         reach = radius[i] + margin
@@ -149,6 +172,16 @@ def _agent_object(
     return out_a[:n], out_o[:n]
 
 
+_NONE = np.zeros(0, dtype=np.int64)
+_ONE = RowThreads(1)
+
+
+def _joined(parts: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
+    if len(parts) == 1:
+        return parts[0]
+    return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
+
+
 def find_collisions(
     pos: np.ndarray,
     radius: np.ndarray,
@@ -161,6 +194,7 @@ def find_collisions(
     scene_world: np.ndarray,
     object_grid: Grid | None,
     margin: float = 0.0,
+    threads: RowThreads | None = None,
 ) -> CollisionEvents:
     """Find agent-agent and agent-object collisions by distance threshold.
 
@@ -176,21 +210,28 @@ def find_collisions(
         scene_world: Object worlds ``(O,)``.
         object_grid: Grid of objects (``None`` when there are none).
         margin: Extra distance added to every threshold.
+        threads: Row ranges to run on (default: one range on the calling thread); the events do not depend
+            on it (each range's rows are joined in range order, which is the one-range order).
 
     Returns:
         Events; an agent-agent collision yields one row for each of the two agents (all pairs' first
         agents, then their second agents), followed by agent-object rows in slot order.
     """
     pos = np.ascontiguousarray(pos)
+    threads = threads if threads is not None else _ONE
     sp = agent_grid.spec
-    i, j = _agent_agent(pos, radius, online, world, agent_grid.cell_start, agent_grid.items, sp.origin_x,
-                        sp.origin_y, sp.cell, sp.nx, sp.ny, float(margin))  # fmt: skip
-    a_obj = o_obj = i[:0]
+    m = float(margin)
+    rmax = _max_radius(radius, online)
+    i = j = a_obj = o_obj = _NONE
+    if rmax >= 0.0:
+        cs, items = agent_grid.cell_start, agent_grid.items
+        i, j = _joined(threads.run(lambda lo, hi, _: _agent_agent(lo, hi, rmax, pos, radius, world, cs, items,
+                       sp.origin_x, sp.origin_y, sp.cell, sp.nx, sp.ny, m), items.shape[0]))  # fmt: skip
     if object_grid is not None and scene_kind.shape[0] > 0:
-        sp = object_grid.spec
-        a_obj, o_obj = _agent_object(pos, radius, online, world, scene_kind, scene_centre, scene_half,
-                                     scene_world, object_grid.cell_start, object_grid.items, sp.origin_x,
-                                     sp.origin_y, sp.cell, sp.nx, sp.ny, float(margin))  # fmt: skip
+        og, so = object_grid, object_grid.spec
+        a_obj, o_obj = _joined(threads.run(lambda lo, hi, _: _agent_object(lo, hi, pos, radius, online, world,
+                               scene_kind, scene_centre, scene_half, scene_world, og.cell_start, og.items,
+                               so.origin_x, so.origin_y, so.cell, so.nx, so.ny, m), pos.shape[0]))  # fmt: skip
     if not i.size and not a_obj.size:  # the common step: nothing hit, no concatenation
         return CollisionEvents.empty()
     none_a = np.full(i.shape[0] * 2, -1, dtype=np.int64)

@@ -18,6 +18,7 @@ These contracts live in ``core`` so that the subsystem packages can implement th
 
 from __future__ import annotations
 
+import math
 import zlib
 from dataclasses import dataclass, field
 from typing import Any, Protocol, runtime_checkable
@@ -85,7 +86,7 @@ class Part:
     @property
     def size(self) -> int:
         """Number of scalars in the part."""
-        return int(np.prod(self.shape))
+        return int(math.prod(self.shape))
 
 
 @runtime_checkable

@@ -17,9 +17,26 @@ from pettingzoo import ParallelEnv
 from pettingzoo.utils.conversions import parallel_to_aec
 
 from agentsim_env.core.pipeline import EpisodeSeeds
+from agentsim_env.core.threads import check_num_threads
 from agentsim_env.core.validation import check_choice
-from agentsim_env.env.spaces import FORMATS, REAL_KINDS, action_space_for, observation_space_for, split_action
-from agentsim_env.scenarios.base import Scenario, assert_finite, check_finite_default, reset_worlds, run_step
+from agentsim_env.env.batch_kernels import scatter_part
+from agentsim_env.env.buffers import Recycled
+from agentsim_env.env.spaces import (
+    FORMATS,
+    REAL_KINDS,
+    action_space_for,
+    flat_layout,
+    observation_space_for,
+    split_action,
+)
+from agentsim_env.scenarios.base import (
+    Scenario,
+    assert_finite,
+    check_finite_default,
+    flat_parts,
+    reset_worlds,
+    run_step,
+)
 from agentsim_env.scenarios.registry import make_scenario
 
 RENDER_MODES = ("human", "rgb_array", "web")
@@ -48,9 +65,40 @@ def _builder(keys: tuple[str, ...]) -> Callable[..., dict[str, Any]]:
     return builders.get(n, lambda *vals: dict(zip(keys, vals)))
 
 
-def _dicts(keys: tuple[str, ...], columns: list[Any]) -> list[dict[str, Any]]:
-    """One dict ``{keys[i]: columns[i][j]}`` per row ``j``."""
-    return list(map(_builder(keys), *columns))
+def _per_agent(agents: list[str], keys: tuple[str, ...], columns: list[Any]) -> dict[str, dict[str, Any]]:
+    """``{agents[j]: {keys[i]: columns[i][j]}}``: one small dict per agent, built in a single pass.
+
+    A dict comprehension with the keys as locals for up to four keys (every observation and info layout of the
+    plain scenarios), :func:`_builder` beyond.
+    """
+    if len(keys) == 3:
+        k0, k1, k2 = keys
+        c0, c1, c2 = columns
+        return {a: {k0: x, k1: y, k2: z} for a, x, y, z in zip(agents, c0, c1, c2)}
+    if len(keys) == 4:
+        k0, k1, k2, k3 = keys
+        c0, c1, c2, c3 = columns
+        return {a: {k0: x, k1: y, k2: z, k3: u} for a, x, y, z, u in zip(agents, c0, c1, c2, c3)}
+    if len(keys) == 2:
+        k0, k1 = keys
+        c0, c1 = columns
+        return {a: {k0: x, k1: y} for a, x, y in zip(agents, c0, c1)}
+    if len(keys) == 1:
+        k0 = keys[0]
+        return {a: {k0: x} for a, x in zip(agents, columns[0])}
+    return dict(zip(agents, map(_builder(keys), *columns)))
+
+
+def _rows(values: np.ndarray, idx: np.ndarray | None) -> list[Any]:
+    """``values[idx]`` (every row when ``idx`` is None) as a list of Python scalars."""
+    return (values if idx is None else values[idx]).tolist()  # type: ignore[no-any-return]
+
+
+def _checked(part: np.ndarray | None) -> np.ndarray:
+    """``part``, or ``ValueError`` when :func:`scatter_part` found a NaN or inf (the caller finds the agent)."""
+    if part is None:
+        raise ValueError
+    return part
 
 
 class AgentSimParallelEnv(ParallelEnv):
@@ -66,6 +114,8 @@ class AgentSimParallelEnv(ParallelEnv):
         check_finite: Debug switch: after every reset and step, raise ``FloatingPointError`` naming the part and
             the agent when an observation, reward or info handed out is NaN or inf (``None``: on when the
             environment variable ``AGENTSIM_CHECK_FINITE`` is ``1``; the test suite sets it).
+        num_threads: Threads for the per-agent kernels, 1..256 (default 1). Worth it from tens of thousands of
+            agents; results are identical for every count (``core.threads``).
     """
 
     def __init__(
@@ -76,17 +126,20 @@ class AgentSimParallelEnv(ParallelEnv):
         obs_format: str = "dict",
         action_format: str = "dict",
         check_finite: bool | None = None,
+        num_threads: int = 1,
     ) -> None:
         if render_mode is not None:
             check_choice("render_mode", render_mode, RENDER_MODES + (None,))
         check_choice("obs_format", obs_format, FORMATS)
         check_choice("action_format", action_format, FORMATS)
+        num_threads = check_num_threads(num_threads)
         self.scenario = scenario
         self.check_finite = check_finite_default(check_finite)
         self.render_mode = render_mode
         self.obs_format = obs_format
         self.action_format = action_format
         self.world = scenario.build(1)
+        self.world.set_num_threads(num_threads)
         self.metadata: dict[str, Any] = {
             "name": f"{scenario.name}_v{scenario.version}",
             "render_modes": list(RENDER_MODES),
@@ -97,7 +150,11 @@ class AgentSimParallelEnv(ParallelEnv):
         self._index = {a: i for i, a in enumerate(self.possible_agents)}
         # every agent has the same spaces: one object each, shared (200,000 agents would otherwise build
         # 400,000 gymnasium spaces, seconds of work for nothing)
-        obs_space = observation_space_for(scenario.obs_parts(), obs_format)
+        obs_parts = scenario.obs_parts()
+        obs_space = observation_space_for(obs_parts, obs_format)
+        self._obs_keys = tuple(obs_parts)
+        self._obs_cols = [(sl, obs_parts[k].shape) for k, sl in flat_layout(obs_parts).items()]
+        self._obs_out = Recycled((self.world.state.n_slots, sum(p.size for p in obs_parts.values())), np.float32)
         self._act_parts = scenario.act_parts()  # fixed per config; read on every step
         act_space = action_space_for(self._act_parts, action_format)
         self._obs_spaces = dict.fromkeys(self.possible_agents, obs_space)
@@ -140,15 +197,13 @@ class AgentSimParallelEnv(ParallelEnv):
         self._steps = 0
         self._started = True
         self._set_agents(list(self.possible_agents))
-        parts = self.scenario.observation(self.world)
-        if self.check_finite:
-            assert_finite(self.scenario, self.world.state.online, 0, parts)
+        flat = self._flat_obs(self.world.state.online)
         if self.render_mode == "human":
             self.render()
         elif self.render_mode == "web":
             self._web_episode()
         infos = self._reset_infos()
-        return self._obs_dicts(parts), infos
+        return self._obs_dicts(flat), infos
 
     def step(self, actions: dict[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
         """Advance one step with an action for every live agent (see the scenario docstring for layouts)."""
@@ -163,29 +218,25 @@ class AgentSimParallelEnv(ParallelEnv):
         sc, world = self.scenario, self.world
         # 1. validate everything before any state changes, then decode actions into motion commands
         parts = self._validate_actions(actions)
-        acting = np.zeros(world.state.n_slots, dtype=bool)
-        acting[self._live_idx] = True
+        acting = self._acting.copy()
         # 1. decode; 2-8. the world pipeline; 9. the scenario scores
         res, terminated = self._step_core(parts, acting)
         self._steps += 1
-        truncated = acting & ~terminated & (self._steps >= sc.max_steps)
-        obs_parts = sc.observation(world)
-        if self.check_finite:
-            assert_finite(sc, acting, self._steps, obs_parts, res)
-        obs = self._obs_dicts(obs_parts)
+        over = self._steps >= sc.max_steps
+        truncated = acting & ~terminated if over else np.zeros(acting.shape[0], dtype=bool)
+        obs = self._obs_dicts(self._flat_obs(acting, res))
         live = self.agents
-        idx = self._live_idx
-        rew = res.rewards[idx].astype(float).tolist()
-        term = terminated[idx].tolist()
-        trunc = truncated[idx].tolist()
-        rewards = dict(zip(live, rew))
-        terms = dict(zip(live, term))
-        truncs = dict(zip(live, trunc))
+        idx = None if len(live) == world.state.n_slots else self._live_idx  # None: every slot is live
+        rewards = dict(zip(live, _rows(np.asarray(res.rewards, dtype=np.float64), idx)))
+        # terminated and truncated are False outside the live slots: a dict of False is copied when none ended
+        ended_t, ended_u = bool(terminated.any()), over and bool(truncated.any())
+        terms = dict(zip(live, _rows(terminated, idx))) if ended_t else self._all_false.copy()
+        truncs = dict(zip(live, _rows(truncated, idx))) if ended_u else self._all_false.copy()
         keys = tuple(res.info)
-        cols = [res.info[k][idx].tolist() for k in keys]
-        infos = dict(zip(live, _dicts(keys, cols))) if keys else {a: {} for a in live}
-        if any(term) or any(trunc):
-            self._set_agents([a for a, t, u in zip(live, term, trunc) if not (t or u)])
+        infos = _per_agent(live, keys, [_rows(res.info[k], idx) for k in keys]) if keys else {a: {} for a in live}
+        if ended_t or ended_u:
+            keep = ~(terminated | truncated)[self._live_idx]
+            self._set_agents([a for a, k in zip(live, keep.tolist()) if k], self._live_idx[keep])
         if self.render_mode == "human":
             self.render()
         return obs, rewards, terms, truncs, infos
@@ -198,12 +249,19 @@ class AgentSimParallelEnv(ParallelEnv):
         """Stages 1-10 for validated action parts (the distributed env runs them over its shards)."""
         return run_step(self.scenario, self.world, parts, acting)
 
-    def _set_agents(self, agents: list[str]) -> None:
-        """Set the live agents and the lookups derived from them (rebuilt only when the list changes)."""
+    def _set_agents(self, agents: list[str], idx: np.ndarray | None = None) -> None:
+        """Set the live agents and the lookups derived from them (rebuilt only when the list changes).
+
+        ``idx``: their slots, when the caller has them.
+        """
         self.agents = agents
-        self._live_set = frozenset(agents)
-        self._live_idx = np.fromiter((self._index[a] for a in agents), dtype=np.int64, count=len(agents))
+        if idx is None:
+            idx = np.fromiter((self._index[a] for a in agents), dtype=np.int64, count=len(agents))
+        self._live_idx = idx
+        self._acting = np.zeros(self.world.state.n_slots, dtype=bool)
+        self._acting[idx] = True
         self._getter = operator.itemgetter(*agents) if len(agents) > 1 else None
+        self._all_false = dict.fromkeys(agents, False)
 
     def _validate_actions(self, actions: dict[str, Any]) -> dict[str, np.ndarray]:
         """Stack the actions of live agents into per-part arrays over slots (validated, clipped).
@@ -214,7 +272,7 @@ class AgentSimParallelEnv(ParallelEnv):
         if not isinstance(actions, dict):
             raise ValueError(f"actions must be a dict agent id -> action, got {type(actions).__name__}")
         live = self.agents
-        if actions.keys() != self._live_set:
+        if actions.keys() != self._all_false.keys():
             for a in actions:
                 if a not in self._index:
                     raise ValueError(f"unknown agent id {a!r} in actions; agents are {self.possible_agents[0]!r}..."
@@ -229,7 +287,7 @@ class AgentSimParallelEnv(ParallelEnv):
         n = len(live)
         acts = self._getter(actions) if self._getter is not None else (actions[live[0]],)
         s = self.world.state.n_slots
-        out = {name: np.zeros((s, p.size)) for name, p in parts.items()}
+        out: dict[str, np.ndarray] = {}
         try:
             # one rule (env.spaces.ACTION_RULE): real numbers of exactly the part's shape
             if self.action_format == "flat":
@@ -239,7 +297,7 @@ class AgentSimParallelEnv(ParallelEnv):
                     raise ValueError
                 start = 0
                 for name, p in parts.items():
-                    out[name][idx] = arr[:, start : start + p.size]
+                    out[name] = _checked(scatter_part(arr[:, start : start + p.size], idx, s, p.low, p.high))
                     start += p.size
             else:
                 if set(map(len, acts)) != {len(parts)}:
@@ -248,34 +306,39 @@ class AgentSimParallelEnv(ParallelEnv):
                     arr = np.asarray(list(map(operator.itemgetter(name), acts)))
                     if arr.shape != (n, *p.shape) or arr.dtype.kind not in REAL_KINDS:
                         raise ValueError
-                    out[name][idx] = arr.reshape(n, p.size)
-            for name in parts:
-                if not np.isfinite(out[name]).all():
-                    raise ValueError
+                    out[name] = _checked(scatter_part(arr.reshape(n, p.size), idx, s, p.low, p.high))
         except (ValueError, TypeError, KeyError):
             for a in live:  # slow path: find the culprit and raise naming it
                 split_action(actions[a], parts, self.action_format, a)
             raise ValueError(
                 "actions could not be stacked; check that every action has the same layout"
             ) from None
-        for name, p in parts.items():
-            np.clip(out[name], p.low, p.high, out=out[name])
         return out
 
     def _reset_infos(self) -> dict[str, dict[str, Any]]:
         """Infos at reset: the keys ``step`` returns, each at its neutral value (0)."""
         return {a: dict.fromkeys(self._info_keys, 0) for a in self.agents}
 
-    def _obs_dicts(self, parts: dict[str, np.ndarray]) -> dict[str, Any]:
-        """Per-agent observations of the live agents, built once from the part arrays (rows of fresh arrays)."""
-        s = self.world.state.n_slots
-        idx = self._live_idx
+    def _flat_obs(self, rows: np.ndarray, result: Any = None) -> np.ndarray:
+        """Flat observations ``(S, obs_dim)`` of every slot (a fresh array); with ``check_finite``, ``rows`` (and
+        ``result``) are checked first."""
+        out = self._obs_out.get()
+        if self.check_finite:
+            parts = self.scenario.observation(self.world)
+            assert_finite(self.scenario, rows, self._steps, parts, result)
+            return flat_parts(parts, self.world.state.n_slots, out)
+        return self.scenario.flat_observation(self.world, out)
+
+    def _obs_dicts(self, flat: np.ndarray) -> dict[str, Any]:
+        """Per-agent observations of the live agents from the fresh flat array: rows of it (``"flat"``) or dicts
+        of views of its part columns (``"dict"``); a later step never writes into them."""
+        if len(self.agents) != flat.shape[0]:
+            flat = flat[self._live_idx]
         if self.obs_format == "flat":
-            flat = np.concatenate([p.reshape(s, -1) for p in parts.values()], axis=1, dtype=np.float32)
-            return dict(zip(self.agents, flat[idx]))
-        keys = tuple(parts)
-        rows = [parts[k][idx] for k in keys]  # fancy indexing: fresh arrays, never views of live state
-        return dict(zip(self.agents, _dicts(keys, rows)))
+            return dict(zip(self.agents, flat))
+        n = flat.shape[0]
+        cols = [list(flat[:, sl].reshape(n, *shape)) for sl, shape in self._obs_cols]
+        return _per_agent(self.agents, self._obs_keys, cols)
 
     # ------------------------------------------------------------------ extras
     def _comms(self) -> Any:
@@ -387,7 +450,7 @@ def to_aec(env: AgentSimParallelEnv) -> Any:
 
 
 #: The keys of ``build_parallel_env`` (and ``agentsim_env.make``) that configure the env, not the scenario.
-ENV_KEYS = ("render_mode", "obs_format", "action_format", "check_finite")
+ENV_KEYS = ("render_mode", "obs_format", "action_format", "check_finite", "num_threads")
 
 
 def build_parallel_env(name: str, defaults: dict[str, Any] | None = None, **config: Any) -> AgentSimParallelEnv:

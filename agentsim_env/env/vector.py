@@ -17,9 +17,18 @@ from typing import Any
 import numpy as np
 
 from agentsim_env.core.pipeline import EpisodeSeeds
+from agentsim_env.core.threads import check_num_threads
 from agentsim_env.core.validation import check_int, is_int, short_repr
+from agentsim_env.env.batch_kernels import finish_step, prepare_actions
+from agentsim_env.env.buffers import Recycled
 from agentsim_env.env.spaces import flat_layout
-from agentsim_env.scenarios.base import assert_finite, check_finite_default, reset_worlds, run_step
+from agentsim_env.scenarios.base import (
+    assert_finite,
+    check_finite_default,
+    flat_parts,
+    reset_worlds,
+    run_step,
+)
 from agentsim_env.scenarios.registry import make_scenario
 
 MAX_WORLDS = 1_000_000
@@ -59,15 +68,20 @@ class BatchedEnv:
         n_worlds: Number of worlds B, 1..1,000,000.
         check_finite: Debug switch: raise ``FloatingPointError`` naming the part, the agent and the world when
             an observation, reward or info of a live agent is NaN or inf (``None``: from ``AGENTSIM_CHECK_FINITE``).
+        num_threads: Threads for the per-slot kernels, 1..256 (default 1); results are identical for every count.
         **config: Scenario config keys.
     """
 
-    def __init__(self, name: str, n_worlds: int, *, check_finite: bool | None = None, **config: Any) -> None:
+    def __init__(
+        self, name: str, n_worlds: int, *, check_finite: bool | None = None, num_threads: int = 1, **config: Any
+    ) -> None:
         check_int("n_worlds", n_worlds, 1, MAX_WORLDS)
         n_worlds = int(n_worlds)
+        num_threads = check_num_threads(num_threads)
         self.check_finite = check_finite_default(check_finite)
         self.scenario = make_scenario(name, **config)
         self.world = self.scenario.build(n_worlds)
+        self.world.set_num_threads(num_threads)
         self.n_worlds = n_worlds
         self.n_agents = self.scenario.n_agents
         self._obs_parts = self.scenario.obs_parts()
@@ -80,14 +94,19 @@ class BatchedEnv:
         self.steps = np.zeros(n_worlds, dtype=np.int64)
         self._seeds = [EpisodeSeeds() for _ in range(n_worlds)]
         self._started = False
+        self._obs_out = Recycled((self.world.state.n_slots, self.obs_dim), np.float32)
 
-    def _flat_obs(self, rows: np.ndarray | None = None, step: int = 0, result: Any = None) -> np.ndarray:
-        """Flat observations of every slot; with ``check_finite``, ``rows`` (and ``result``) are checked."""
-        parts = self.scenario.observation(self.world)
+    def _flat_obs(
+        self, rows: np.ndarray | None = None, step: int = 0, result: Any = None, out: np.ndarray | None = None
+    ) -> np.ndarray:
+        """Flat observations of every slot (into ``out`` when given); with ``check_finite``, ``rows`` (and
+        ``result``) are checked."""
         if self.check_finite and rows is not None:
+            parts = self.scenario.observation(self.world)
             assert_finite(self.scenario, rows, step, parts, result)
-        s = self.world.state.n_slots
-        flat = np.concatenate([p.reshape(s, -1) for p in parts.values()], axis=1, dtype=np.float32)
+            flat = flat_parts(parts, self.world.state.n_slots, out)
+        else:
+            flat = self.scenario.flat_observation(self.world, out)
         return flat.reshape(self.n_worlds, self.n_agents, self.obs_dim)
 
     def _reset_worlds(self, worlds: np.ndarray) -> None:
@@ -155,30 +174,26 @@ class BatchedEnv:
             raise ValueError(
                 f"actions must have shape {(self.n_worlds, self.n_agents, self.act_dim)}, got {a.shape}"
             )
-        bad = ~np.isfinite(a).all(axis=2) & self.alive
-        if bad.any():
-            w, i = np.argwhere(bad)[0]
-            raise ValueError(f"actions of world {w}, agent {i} contain NaN or inf")
-        a = np.clip(np.where(self.alive[:, :, None], a, 0.0), -1.0, 1.0).reshape(-1, self.act_dim)
         acting = self.alive.reshape(-1).copy()
+        a, bad = prepare_actions(a.reshape(-1, self.act_dim), acting)
+        if bad >= 0:
+            w, i = divmod(bad, self.n_agents)
+            raise ValueError(f"actions of world {w}, agent {i} contain NaN or inf")
         parts = {k: a[:, sl] for k, sl in self._act_layout.items()}
-        sc = self.scenario
         res, term = self._step_core(parts, acting)
         self.steps += 1
-        trunc = acting & ~term & np.repeat(self.steps >= sc.max_steps, self.n_agents)
-        shape = (self.n_worlds, self.n_agents)
-        term, trunc = term.reshape(shape), trunc.reshape(shape)
-        self.alive &= ~(term | trunc)
-        obs = self._flat_obs(acting, int(self.steps.max()), res)
-        obs[~self.alive & ~(term | trunc)] = 0.0
-        # asarray: numpy's stubs type a reduction over an axis as scalar-or-array; on (B, N) it is (B,)
-        done_worlds = np.asarray(~self.alive.any(axis=1))
+        obs = self._flat_obs(acting, int(self.steps.max()) if self.check_finite else 0, res, self._obs_out.get())
+        term = np.asarray(term, dtype=bool)
+        trunc, done_worlds, n_done = finish_step(term, acting, self.steps >= self.scenario.max_steps, self.alive,
+                                                 obs.reshape(-1, self.obs_dim))  # fmt: skip
         final = np.zeros(obs.shape, dtype=obs.dtype)  # calloc: pages stay untouched unless a world resets
-        if done_worlds.any():
+        if n_done:
             final[done_worlds] = obs[done_worlds]
             self._reset_worlds(np.flatnonzero(done_worlds))
             fresh = np.repeat(done_worlds, self.n_agents)
             obs[done_worlds] = self._flat_obs(fresh)[done_worlds]
+        shape = (self.n_worlds, self.n_agents)
         info = {k: v.reshape(shape) for k, v in res.info.items()}
         rewards = res.rewards.reshape(shape).astype(np.float32)
-        return BatchStep(obs, rewards, term, trunc, self.alive.copy(), final, done_worlds, info)
+        return BatchStep(obs, rewards, term.reshape(shape), trunc.reshape(shape), self.alive.copy(), final,
+                         done_worlds, info)  # fmt: skip

@@ -305,6 +305,50 @@ def integrate(
     )  # fmt: skip
 
 
+def integrate_unchecked(
+    ms: MotionState,
+    pos: np.ndarray,
+    vel: np.ndarray,
+    heading: np.ndarray,
+    max_speed: np.ndarray,
+    max_accel: np.ndarray,
+    online: np.ndarray,
+    dt: float,
+) -> None:
+    """:func:`integrate` without the checks, for a caller that already validated these very arrays and ``dt``."""
+    _integrate_kernel(
+        ms.kind, ms.params, ms.t, ms.waypoints, ms.n_waypoints, ms.wp_index, ms.done, ms.loop,
+        pos, vel, heading, max_speed, max_accel, online, dt,
+    )  # fmt: skip
+
+
+@njit(cache=True)
+def _clip_box_kernel(pos, lo, hi):  # type: ignore[no-untyped-def]
+    # max then min with NaN kept, as np.clip evaluates it (signed zeros included)
+    for s in range(pos.shape[0]):
+        for a in range(3):
+            x = pos[s, a]
+            m = x if (x >= lo[a] or x != x) else lo[a]
+            pos[s, a] = m if (m <= hi[a] or m != m) else hi[a]
+
+
+def clip_box(pos: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> None:
+    """Clip every position into the box ``[lo, hi]`` per axis, in place (one kernel).
+
+    Args:
+        pos: ``(S, 3)`` float64 positions, updated.
+        lo: ``(3,)`` float64 lower corner.
+        hi: ``(3,)`` float64 upper corner.
+    """
+    _clip_box_kernel(pos, lo, hi)
+
+
+def clip_box_reference(pos: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> None:
+    """Plain numpy statement of :func:`clip_box` (used by the tests)."""
+    for a in range(3):
+        np.clip(pos[:, a], lo[a], hi[a], out=pos[:, a])
+
+
 def integrate_reference(
     ms: MotionState,
     pos: np.ndarray,

@@ -7,12 +7,13 @@ slot's primitive in one kernel. Stage 1 (the scenario) writes the primitives wit
 
 from __future__ import annotations
 
+import operator
 from dataclasses import dataclass
 
 import numpy as np
 
 from agentsim_env.core.pipeline import StepContext
-from agentsim_env.motion.integrate import integrate
+from agentsim_env.motion.integrate import integrate, integrate_unchecked
 from agentsim_env.motion.primitives import set_hold
 from agentsim_env.motion.state import MotionState
 
@@ -40,6 +41,7 @@ class MotionStage:
         self.n_agents = int(n_agents)
         self.state = MotionState.create(int(n_worlds) * self.n_agents, max_waypoints)
         self.keep_start = keep_start
+        self._checked: tuple[object, ...] = ()  # the arrays and dt the last validated call was given
 
     def reset_world(self, w: int, rng: np.random.Generator) -> None:
         """Every slot of world ``w`` holds its position until stage 1 commands otherwise."""
@@ -50,5 +52,11 @@ class MotionStage:
         """Stage 2: integrate every online slot's primitive over ``dt`` (writes pos, vel, heading)."""
         st = ctx.state
         start = st.pos[:, :2].copy() if self.keep_start else None
-        integrate(self.state, st.pos, st.vel, st.heading, st.max_speed, st.max_accel, st.online, ctx.dt)
+        args = (self.state, st.pos, st.vel, st.heading, st.max_speed, st.max_accel, st.online)
+        seen = self._checked
+        if len(seen) == 8 and seen[7] == ctx.dt and all(map(operator.is_, args, seen)):
+            integrate_unchecked(*args, float(ctx.dt))
+        else:  # new arrays (or a new dt): checked once
+            integrate(*args, ctx.dt)
+            self._checked = (*args, ctx.dt)
         return MotionEvents(start)

@@ -274,6 +274,14 @@ class Scenario(ABC, Generic[ConfigT]):
             out["comms"] = stats
         return out
 
+    def flat_observation(self, world: World, out: np.ndarray | None = None) -> np.ndarray:
+        """Every observation part of every slot in the flat layout ``(S, obs_dim)`` float32.
+
+        The parts of :meth:`observation` concatenated in layout order, into ``out`` when given (else a fresh
+        array); a scenario may write them straight into the flat array instead (same values).
+        """
+        return flat_parts(self.observation(world), world.state.n_slots, out)
+
     def state(self, world: World, w: int) -> np.ndarray:
         """Global state of world ``w``: per agent pos / 100, vel / 10, online, group / 10; then ``state_extra``."""
         st = world.state
@@ -283,6 +291,15 @@ class Scenario(ABC, Generic[ConfigT]):
         )
         extra = np.asarray(self.state_extra(world, w), dtype=np.float64).ravel()
         return np.clip(np.concatenate([per.ravel(), extra]), -10.0, 10.0).astype(np.float32)
+
+
+def flat_parts(parts: dict[str, np.ndarray], n_slots: int, out: np.ndarray | None = None) -> np.ndarray:
+    """Observation parts ``{part: (S, ...)}`` concatenated per slot into ``(S, obs_dim)`` float32: ``out`` when
+    given, else a fresh array."""
+    cols = [p.reshape(n_slots, -1) for p in parts.values()]
+    if out is None:
+        return np.concatenate(cols, axis=1, dtype=np.float32)
+    return np.concatenate(cols, axis=1, out=out)
 
 
 CHECK_FINITE_ENV = "AGENTSIM_CHECK_FINITE"
@@ -370,7 +387,8 @@ def run_step(
     events = world.step(hooks=False)
     res = scenario.score(world, events, acting)
     terminated = acting & (res.terminated | ~world.state.online)
-    world.set_offline(np.flatnonzero(terminated))
+    if terminated.any():
+        world.set_offline(np.flatnonzero(terminated))
     if world.hooks:  # 10. step hooks, with the scores
         events.scores = StepScores(acting, res.rewards, terminated, res.info)
         world.run_hooks(events)

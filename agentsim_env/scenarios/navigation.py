@@ -216,6 +216,7 @@ class NavigationScenario(Scenario[NavigationConfig]):
     def __init__(self, config: NavigationConfig) -> None:
         super().__init__(config)
         self._obs = np.zeros((0, SELF_DIM + 2 * self.lidar.n_rays + TASK_DIM), dtype=np.float32)
+        self._side = float(config.side)
 
     def extra_bytes(self) -> tuple[int, int]:
         """Goals per slot; the obstacles (scene arrays and object grid, about 200 bytes each) per world."""
@@ -288,22 +289,35 @@ class NavigationScenario(Scenario[NavigationConfig]):
 
     def observe(self, world: World) -> dict[str, np.ndarray]:
         """self, lidar and task parts for every slot (see the module docstring)."""
-        c, st = self.config, world.state
-        scan = world.scan
-        assert scan is not None
         k = self.lidar.n_rays
-        if self._obs.shape[0] != st.n_slots:
-            self._obs = np.zeros((st.n_slots, self._obs.shape[1]), dtype=np.float32)
-        out = self._obs
-        lo, hi = c.body.altitude
-        _observe_kernel(st.pos, st.vel, st.heading, world.task.goal, scan.distance, scan.hit_kind, float(c.side),
-                        float(lo), float(hi), float(c.body.max_speed), out)  # fmt: skip
+        if self._obs.shape[0] != world.state.n_slots:
+            self._obs = np.zeros((world.state.n_slots, self._obs.shape[1]), dtype=np.float32)
+        out = self._write_obs(world, self._obs)
         # Views of one reused buffer: the envs copy them into the fresh arrays they return.
         return {
             "self": out[:, :SELF_DIM],
             "lidar": out[:, SELF_DIM : SELF_DIM + 2 * k].reshape(-1, k, 2),
             "task": out[:, SELF_DIM + 2 * k :],
         }
+
+    def flat_observation(self, world: World, out: np.ndarray | None = None) -> np.ndarray:
+        """The flat layout written by the observation kernel straight into ``out`` or a fresh array (when the
+        three parts are all there is)."""
+        if world.comms is not None or any(s.obs_part is not None for s in world.sensors):
+            return super().flat_observation(world, out)
+        if out is None:
+            out = np.empty((world.state.n_slots, self._obs.shape[1]), dtype=np.float32)
+        return self._write_obs(world, out)
+
+    def _write_obs(self, world: World, out: np.ndarray) -> np.ndarray:
+        """The self | lidar | task columns of every slot into ``out`` ``(S, obs_dim)`` float32."""
+        c, st = self.config, world.state
+        scan = world.scan
+        assert scan is not None
+        lo, hi = c.body.altitude
+        _observe_kernel(st.pos, st.vel, st.heading, world.task.goal, scan.distance, scan.hit_kind, self._side,
+                        float(lo), float(hi), float(c.body.max_speed), out)  # fmt: skip
+        return out
 
     def state_extra(self, world: World, w: int) -> np.ndarray:
         """Every goal / 100 m."""

@@ -6,6 +6,7 @@ import numpy as np
 
 from agentsim_env.core.collisions import CollisionEvents, find_collisions
 from agentsim_env.core.pipeline import StepContext
+from agentsim_env.core.threads import RowThreads
 
 
 class CollisionStage:
@@ -21,6 +22,8 @@ class CollisionStage:
     def __init__(self, enabled: bool = True, margin: float = 0.0) -> None:
         self.enabled = enabled
         self.margin = float(margin)
+        self.threads = RowThreads(1)
+        """Row ranges for the kernels (``World.set_num_threads``); the events do not depend on them."""
 
     def reset_world(self, w: int, rng: np.random.Generator) -> None:
         """Collisions keep no per-world state."""
@@ -32,4 +35,4 @@ class CollisionStage:
             return CollisionEvents.empty()
         st, sc = ctx.state, ctx.scene
         return find_collisions(st.pos, st.radius, st.online, st.world_id, ctx.grid, sc.kind, sc.centre, sc.half,
-                               sc.world, ctx.object_grid, self.margin)  # fmt: skip
+                               sc.world, ctx.object_grid, self.margin, self.threads)  # fmt: skip

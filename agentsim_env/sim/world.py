@@ -35,8 +35,10 @@ from agentsim_env.core.pipeline import Sensor, StepContext, Subsystem, stream
 from agentsim_env.core.scene import Scene
 from agentsim_env.core.spatial import Grid, GridSpec, build_grid, build_object_grid
 from agentsim_env.core.state import AgentState
+from agentsim_env.core.threads import RowThreads
 from agentsim_env.groups.controller import GroupController, GroupEvents, GroupStepEvents
 from agentsim_env.motion import MotionState
+from agentsim_env.motion.integrate import clip_box
 from agentsim_env.motion.stage import MotionStage
 from agentsim_env.payloads.stage import PayloadEvents, PayloadStage
 from agentsim_env.physics.stage import PhysicsStage
@@ -153,6 +155,19 @@ class World:
         self.task: Any = None  # the scenario's per-slot state (a scenarios.base.SlotState), set by make_world
         self.hooks: list[StepHook] = []
         self.last_events = StepEvents(CollisionEvents.empty(), np.zeros(0, dtype=np.int64))
+        self._box: tuple[Any, np.ndarray, np.ndarray] = (None, _NONE, _NONE)  # config, low and high corners
+        self.threads = RowThreads(1)
+
+    def set_num_threads(self, num_threads: int) -> None:
+        """Threads for the per-slot kernels of every stage that has them, 1..256 (results do not change).
+
+        Stages opt in with a ``threads`` attribute (a :class:`core.threads.RowThreads`); the scenario's
+        observation kernels read ``world.threads``.
+        """
+        self.threads = RowThreads(num_threads)
+        for sub in self.subsystems:
+            if hasattr(sub, "threads"):
+                sub.threads = self.threads  # type: ignore[attr-defined]
 
     # ------------------------------------------------------------------ accessors
     @property
@@ -283,10 +298,11 @@ class World:
         cfg, st = self.config, self.state
         ctx.outputs["motion"] = self.motion_stage.step(ctx)  # 2. motion
         contacts = self.physics.step(ctx) if self.physics is not None else None  # 3. physics
-        xmin, xmax, ymin, ymax = cfg.bounds  # agents stay inside the map and the altitude band
-        np.clip(st.pos[:, 0], xmin, xmax, out=st.pos[:, 0])
-        np.clip(st.pos[:, 1], ymin, ymax, out=st.pos[:, 1])
-        np.clip(st.pos[:, 2], cfg.z_range[0], cfg.z_range[1], out=st.pos[:, 2])
+        if self._box[0] is not cfg:
+            (xmin, xmax, ymin, ymax), (zmin, zmax) = cfg.bounds, cfg.z_range
+            self._box = (cfg, np.array([xmin, ymin, zmin], dtype=np.float64),
+                         np.array([xmax, ymax, zmax], dtype=np.float64))  # fmt: skip
+        clip_box(st.pos, self._box[1], self._box[2])  # agents stay inside the map and the altitude band
         landed = self.payloads.step(ctx) if self.payloads is not None else None  # 4. payloads
         return contacts, landed
 

@@ -1,0 +1,270 @@
+"""The performance targets in one table: every row with its target, its result and whether it is met.
+
+Rows (all ``navigation``; "full stack" is the comms config of ``bench_comms``: 32-ray 3D scan, bus, overlay with
+hop limit 2, groups of 8, heartbeats, every agent sending one message per step):
+
+- 1x64 array / dict API and 512x4 array API, agent-steps per CPU second (VMAS on CPU measured alongside);
+- full stack 1x1,000 and 1x10,000, dict and array API, env-steps per CPU second;
+- comms cost: the full-stack step over the same step without comms (array API);
+- dict API cost above the array API at 1x1,000, microseconds per agent-step (``1/dict - 1/array``);
+- 1x100,000 array API without comms, env-steps per CPU second on one core;
+- 2 threads vs 1 at 1x100,000 (``num_threads=2``), wall-time ratio; needs 2 free cores;
+- cold start: a second process's import + make + reset + first step (``bench_coldstart``).
+
+Two more tables: per-core agent-steps/s with the 32-ray scan on, next to the published CPU anchor (a C++
+batched engine, ~2M steps/s per core without sensing), and the scaling curve 1k -> 10k -> 100k agents (CPU
+microseconds per agent-step, which should stay flat). ``--plot PATH`` draws the curve.
+
+CPU time (``time.process_time``) for one-thread rows, wall time for the threads row; interleaved rounds,
+medians (``common``).
+
+Run: ``python benchmarks/bench_perf.py [--quick] [--plot scaling.png] [--no-coldstart]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import common  # noqa: E402, I001  (first: pins the thread pools)
+
+import bench_comms  # noqa: E402
+import bench_step  # noqa: E402
+from common import fmt_num, machine_description, markdown_table, measure_interleaved  # noqa: E402
+
+CPP_ANCHOR = 2_000_000  # agent-steps/s per core of a C++ batched engine without sensing (published figure)
+LONG = bench_step.LONG_EPISODE
+
+
+@dataclass
+class Row:
+    """One line of the targets table.
+
+    Attributes:
+        case: What is measured.
+        value: The measured figure.
+        unit: Its unit.
+        target: The figure to reach.
+        higher: Whether higher is better (else lower).
+        note: A baseline or remark measured in the same run.
+    """
+
+    case: str
+    value: float | None
+    unit: str
+    target: float | None
+    higher: bool = True
+    note: str = ""
+
+    def cells(self) -> list[str]:
+        """The table cells: case, result, target, met."""
+        op = ">=" if self.higher else "<="
+        if self.target is None:
+            return [self.case, "n/a" if self.value is None else f"{fmt_num(self.value)} {self.unit}", "-", "-",
+                    self.note]  # fmt: skip
+        if self.value is None:
+            return [self.case, "n/a", f"{op} {fmt_num(self.target)} {self.unit}", "n/a", self.note]
+        met = self.value >= self.target if self.higher else self.value <= self.target
+        return [self.case, f"{fmt_num(self.value)} {self.unit}", f"{op} {fmt_num(self.target)} {self.unit}",
+                "PASS" if met else "short", self.note]  # fmt: skip
+
+
+def _vmas(b: int, n: int) -> common.Case | None:
+    try:
+        return bench_step.vmas_case(b, n, 0)
+    except ImportError:
+        return None
+
+
+def small_worlds(rounds: int, block_s: float) -> tuple[list[Row], dict[str, float]]:
+    """1x64 array / dict, 512x4 array, 1x1,000 array / dict (the dict API cost); VMAS alongside."""
+    rows: list[Row] = []
+    rates: dict[str, float] = {}
+    for b, n in ((1, 64), (512, 4), (1, 1000)):
+        cases: dict[str, common.Case] = {"array": bench_step.array_case(b, n, 0)}
+        if b == 1:
+            cases["dict"] = bench_step.dict_case(b, n, 0)
+        if n != 1000:
+            v = _vmas(b, n)
+            if v is not None:
+                cases["vmas"] = v
+        st = measure_interleaved(
+            cases, rounds=rounds, block_s=block_s, max_block_steps=bench_step.MAX_BLOCK_STEPS
+        )
+        for k, s in st.items():
+            rates[f"{k} {b}x{n}"] = s.agent_steps_per_s
+    vm = {k: rates.get(f"vmas {k}") for k in ("1x64", "512x4")}
+    note = {k: (f"VMAS CPU {fmt_num(v)} ag-st/s" if v else "VMAS not installed") for k, v in vm.items()}
+    rows.append(
+        Row("navigation 1x64, array API", rates["array 1x64"], "ag-st/s", 1_000_000, note=note["1x64"])
+    )
+    rows.append(Row("navigation 1x64, dict API", rates["dict 1x64"], "ag-st/s", 700_000, note=note["1x64"]))
+    rows.append(Row("navigation 512x4, array API (1 core)", rates["array 512x4"], "ag-st/s", 4_000_000,
+                    note=note["512x4"]))  # fmt: skip
+    cost = (1.0 / rates["dict 1x1000"] - 1.0 / rates["array 1x1000"]) * 1e6
+    rows.append(Row("dict API cost above the array API, 1x1,000", cost, "us/agent-step", 0.4, higher=False,
+                    note=f"dict {fmt_num(rates['dict 1x1000'])}, array {fmt_num(rates['array 1x1000'])} ag-st/s"))  # fmt: skip
+    return rows, rates
+
+
+def full_stack(
+    sizes: list[int], rounds: int, block_s: float
+) -> tuple[list[Row], dict[int, dict[str, float]]]:
+    """Full stack dict / array env-steps/s and the comms cost, per size."""
+    rows: list[Row] = []
+    eps: dict[int, dict[str, float]] = {}
+    targets = {1000: (1000, 2000), 10_000: (100, 200)}
+    for n in sizes:
+        cases = {"dict": bench_comms.dict_case(n, True), "array": bench_comms.array_case(n, True),
+                 "bare": bench_comms.array_case(n, False)}  # fmt: skip
+        st = measure_interleaved(cases, rounds=rounds, block_s=block_s)
+        e = eps[n] = {k: 1.0 / s.step_s for k, s in st.items()}
+        td, ta = targets.get(n, (None, None))
+        rows.append(Row(f"full stack 1x{n:,}, dict API", e["dict"], "env-steps/s", td))
+        rows.append(Row(f"full stack 1x{n:,}, array API", e["array"], "env-steps/s", ta))
+        rows.append(Row(f"comms cost 1x{n:,} (full step / step without comms)", e["bare"] / e["array"], "x",
+                        1.5 if n in targets else None,
+                        higher=False, note=f"without comms {fmt_num(e['bare'])} env-steps/s"))  # fmt: skip
+    return rows, eps
+
+
+def _array(n: int, threads: int = 1, **config: object) -> common.Case:
+    return bench_step.array_case(1, n, 0, num_threads=threads, **config)
+
+
+def big_world(n: int, rounds: int) -> tuple[list[Row], dict[str, float]]:
+    """1xN array API without comms on one core, and 2 threads vs 1 (wall time)."""
+    cases = {"1": _array(n, 1), "2": _array(n, 2)}
+    st = measure_interleaved(cases, rounds=rounds, block_s=0.3, warmup=2)
+    tgt = 1.7 if n >= 100_000 else None
+    rows = [
+        Row(f"1x{n:,} array API, no comms, 1 core", 1.0 / st["1"].step_s, "env-steps/s", 25 if tgt else None)
+    ]
+    cores = common_cores()
+    if cores < 2:
+        rows.append(
+            Row(f"1x{n:,}: 2 threads vs 1 (wall)", None, "x", tgt, note=f"only {cores} core available")
+        )
+    else:
+        ratio = st["1"].wall_step_s / st["2"].wall_step_s
+        rows.append(Row(f"1x{n:,}: 2 threads vs 1 (wall)", ratio, "x", tgt,
+                        note=f"{st['1'].wall_step_s * 1e3:.1f} vs {st['2'].wall_step_s * 1e3:.1f} ms/step wall"))  # fmt: skip
+    return rows, {"step_s": st["1"].step_s}
+
+
+def common_cores() -> int:
+    """Cores this process may use."""
+    from agentsim_env.core.threads import available_cores
+
+    return available_cores()
+
+
+def cold_start(quick: bool) -> list[Row]:
+    """Second-process start per case, from ``bench_coldstart``."""
+    import bench_coldstart
+
+    rows = []
+    for r in bench_coldstart.coldstart_rows(quick):
+        rows.append(Row(f"cold start: {r['case']} (warm cache)", r["warm_s"], "s", 3.0, higher=False,
+                        note=f"empty cache {r['empty_s']:.1f} s" if r.get("empty_s") else ""))  # fmt: skip
+    return rows
+
+
+def scaling(sizes: list[int], rounds: int) -> dict[str, dict[int, float]]:
+    """CPU microseconds per agent-step, array API, without comms and with the full stack, per size."""
+    curve: dict[str, dict[int, float]] = {"no comms": {}, "full stack": {}}
+    for n in sizes:
+        cases: dict[str, common.Case] = {"no comms": bench_comms.array_case(n, False),
+                                         "full stack": bench_comms.array_case(n, True)}  # fmt: skip
+        st = measure_interleaved(cases, rounds=rounds, block_s=0.2, warmup=1)
+        for k, s in st.items():
+            curve[k][n] = s.step_s / n * 1e6
+    return curve
+
+
+def plot_scaling(curve: dict[str, dict[int, float]], path: str) -> None:
+    """Draw microseconds per agent-step against agents (log x)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(5.5, 3.5))
+    for k, pts in curve.items():
+        ns = sorted(pts)
+        ax.plot(ns, [pts[n] for n in ns], marker="o", label=k)
+    ax.set_xscale("log")
+    ax.set_xlabel("agents in one world")
+    ax.set_ylabel("CPU us per agent-step")
+    ax.set_ylim(bottom=0)
+    ax.set_title("navigation, array API, 1 thread")
+    ax.grid(alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def _timed(label: str, fn: Callable[[], object]) -> object:
+    print(f"  measuring {label}", file=sys.stderr, flush=True)
+    return fn()
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Print the targets table, the per-core table and the scaling curve."""
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument(
+        "--quick", action="store_true", help="small sizes, few rounds (smoke test; targets not comparable)"
+    )
+    p.add_argument("--plot", default=None, help="write the scaling curve to this PNG")
+    p.add_argument("--no-coldstart", action="store_true", help="skip the cold-start rows")
+    args = p.parse_args(argv)
+    q = args.quick
+    rounds, block = (2, 0.02) if q else (11, 0.15)
+    big = 5_000 if q else 100_000
+    comm_sizes = [200, 500] if q else [1000, 10_000]
+    print(f"machine: {machine_description()}")
+    print(
+        f"mode: {'quick' if q else 'full'}; CPU time, one thread unless stated; medians of interleaved rounds\n"
+    )
+    rows: list[Row] = []
+    small, rates = _timed("small worlds", lambda: small_worlds(rounds, block))  # type: ignore[misc]
+    rows += small
+    fs, eps = _timed(
+        "full stack", lambda: full_stack(comm_sizes, max(3, rounds // 2), 0.3 if not q else 0.02)
+    )  # type: ignore[misc]
+    rows += fs
+    bw, _ = _timed(f"1x{big}", lambda: big_world(big, 2 if q else 5))  # type: ignore[misc]
+    rows += bw
+    if not args.no_coldstart:
+        rows += _timed("cold start", lambda: cold_start(q))  # type: ignore[operator]
+    print("## Targets\n")
+    print(
+        markdown_table(["case", "result", "target", "met", "measured alongside"], [r.cells() for r in rows])
+    )
+    met = sum(1 for r in rows if r.cells()[3] == "PASS")
+    print(f"\n{met} of {len(rows)} rows met.\n")
+
+    print("## Per core, 32-ray scan on (navigation, array API, 1 thread)\n")
+    per_core = [["512x4", fmt_num(rates["array 512x4"])], ["1x1,000", fmt_num(rates["array 1x1000"])],
+                ["C++ batched engine (published, no sensing)", fmt_num(CPP_ANCHOR)]]  # fmt: skip
+    print(markdown_table(["case", "agent-steps/s per core"], per_core))
+
+    sizes = [1000, 5000] if q else [1000, 10_000, 100_000]
+    curve = _timed("scaling", lambda: scaling(sizes, 2 if q else 3))  # type: ignore[arg-type]
+    print("\n## Scaling: CPU us per agent-step (array API, 1 thread)\n")
+    table = [[f"1x{n:,}"] + [fmt_num(curve[k][n]) for k in curve] for n in sizes]  # type: ignore[index]
+    print(markdown_table(["agents", *curve], table))  # type: ignore[list-item]
+    if args.plot:
+        plot_scaling(curve, args.plot)  # type: ignore[arg-type]
+        print(f"\nscaling plot: {args.plot}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

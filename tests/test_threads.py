@@ -1,0 +1,141 @@
+"""``num_threads``: the row ranges, the bad values, and results that do not depend on the thread count."""
+
+from __future__ import annotations
+
+import threading
+from typing import Any
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import agentsim_env
+from agentsim_env.core import threads as threads_mod
+from agentsim_env.core.collisions import find_collisions
+from agentsim_env.core.scene import Scene
+from agentsim_env.core.spatial import GridSpec, build_grid, build_object_grid
+from agentsim_env.core.threads import RowThreads, check_num_threads
+from agentsim_env.sensors.proximity import ProximityConfig, ProximitySensor
+from agentsim_env.env.vector import BatchedEnv
+from agentsim_env.scenarios.registry import scenario_class
+
+
+@given(n=st.integers(0, 100_000), k=st.integers(1, 16), min_rows=st.integers(1, 5000))
+@settings(max_examples=200, deadline=None)
+def test_ranges_cover_rows_once_in_order(n: int, k: int, min_rows: int) -> None:
+    ranges = RowThreads(k).ranges(n, min_rows)
+    assert 1 <= len(ranges) <= k
+    assert ranges[0][0] == 0 and ranges[-1][1] == n
+    assert all(a[1] == b[0] for a, b in zip(ranges, ranges[1:]))
+    if len(ranges) > 1:
+        assert min(hi - lo for lo, hi in ranges) >= min_rows
+
+
+def test_run_uses_other_threads_and_raises_their_errors() -> None:
+    seen: dict[int, str] = {}
+
+    def rows(lo: int, hi: int, part: int) -> None:
+        seen[part] = threading.current_thread().name
+
+    RowThreads(3).run(rows, 30, min_rows=10)
+    assert sorted(seen) == [0, 1, 2]
+    assert seen[0] == threading.current_thread().name and seen[1] != seen[0]
+
+    def fails(lo: int, hi: int, part: int) -> None:
+        if part == 2:
+            raise RuntimeError(f"rows {lo}..{hi}")
+
+    with pytest.raises(RuntimeError, match="rows 20..30"):
+        RowThreads(3).run(fails, 30, min_rows=10)
+
+
+@pytest.mark.parametrize(
+    ("value", "message"),
+    [(0, "num_threads must be >= 1"), (257, "num_threads must be <= 256"), ("2", "num_threads must be an integer"),
+     (2.5, "num_threads must be an integer"), (True, "num_threads must be an integer"),
+     (None, "num_threads must be an integer")],
+)  # fmt: skip
+def test_bad_num_threads_is_refused_by_name(value: Any, message: str) -> None:
+    with pytest.raises(ValueError, match=message):
+        check_num_threads(value)
+    with pytest.raises(ValueError, match=message):
+        BatchedEnv("navigation", 1, n_agents=4, num_threads=value)
+    with pytest.raises(ValueError, match=message):
+        agentsim_env.make("navigation", n_agents=4, num_threads=value)
+
+
+def _rollout(name: str, cfg: dict[str, Any], num_threads: int, steps: int = 25) -> list[np.ndarray]:
+    env = BatchedEnv(name, 2, num_threads=num_threads, **cfg)
+    out = [env.reset(seed=3)]
+    rng = np.random.default_rng(0)
+    for _ in range(steps):
+        r = env.step(rng.uniform(-1, 1, (2, env.n_agents, env.act_dim)))
+        out += [r.obs, r.rewards, r.terminated, r.truncated, r.alive, r.final_obs, env.world.state.pos.copy()]
+        ev = env.world.last_events.collisions  # the events' order too, not only who went offline
+        out += [ev.agent, ev.other_agent, ev.obj]
+    return out
+
+
+CASES = [(name, cfg) for name in agentsim_env.list_scenarios() for cfg in scenario_class(name).test_configs]
+
+
+@pytest.mark.parametrize(("name", "cfg"), CASES, ids=[f"{n}-{i}" for i, (n, _) in enumerate(CASES)])
+def test_results_do_not_depend_on_the_thread_count(
+    name: str, cfg: dict[str, Any], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # Tiny ranges so that these small worlds are really split over threads.
+    monkeypatch.setattr(threads_mod, "MIN_ROWS", 2)
+    one = _rollout(name, cfg, 1)
+    for k in (2, 3):
+        other = _rollout(name, cfg, k)
+        assert len(one) == len(other)
+        for i, (a, b) in enumerate(zip(one, other)):
+            np.testing.assert_array_equal(a, b, err_msg=f"{name} with {k} threads: array {i} differs")
+
+
+@given(seed=st.integers(0, 10_000), k=st.integers(2, 5))
+@settings(max_examples=40, deadline=None)
+def test_collision_events_and_scans_do_not_depend_on_the_thread_count(seed: int, k: int) -> None:
+    # Crowded random worlds with objects: events in every range of slots, joined in the one-range order.
+    rng = np.random.default_rng(seed)
+    s, n_worlds = 120, 2
+    pos = np.column_stack([rng.uniform(0, 20, (s, 2)), rng.uniform(0, 4, s)])
+    radius = rng.uniform(0.3, 1.2, s)
+    online = rng.random(s) < 0.9
+    world = rng.integers(0, n_worlds, s)
+    scene = Scene()
+    scene.add(rng.integers(0, 3, 12), np.column_stack([rng.uniform(0, 20, (12, 2)), rng.uniform(0, 4, 12)]),
+              rng.uniform(0.5, 3.0, (12, 3)), rng.integers(0, n_worlds, 12))  # fmt: skip
+    spec = GridSpec.for_bounds((0, 20, 0, 20), 3.0, n_worlds)
+    grid = build_grid(spec, pos, world, online)
+    og = build_object_grid(spec, scene.centre, scene.footprint_radius(), scene.world)
+    args = (pos, radius, online, world, grid, scene.kind, scene.centre, scene.half, scene.world, og, 0.1)
+    one = find_collisions(*args, RowThreads(1))
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(threads_mod, "MIN_ROWS", 8)
+        many = find_collisions(*args, RowThreads(k))
+    assert (one.other_agent >= 0).any() and (one.obj >= 0).any()
+    for name in ("agent", "other_agent", "obj"):
+        np.testing.assert_array_equal(getattr(one, name), getattr(many, name))
+    sensor = ProximitySensor(ProximityConfig(n_azimuth=16, elevations_deg=(-20.0, 0.0)))
+    heading, srange = rng.uniform(-3, 3, s), rng.uniform(2, 8, s)
+    scan_args = (pos, heading, srange, radius, online, world, grid, scene.kind, scene.centre, scene.half,
+                 scene.world, og, True)  # fmt: skip
+    ref = sensor.scan(*scan_args)
+    ref = (ref.distance.copy(), ref.hit_kind.copy(), ref.hit_id.copy())
+    sensor.threads = RowThreads(k)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(threads_mod, "MIN_ROWS", 8)
+        got = sensor.scan(*scan_args)
+    for a, b in zip(ref, (got.distance, got.hit_kind, got.hit_id)):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_make_and_batched_env_take_the_thread_count() -> None:
+    env = agentsim_env.make("navigation", n_agents=4, num_threads=2)
+    assert env.world.threads.num_threads == 2
+    b = BatchedEnv("navigation", 1, n_agents=4, num_threads=3)
+    assert b.world.threads.num_threads == 3
+    scan = next(s for s in b.world.sensors if s.name == "proximity")
+    assert scan.threads is b.world.threads  # type: ignore[attr-defined]
