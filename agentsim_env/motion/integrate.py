@@ -26,6 +26,7 @@ import math
 import numpy as np
 from numba import njit
 
+from agentsim_env.core.threads import RowThreads
 from agentsim_env.motion.state import CIRCULAR, LINEAR, PARABOLIC, PATH, VELOCITY, MotionState
 
 # Slack on "duration elapsed" so that n * dt == duration finishes on step n despite rounding of t.
@@ -114,8 +115,10 @@ def _landing_time(z0: float, vz: float, g: float, t: float) -> float:
 _landing_time_nb = njit(cache=True)(_landing_time)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _integrate_kernel(
+    lo: int,
+    hi: int,
     kind: np.ndarray,
     params: np.ndarray,
     t: np.ndarray,
@@ -132,7 +135,8 @@ def _integrate_kernel(
     online: np.ndarray,
     dt: float,
 ) -> None:
-    for s in range(kind.shape[0]):
+    # Slots lo..hi-1 (rows are independent: ranges may run on different threads).
+    for s in range(lo, hi):
         if not online[s]:
             vel[s, 0] = 0.0
             vel[s, 1] = 0.0
@@ -300,7 +304,7 @@ def integrate(
     """
     dt = _validate(ms, pos, vel, heading, max_speed, max_accel, online, dt)
     _integrate_kernel(
-        ms.kind, ms.params, ms.t, ms.waypoints, ms.n_waypoints, ms.wp_index, ms.done, ms.loop,
+        0, ms.kind.shape[0], ms.kind, ms.params, ms.t, ms.waypoints, ms.n_waypoints, ms.wp_index, ms.done, ms.loop,
         pos, vel, heading, max_speed, max_accel, online, dt,
     )  # fmt: skip
 
@@ -314,12 +318,19 @@ def integrate_unchecked(
     max_accel: np.ndarray,
     online: np.ndarray,
     dt: float,
+    threads: RowThreads | None = None,
 ) -> None:
-    """:func:`integrate` without the checks, for a caller that already validated these very arrays and ``dt``."""
-    _integrate_kernel(
-        ms.kind, ms.params, ms.t, ms.waypoints, ms.n_waypoints, ms.wp_index, ms.done, ms.loop,
-        pos, vel, heading, max_speed, max_accel, online, dt,
-    )  # fmt: skip
+    """:func:`integrate` without the checks, for a caller that already validated these very arrays and ``dt``;
+    ``threads`` splits the slots into row ranges (the result does not depend on it)."""
+    if threads is None or threads.num_threads == 1:
+        _integrate_kernel(
+            0, ms.kind.shape[0], ms.kind, ms.params, ms.t, ms.waypoints, ms.n_waypoints, ms.wp_index, ms.done,
+            ms.loop, pos, vel, heading, max_speed, max_accel, online, dt,
+        )  # fmt: skip
+        return
+    threads.run(lambda lo, hi, _: _integrate_kernel(lo, hi, ms.kind, ms.params, ms.t, ms.waypoints,
+                ms.n_waypoints, ms.wp_index, ms.done, ms.loop, pos, vel, heading, max_speed, max_accel, online,
+                dt), ms.kind.shape[0])  # fmt: skip
 
 
 @njit(cache=True)

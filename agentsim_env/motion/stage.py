@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from agentsim_env.core.pipeline import StepContext
+from agentsim_env.core.threads import RowThreads
 from agentsim_env.motion.integrate import integrate, integrate_unchecked
 from agentsim_env.motion.primitives import set_hold
 from agentsim_env.motion.state import MotionState
@@ -42,6 +43,8 @@ class MotionStage:
         self.state = MotionState.create(int(n_worlds) * self.n_agents, max_waypoints)
         self.keep_start = keep_start
         self._checked: tuple[object, ...] = ()  # the arrays and dt the last validated call was given
+        self.threads = RowThreads(1)
+        """Row ranges for the integration (``World.set_num_threads``); the motion does not depend on them."""
 
     def reset_world(self, w: int, rng: np.random.Generator) -> None:
         """Every slot of world ``w`` holds its position until stage 1 commands otherwise."""
@@ -55,7 +58,7 @@ class MotionStage:
         args = (self.state, st.pos, st.vel, st.heading, st.max_speed, st.max_accel, st.online)
         seen = self._checked
         if len(seen) == 8 and seen[7] == ctx.dt and all(map(operator.is_, args, seen)):
-            integrate_unchecked(*args, float(ctx.dt))
+            integrate_unchecked(*args, float(ctx.dt), self.threads)
         else:  # new arrays (or a new dt): checked once
             integrate(*args, ctx.dt)
             self._checked = (*args, ctx.dt)

@@ -95,13 +95,13 @@ def _score_kernel(
     return dist, arrived, task, collided, effort
 
 
-@nb.njit(cache=True, error_model="numpy")
-def _observe_kernel(pos, vel, heading, goal, distance, hit_kind, side, lo, hi, vmax, out):  # type: ignore[no-untyped-def]
-    # out (S, 8 + 2K + 4) float32: self | lidar (distance, kind / 3 interleaved) | task.
+@nb.njit(cache=True, error_model="numpy", nogil=True)
+def _observe_kernel(r0, r1, pos, vel, heading, goal, distance, hit_kind, side, lo, hi, vmax, out):  # type: ignore[no-untyped-def]
+    # Rows r0..r1-1 of out (S, 8 + 2K + 4) float32: self | lidar (distance, kind / 3 interleaved) | task.
     n_k = distance.shape[1]
     diag = side * np.sqrt(2.0)
     t0 = SELF_DIM + 2 * n_k
-    for s in range(pos.shape[0]):
+    for s in range(r0, r1):
         out[s, 0] = min(max(pos[s, 0] / side * 2 - 1, -1.0), 1.0)
         out[s, 1] = min(max(pos[s, 1] / side * 2 - 1, -1.0), 1.0)
         out[s, 2] = min(max((pos[s, 2] - lo) / (hi - lo) * 2 - 1, -1.0), 1.0)
@@ -314,9 +314,13 @@ class NavigationScenario(Scenario[NavigationConfig]):
         c, st = self.config, world.state
         scan = world.scan
         assert scan is not None
-        lo, hi = c.body.altitude
-        _observe_kernel(st.pos, st.vel, st.heading, world.task.goal, scan.distance, scan.hit_kind, self._side,
-                        float(lo), float(hi), float(c.body.max_speed), out)  # fmt: skip
+        lo, hi = float(c.body.altitude[0]), float(c.body.altitude[1])
+        args = (st.pos, st.vel, st.heading, world.task.goal, scan.distance, scan.hit_kind, self._side, lo, hi,
+                float(c.body.max_speed), out)  # fmt: skip
+        if world.threads.num_threads == 1:
+            _observe_kernel(0, st.n_slots, *args)
+        else:
+            world.threads.run(lambda r0, r1, _: _observe_kernel(r0, r1, *args), st.n_slots)
         return out
 
     def state_extra(self, world: World, w: int) -> np.ndarray:
