@@ -15,9 +15,11 @@ from __future__ import annotations
 
 from typing import Any
 
+from agentsim_env._compile_notice import install as _install_compile_notice
 from agentsim_env._numba_cache import ensure_numba_cache as _ensure_numba_cache
 
 _ensure_numba_cache()  # before any kernel module: numba picks a function's cache directory when decorating it
+_install_compile_notice()  # one stderr line when a kernel compiles instead of loading from the cache
 
 __version__ = "0.1.0"
 

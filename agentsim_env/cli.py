@@ -29,13 +29,14 @@ from typing import Any
 
 import numpy as np
 
+from agentsim_env import _compile_notice
 from agentsim_env.cli_set import canonical, parse_set
 from agentsim_env.outdirs import prepare_out, remove_created
 
 #: File in the numba cache directory whose content (versions) says the kernels were compiled and cached.
 WARM_MARKER = ".agentsim-kernels-warm"
 COMPILE_NOTICE = "agentsim: compiling simulation kernels (first run only, ~30 s)..."
-#: Tiny configs for ``agentsim warmup`` (every scenario also gets a short episode).
+#: Tiny configs for ``agentsim warmup`` (every scenario gets a short scripted episode and a short random one).
 WARMUP_CONFIG: dict[str, dict[str, Any]] = {"navigation": {"n_agents": 2}, "rendezvous": {"n_agents": 2},
                                             "uav_release": {"zones": "tiny"}}  # fmt: skip
 WARMUP_STEPS = 5
@@ -196,8 +197,9 @@ def kernels_cold() -> bool:
 def announce_compile() -> bool:
     """Print the one-line compile notice to stderr when the kernel cache is cold; return whether it was."""
     cold = kernels_cold()
-    if cold:
+    if cold and not _compile_notice.quiet():  # AGENTSIM_QUIET_COMPILE=1 silences both notices
         print(COMPILE_NOTICE, file=sys.stderr, flush=True)
+        _compile_notice.mark_shown()  # the library's own notice (on an actual compilation) would repeat it
     return cold
 
 
@@ -456,10 +458,12 @@ def cmd_warmup(args: argparse.Namespace) -> int:
         env = agentsim_env.make(name, **config)
         if name in BASELINES:
             run_episode(env, make_policy(name, env), 0)
-        else:  # a scenario registered without baselines: random actions
-            env.reset(seed=0)
-            while env.agents:
-                env.step({a: env.action_space(a).sample() for a in env.agents})
+        # random actions too: they reach kernels a short scripted episode does not (messages, falling payloads)
+        env.reset(seed=0)
+        for a in env.agents:
+            env.action_space(a).seed(0)
+        while env.agents:
+            env.step({a: env.action_space(a).sample() for a in env.agents})
         env.close()
         if not args.quiet:
             print(f"  {name:14s} ready ({time.perf_counter() - t0:.1f} s)")

@@ -170,7 +170,7 @@ def cold_start(quick: bool) -> list[Row]:
     rows = []
     for r in bench_coldstart.coldstart_rows(quick):
         rows.append(Row(f"cold start: {r['case']} (warm cache)", r["warm_s"], "s", 3.0, higher=False,
-                        note=f"empty cache {r['empty_s']:.1f} s" if r.get("empty_s") else ""))  # fmt: skip
+                        note=f"empty cache {r['cold_s']:.1f} s" if r.get("cold_s") else ""))  # fmt: skip
     return rows
 
 

@@ -10,6 +10,7 @@ ROOT = Path(__file__).resolve().parents[1]
 # package -> layer; a package may import its own modules and packages of lower layers only
 LAYERS: dict[str, float] = {
     "_numba_cache": 0,
+    "_compile_notice": 0,  # the one-line notice when a kernel compiles; imports only numba and the standard library
     "core": 0,
     "motion": 1,
     "physics": 1,
