@@ -171,7 +171,7 @@ def build_object_grid(spec: GridSpec, centre: np.ndarray, footprint_radius: np.n
     """Register every object in all cells its footprint's bounding square touches.
 
     Args:
-        spec: Grid geometry (the same as the agents' grid).
+        spec: Grid geometry (its own: object queries read their cells through the grid's spec).
         centre: Object centres ``(O, 3)``.
         footprint_radius: Horizontal bounding radius per object ``(O,)``.
         world: World id per object ``(O,)``.
