@@ -338,3 +338,21 @@ def test_scan_validation() -> None:
     bad.centre, bad.half, bad.world = np.ones((2, 3)), np.ones((2, 3)), np.zeros(2, dtype=np.int32)
     with pytest.raises(ValueError, match="kind"):
         _scan(sensor, *args, bad)
+
+
+def test_a_scan_sees_changes_of_arrays_it_had_to_convert() -> None:
+    # float32 positions are converted to a float64 copy: a second scan of the same (changed) array must not
+    # reuse the copy of the first.
+    sensor = ProximitySensor(ProximityConfig(n_azimuth=8))
+    pos = np.array([[0.0, 0.0, 1.0], [3.0, 0.0, 1.0]], dtype=np.float32)
+    args = (np.zeros(2), np.full(2, 10.0), np.full(2, 0.5), np.ones(2, bool), np.zeros(2, np.int64))
+    spec = GridSpec.for_bounds((-20, 20, -20, 20), 5.0, 1)
+    empty = (np.zeros(0, np.int8), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, np.int64), None, False)
+
+    def scan() -> np.ndarray:
+        grid = build_grid(spec, pos.astype(np.float64), args[4], args[3])
+        return sensor.scan(pos, *args, grid, *empty).distance[0, 0].copy()
+
+    near = scan()
+    pos[1, 0] = 6.0
+    assert scan() > near

@@ -21,6 +21,7 @@ projection can cross the candidate's bounding disc, so the cost per agent stays 
 
 from __future__ import annotations
 
+import operator
 from dataclasses import dataclass
 
 import numba as nb
@@ -316,14 +317,20 @@ def _check_inputs(pos, heading, sensor_range, radius, online, world, kind, centr
     obj_world = _ids(obj_world)
     if obj_world.shape != (o,):
         raise ValueError(f"obj_world must have shape ({o},), got {obj_world.shape}")
-    ok_range, ok_radius, lo, hi, ok_kind, olo, ohi = _summary(out[2], out[3], out[4], out[5], kind, obj_world)
+    return _check_values((*out, kind, centre, half, obj_world))
+
+
+def _check_values(arrays):  # type: ignore[no-untyped-def]
+    # The value checks of arrays already in kernel form (every call: values change from step to step).
+    _, _, srange, radius, online, world, kind, _, _, obj_world = arrays
+    ok_range, ok_radius, lo, hi, ok_kind, olo, ohi = _summary(srange, radius, online, world, kind, obj_world)
     if not ok_range:
         raise ValueError("sensor_range must be finite and > 0 for every online slot")
     if not ok_radius:
         raise ValueError("radius must be finite and >= 0 for every online slot")
     if not ok_kind:
         raise ValueError("kind codes must be in {0 (box), 1 (cylinder), 2 (sphere)}")
-    return (*out, kind, centre, half, obj_world), (lo, hi, olo, ohi)
+    return arrays, (lo, hi, olo, ohi)
 
 
 _NO_GRID = (np.zeros(2, dtype=np.int64), np.zeros(0, dtype=np.int64), 0.0, 0.0, 1.0, 1, 1)
@@ -355,6 +362,8 @@ class ProximitySensor:
         self.directions = self.config.ray_directions()
         self._out: ScanResult | None = None
         self._stamps = [np.empty(0, dtype=np.int64)]
+        self._given: tuple[object, ...] = ()  # the arrays of the last scan, and their kernel form
+        self._arrays: tuple[np.ndarray, ...] = ()
         self.threads = RowThreads(1)
         """Threads for the scan (``World.set_num_threads`` sets them); results do not depend on the count."""
 
@@ -418,9 +427,16 @@ class ProximitySensor:
         Returns:
             The filled :class:`ScanResult`.
         """
-        arrays, (lo, hi, olo, ohi) = _check_inputs(
-            pos, heading, sensor_range, radius, online, world, kind, centre, half, obj_world
-        )
+        given = (pos, heading, sensor_range, radius, online, world, kind, centre, half, obj_world)
+        last = self._given
+        if len(last) == len(given) and all(map(operator.is_, given, last)):  # the same arrays as last time
+            arrays, (lo, hi, olo, ohi) = _check_values(self._arrays)
+        else:  # converted and shape-checked once per set of arrays
+            arrays, (lo, hi, olo, ohi) = _check_inputs(*given)
+            # only arrays used in place (or through a reshaped view) can be reused: a converted copy would
+            # miss later changes of the caller's array
+            same = all(a is g or a.base is g for a, g in zip(arrays, given))
+            self._given, self._arrays = (given, arrays) if same else ((), ())
         pos, heading, srange, radius, online, world, kind, centre, half, obj_world = arrays
         s, k = pos.shape[0], self.n_rays
         if out is None:
