@@ -168,7 +168,8 @@ def cold_start(quick: bool) -> list[Row]:
     import bench_coldstart
 
     rows = []
-    for r in bench_coldstart.coldstart_rows(quick):
+    # fewer runs than bench_coldstart's own table (which make bench prints too): the medians barely move
+    for r in bench_coldstart.coldstart_rows(quick, runs=3 if quick else 5, cold_runs=1, whole_quickstart=False):
         rows.append(Row(f"cold start: {r['case']} (warm cache)", r["warm_s"], "s", 3.0, higher=False,
                         note=f"empty cache {r['cold_s']:.1f} s" if r.get("cold_s") else ""))  # fmt: skip
     return rows
