@@ -16,9 +16,9 @@ from agentsim_env.core.collisions import find_collisions
 from agentsim_env.core.scene import Scene
 from agentsim_env.core.spatial import GridSpec, build_grid, build_object_grid
 from agentsim_env.core.threads import RowThreads, check_num_threads
-from agentsim_env.sensors.proximity import ProximityConfig, ProximitySensor
 from agentsim_env.env.vector import BatchedEnv
 from agentsim_env.scenarios.registry import scenario_class
+from agentsim_env.sensors.proximity import ProximityConfig, ProximitySensor
 
 
 @given(n=st.integers(0, 100_000), k=st.integers(1, 16), min_rows=st.integers(1, 5000))
