@@ -143,9 +143,36 @@ def test_measure_interleaved_counts_agent_steps() -> None:
     assert stats["a"].agent_steps_per_s > 0 and stats["b"].agent_steps_per_s == 0
 
 
+@pytest.mark.slow
+def test_perf_benchmark_quick_run_prints_every_row_with_target_and_result(tmp_path: Path) -> None:
+    plot = tmp_path / "scaling.png"
+    cmd = [sys.executable, str(ROOT / "benchmarks" / "bench_perf.py"), "--quick", "--no-coldstart", "--plot",
+           str(plot)]  # fmt: skip
+    res = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stderr[-3000:]
+    assert res.stdout.startswith("machine: ")
+    (head, rows), (core_head, core_rows), (scale_head, scale_rows) = _tables(res.stdout)
+    assert head == ["case", "result", "target", "met", "measured alongside"]
+    cases = [r[0] for r in rows]
+    for wanted in ("1x64, array API", "1x64, dict API", "512x4", "dict API cost", "full stack 1x200, dict API",
+                   "comms cost 1x500", "array API, no comms, 1 core", "2 threads vs 1"):  # fmt: skip
+        assert any(wanted in c for c in cases), wanted
+    for row in rows:
+        value = row[1].split(" ")[0]
+        assert _number_or_skipped(value) or value == "n/a", row
+        assert row[3] in {"PASS", "short", "-", "n/a"}, row
+        assert (row[2] == "-") == (row[3] == "-"), row  # a row has a target exactly when it has a verdict
+    # the rows of the table carry targets in quick mode too
+    assert {r[0] for r in rows if r[3] != "-"} >= {"navigation 1x64, array API", "navigation 512x4, array API (1 core)"}
+    assert core_head[1] == "agent-steps/s per core" and any("C++" in r[0] for r in core_rows)
+    assert scale_head == ["agents", "no comms", "full stack"] and len(scale_rows) == 2
+    assert all(_number_or_skipped(c) for r in scale_rows for c in r[1:])
+    assert plot.stat().st_size > 1000
+
+
 def test_run_all_finds_benchmarks_with_main() -> None:
     names = [p.stem for p in run_all.benchmarks()]
-    assert "bench_step" in names and "bench_train" in names
+    assert "bench_step" in names and "bench_train" in names and "bench_perf" in names
     assert [p.stem for p in run_all.benchmarks(["step"])] == ["bench_step"]
     assert all(run_all.has_main(p) for p in run_all.benchmarks())
 
