@@ -12,6 +12,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from tests.bench_tables import markdown_tables
+
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
@@ -22,16 +24,7 @@ MAIN_TEXT_COLUMNS = {"size BxN", "target", "array", "dict"}
 PASS_VALUES = {"PASS", "FAIL", "skipped", "-"}
 
 
-def _tables(out: str) -> list[tuple[list[str], list[list[str]]]]:
-    """Markdown tables in ``out`` as (header, rows), the separator line dropped."""
-    tables, block = [], []
-    for line in [*out.splitlines(), ""]:
-        if line.startswith("|"):
-            block.append([c.strip() for c in line.strip().strip("|").split("|")])
-        elif block:
-            tables.append((block[0], block[2:]))
-            block = []
-    return tables
+_tables = markdown_tables
 
 
 def _number_or_skipped(cell: str) -> bool:

@@ -17,6 +17,7 @@ import pytest
 
 from agentsim_env import _compile_notice
 from agentsim_env._compile_notice import NOTICE, QUIET_ENV
+from tests.bench_tables import markdown_tables
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -142,15 +143,7 @@ def test_mark_shown_keeps_the_listener_silent(
 
 
 # ----------------------------------------------------------------------------------------- benchmark
-def _tables(out: str) -> list[tuple[list[str], list[list[str]]]]:
-    tables, block = [], []
-    for line in [*out.splitlines(), ""]:
-        if line.startswith("|"):
-            block.append([c.strip() for c in line.strip().strip("|").split("|")])
-        elif block:
-            tables.append((block[0], block[2:]))
-            block = []
-    return tables
+_tables = markdown_tables
 
 
 def _number(cell: str) -> bool:

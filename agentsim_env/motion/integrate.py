@@ -303,10 +303,7 @@ def integrate(
         ValueError: on wrong shapes/dtypes or a non-positive ``dt``.
     """
     dt = _validate(ms, pos, vel, heading, max_speed, max_accel, online, dt)
-    _integrate_kernel(
-        0, ms.kind.shape[0], ms.kind, ms.params, ms.t, ms.waypoints, ms.n_waypoints, ms.wp_index, ms.done, ms.loop,
-        pos, vel, heading, max_speed, max_accel, online, dt,
-    )  # fmt: skip
+    integrate_unchecked(ms, pos, vel, heading, max_speed, max_accel, online, dt)
 
 
 def integrate_unchecked(
