@@ -139,3 +139,26 @@ def test_make_and_batched_env_take_the_thread_count() -> None:
     assert b.world.threads.num_threads == 3
     scan = next(s for s in b.world.sensors if s.name == "proximity")
     assert scan.threads is b.world.threads  # type: ignore[attr-defined]
+
+
+@pytest.mark.parametrize(
+    ("argv", "match"),
+    [(["--threads", "0"], "--threads must be an integer in [1, 256]"),
+     (["--threads", "2", "--shards", "2"], "--threads applies to one process")],
+)  # fmt: skip
+def test_cli_run_threads_bad_options(argv: list[str], match: str, capsys: pytest.CaptureFixture[str]) -> None:
+    from agentsim_env.cli import main
+
+    assert main(["run", "navigation", "--episodes", "1", "--out", "", "--quiet", *argv]) == 2
+    assert match in capsys.readouterr().err
+
+
+def test_cli_run_with_threads_prints_what_one_thread_prints(capsys: pytest.CaptureFixture[str]) -> None:
+    from agentsim_env.cli import main
+
+    base = ["run", "navigation", "--episodes", "2", "--out", "", "--set", "n_agents=6"]
+    outs = []
+    for k in ("1", "2"):
+        assert main([*base, "--threads", k]) == 0
+        outs.append(capsys.readouterr().out)
+    assert outs[0] == outs[1] and outs[0]
