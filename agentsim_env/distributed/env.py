@@ -92,7 +92,8 @@ class DistributedParallelEnv(AgentSimParallelEnv):
         ray_address: A Ray cluster's address (``"host:port"``, ``"ray://host:port"`` or ``"auto"``); ``None``
             starts a local cluster on 127.0.0.1.
         timeout_s: Deadline of every call to a shard; a shard that misses it is declared offline.
-        **env_kw: ``render_mode``, ``obs_format``, ``action_format``, ``check_finite``.
+        **env_kw: ``render_mode``, ``obs_format``, ``action_format``, ``check_finite``, ``num_threads`` (the
+            coordinator's stages, observations included; each shard runs one thread).
     """
 
     def __init__(
