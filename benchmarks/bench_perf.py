@@ -28,6 +28,7 @@ import sys
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TypeVar
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import common  # noqa: E402, I001  (first: pins the thread pools)
@@ -36,8 +37,10 @@ import bench_comms  # noqa: E402
 import bench_step  # noqa: E402
 from common import fmt_num, machine_description, markdown_table, measure_interleaved  # noqa: E402
 
+from agentsim_env.core.threads import available_cores  # noqa: E402
+
 CPP_ANCHOR = 2_000_000  # agent-steps/s per core of a C++ batched engine without sensing (published figure)
-LONG = bench_step.LONG_EPISODE
+T = TypeVar("T")
 
 
 @dataclass
@@ -111,32 +114,29 @@ def small_worlds(rounds: int, block_s: float) -> tuple[list[Row], dict[str, floa
     return rows, rates
 
 
-def full_stack(
-    sizes: list[int], rounds: int, block_s: float
-) -> tuple[list[Row], dict[int, dict[str, float]]]:
+def full_stack(sizes: list[int], rounds: int, block_s: float) -> list[Row]:
     """Full stack dict / array env-steps/s and the comms cost, per size."""
     rows: list[Row] = []
-    eps: dict[int, dict[str, float]] = {}
     targets = {1000: (1000, 2000), 10_000: (100, 200)}
     for n in sizes:
         cases = {"dict": bench_comms.dict_case(n, True), "array": bench_comms.array_case(n, True),
                  "bare": bench_comms.array_case(n, False)}  # fmt: skip
         st = measure_interleaved(cases, rounds=rounds, block_s=block_s)
-        e = eps[n] = {k: 1.0 / s.step_s for k, s in st.items()}
+        e = {k: 1.0 / s.step_s for k, s in st.items()}
         td, ta = targets.get(n, (None, None))
         rows.append(Row(f"full stack 1x{n:,}, dict API", e["dict"], "env-steps/s", td))
         rows.append(Row(f"full stack 1x{n:,}, array API", e["array"], "env-steps/s", ta))
         rows.append(Row(f"comms cost 1x{n:,} (full step / step without comms)", e["bare"] / e["array"], "x",
                         1.5 if n in targets else None,
                         higher=False, note=f"without comms {fmt_num(e['bare'])} env-steps/s"))  # fmt: skip
-    return rows, eps
+    return rows
 
 
 def _array(n: int, threads: int = 1, **config: object) -> common.Case:
     return bench_step.array_case(1, n, 0, num_threads=threads, **config)
 
 
-def big_world(n: int, rounds: int) -> tuple[list[Row], dict[str, float]]:
+def big_world(n: int, rounds: int) -> list[Row]:
     """1xN array API without comms on one core, and 2 threads vs 1 (wall time)."""
     cases = {"1": _array(n, 1), "2": _array(n, 2)}
     st = measure_interleaved(cases, rounds=rounds, block_s=0.3, warmup=2)
@@ -144,7 +144,7 @@ def big_world(n: int, rounds: int) -> tuple[list[Row], dict[str, float]]:
     rows = [
         Row(f"1x{n:,} array API, no comms, 1 core", 1.0 / st["1"].step_s, "env-steps/s", 25 if tgt else None)
     ]
-    cores = common_cores()
+    cores = available_cores()
     if cores < 2:
         rows.append(
             Row(f"1x{n:,}: 2 threads vs 1 (wall)", None, "x", tgt, note=f"only {cores} core available")
@@ -153,14 +153,7 @@ def big_world(n: int, rounds: int) -> tuple[list[Row], dict[str, float]]:
         ratio = st["1"].wall_step_s / st["2"].wall_step_s
         rows.append(Row(f"1x{n:,}: 2 threads vs 1 (wall)", ratio, "x", tgt,
                         note=f"{st['1'].wall_step_s * 1e3:.1f} vs {st['2'].wall_step_s * 1e3:.1f} ms/step wall"))  # fmt: skip
-    return rows, {"step_s": st["1"].step_s}
-
-
-def common_cores() -> int:
-    """Cores this process may use."""
-    from agentsim_env.core.threads import available_cores
-
-    return available_cores()
+    return rows
 
 
 def cold_start(quick: bool) -> list[Row]:
@@ -169,7 +162,9 @@ def cold_start(quick: bool) -> list[Row]:
 
     rows = []
     # fewer runs than bench_coldstart's own table (which make bench prints too): the medians barely move
-    for r in bench_coldstart.coldstart_rows(quick, runs=3 if quick else 5, cold_runs=1, whole_quickstart=False):
+    for r in bench_coldstart.coldstart_rows(
+        quick, runs=3 if quick else 5, cold_runs=1, whole_quickstart=False
+    ):
         rows.append(Row(f"cold start: {r['case']} (warm cache)", r["warm_s"], "s", 3.0, higher=False,
                         note=f"empty cache {r['cold_s']:.1f} s" if r.get("cold_s") else ""))  # fmt: skip
     return rows
@@ -211,7 +206,7 @@ def plot_scaling(curve: dict[str, dict[int, float]], path: str) -> None:
     plt.close(fig)
 
 
-def _timed(label: str, fn: Callable[[], object]) -> object:
+def _timed(label: str, fn: Callable[[], T]) -> T:
     print(f"  measuring {label}", file=sys.stderr, flush=True)
     return fn()
 
@@ -234,16 +229,12 @@ def main(argv: list[str] | None = None) -> int:
         f"mode: {'quick' if q else 'full'}; CPU time, one thread unless stated; medians of interleaved rounds\n"
     )
     rows: list[Row] = []
-    small, rates = _timed("small worlds", lambda: small_worlds(rounds, block))  # type: ignore[misc]
+    small, rates = _timed("small worlds", lambda: small_worlds(rounds, block))
     rows += small
-    fs, eps = _timed(
-        "full stack", lambda: full_stack(comm_sizes, max(3, rounds // 2), 0.3 if not q else 0.02)
-    )  # type: ignore[misc]
-    rows += fs
-    bw, _ = _timed(f"1x{big}", lambda: big_world(big, 2 if q else 5))  # type: ignore[misc]
-    rows += bw
+    rows += _timed("full stack", lambda: full_stack(comm_sizes, max(3, rounds // 2), 0.3 if not q else 0.02))
+    rows += _timed(f"1x{big}", lambda: big_world(big, 2 if q else 5))
     if not args.no_coldstart:
-        rows += _timed("cold start", lambda: cold_start(q))  # type: ignore[operator]
+        rows += _timed("cold start", lambda: cold_start(q))
     print("## Targets\n")
     print(
         markdown_table(["case", "result", "target", "met", "measured alongside"], [r.cells() for r in rows])
@@ -257,12 +248,12 @@ def main(argv: list[str] | None = None) -> int:
     print(markdown_table(["case", "agent-steps/s per core"], per_core))
 
     sizes = [1000, 5000] if q else [1000, 10_000, 100_000]
-    curve = _timed("scaling", lambda: scaling(sizes, 2 if q else 3))  # type: ignore[arg-type]
+    curve = _timed("scaling", lambda: scaling(sizes, 2 if q else 3))
     print("\n## Scaling: CPU us per agent-step (array API, 1 thread)\n")
-    table = [[f"1x{n:,}"] + [fmt_num(curve[k][n]) for k in curve] for n in sizes]  # type: ignore[index]
-    print(markdown_table(["agents", *curve], table))  # type: ignore[list-item]
+    table = [[f"1x{n:,}"] + [fmt_num(curve[k][n]) for k in curve] for n in sizes]
+    print(markdown_table(["agents", *curve], table))
     if args.plot:
-        plot_scaling(curve, args.plot)  # type: ignore[arg-type]
+        plot_scaling(curve, args.plot)
         print(f"\nscaling plot: {args.plot}")
     return 0
 

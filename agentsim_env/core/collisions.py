@@ -175,7 +175,6 @@ def _agent_object(
     return out_a[:n], out_o[:n]
 
 
-_NONE = np.zeros(0, dtype=np.int64)
 _ONE = RowThreads(1)
 
 
@@ -225,7 +224,7 @@ def find_collisions(
     sp = agent_grid.spec
     m = float(margin)
     rmax = _max_radius(radius, online)
-    i = j = a_obj = o_obj = _NONE
+    i = j = a_obj = o_obj = _EMPTY
     if rmax >= 0.0:
         cs, items = agent_grid.cell_start, agent_grid.items
         i, j = _joined(threads.run(lambda lo, hi, _: _agent_agent(lo, hi, rmax, pos, radius, world, cs, items,

@@ -29,6 +29,8 @@ from numba import njit
 from agentsim_env.core.threads import RowThreads
 from agentsim_env.motion.state import CIRCULAR, LINEAR, PARABOLIC, PATH, VELOCITY, MotionState
 
+_ONE = RowThreads(1)
+
 # Slack on "duration elapsed" so that n * dt == duration finishes on step n despite rounding of t.
 T_EPS = 1e-9
 HEADING_EPS = 1e-9
@@ -319,15 +321,9 @@ def integrate_unchecked(
 ) -> None:
     """:func:`integrate` without the checks, for a caller that already validated these very arrays and ``dt``;
     ``threads`` splits the slots into row ranges (the result does not depend on it)."""
-    if threads is None or threads.num_threads == 1:
-        _integrate_kernel(
-            0, ms.kind.shape[0], ms.kind, ms.params, ms.t, ms.waypoints, ms.n_waypoints, ms.wp_index, ms.done,
-            ms.loop, pos, vel, heading, max_speed, max_accel, online, dt,
-        )  # fmt: skip
-        return
-    threads.run(lambda lo, hi, _: _integrate_kernel(lo, hi, ms.kind, ms.params, ms.t, ms.waypoints,
-                ms.n_waypoints, ms.wp_index, ms.done, ms.loop, pos, vel, heading, max_speed, max_accel, online,
-                dt), ms.kind.shape[0])  # fmt: skip
+    (threads or _ONE).run(lambda lo, hi, _: _integrate_kernel(lo, hi, ms.kind, ms.params, ms.t, ms.waypoints,
+                          ms.n_waypoints, ms.wp_index, ms.done, ms.loop, pos, vel, heading, max_speed, max_accel,
+                          online, dt), ms.kind.shape[0])  # fmt: skip
 
 
 @njit(cache=True)

@@ -317,10 +317,7 @@ class NavigationScenario(Scenario[NavigationConfig]):
         lo, hi = float(c.body.altitude[0]), float(c.body.altitude[1])
         args = (st.pos, st.vel, st.heading, world.task.goal, scan.distance, scan.hit_kind, self._side, lo, hi,
                 float(c.body.max_speed), out)  # fmt: skip
-        if world.threads.num_threads == 1:
-            _observe_kernel(0, st.n_slots, *args)
-        else:
-            world.threads.run(lambda r0, r1, _: _observe_kernel(r0, r1, *args), st.n_slots)
+        world.threads.run(lambda r0, r1, _: _observe_kernel(r0, r1, *args), st.n_slots)
         return out
 
     def state_extra(self, world: World, w: int) -> np.ndarray:
