@@ -3,7 +3,9 @@ run-time objects, faults, and bad options. The same on a Ray cluster: tests/test
 
 from __future__ import annotations
 
+import logging
 import sys
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -11,6 +13,7 @@ import pytest
 import agentsim_env
 from agentsim_env.distributed import DistributedBatchedEnv, Strips
 from agentsim_env.distributed import make as make_sharded
+from agentsim_env.distributed.ray_backend import start_local_cluster
 from agentsim_env.env.vector import BatchedEnv
 from agentsim_env.recorder import record
 from agentsim_env.recorder.read import Store
@@ -229,6 +232,29 @@ def test_missing_ray_gives_the_install_hint(monkeypatch: pytest.MonkeyPatch) -> 
     monkeypatch.setitem(sys.modules, "ray", None)
     with pytest.raises(ImportError, match=r"pip install 'agentsim-env\[ray\]'"):
         make_sharded("navigation", shards=2, n_agents=20)
+
+
+def test_a_local_cluster_off_loopback_warns_naming_what_listens(caplog: pytest.LogCaptureFixture) -> None:
+    constants = pytest.importorskip("ray._private.ray_constants")
+    seen: list[dict] = []
+
+    # what ray.init is given, and the flag it reads while it resolves the node's address
+    def init(**kw: object) -> None:
+        seen.append({**kw, "cluster_flag": constants.ENABLE_RAY_CLUSTER})
+
+    flag = constants.ENABLE_RAY_CLUSTER
+    for node, warned in (("127.0.0.1", False), ("192.0.2.7", True)):
+        fake = SimpleNamespace(init=init, util=SimpleNamespace(get_node_ip_address=lambda n=node: n),
+                               __version__="9.9")  # fmt: skip
+        caplog.clear()
+        with caplog.at_level(logging.WARNING, logger="agentsim_env.distributed"):
+            assert start_local_cluster(fake, num_cpus=2) == node
+        assert seen[-1]["_node_ip_address"] == "127.0.0.1" and seen[-1]["include_dashboard"] is False
+        assert seen[-1]["cluster_flag"] is False  # lowered while ray.init runs, and only then:
+        assert constants.ENABLE_RAY_CLUSTER == flag
+        assert len(caplog.records) == int(warned)
+    msg = caplog.records[0].getMessage()
+    assert "Ray 9.9" in msg and "192.0.2.7" in msg and "gcs_server" in msg and "every interface" in msg
 
 
 def test_strips_and_halos() -> None:

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from agentsim_env.distributed import make as make_sharded
+from agentsim_env.distributed.ray_backend import start_local_cluster
 from agentsim_env.recorder import record
 from agentsim_env.recorder.read import Store
 from agentsim_env.scenarios.registry import list_scenarios, scenario_class
@@ -33,8 +34,7 @@ SHARDABLE = {
 @pytest.fixture(scope="module", autouse=True)
 def local_cluster():  # type: ignore[no-untyped-def]
     """One local Ray cluster on 127.0.0.1 for the module (each env then joins it instead of starting one)."""
-    ray.init(num_cpus=4, include_dashboard=False, _node_ip_address="127.0.0.1", logging_level="ERROR",
-             log_to_driver=False)  # fmt: skip
+    start_local_cluster(ray, num_cpus=4)
     yield
     ray.shutdown()
 

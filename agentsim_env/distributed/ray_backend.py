@@ -8,13 +8,26 @@ as is one whose process died. An exception raised by the shard's own code propag
 
 When this process has already called ``ray.init`` (a test's cluster, a trainer's), the shards join that cluster
 and ``ray_address`` is not used.
+
+The local cluster listens on loopback only (``start_local_cluster``): Ray binds its gRPC servers (gcs_server,
+the raylet's two ports, the driver's and every worker's) to 127.0.0.1 only when the node's address is literally
+127.0.0.1, else to every interface, and its runtime-env agent to the node's address. ``ray.init`` replaces a
+loopback ``_node_ip_address`` by the machine's outward address unless Ray treats the machine as one that cannot
+join a cluster (its macOS and Windows default, ``ray_constants.ENABLE_RAY_CLUSTER``), so that flag is lowered
+while the cluster starts. Where a Ray version no longer honours it, the start says in one warning what listens
+beyond loopback.
 """
 
 from __future__ import annotations
 
+import contextlib
+import importlib
+import ipaddress
+import logging
 import os
 import re
 import socket
+from collections.abc import Iterator
 from typing import Any
 
 from agentsim_env.distributed.backends import Failure
@@ -26,6 +39,8 @@ STARTUP_TIMEOUT_S = 300.0
 """Seconds a shard may take to start (import, kernels) and answer its first reset."""
 _ADDRESS = re.compile(r"^(auto|local|(ray://)?[A-Za-z0-9_.\-]+:\d{1,5})$")
 _users = 0  # envs using the local cluster this process started
+LOOPBACK = "127.0.0.1"
+log = logging.getLogger("agentsim_env.distributed")
 
 
 def import_ray() -> Any:
@@ -65,6 +80,66 @@ def check_address(address: str) -> str:
     return address.strip()
 
 
+@contextlib.contextmanager
+def _loopback_node_address() -> Iterator[None]:
+    """While inside, Ray resolves this node's address to loopback instead of the machine's outward address."""
+    try:
+        constants = importlib.import_module("ray._private.ray_constants")
+    except ImportError:  # pragma: no cover - a Ray without the module: start_local_cluster warns
+        yield
+        return
+    if not hasattr(constants, "ENABLE_RAY_CLUSTER"):  # pragma: no cover - as above
+        yield
+        return
+    before = constants.ENABLE_RAY_CLUSTER
+    constants.ENABLE_RAY_CLUSTER = False  # read when ray.init resolves the node address, not after
+    try:
+        yield
+    finally:
+        constants.ENABLE_RAY_CLUSTER = before
+
+
+def is_loopback(address: str) -> bool:
+    """Whether ``address`` (an IP address or ``localhost``) is a loopback address."""
+    if address == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(address).is_loopback
+    except ValueError:
+        return False
+
+
+def exposed_warning(node_address: str, version: str) -> str | None:
+    """The warning for a local cluster whose node address is ``node_address``; ``None`` when it is loopback."""
+    if is_loopback(node_address):
+        return None
+    return (f"the local Ray cluster is not on loopback (Ray {version} gave it the node address {node_address}): "
+            f"gcs_server, both raylet ports, the driver and every shard worker listen on every interface and the "
+            f"runtime-env agent on {node_address}; any machine that reaches them can run code here (firewall "
+            f"them, or pass ray_address)")  # fmt: skip
+
+
+def start_local_cluster(ray: Any, num_cpus: int) -> str:
+    """``ray.init`` a local cluster whose every port listens on loopback (see the module docstring).
+
+    Args:
+        ray: The ``ray`` module.
+        num_cpus: CPUs the cluster offers.
+
+    Returns:
+        The node's address (127.0.0.1; if this Ray version gave it another one, a warning named what listens
+        beyond loopback).
+    """
+    with _loopback_node_address():
+        ray.init(num_cpus=num_cpus, include_dashboard=False, _node_ip_address=LOOPBACK, logging_level="ERROR",
+                 log_to_driver=False)  # fmt: skip
+    address = str(ray.util.get_node_ip_address())
+    warning = exposed_warning(address, getattr(ray, "__version__", "?"))
+    if warning is not None:
+        log.warning(warning)
+    return address
+
+
 class RayShards:
     """K shard actors on a Ray cluster (see the module docstring).
 
@@ -88,8 +163,7 @@ class RayShards:
             address = check_address(address)
         if not ray.is_initialized():
             if address is None:
-                ray.init(num_cpus=max(os.cpu_count() or 1, self.n_shards), include_dashboard=False,
-                         _node_ip_address="127.0.0.1", logging_level="ERROR", log_to_driver=False)  # fmt: skip
+                start_local_cluster(ray, num_cpus=max(os.cpu_count() or 1, self.n_shards))
                 self._own = True
                 _users += 1
             else:
