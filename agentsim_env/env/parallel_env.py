@@ -21,6 +21,7 @@ from agentsim_env.core.threads import check_num_threads
 from agentsim_env.core.validation import check_choice
 from agentsim_env.env.batch_kernels import scatter_part
 from agentsim_env.env.buffers import Recycled
+from agentsim_env.env.guard import CallGuard
 from agentsim_env.env.spaces import (
     FORMATS,
     REAL_KINDS,
@@ -168,6 +169,7 @@ class AgentSimParallelEnv(ParallelEnv):
         self._started = False
         self._window: Any = None
         self.viewer: Any = None  # the web viewer (render_mode="web"), started by the first reset
+        self._guard = CallGuard()  # reset, step, close and the message calls: one thread at a time
 
     # ------------------------------------------------------------------ spaces
     def observation_space(self, agent: str) -> spaces.Space:
@@ -190,7 +192,18 @@ class AgentSimParallelEnv(ParallelEnv):
     def reset(
         self, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[dict[str, Any], dict[str, dict[str, Any]]]:
-        """Start an episode; ``seed`` re-seeds the env's generator (otherwise it continues)."""
+        """Start an episode; ``seed`` re-seeds the env's generator (otherwise it continues).
+
+        Raises:
+            RuntimeError: Another thread is inside a call of this env (``step``, ``reset``, ``close``...).
+        """
+        self._guard.enter("reset")
+        try:
+            return self._reset(seed)
+        finally:
+            self._guard.exit()
+
+    def _reset(self, seed: int | None) -> tuple[dict[str, Any], dict[str, dict[str, Any]]]:
         if seed is not None:
             self._seeds.reset(seed)
         self._reset_core(self._seeds.next())
@@ -206,7 +219,19 @@ class AgentSimParallelEnv(ParallelEnv):
         return self._obs_dicts(flat), infos
 
     def step(self, actions: dict[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
-        """Advance one step with an action for every live agent (see the scenario docstring for layouts)."""
+        """Advance one step with an action for every live agent (see the scenario docstring for layouts).
+
+        Raises:
+            ValueError: A bad action (the message names the agent and the part) or no episode running.
+            RuntimeError: Another thread is inside a call of this env (``step``, ``reset``, ``close``...).
+        """
+        self._guard.enter("step")
+        try:
+            return self._step(actions)
+        finally:
+            self._guard.exit()
+
+    def _step(self, actions: dict[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
         if not self.agents:
             if not self._started:
                 raise ValueError("call reset() before step(): no episode has started")
@@ -371,22 +396,23 @@ class AgentSimParallelEnv(ParallelEnv):
         Raises:
             ValueError: Unknown or offline agent, unknown group, wrong payload width, NaN payload.
         """
-        comms = self._comms()
-        s = self._live_slot(sender, "sender")
-        if (to is None) == (group is None):
-            raise ValueError("give exactly one of to= (an agent id) or group= (a group id)")
-        pay = np.asarray(payload, dtype=np.float64).reshape(1, -1)
-        d = comms.cfg.payload_dim
-        if pay.shape[1] != d:
-            raise ValueError(f"payload must have {d} values (comms.payload_dim), got {pay.shape[1]}")
-        if not np.isfinite(pay).all():
-            raise ValueError(f"payload must be finite, got {pay.ravel().tolist()}")
-        if group is None:
-            return bool(comms.unicast(s, self._live_slot(str(to), "receiver"), pay[0], self.world.tick))
-        known = np.unique(self.world.state.group[self.world.state.group >= 0]).tolist()
-        if group not in known:
-            raise ValueError(f"group: unknown group {group!r}; groups are {known}")
-        return bool(comms.to_group(s, int(group), pay[0], self.world.tick))
+        with self._guard.hold("send_message"):
+            comms = self._comms()
+            s = self._live_slot(sender, "sender")
+            if (to is None) == (group is None):
+                raise ValueError("give exactly one of to= (an agent id) or group= (a group id)")
+            pay = np.asarray(payload, dtype=np.float64).reshape(1, -1)
+            d = comms.cfg.payload_dim
+            if pay.shape[1] != d:
+                raise ValueError(f"payload must have {d} values (comms.payload_dim), got {pay.shape[1]}")
+            if not np.isfinite(pay).all():
+                raise ValueError(f"payload must be finite, got {pay.ravel().tolist()}")
+            if group is None:
+                return bool(comms.unicast(s, self._live_slot(str(to), "receiver"), pay[0], self.world.tick))
+            known = np.unique(self.world.state.group[self.world.state.group >= 0]).tolist()
+            if group not in known:
+                raise ValueError(f"group: unknown group {group!r}; groups are {known}")
+            return bool(comms.to_group(s, int(group), pay[0], self.world.tick))
 
     def assign_group(self, agent: str, group: int) -> None:
         """Move ``agent`` to ``group`` for the rest of the episode (-1: no group); the change is logged as an event.
@@ -394,13 +420,14 @@ class AgentSimParallelEnv(ParallelEnv):
         Group ids run from -1 to ``n_agents - 1`` (at most one group per agent); ``reset`` returns every agent to
         the group the scenario dealt it.
         """
-        self._comms()
-        slot = self._live_slot(agent, "agent")
-        n = self.scenario.n_agents
-        if isinstance(group, bool) or not isinstance(group, (int, np.integer)) or not -1 <= group < n:
-            raise ValueError(f"group must be an integer in -1..{n - 1} (-1 = no group), got {group!r}")
-        assert self.world.groups is not None
-        self.world.groups.assign(np.array([slot]), int(group), self.world.tick)
+        with self._guard.hold("assign_group"):
+            self._comms()
+            slot = self._live_slot(agent, "agent")
+            n = self.scenario.n_agents
+            if isinstance(group, bool) or not isinstance(group, (int, np.integer)) or not -1 <= group < n:
+                raise ValueError(f"group must be an integer in -1..{n - 1} (-1 = no group), got {group!r}")
+            assert self.world.groups is not None
+            self.world.groups.assign(np.array([slot]), int(group), self.world.tick)
 
     def state(self) -> np.ndarray:
         """Global state of the world for centralised critics (see ``state_space``)."""
@@ -436,12 +463,13 @@ class AgentSimParallelEnv(ParallelEnv):
 
     def close(self) -> None:
         """Close the live window or stop the web viewer, if any."""
-        if self.viewer is not None:
-            self.viewer.close()
-            self.viewer = None
-        if self._window is not None:
-            self._window.close()
-            self._window = None
+        with self._guard.hold("close"):
+            if self.viewer is not None:
+                self.viewer.close()
+                self.viewer = None
+            if self._window is not None:
+                self._window.close()
+                self._window = None
 
 
 def to_aec(env: AgentSimParallelEnv) -> Any:

@@ -21,6 +21,7 @@ from agentsim_env.core.threads import check_num_threads
 from agentsim_env.core.validation import check_int, is_int, short_repr
 from agentsim_env.env.batch_kernels import finish_step, prepare_actions
 from agentsim_env.env.buffers import Recycled
+from agentsim_env.env.guard import CallGuard
 from agentsim_env.env.spaces import flat_layout
 from agentsim_env.scenarios.base import (
     assert_finite,
@@ -95,6 +96,7 @@ class BatchedEnv:
         self._seeds = [EpisodeSeeds() for _ in range(n_worlds)]
         self._started = False
         self._obs_out = Recycled((self.world.state.n_slots, self.obs_dim), np.float32)
+        self._guard = CallGuard()  # reset and step: one thread at a time
 
     def _flat_obs(
         self, rows: np.ndarray | None = None, step: int = 0, result: Any = None, out: np.ndarray | None = None
@@ -132,7 +134,18 @@ class BatchedEnv:
 
         Returns:
             Observations ``(B, N, obs_dim)``.
+
+        Raises:
+            ValueError: A bad seed (the message names the world).
+            RuntimeError: Another thread is inside ``reset`` or ``step`` of this env.
         """
+        self._guard.enter("reset")
+        try:
+            return self._reset(seed)
+        finally:
+            self._guard.exit()
+
+    def _reset(self, seed: int | Sequence[int] | None) -> np.ndarray:
         b = self.n_worlds
         if seed is None:
             seeds: list[int | None] = [None] * b
@@ -166,7 +179,15 @@ class BatchedEnv:
 
         Raises:
             ValueError: Wrong shape, or a NaN/inf action of a live agent (the message names world and agent).
+            RuntimeError: Another thread is inside ``reset`` or ``step`` of this env.
         """
+        self._guard.enter("step")
+        try:
+            return self._step(actions)
+        finally:
+            self._guard.exit()
+
+    def _step(self, actions: np.ndarray) -> BatchStep:
         if not self._started:
             raise ValueError("call reset() before step()")
         a = np.asarray(actions, dtype=np.float64)
@@ -186,14 +207,16 @@ class BatchedEnv:
         term = np.asarray(term, dtype=bool)
         trunc, done_worlds, n_done = finish_step(term, acting, self.steps >= self.scenario.max_steps, self.alive,
                                                  obs.reshape(-1, self.obs_dim))  # fmt: skip
+        # Copies taken before the automatic reset: the scenario's arrays may be state that a reset (or any later
+        # step) writes, and what is returned belongs to the caller.
+        shape = (self.n_worlds, self.n_agents)
+        info = {k: np.array(v).reshape(shape) for k, v in res.info.items()}
+        rewards = res.rewards.reshape(shape).astype(np.float32)
         final = np.zeros(obs.shape, dtype=obs.dtype)  # calloc: pages stay untouched unless a world resets
         if n_done:
             final[done_worlds] = obs[done_worlds]
             self._reset_worlds(np.flatnonzero(done_worlds))
             fresh = np.repeat(done_worlds, self.n_agents)
             obs[done_worlds] = self._flat_obs(fresh)[done_worlds]
-        shape = (self.n_worlds, self.n_agents)
-        info = {k: v.reshape(shape) for k, v in res.info.items()}
-        rewards = res.rewards.reshape(shape).astype(np.float32)
         return BatchStep(obs, rewards, term.reshape(shape), trunc.reshape(shape), self.alive.copy(), final,
                          done_worlds, info)  # fmt: skip
