@@ -172,6 +172,68 @@ def test_a_dead_shard_terminates_its_agents_once_and_the_rest_goes_on(tmp_path) 
     assert steps.step.max() == 16  # nothing recorded before or after the fault is lost
 
 
+@pytest.mark.parametrize("method", ["move", "collide_sense"])
+def test_a_shard_that_raises_is_offline_like_a_dead_one(method: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    env = make_sharded("navigation", shards=2, backend="local", n_agents=100, collisions=False)
+    co = env.coordinator
+    rng = np.random.default_rng(0)
+    env.reset(seed=0)
+    live_steps(env, 3, rng)
+    doomed = {env.possible_agents[i] for i in np.flatnonzero(co.owner == 1)}
+    assert doomed
+
+    def fault(*args: object) -> None:  # a persistent fault: every later call of the shard raises
+        raise ZeroDivisionError("a fault inside the shard")
+
+    monkeypatch.setattr(co.backend.shards[1], method, fault)
+    _, _, term, _, _ = env.step(random_actions(env, rng))
+    assert {a for a, t in term.items() if t} == doomed  # its agents terminate once
+    assert not env.shards[1].alive and env.shards[0].alive
+    assert "raised ZeroDivisionError: a fault inside the shard" in env.shards[1].reason
+    later = live_steps(env, 5, rng)  # the rest goes on
+    assert len(later) == 5 and all(not (set(s[2]) & doomed) for s in later)
+    env.reset(seed=1)  # the next episode starts the shard anew (without the fault)
+    assert all(s.alive for s in env.shards) and env.shards[1].restarts == 1 and len(env.agents) == 100
+    assert len(live_steps(env, 3, rng)) == 3
+    env.close()
+
+
+def test_a_shard_that_raises_in_its_reset_loses_its_agents_and_the_rest_goes_on(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    env = make_sharded("navigation", shards=2, backend="local", n_agents=100, collisions=False)
+    co = env.coordinator
+
+    def fault(*args: object) -> None:
+        raise RuntimeError("no memory for the world")
+
+    monkeypatch.setattr(co.backend.shards[0], "reset", fault)
+    env.reset(seed=0)
+    assert not env.shards[0].alive and "raised RuntimeError: no memory for the world" in env.shards[0].reason
+    rng = np.random.default_rng(0)
+    assert len(live_steps(env, 3, rng)) == 3
+    assert (co.owner[np.flatnonzero(env.world.state.online)] == 1).all()
+    env.reset(seed=1)
+    assert all(s.alive for s in env.shards) and len(env.agents) == 100
+    env.close()
+
+
+def test_every_shard_raising_is_an_error_from_the_fault(monkeypatch: pytest.MonkeyPatch) -> None:
+    env = make_sharded("navigation", shards=2, backend="local", n_agents=50, collisions=False)
+    env.reset(seed=0)
+    rng = np.random.default_rng(0)
+
+    def fault(*args: object) -> None:
+        raise ValueError("a bug in the shard")
+
+    for shard in env.coordinator.backend.shards.values():
+        monkeypatch.setattr(shard, "move", fault)
+    with pytest.raises(RuntimeError, match="every shard is offline.*a bug in the shard.*reset") as err:
+        env.step(random_actions(env, rng))
+    assert isinstance(err.value.__cause__, ValueError)  # the shard's own traceback is kept
+    env.close()
+
+
 def test_a_slow_shard_is_declared_offline_at_its_deadline() -> None:
     env = make_sharded("navigation", shards=2, backend="local", n_agents=100, timeout_s=0.5)
     rng = np.random.default_rng(0)

@@ -88,6 +88,24 @@ def test_a_shard_sleeping_past_the_deadline_does_not_hang_the_step() -> None:
     env.close()
 
 
+def test_a_shard_actor_that_raises_is_offline_like_a_dead_one() -> None:
+    env = make_sharded("navigation", shards=2, n_agents=100, collisions=False)
+    rng = np.random.default_rng(0)
+    env.reset(seed=0)
+    live_steps(env, 2, rng)
+    doomed = {env.possible_agents[i] for i in np.flatnonzero(env.coordinator.owner == 1)}
+    # a persistent fault inside the actor: time.sleep(1e300) raises OverflowError in every later call
+    env.coordinator.backend.set_delay(1, 1e300)
+    _, _, term, _, _ = env.step(random_actions(env, rng))
+    assert {a for a, t in term.items() if t} == doomed
+    assert not env.shards[1].alive and "raised OverflowError" in env.shards[1].reason
+    assert len(live_steps(env, 5, rng)) == 5
+    env.reset(seed=1)  # a new actor, without the fault
+    assert all(s.alive for s in env.shards) and len(env.agents) == 100
+    assert len(live_steps(env, 3, rng)) == 3
+    env.close()
+
+
 def test_an_unreachable_address_is_one_clear_error() -> None:
     # a fresh process (this one has a cluster already); port 1 on loopback: nothing listens there
     code = ("from agentsim_env.distributed import make\n"

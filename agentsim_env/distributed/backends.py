@@ -1,9 +1,11 @@
 """How the coordinator reaches its shards: in process (``LocalShards``) or as Ray actors (``ray_backend``).
 
 A backend runs one method on several shards at once and answers, per shard, either the shard's packed reply
-or a :class:`Failure` (the shard died, or missed the deadline). It never raises for a shard that stopped
-answering: the coordinator declares that shard offline and goes on. An exception raised by the shard's own
-code (a bug, a bad argument) is not a failure of the machine and propagates.
+or a :class:`Failure` (the shard died, missed the deadline, or raised). It never raises for a shard that failed:
+the coordinator declares that shard offline and goes on. An exception raised by the shard's own code counts as a
+failure too: the shard's state is unknown after it (a persistent fault would break every later call), so the
+shard is dropped like a dead one and started anew at the next ``reset``; the exception travels in the
+``Failure`` (the coordinator logs its traceback, and chains it when no shard is left).
 """
 
 from __future__ import annotations
@@ -18,9 +20,20 @@ from agentsim_env.distributed.shard import Packed, Shard
 
 @dataclass(frozen=True, slots=True)
 class Failure:
-    """A shard that did not answer: why (``"died: ..."`` or ``"missed the ... deadline"``)."""
+    """A shard that did not answer: why (``"died: ..."``, ``"missed the ... deadline"`` or ``"raised ..."``).
+
+    Attributes:
+        reason: One line for ``env.shards`` and the log.
+        error: The exception the shard's code raised (``None`` for a shard that died or was late).
+    """
 
     reason: str
+    error: BaseException | None = None
+
+
+def raised(error: BaseException) -> Failure:
+    """The failure of a shard whose code raised ``error``."""
+    return Failure(f"raised {type(error).__name__}: {error}", error)
 
 
 class Backend(Protocol):
@@ -48,7 +61,8 @@ class LocalShards:
     """Shards in this process, called one after another (debugging, tests, machines without Ray).
 
     Deadlines are checked after the fact (a call cannot be interrupted): a shard whose call took longer than
-    the deadline is declared offline all the same, and its answer thrown away.
+    the deadline is declared offline all the same, and its answer thrown away. A shard whose call raised is
+    dropped (see the module docstring).
 
     Args:
         factory: Builds shard ``k``.
@@ -72,7 +86,12 @@ class LocalShards:
                 out[k] = Failure("died: the shard was stopped")
                 continue
             t0 = time.perf_counter()
-            reply = getattr(shard, method)(*args)
+            try:
+                reply = getattr(shard, method)(*args)
+            except Exception as e:  # the shard's state is unknown now: drop it until a restart
+                self.shards[k] = None
+                out[k] = raised(e)
+                continue
             took = time.perf_counter() - t0
             if took > timeout_s:
                 self.shards[k] = None  # its answer came too late: it is offline until a restart

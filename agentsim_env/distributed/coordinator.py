@@ -19,8 +19,10 @@ One step (see ``distributed.shard`` for the shard's side):
    for the observations. When collisions take nobody offline, calls 2 and 3 go as one (``collide_sense``).
 
 Faults: every reply carries a heartbeat (shard, address, step, compute time) kept in ``shards``; a shard that
-dies or misses the deadline is declared offline at once: its agents go offline (they report ``terminations``
-once), its strips pass to the nearest live shard, the rest goes on. ``reset`` restarts offline shards.
+dies, misses the deadline or raises is declared offline at once: its agents go offline (they report
+``terminations`` once), its strips pass to the nearest live shard, the rest goes on. ``reset`` restarts offline
+shards. When no shard is left, the call raises a ``RuntimeError`` naming every shard's reason (chained to the
+exception a shard raised, if any).
 """
 
 from __future__ import annotations
@@ -144,18 +146,23 @@ class Coordinator:
         """``(K,)`` bool: the shards still answering."""
         return np.array([i.alive for i in self.shards], dtype=bool)
 
-    def _declare_offline(self, k: int, reason: str) -> None:
+    def _declare_offline(self, k: int, failure: Failure) -> None:
         info = self.shards[k]
         if not info.alive:
             return
-        info.alive, info.reason = False, reason
+        info.alive, info.reason = False, failure.reason
         slots = np.flatnonzero(self.owner == k)
         self.owner[slots] = -1
         self.world.set_offline(slots)
         self.lost = np.union1d(self.lost, slots)
+        if not self.alive.any():
+            reasons = "; ".join(f"shard {i.index}: {i.reason}" for i in self.shards)
+            raise RuntimeError(f"every shard is offline ({reasons}): the simulation cannot go on (reset() restarts "
+                               f"them)") from failure.error  # fmt: skip
         self.strips.reassign(k, self.alive)
+        # a shard that raised: its traceback goes with the warning (a bug shows where it is)
         log.warning("shard %d (%s) is offline: %s; its %d agents terminate, the simulation goes on",
-                    k, info.address, reason, slots.size)  # fmt: skip
+                    k, info.address, failure.reason, slots.size, exc_info=failure.error)  # fmt: skip
 
     def _call(self, method: str, calls: dict[int, tuple[Any, ...]]) -> dict[int, Packed]:
         """Run ``method`` on the live shards; declare the ones that fail offline; the answers of the others."""
@@ -165,7 +172,7 @@ class Coordinator:
         now = time.time()
         for k, r in replies.items():
             if isinstance(r, Failure):
-                self._declare_offline(k, r.reason)
+                self._declare_offline(k, r)
                 continue
             beat, info = r["beat"], self.shards[k]
             info.address, info.last_answer, info.last_step = beat["address"], now, beat["step"]

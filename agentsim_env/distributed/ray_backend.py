@@ -4,7 +4,7 @@
 given (started here, stopped when the last env using it closes), or the cluster at ``ray_address``. A call
 runs on every shard at once; ``ray.wait`` bounds it by the deadline, so a step never hangs on a dead or slow
 machine: a shard that misses it is killed and reported as a :class:`~agentsim_env.distributed.backends.Failure`,
-as is one whose process died. An exception raised by the shard's own code propagates as itself.
+as is one whose process died, and one whose code raised (its actor is killed: its state is unknown after it).
 
 When this process has already called ``ray.init`` (a test's cluster, a trainer's), the shards join that cluster
 and ``ray_address`` is not used.
@@ -30,7 +30,7 @@ import socket
 from collections.abc import Iterator
 from typing import Any
 
-from agentsim_env.distributed.backends import Failure
+from agentsim_env.distributed.backends import Failure, raised
 from agentsim_env.distributed.partition import Strips
 from agentsim_env.distributed.shard import Packed, Shard
 
@@ -84,7 +84,7 @@ def check_address(address: str) -> str:
 def _loopback_node_address() -> Iterator[None]:
     """While inside, Ray resolves this node's address to loopback instead of the machine's outward address."""
     try:
-        constants = importlib.import_module("ray._private.ray_constants")
+        constants: Any = importlib.import_module("ray._private.ray_constants")
     except ImportError:  # pragma: no cover - a Ray without the module: start_local_cluster warns
         yield
         return
@@ -209,7 +209,8 @@ class RayShards:
             except ray.exceptions.RayActorError as e:
                 out[k] = Failure(f"died: {type(e).__name__}")
             except ray.exceptions.RayTaskError as e:
-                raise e.as_instanceof_cause() from None
+                self.kill(k)
+                out[k] = raised(e.cause if isinstance(e.cause, BaseException) else e)
         return out
 
     def restart(self, index: int) -> None:
