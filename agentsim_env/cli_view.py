@@ -40,8 +40,11 @@ def _check_network(args: argparse.Namespace) -> None:
 def cmd_view(args: argparse.Namespace) -> int:
     """Run a scenario with a policy and stream it to the page, or replay a store."""
     _check_network(args)
-    if args.speed is not None and not 0 <= args.speed <= 10000:
-        raise ValueError(f"--speed must be a number of steps per second in 0..10000 (0: as fast as it runs), got {args.speed}")
+    if args.speed is not None:
+        from agentsim_env.render.web.viewer import SPEED_RANGE, speed_ok
+
+        if not speed_ok(args.speed):
+            raise ValueError(f"--speed must be {SPEED_RANGE}, got {args.speed}")
     if args.replay:
         if args.scenario or args.policy or args.set:
             raise ValueError("--replay plays a store: give no SCENARIO, --policy or --set with it")
@@ -84,7 +87,7 @@ def _live(args: argparse.Namespace) -> int:
     from agentsim_env.cli_set import parse_set
     from agentsim_env.policies.registry import make_policy, resolve_policy
     from agentsim_env.policies.rollout import run_episode
-    from agentsim_env.render.web.viewer import WebViewer
+    from agentsim_env.render.web.viewer import WebViewer, clamp_speed
     from agentsim_env.scenarios.registry import scenario_class
 
     config = parse_set(scenario_class(args.scenario).config_cls, args.set or [])
@@ -92,7 +95,7 @@ def _live(args: argparse.Namespace) -> int:
     args.announce()
     env = agentsim_env.make(args.scenario, **config)
     policy = make_policy(args.scenario, env, policy_name)
-    speed = args.speed if args.speed is not None else 1.0 / env.world.config.dt
+    speed = args.speed if args.speed is not None else clamp_speed(1.0 / env.world.config.dt)
     viewer = WebViewer(host=args.host, port=args.port, speed=speed, title=f"{args.scenario} | {policy_name}",
                        quiet=True)  # fmt: skip
     url = viewer.attach(env.world, env.scenario)
@@ -177,7 +180,8 @@ def add_view_commands(sub: Any, set_help: str, announce: Any) -> None:
     v.add_argument("--policy", default=None, help="baseline name (default: the scenario's first) or a trained model")
     v.add_argument("--set", nargs="*", metavar="KEY=VALUE", help=set_help)
     v.add_argument("--seed", type=int, default=0, help="seed of the first episode")
-    v.add_argument("--speed", type=float, default=None, help="steps per second (default: real time; 0: max)")
+    v.add_argument("--speed", type=float, default=None,
+                   help="steps per second, 0.1..10000 (default: real time; 0: as fast as it runs)")
     v.add_argument("--episodes", type=int, default=None, help="stop after this many episodes (default: run on)")
     v.add_argument("--steps", type=int, default=None, help="stop after this many steps (default: run on)")
     v.add_argument("--replay", default=None, metavar="RUN.db", help="replay an episode of this store instead")

@@ -19,17 +19,55 @@ from agentsim_env.render.web.server import TICK_S, ClientError, WebServer
 from agentsim_env.sim.world import StepEvents, World
 
 STATUS_EVERY = 0.5  # seconds between status / selected-agent updates
+MIN_SPEED = 0.1  # slowest pace in steps per second (one step every 10 s); 0 means as fast as possible
 MAX_SPEED = 10000.0
+PACE_SLICE_S = 0.05  # pace() never sleeps longer than this without looking at the controls again
+SPEED_RANGE = f"0 (as fast as possible) or a number of steps per second in {MIN_SPEED:g}..{MAX_SPEED:g}"
+
+
+def speed_ok(value: object) -> bool:
+    """Whether ``value`` is a speed the controls take: 0, or a number in ``MIN_SPEED..MAX_SPEED``.
+
+    Args:
+        value: Anything (a page's JSON value, a command-line number).
+
+    Returns:
+        True for 0 and for an int or float (not a bool) in the range; False otherwise, NaN included.
+    """
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return False
+    return value == 0 or MIN_SPEED <= value <= MAX_SPEED
+
+
+def _shown(value: object) -> str:
+    """A short form of a page's value for an error message (never the whole of a long string or list)."""
+    if isinstance(value, str):
+        return repr(value[:40]) + ("..." if len(value) > 40 else "")
+    if isinstance(value, (list, dict)):
+        return f"a JSON {'array' if isinstance(value, list) else 'object'}"
+    return repr(value)[:40]
+
+
+def clamp_speed(rate: float) -> float:
+    """A derived rate (such as real time, ``1 / dt``) brought into ``MIN_SPEED..MAX_SPEED`` (0 if not finite)."""
+    if not rate == rate or rate <= 0:  # NaN or not positive: as fast as possible
+        return 0.0
+    return min(max(float(rate), MIN_SPEED), MAX_SPEED)
 
 
 class Controls:
     """Pause, single steps, speed and the selected agent, set by the page (server thread), read by the driver.
 
     Args:
-        speed: Steps per second (0: as fast as possible).
+        speed: Steps per second: 0 (as fast as possible) or ``MIN_SPEED..MAX_SPEED``.
+
+    Raises:
+        ValueError: If ``speed`` is outside that range.
     """
 
     def __init__(self, speed: float = 0.0) -> None:
+        if not speed_ok(speed):
+            raise ValueError(f"speed must be {SPEED_RANGE}, got {speed!r}")
         self.paused = False
         self.speed = float(speed)
         self.selected: int | None = None
@@ -54,6 +92,7 @@ class Controls:
         self._only(msg, ())
         with self._cond:
             self.paused = True
+            self._cond.notify_all()  # a pacing driver stops waiting and holds in gate() instead
         return self.status()
 
     def _resume(self, msg: dict[str, Any]) -> dict[str, Any]:
@@ -75,12 +114,12 @@ class Controls:
     def _speed(self, msg: dict[str, Any]) -> dict[str, Any]:
         self._only(msg, ("value",))
         v = msg.get("value")
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 <= v <= MAX_SPEED:
-            raise ClientError(f"speed: 'value' must be a number of steps per second in 0..{MAX_SPEED:g} "
-                              f"(0 = as fast as possible), got {v!r}")  # fmt: skip
+        if not speed_ok(v):
+            raise ClientError(f"speed: 'value' must be {SPEED_RANGE}, got {_shown(v)}")
         with self._cond:
             self.speed = float(v)
             self._next = 0.0
+            self._cond.notify_all()  # a driver pacing at the old speed takes the new one at once
         return self.status()
 
     def _select(self, msg: dict[str, Any]) -> dict[str, Any] | None:
@@ -114,15 +153,25 @@ class Controls:
             pass
 
     def pace(self) -> None:
-        """Sleep so that steps follow at ``speed`` per second (no-op at speed 0 or when behind)."""
-        if self.speed <= 0:
-            return
-        now = time.perf_counter()
-        if self._next <= 0.0 or now - self._next > 1.0:  # first step, or far behind: restart the clock
-            self._next = now
-        self._next += 1.0 / self.speed
-        if self._next > now:
-            time.sleep(self._next - now)
+        """Wait so that steps follow at ``speed`` per second (no-op at speed 0 or when behind).
+
+        The wait is cut short by any change of the controls (a new speed, pause, step, resume, close), so a
+        slow speed never parks the driver: it looks at the controls at least every ``PACE_SLICE_S``.
+        """
+        with self._cond:
+            speed = self.speed
+            if not MIN_SPEED <= speed <= MAX_SPEED:  # 0: as fast as possible (and nothing else gets here)
+                return
+            now = time.perf_counter()
+            if self._next <= 0.0 or now - self._next > 1.0:  # first step, or far behind: restart the clock
+                self._next = now
+            self._next += 1.0 / speed
+            due = self._next
+            while not self.closed and not self.paused and not self._tokens and self.speed == speed:
+                left = due - time.perf_counter()
+                if left <= 0.0 or self._next != due:  # due, or the clock was restarted (resume, new speed)
+                    return
+                self._cond.wait(min(left, PACE_SLICE_S))
 
     def close(self) -> None:
         """Release a waiting driver for good."""
@@ -137,7 +186,7 @@ class WebViewer:
     Args:
         host: Address to bind (127.0.0.1: this machine only; anything else prints a warning).
         port: Port (0: a free one).
-        speed: Initial steps per second (0: as fast as the simulation runs).
+        speed: Initial steps per second: 0 (as fast as the simulation runs) or ``MIN_SPEED..MAX_SPEED``.
         title: Page title (default: the scenario's name).
         w: Which world of a batched world to show.
         quiet: Print nothing (otherwise the URL is printed when the server starts).
@@ -239,7 +288,7 @@ class WebViewer:
             self.server.publish_frame(self.seq, frame)
 
     def hook(self, world: World, events: StepEvents) -> None:
-        """Stage 10: log lines, a frame when a page can take one, status; then pause and pace."""
+        """Stage 10: log lines, a frame when a page can take one, status; then pace and pause."""
         srv = self.server
         if srv.n_pages:
             srv.publish_log(log_lines(world, self.scenario, events, self.w, self.episode, self._names))
@@ -260,13 +309,13 @@ class WebViewer:
                 sel = self.controls.selected
                 if sel is not None:
                     srv.broadcast(agent_message(world, self.scenario, self.w, sel))
+        self.controls.pace()  # cut short by a pause, which then holds this very step
         if self.controls.paused:
             self._events = events
             self._send_frame(events)  # the page shows the step the simulation is paused on
             srv.broadcast(self._status())
             self.controls.gate()
             self._events = None
-        self.controls.pace()
 
     def close(self) -> None:
         """Remove the hook, release a paused step and stop the server."""
@@ -276,4 +325,4 @@ class WebViewer:
         self.server.stop()
 
 
-__all__ = ["Controls", "WebViewer"]
+__all__ = ["MAX_SPEED", "MIN_SPEED", "SPEED_RANGE", "Controls", "WebViewer", "clamp_speed", "speed_ok"]
