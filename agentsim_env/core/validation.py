@@ -5,7 +5,8 @@ allowed values) at construction, before any state is touched.
 
 Every field is also checked against its annotation (``coerce_fields``): a ``bool`` field takes ``True`` or
 ``False`` only (never a truthy string or number), ``int`` and ``float`` fields take numpy scalars too (stored as
-Python numbers), ``str`` fields take strings.
+Python numbers), ``str`` fields take printable text (``check_text``: no control characters, bidirectional
+overrides or unpaired surrogates).
 """
 
 from __future__ import annotations
@@ -13,12 +14,15 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
+import re
 import types
 import typing
 from collections.abc import Iterable, Mapping
 from typing import Any, TypeVar
 
 import numpy as np
+
+from agentsim_env.core.short_text import short_repr  # re-exported: every message builder uses this one
 
 T = TypeVar("T")
 
@@ -49,10 +53,40 @@ def build_config(cls: type[T], values: Mapping[str, Any], label: str = "config")
         raise ValueError(f"bad value for {cls.__name__}: {exc}") from exc
 
 
-def short_repr(value: Any, limit: int = 120) -> str:
-    """``repr(value)`` cut to ``limit`` characters, so an error message stays short whatever the input."""
-    text = repr(value)
-    return text if len(text) <= limit else f"{text[: limit - 20]}... ({len(text):,} characters)"
+#: Characters no text field takes: C0 controls, DEL and C1 controls (a terminal acts on them), the
+#: bidirectional embeddings, overrides and isolates (they reorder what is shown), and surrogates (in a Python
+#: string they are always unpaired, and no UTF-8 encoder writes them).
+_BAD_TEXT = re.compile("[\x00-\x1f\x7f-\x9f\u202a-\u202e\u2066-\u2069\ud800-\udfff]")
+_BAD_TEXT_OR_NEWLINE = re.compile("[\x00-\x08\x0b-\x1f\x7f-\x9f\u202a-\u202e\u2066-\u2069\ud800-\udfff]")
+
+
+def check_text(name: str, value: Any, *, allow_newlines: bool = False) -> str:
+    """Raise unless ``value`` is a string that is safe to print, log, plot and encode as UTF-8.
+
+    Refused: C0 and C1 control characters and DEL (U+0000-001F, U+007F-009F), the bidirectional embeddings,
+    overrides and isolates (U+202A-202E, U+2066-2069) and unpaired surrogates (U+D800-DFFF).
+
+    Args:
+        name: The field, named in the error.
+        value: The value to check.
+        allow_newlines: Also accept tab and line feed (free text such as a description).
+
+    Returns:
+        ``value`` unchanged.
+
+    Raises:
+        ValueError: Naming the field, the first refused character (as ``U+XXXX``) and its position; the
+            message never contains the character itself.
+    """
+    if not isinstance(value, str):
+        raise ValueError(f"{name} must be a string, got {short_repr(value)}")
+    bad = (_BAD_TEXT_OR_NEWLINE if allow_newlines else _BAD_TEXT).search(value)
+    if bad is not None:
+        raise ValueError(
+            f"{name} must be printable text without control characters, bidirectional overrides or unpaired "
+            f"surrogates; found U+{ord(bad.group()):04X} at position {bad.start()}"
+        )
+    return value
 
 
 def check_choice(name: str, value: Any, allowed: Iterable[Any]) -> None:
@@ -85,9 +119,9 @@ def check_int(name: str, value: Any, lo: int | None = None, hi: int | None = Non
     if not is_int(value):
         raise ValueError(f"{name} must be an integer, got {short_repr(value)}")
     if lo is not None and value < lo:
-        raise ValueError(f"{name} must be >= {lo}, got {value}")
+        raise ValueError(f"{name} must be >= {lo}, got {short_repr(value)}")  # an int may have 10**6 digits
     if hi is not None and value > hi:
-        raise ValueError(f"{name} must be <= {hi}, got {value}")
+        raise ValueError(f"{name} must be <= {hi}, got {short_repr(value)}")
 
 
 def check_float(
@@ -147,9 +181,7 @@ def _check_type(name: str, value: Any, tp: Any) -> Any:
             raise ValueError(f"{name} must be a number, got {short_repr(value)}")
         return float(value)
     if tp is str:
-        if not isinstance(value, str):
-            raise ValueError(f"{name} must be a string, got {short_repr(value)}")
-        return value
+        return check_text(name, value)
     if origin is tuple:
         args = typing.get_args(tp)
         if isinstance(value, np.ndarray):

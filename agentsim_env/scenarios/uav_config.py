@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 from agentsim_env.comms.stack import CommsConfig
-from agentsim_env.core.validation import check_float, check_int, short_repr
+from agentsim_env.core.validation import check_float, check_int, check_text, short_repr
 from agentsim_env.payloads import ScatterConfig, WindConfig
 from agentsim_env.scenarios.config import BodyConfig, ScenarioConfig, SensingConfig
 from agentsim_env.scenarios.rewards import RewardConfig
@@ -150,6 +150,8 @@ class UavReleaseConfig(ScenarioConfig):
             raise ValueError(f"zones must be {ZONES_ACCEPTED}; got {type(z).__name__} {short_repr(z)}")
         if isinstance(z, str) and not z.strip():
             raise ValueError(f"zones must be {ZONES_ACCEPTED}; got an empty string")
+        if z is not None:
+            check_text("zones", os.fsdecode(z))  # a path is echoed in messages: no terminal escapes
         named = {None: default_zones_path, "default": default_zones_path, "tiny": tiny_zones_path}
         if z is None or z in named:
             return load_zones(named[z]())

@@ -31,7 +31,9 @@ altitude     number   null     release altitude (m AGL), 0 < altitude <= 120; nu
 name         string   null     label used in messages, logs and plots
 ============ ======== ======== ======================================================================
 
-A file is at most 16 MiB of UTF-8 JSON. Unknown fields, missing required fields, wrong types (a boolean is not a number; an integer is accepted for
+A file is a regular file (not a device or FIFO) of at most 16 MiB of UTF-8 JSON, with no key given twice in
+one object and at most ``MAX_JSON_DEPTH`` levels of nesting. Text (``name``, ``description``) must be printable:
+control characters, bidirectional overrides and unpaired surrogates are refused. Unknown fields, missing required fields, wrong types (a boolean is not a number; an integer is accepted for
 a number) and out-of-range values raise ``ValueError`` naming the zone (``zones[i]`` and its name) and the
 field.
 Overlapping zones are allowed (see ``overlaps``); the payload check is separate (``validate_against_payload``)
@@ -51,12 +53,15 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from agentsim_env.core.validation import check_choice, check_float, check_int, short_repr
+from agentsim_env.core.files import json_depth, parse_json, read_regular
+from agentsim_env.core.validation import check_choice, check_float, check_int, check_text, short_repr
 from agentsim_env.wsn.profiles import PROFILE_KINDS, RadialProfile
 
 __all__ = [
     "FORMAT_VERSION",
     "MAX_ALTITUDE",
+    "MAX_FILE_BYTES",
+    "MAX_JSON_DEPTH",
     "MAX_MAP_SIDE",
     "MAX_SENSORS_PER_ZONE",
     "MAX_ZONES",
@@ -70,6 +75,7 @@ __all__ = [
     "validate_against_payload",
     "zones_from_dict",
     "zones_to_dict",
+    "zones_to_json",
 ]
 
 FORMAT_VERSION = 1
@@ -81,6 +87,8 @@ MAX_ZONES = 1000
 MAX_SENSORS_PER_ZONE = 100_000
 MAX_MAP_SIDE = 1e5
 MAX_FILE_BYTES = 16 << 20
+#: Most levels of JSON objects and lists in a zone file (the format itself uses 4: file, zones, zone, centre).
+MAX_JSON_DEPTH = 16
 
 _REQUIRED = ("centre", "radius", "n_sensors")
 _TOP_FIELDS = ("version", "description", "map_size", "base", "zones")
@@ -119,8 +127,10 @@ def _check_zone_values(label: str, v: dict[str, Any]) -> None:
     check_float(f("weight"), v["weight"], 1e-3, 1e3)
     if v["altitude"] is not None:
         check_float(f("altitude"), v["altitude"], 0.0, MAX_ALTITUDE, lo_open=True)
-    if v["name"] is not None and not isinstance(v["name"], str):
-        raise ValueError(f"{f('name')} must be a string or null, got {short_repr(v['name'])}")
+    if v["name"] is not None:
+        if not isinstance(v["name"], str):
+            raise ValueError(f"{f('name')} must be a string or null, got {short_repr(v['name'])}")
+        check_text(f("name"), v["name"])  # names reach terminals, logs and plots
 
 
 def _zone_label(index: int | None, name: Any) -> str:
@@ -288,7 +298,12 @@ def zones_from_dict(d: dict[str, Any]) -> ZoneSet:
     """
     if not isinstance(d, dict):
         raise ValueError(f"the zone file must hold a JSON object, got {type(d).__name__}")
+    if json_depth(d, MAX_JSON_DEPTH) > MAX_JSON_DEPTH:
+        raise ValueError(f"the zone file is nested more than {MAX_JSON_DEPTH} levels deep; at most "
+                         f"{MAX_JSON_DEPTH} are allowed")  # fmt: skip
     _check_keys("zone file", d, _TOP_FIELDS, ("map_size", "zones"))
+    if "description" in d:  # not kept, but checked like every other text of the file
+        check_text("field 'description'", d["description"], allow_newlines=True)
     if "version" in d and (isinstance(d["version"], bool) or d["version"] != FORMAT_VERSION):
         raise ValueError(f"field 'version' must be {FORMAT_VERSION}, got {short_repr(d['version'])}")
     raw = d["zones"]
@@ -349,35 +364,44 @@ def load_zones(path: str | os.PathLike[str]) -> ZoneSet:
         The validated zone set.
 
     Raises:
-        ValueError: On malformed JSON, non-UTF-8 text, a file over ``MAX_FILE_BYTES`` or invalid content; the
-            message starts with the path.
-        OSError: When the file cannot be read.
+        ValueError: On a folder, device, FIFO or socket (only a regular file is read, and at most
+            ``MAX_FILE_BYTES + 1`` bytes of it), a file over ``MAX_FILE_BYTES``, non-UTF-8 text, malformed JSON,
+            a key given twice in one object, nesting past ``MAX_JSON_DEPTH`` or invalid content; the message
+            starts with the path.
+        OSError: When the file cannot be opened or read.
     """
-    p = Path(path)
     if not str(path):
         raise ValueError("zones: the zone file path is empty")
-    if p.is_dir():
-        raise ValueError(f"{path}: is a folder, not a zone file")
-    size = p.stat().st_size
-    if size > MAX_FILE_BYTES:
-        raise ValueError(f"{path}: {size:,} bytes; a zone file is at most {MAX_FILE_BYTES:,} bytes")
+    raw = read_regular(path, MAX_FILE_BYTES, "a zone file")
     try:
-        text = p.read_bytes().decode("utf-8")
+        text = raw.decode("utf-8")
     except UnicodeDecodeError as exc:
         raise ValueError(
             f"{path}: not UTF-8 text (byte {exc.object[exc.start]:#04x} at position {exc.start}); "
             "zone files are UTF-8 JSON: re-save the file as UTF-8"
         ) from None
     try:
-        data = json.loads(text)
+        data = parse_json(text, MAX_JSON_DEPTH)
     except json.JSONDecodeError as exc:
         raise ValueError(f"{path}: not valid JSON: {exc}") from exc
-    except RecursionError:
-        raise ValueError(f"{path}: JSON nested too deeply to be a zone file") from None
+    except ValueError as exc:  # a duplicate key, or nesting past MAX_JSON_DEPTH
+        raise ValueError(f"{path}: {exc}") from None
     try:
         return zones_from_dict(data)
     except ValueError as exc:
         raise ValueError(f"{path}: {exc}") from exc
+
+
+def zones_to_json(zs: ZoneSet) -> str:
+    """A zone set as the indented JSON text that ``save_zones`` writes and ``load_zones`` reads.
+
+    Args:
+        zs: The zone set.
+
+    Returns:
+        The text, ending with a newline.
+    """
+    return json.dumps(zones_to_dict(zs), indent=2) + "\n"
 
 
 def save_zones(zs: ZoneSet, path: str | os.PathLike[str]) -> None:
@@ -387,7 +411,7 @@ def save_zones(zs: ZoneSet, path: str | os.PathLike[str]) -> None:
         zs: The zone set.
         path: Destination file (overwritten).
     """
-    Path(path).write_text(json.dumps(zones_to_dict(zs), indent=2) + "\n", encoding="utf-8")
+    Path(path).write_text(zones_to_json(zs), encoding="utf-8")
 
 
 def validate_against_payload(zs: ZoneSet, n_uavs: int, payload_per_uav: int) -> None:
