@@ -22,8 +22,6 @@ from typing import Any, TypeVar
 
 import numpy as np
 
-from agentsim_env.core.short_text import short_repr  # re-exported: every message builder uses this one
-
 T = TypeVar("T")
 
 
@@ -51,6 +49,12 @@ def build_config(cls: type[T], values: Mapping[str, Any], label: str = "config")
         return cls(**values)
     except TypeError as exc:  # e.g. a value of the wrong type reaching a comparison
         raise ValueError(f"bad value for {cls.__name__}: {exc}") from exc
+
+
+def short_repr(value: Any, limit: int = 120) -> str:
+    """``repr(value)`` cut to ``limit`` characters, so an error message stays short whatever the input."""
+    text = repr(value)
+    return text if len(text) <= limit else f"{text[: limit - 20]}... ({len(text):,} characters)"
 
 
 #: Characters no text field takes: C0 controls, DEL and C1 controls (a terminal acts on them), the
@@ -119,9 +123,9 @@ def check_int(name: str, value: Any, lo: int | None = None, hi: int | None = Non
     if not is_int(value):
         raise ValueError(f"{name} must be an integer, got {short_repr(value)}")
     if lo is not None and value < lo:
-        raise ValueError(f"{name} must be >= {lo}, got {short_repr(value)}")  # an int may have 10**6 digits
+        raise ValueError(f"{name} must be >= {lo}, got {value}")
     if hi is not None and value > hi:
-        raise ValueError(f"{name} must be <= {hi}, got {short_repr(value)}")
+        raise ValueError(f"{name} must be <= {hi}, got {value}")
 
 
 def check_float(
