@@ -6,6 +6,7 @@ raylet, the runtime-env agent, the shard workers), read from ``/proc/net/tcp*`` 
 
 from __future__ import annotations
 
+import os
 import sys
 from collections.abc import Iterator
 from typing import Any
@@ -39,8 +40,10 @@ def running() -> Iterator[tuple[Any, list[Listener]]]:
 def test_every_port_of_the_local_cluster_is_on_loopback(running: tuple[Any, list[Listener]]) -> None:
     _, opened = running
     names = {s.process for s in opened}
-    # the walk over the process tree found Ray's processes (else the check below would prove nothing)
-    assert {"gcs_server", "raylet", "ray::Shard"} <= names, sorted(map(str, opened))
+    # the walk found every kind of Ray process that listens, and the driver (else the check would prove nothing)
+    assert {"gcs_server", "raylet", "ray::RuntimeEnvAgent", "ray::Shard"} <= names, sorted(map(str, opened))
+    assert any(s.pid == os.getpid() for s in opened), sorted(map(str, opened))
+    assert sum(s.process == "ray::Shard" for s in opened) == 2  # one worker per shard
     exposed = [str(s) for s in opened if not s.loopback]
     assert not exposed, f"the local Ray cluster listens beyond loopback: {exposed}"
 

@@ -4,6 +4,8 @@ loopback only by default: every TCP socket they open, read from ``/proc/net/tcp*
 from __future__ import annotations
 
 import sys
+from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 import pytest
@@ -42,6 +44,25 @@ def test_agentsim_view_listens_on_loopback_only(monkeypatch: pytest.MonkeyPatch)
     monkeypatch.setattr(rollout, "run_episode", first_episode)
     assert main(["view", "navigation", "--set", "n_agents=3", "--steps", "2", "--speed", "0"]) == 0
     _assert_loopback(seen[0], "agentsim view")
+
+
+def test_agentsim_view_replay_listens_on_loopback_only(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    import agentsim_env.cli_view as cli_view
+
+    db = tmp_path / "r.db"
+    assert main(["run", "navigation", "--episodes", "1", "--set", "n_agents=3", "max_steps=5", "--record", str(db),
+                 "--out", "", "--quiet"]) == 0  # fmt: skip
+    before = {s.inode for s in listeners()}
+    seen: list[list[Listener]] = []
+
+    class Ctrl_C:  # noqa: N801 - stands for the Ctrl-C the replay waits for
+        def wait(self) -> None:
+            seen.append(_opened(before))
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(cli_view, "threading", SimpleNamespace(Event=Ctrl_C))
+    assert main(["view", "--replay", str(db)]) == 0
+    _assert_loopback(seen[0], "agentsim view --replay")
 
 
 def test_render_mode_web_listens_on_loopback_only() -> None:
