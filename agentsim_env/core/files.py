@@ -32,6 +32,11 @@ _KINDS = (
 )
 
 
+def _flag(name: str) -> int:
+    """The ``os.O_*`` flag ``name``, or 0 where the platform lacks it (Windows has no O_NONBLOCK)."""
+    return int(getattr(os, name, 0))
+
+
 def file_kind(mode: int) -> str:
     """What a ``st_mode`` names, in words (``"a regular file"``, ``"a FIFO (named pipe)"``, ...)."""
     for test, words in _KINDS:
@@ -57,14 +62,14 @@ def read_regular(path: str | os.PathLike[str], limit: int, what: str = "file") -
         OSError: When the file cannot be opened or read.
     """
     # O_NONBLOCK: opening a FIFO that nobody writes returns at once instead of waiting for a writer
-    flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0) | getattr(os, "O_BINARY", 0)
-    fd = os.open(path, flags)
+    fd = os.open(path, os.O_RDONLY | _flag("O_NONBLOCK") | _flag("O_CLOEXEC") | _flag("O_BINARY"))
     with os.fdopen(fd, "rb", buffering=0) as fh:
         st = os.fstat(fd)  # the opened file, so nothing can swap it between the check and the read
         if stat.S_ISDIR(st.st_mode):
             raise ValueError(f"{path}: is a folder, not {what}")
         if not stat.S_ISREG(st.st_mode):
-            raise ValueError(f"{path}: is {file_kind(st.st_mode)}, not a regular file; {what} must be a regular file")
+            kind = file_kind(st.st_mode)
+            raise ValueError(f"{path}: is {kind}, not a regular file; {what} must be a regular file")
         if st.st_size > limit:
             raise ValueError(f"{path}: {st.st_size:,} bytes; {what} is at most {limit:,} bytes")
         chunks, left = [], limit + 1
@@ -156,13 +161,13 @@ def _checked_target(path: Path) -> tuple[Path, os.stat_result | None]:
             raise _refuse(errno.EINVAL, f"{target} is {file_kind(st.st_mode)}, not a regular file; "
                           "nothing was written", target)  # fmt: skip
         if not _may(target, os.W_OK):
-            raise _refuse(errno.EACCES, f"permission denied: this process may not write {target} "
-                          f"(mode {stat.S_IMODE(st.st_mode):04o}, owner uid {st.st_uid}); nothing was written",
-                          target)  # fmt: skip
+            how = f"mode {stat.S_IMODE(st.st_mode):04o}, owner uid {st.st_uid}"
+            raise _refuse(errno.EACCES, f"permission denied: this process may not write {target} ({how}); "
+                          "nothing was written", target)  # fmt: skip
     elif not folder.is_dir():
         raise _refuse(errno.ENOENT, f"the folder {folder} does not exist; nothing was written", target)
     if not _may(folder, os.W_OK | os.X_OK):
-        raise _refuse(errno.EACCES, f"permission denied: this process may not create files in {folder} (the file "
+        raise _refuse(errno.EACCES, f"permission denied: this process may not create files in {folder} (a file "
                       "is replaced through a temporary file beside it); nothing was written", target)  # fmt: skip
     return target, st
 
@@ -200,8 +205,9 @@ def write_atomically(path: str | os.PathLike[str], data: bytes) -> Path:
                 try:
                     os.fchown(fd, st.st_uid, st.st_gid)
                 except PermissionError:
-                    raise _refuse(errno.EPERM, f"cannot keep the owner of {target} (uid {st.st_uid}, gid "
-                                  f"{st.st_gid}) on a replacement; nothing was written", target) from None  # fmt: skip
+                    owner = f"uid {st.st_uid}, gid {st.st_gid}"
+                    raise _refuse(errno.EPERM, f"cannot keep the owner of {target} ({owner}) on a replacement; "
+                                  "nothing was written", target) from None  # fmt: skip
             os.fchmod(fd, stat.S_IMODE(st.st_mode))  # after the chown, which may clear set-id bits
         with os.fdopen(fd, "wb") as fh:
             fd = -1  # owned by fh now
@@ -220,7 +226,7 @@ def write_atomically(path: str | os.PathLike[str], data: bytes) -> Path:
 
 def _create_temp(target: Path) -> tuple[int, Path]:
     """A new, empty temporary file beside ``target``, created with ``0o666`` (the umask applies)."""
-    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0) | getattr(os, "O_BINARY", 0)
+    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | _flag("O_CLOEXEC") | _flag("O_BINARY")
     for _ in range(100):
         tmp = target.parent / f".{target.name}.{secrets.token_hex(6)}.tmp"
         try:

@@ -7,7 +7,9 @@ the one ``load_zones`` would give. Messages (JSON objects, ``cmd`` names the req
 * ``{"cmd": "zones.preview", "zones": {zone file}}`` -> ``{"type": "zones.preview", "ok": true, "zones": [...],
   "overlaps": [[i, j], ...]}``, or ``{"ok": false, "error": message}`` when the zone file is invalid.
 * ``{"cmd": "zones.save", "zones": {zone file}}`` -> ``{"type": "zones.saved", "path", "n_zones"}``; writes only the
-  file the designer was started with (atomically), never a path named by the page.
+  file the designer was started with, never a path named by the page: atomically, through a symbolic link to the
+  file it names, keeping an existing file's mode and owner (a new file follows the umask), and refusing (with
+  the reason, for the page) a file the process may not write or that is not a regular file.
 * ``{"cmd": "zones.load"}`` -> ``{"type": "zones.loaded", "zones": {zone file}, "path"}``.
 
 Malformed messages raise ``ClientError`` (sent to the page as ``{"type": "error", "message": ...}``).
@@ -15,8 +17,6 @@ Malformed messages raise ``ClientError`` (sent to the page as ``{"type": "error"
 
 from __future__ import annotations
 
-import os
-import tempfile
 import threading
 import webbrowser
 from pathlib import Path
@@ -24,10 +24,17 @@ from typing import Any
 
 import numpy as np
 
+from agentsim_env.core.files import write_atomically
 from agentsim_env.render.web.frames import DENSITY_SAMPLES, density_curve
 from agentsim_env.render.web.server import ClientError, Handler, WebServer
 from agentsim_env.scenarios import uav_zones
-from agentsim_env.scenarios.uav_zones import ZoneSet, load_zones, save_zones, zones_from_dict, zones_to_dict
+from agentsim_env.scenarios.uav_zones import (
+    ZoneSet,
+    load_zones,
+    zones_from_dict,
+    zones_to_dict,
+    zones_to_json,
+)
 from agentsim_env.wsn.profiles import PROFILE_KINDS
 
 __all__ = [
@@ -126,15 +133,8 @@ def preview(zs: ZoneSet) -> dict[str, Any]:
 
 
 def _write_atomically(zs: ZoneSet, path: Path) -> None:
-    """Write ``zs`` to a temporary file beside ``path``, then rename it over ``path``."""
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    os.close(fd)
-    try:
-        save_zones(zs, tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    """Replace ``path`` (or the file its link names) with ``zs``; see ``core.files.write_atomically``."""
+    write_atomically(path, zones_to_json(zs).encode("utf-8"))
 
 
 def designer_handlers(path: Path | None) -> dict[str, Handler]:
