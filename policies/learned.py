@@ -14,6 +14,8 @@ deterministically by default; actions come back as Dicts or flat vectors, as the
 from __future__ import annotations
 
 import json
+import zipfile
+import zlib
 from pathlib import Path
 from typing import Any
 
@@ -21,7 +23,11 @@ import numpy as np
 
 from agentsim_env.env.spaces import flat_layout
 
-__all__ = ["LearnedPolicy", "is_model_path", "load_policy", "model_env_config", "model_files"]
+__all__ = ["LearnedPolicy", "ModelFileError", "is_model_path", "load_model", "load_policy", "model_env_config",
+           "model_files"]  # fmt: skip
+
+#: Parts every stable-baselines3 model zip holds (the class parameters and the policy's weights).
+_REQUIRED_PARTS = ("data", "policy.pth")
 
 
 def is_model_path(name: str | Path) -> bool:
@@ -43,6 +49,8 @@ def model_files(path: str | Path) -> tuple[Path, Path]:
         ValueError: When either file is missing.
     """
     p = Path(path)
+    if p.is_dir() and p.suffix == ".zip":
+        raise ValueError(f"trained model {str(p)!r} is a folder, not a model .zip file")
     if p.is_dir():
         zip_path = p / "model.zip"
         if not zip_path.is_file():
@@ -82,6 +90,91 @@ def model_env_config(path: str | Path) -> tuple[str, dict[str, Any]]:
     """
     meta = _read_config(model_files(path)[1])
     return meta["scenario"], dict(meta.get("env", {}))
+
+
+class ModelFileError(ValueError):
+    """A model file that does not load, with the reason in words (``reason``: e.g. "not a valid zip file").
+
+    Args:
+        path: The file.
+        reason: What is wrong with it.
+    """
+
+    def __init__(self, path: Path, reason: str) -> None:
+        super().__init__(f"trained model {str(path)!r} cannot be loaded: {reason}")
+        self.path = path
+        self.reason = reason
+
+
+def _damage(path: Path) -> str | None:
+    """What makes ``path`` unreadable as a model zip, checked cheaply before loading (``None``: nothing found)."""
+    if not path.exists():
+        return "it does not exist"
+    if not path.is_file():
+        return "it is a folder, not a file" if path.is_dir() else "it is not a regular file"
+    try:
+        with zipfile.ZipFile(path) as archive:
+            bad = archive.testzip()  # every part's CRC: a truncated or overwritten part is named here
+            names = set(archive.namelist())
+    except (zipfile.BadZipFile, zlib.error, EOFError, ValueError):
+        return "not a valid zip file"  # truncated, or not a model at all
+    except OSError as exc:
+        return f"it cannot be read ({exc.strerror or exc})"
+    if bad is not None:
+        return f"{bad} is damaged (its checksum does not match)"
+    missing = [n for n in _REQUIRED_PARTS if n not in names]
+    if missing:
+        return f"not a stable-baselines3 model (no {', '.join(missing)} in the zip)"
+    return None
+
+
+def _diagnose(path: Path, exc: Exception) -> str:
+    """Which part of a well-formed model zip made loading fail (the loader's own message names none)."""
+    import torch
+
+    with zipfile.ZipFile(path) as archive:
+        try:
+            json.loads(archive.read("data"))
+        except ValueError:
+            return "data is not valid JSON"
+        for name in archive.namelist():
+            if name.endswith(".pth"):
+                try:
+                    with archive.open(name) as f:
+                        torch.load(f, map_location="cpu", weights_only=True)
+                except Exception:  # noqa: BLE001 - torch raises many kinds for a damaged file
+                    return f"{name} is not a valid PyTorch file"
+    first = (str(exc).strip().splitlines() or [""])[0]
+    return f"{type(exc).__name__}: {first[:300]}"
+
+
+def load_model(path: str | Path, **kwargs: Any) -> Any:
+    """``stable_baselines3.PPO.load`` with one clear error for a damaged file.
+
+    Args:
+        path: The model ``.zip`` (``model.zip`` or a checkpoint).
+        **kwargs: Passed to ``PPO.load`` (``env``, ``device``, ``tensorboard_log``...).
+
+    Returns:
+        The loaded model.
+
+    Raises:
+        ModelFileError: The file is missing, a folder, not a zip, damaged, or holds parts that do not load; the
+            message names the file and the part.
+        ImportError: stable-baselines3 is not installed.
+    """
+    try:
+        from stable_baselines3 import PPO
+    except ImportError as exc:  # pragma: no cover - depends on the installation
+        raise ImportError('trained policies need stable-baselines3: pip install "agentsim-env[train]"') from exc
+    p = Path(path)
+    reason = _damage(p)
+    if reason is not None:
+        raise ModelFileError(p, reason)
+    try:
+        return PPO.load(p, **kwargs)
+    except Exception as exc:  # noqa: BLE001 - whatever the loader raises, the file is what is named
+        raise ModelFileError(p, _diagnose(p, exc)) from None
 
 
 class LearnedPolicy:
@@ -154,7 +247,8 @@ def load_policy(path: str | Path, env: Any, *, deterministic: bool = True) -> Le
         The policy.
 
     Raises:
-        ValueError: Missing files, another scenario, or layouts that differ from the model's.
+        ValueError: Missing files, another scenario, a damaged model file (``ModelFileError``, naming it), or
+            layouts that differ from the model's.
         ImportError: stable-baselines3 is not installed.
     """
     zip_path, config_path = model_files(path)
@@ -162,11 +256,7 @@ def load_policy(path: str | Path, env: Any, *, deterministic: bool = True) -> Le
     scenario = env.scenario.name
     if meta["scenario"] != scenario:
         raise ValueError(f"{str(path)!r} was trained on scenario {meta['scenario']!r}, not {scenario!r}")
-    try:
-        from stable_baselines3 import PPO
-    except ImportError as exc:  # pragma: no cover - depends on the installation
-        raise ImportError('trained policies need stable-baselines3: pip install "agentsim-env[train]"') from exc
-    model = PPO.load(zip_path, device="cpu")
+    model = load_model(zip_path, device="cpu")
     folder = zip_path.parent
     name = folder.name if zip_path.name == "model.zip" else f"{folder.name}/{zip_path.stem}"
     return LearnedPolicy(model, env, deterministic=deterministic, name=name)

@@ -9,13 +9,15 @@ finished agent-episodes, filled from the ``episode`` entries of the VecEnv's inf
 from __future__ import annotations
 
 import csv
-import json
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 from tqdm.auto import tqdm
+
+from agentsim_env.train.checkpoints import write_json_atomic, write_model_atomic
 
 __all__ = ["CURVE_FIELDS", "TrainMonitor", "read_curve"]
 
@@ -119,15 +121,28 @@ class TrainMonitor(BaseCallback):
             self.bar.close()
             self.bar = None
 
-    def save_checkpoint(self) -> Path:
-        """Save the model (weights, optimiser, step count) as ``checkpoints/step_<N>.zip`` with the clocks."""
+    def save_checkpoint(self) -> Path | None:
+        """Save the model (weights, optimiser, step count) as ``checkpoints/step_<N>.zip`` with the clocks.
+
+        Both files are written atomically, the clocks first, so a crash at any moment leaves no partial
+        checkpoint and no checkpoint without its clocks (see ``agentsim_env.train.checkpoints``).
+
+        Returns:
+            The checkpoint, or ``None`` when a folder or other non-file holds its name (said on stderr; training
+            goes on and the next checkpoint is written as usual).
+        """
         assert self.out is not None
         folder = self.out / "checkpoints"
         folder.mkdir(exist_ok=True)
         path = folder / f"step_{self.num_timesteps}.zip"
-        self.model.save(path)
+        sidecar = path.with_suffix(".json")
+        taken = [p for p in (path, sidecar) if (p.exists() or p.is_symlink()) and not p.is_file()]
+        if taken:
+            print(f"checkpoint {path.name} not written: {str(taken[0])!r} is not a file", file=sys.stderr)
+            return None
         clocks = {"wall_s": self.wall_s(), "cpu_s": self.cpu_s(), "episodes": self.episodes}
-        path.with_suffix(".json").write_text(json.dumps(clocks, indent=2), encoding="utf-8")
+        write_json_atomic(sidecar, clocks)
+        write_model_atomic(self.model, path)
         self.checkpoints.append(path)
         return path
 

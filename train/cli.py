@@ -26,7 +26,7 @@ examples:
   agentsim train navigation                                  # train/configs/navigation.yaml
   agentsim train navigation --timesteps 200000 --out outputs/train/nav_small
   agentsim train relay --config relay_nocomm --set seed=1 ppo.learning_rate=0.0001
-  agentsim train navigation --out outputs/train/nav --resume  # continue from the newest checkpoint
+  agentsim train navigation --out outputs/train/nav --resume  # continue from the newest checkpoint that loads
   agentsim train navigation --out outputs/train/nav --eval-only --record eval.db
   agentsim run navigation --policy outputs/train/navigation    # the trained model beside the baselines"""
 
@@ -73,7 +73,8 @@ def _arguments(t: argparse.ArgumentParser) -> None:
     t.add_argument("--worlds", type=int, default=None, help="worlds stepped together (over the config's)")
     t.add_argument("--vec", choices=["native", "supersuit"], default=None, help="vector-env path")
     t.add_argument("--out", default=None, help="run folder (default outputs/train/SCENARIO)")
-    t.add_argument("--resume", action="store_true", help="continue the run in --out from its newest checkpoint")
+    t.add_argument("--resume", action="store_true",
+                   help="continue the run in --out from its newest checkpoint that loads")  # fmt: skip
     t.add_argument("--eval-only", action="store_true", help="evaluate the model in --out, do not train")
     t.add_argument("--no-eval", action="store_true", help="skip the evaluation against the baselines")
     t.add_argument("--record", default=None, metavar="PATH",

@@ -8,23 +8,37 @@ env, or SuperSuit's path with ``vec: supersuit``), so one network is trained on 
 ``config.json``        scenario, scenario config, the whole training config, versions, budget used
 ``config.yaml``        the training config, re-runnable with ``agentsim train --config``
 ``curve.csv``          one row per rollout: agent-steps, episodes, mean return (last 100 episodes), clocks
-``checkpoints/``       ``step_<N>.zip`` every ``checkpoint_every`` agent-steps (``--resume`` continues the newest)
+``checkpoints/``       ``step_<N>.zip`` every ``checkpoint_every`` agent-steps (``--resume`` continues the newest
+                       that loads)
 ``tb/``                TensorBoard logs (``tensorboard --logdir DIR/tb``), when tensorboard is installed
 =====================  ===================================================================================
 
 Seeded runs reproduce exactly (one thread; the env, the network and the rollouts are all seeded by ``seed``).
+The model, the config files and the checkpoints are written atomically (``agentsim_env.train.checkpoints``), and
+a resume writes nothing until its checkpoint has loaded.
 """
 
 from __future__ import annotations
 
-import json
+import csv
+import io
 import platform
+import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from agentsim_env.train.callbacks import TrainMonitor, read_curve
+from agentsim_env.train.callbacks import CURVE_FIELDS, TrainMonitor, read_curve
+from agentsim_env.train.checkpoints import (
+    Resumed,
+    find_resumable,
+    latest_checkpoint,
+    remove_stale_temps,
+    write_atomic,
+    write_json_atomic,
+    write_model_atomic,
+)
 from agentsim_env.train.config import TrainConfig, save_config
 
 __all__ = ["TrainResult", "latest_checkpoint", "make_model", "make_vec_env", "train"]
@@ -43,6 +57,8 @@ class TrainResult:
         wall_s: Wall seconds of training (a resumed run included).
         cpu_s: Process CPU seconds of training.
         checkpoints: Checkpoints written by this call.
+        resumed_from: The checkpoint a resumed run continued (``None``: a fresh run).
+        skipped: Newer checkpoints a resumed run skipped because they did not load, with the reason.
     """
 
     model: Any
@@ -53,6 +69,8 @@ class TrainResult:
     wall_s: float
     cpu_s: float
     checkpoints: list[Path] = field(default_factory=list)
+    resumed_from: Path | None = None
+    skipped: list[tuple[Path, str]] = field(default_factory=list)
 
 
 def make_vec_env(cfg: TrainConfig) -> Any:
@@ -97,13 +115,6 @@ class _Linear:
         return self.start * progress_remaining
 
 
-def latest_checkpoint(out: str | Path) -> Path | None:
-    """The newest ``checkpoints/step_<N>.zip`` of a run folder (``None`` when there is none)."""
-    folder = Path(out) / "checkpoints"
-    found = [(int(p.stem.split("_")[1]), p) for p in folder.glob("step_*.zip") if p.stem.split("_")[1].isdigit()]
-    return max(found)[1] if found else None
-
-
 def _tensorboard_dir(out: Path | None) -> str | None:
     if out is None:
         return None
@@ -124,13 +135,89 @@ def _versions() -> dict[str, str]:
             "torch": torch.__version__, "python": platform.python_version()}  # fmt: skip
 
 
-def _truncate_curve(out: Path, timesteps: int) -> None:
-    """Drop curve rows past a checkpoint (they are trained again when resuming from it); kept rows stay as written."""
-    path = out / "curve.csv"
-    if not path.exists():
+#: Files of a run folder that must be files (a folder of that name would fail only at the end of training).
+_RUN_FILES = ("model.zip", "config.json", "config.yaml", "curve.csv")
+
+
+def _check_run_files(out: Path) -> None:
+    for name in _RUN_FILES:
+        p = out / name
+        if (p.exists() or p.is_symlink()) and not p.is_file():
+            raise ValueError(f"{str(p)!r} is not a file: move it away (the run writes {name} there)")
+
+
+def _check_same_config(cfg: TrainConfig, out: Path) -> None:
+    """A resumed run must have the config it started with (``timesteps`` aside)."""
+    saved = out / "config.yaml"
+    if not saved.exists():
         return
-    header, *rows = path.read_text(encoding="utf-8").splitlines(keepends=True)
-    path.write_text(header + "".join(r for r in rows if int(r.split(",", 1)[0]) <= timesteps), encoding="utf-8")
+    from agentsim_env.train.config import load_config
+
+    before, now = load_config(saved).to_dict(), cfg.to_dict()
+    before.pop("timesteps")  # a resumed run may be given a longer budget
+    now.pop("timesteps")
+    if before != now:
+        changed = sorted(k for k in now if now[k] != before.get(k))
+        raise ValueError(f"--resume: the config differs from the one the run in {str(out)!r} started "
+                         f"with (config.yaml there) in {changed}; only timesteps may change")  # fmt: skip
+
+
+def _curve_upto(out: Path, timesteps: int) -> tuple[bytes | None, dict[str, float]]:
+    """``curve.csv`` without the rows past a checkpoint (they are trained again when resuming from it; kept rows
+    stay byte for byte as written) nor a last row cut short by a kill, and the clocks of its last kept row.
+    Reads only.
+
+    Raises:
+        ValueError: A row that is not a curve row, named by its line (before anything is written).
+    """
+    path = out / "curve.csv"
+    clocks = {"wall_s": 0.0, "cpu_s": 0.0, "episodes": 0.0}
+    if not path.is_file():
+        return None, clocks
+    with open(path, encoding="utf-8", newline="") as f:
+        header, *rows = f.read().splitlines(keepends=True) or [""]
+    if not header.endswith("\n"):  # the header's own write was killed: write it whole (as csv.writer does)
+        header = ",".join(CURVE_FIELDS) + "\r\n"
+    kept = []
+    for line, row in enumerate(rows, start=2):
+        if not row.strip() or not row.endswith("\n"):  # blank, or the last row's append was killed half way
+            continue
+        try:
+            step = int(row.split(",", 1)[0])
+        except ValueError:
+            raise ValueError(f"--resume: {str(path)!r} line {line} is not a curve row ({row.strip()[:60]!r}); "
+                             "nothing was changed") from None  # fmt: skip
+        if step <= timesteps:
+            kept.append(row)
+    if kept:
+        last = next(csv.DictReader(io.StringIO(header + kept[-1])))
+        for key in clocks:
+            try:
+                clocks[key] = float(last.get(key) or 0.0)
+            except ValueError:
+                pass
+    return (header + "".join(kept)).encode("utf-8"), clocks
+
+
+def _say_resumed(resumed: Resumed, clocks_from_curve: bool) -> None:
+    for p, reason in resumed.skipped:
+        print(f"--resume: skipped {p.name}: {reason}", file=sys.stderr)
+    if clocks_from_curve:
+        print(f"--resume: {resumed.path.with_suffix('.json').name} is missing or not valid: the clocks and "
+              "episode count continue from curve.csv", file=sys.stderr)  # fmt: skip
+    print(f"--resume: continuing from {resumed.path.name} ({int(resumed.model.num_timesteps):,} agent-steps)",
+          file=sys.stderr)
+
+
+def _resume(cfg: TrainConfig, path: Path, vec: Any) -> tuple[Resumed, bytes | None, dict[str, float]]:
+    """Load the newest checkpoint of ``path`` that loads, and prepare the curve to continue; writes nothing."""
+    from agentsim_env.policies.learned import load_model
+
+    _check_same_config(cfg, path)
+    tensorboard = _tensorboard_dir(path)
+    resumed = find_resumable(path, lambda p: load_model(p, env=vec, device="cpu", tensorboard_log=tensorboard))
+    curve, curve_clocks = _curve_upto(path, int(resumed.model.num_timesteps))
+    return resumed, curve, resumed.clocks or curve_clocks
 
 
 def train(cfg: TrainConfig, out: str | Path | None = None, *, resume: bool = False, progress: bool = False,
@@ -140,8 +227,9 @@ def train(cfg: TrainConfig, out: str | Path | None = None, *, resume: bool = Fal
     Args:
         cfg: The training config.
         out: Run folder (created); ``None`` trains without writing anything.
-        resume: Continue from the newest checkpoint in ``out`` (its config must equal ``cfg``); without one,
-            an error.
+        resume: Continue from the newest checkpoint in ``out`` that loads (its config must equal ``cfg``): newer
+            ones that do not load are skipped, each named with the reason on stderr; nothing in ``out`` (nor the
+            ``record`` store) is written before the checkpoint has loaded.
         progress: Show the progress bar with the live mean return.
         desc: Text before the bar (default: the scenario).
         record: An SQLite store to record the training env to (every world, every step, automatic resets as new
@@ -151,53 +239,57 @@ def train(cfg: TrainConfig, out: str | Path | None = None, *, resume: bool = Fal
         The result; the model is also saved as ``out/model.zip`` with ``config.json``.
 
     Raises:
-        ValueError: ``resume`` without a checkpoint or with another config.
+        ValueError: ``resume`` without a checkpoint that loads (each is named with its reason) or with another
+            config; a file of the run folder that is a folder.
     """
     import torch
 
     torch.set_num_threads(1)
     path = None if out is None else Path(out)
+    if resume and path is None:
+        raise ValueError("resume needs the run folder (--out) holding the checkpoints")
+    if record is not None and cfg.vec != "native":
+        raise ValueError("recording the training env needs vec: native")
+    if path is not None:
+        _check_run_files(path)
+    vec = make_vec_env(cfg)
+    try:
+        return _train(cfg, path, vec, resume=resume, progress=progress, desc=desc, record=record)
+    except BaseException:
+        vec.close()
+        raise
+
+
+def _train(cfg: TrainConfig, path: Path | None, vec: Any, *, resume: bool, progress: bool, desc: str | None,
+           record: str | Path | None) -> TrainResult:  # fmt: skip
+    clocks = {"wall_s": 0.0, "cpu_s": 0.0, "episodes": 0.0}
+    resumed: Resumed | None = None
+    if resume:
+        assert path is not None
+        resumed, curve_bytes, clocks = _resume(cfg, path, vec)
+        model = resumed.model
+    # from here on the run goes ahead: the folder may change
     if path is not None:
         path.mkdir(parents=True, exist_ok=True)
-    vec = make_vec_env(cfg)
-    recorded: Any = None
-    if record is not None:
-        if cfg.vec != "native":
-            raise ValueError("recording the training env needs vec: native")
-        from agentsim_env.recorder import record as record_env
-
-        label = f"agentsim train {cfg.scenario} worlds={cfg.worlds} seed={cfg.seed}"
-        recorded = vec.batch = record_env(vec.batch, record, label=label)  # the VecEnv steps the recorded env
-    clocks = {"wall_s": 0.0, "cpu_s": 0.0, "episodes": 0}
-    if resume:
-        if path is None:
-            raise ValueError("resume needs the run folder (--out) holding the checkpoints")
-        ckpt = latest_checkpoint(path)
-        if ckpt is None:
-            raise ValueError(f"--resume: no checkpoint in {str(path / 'checkpoints')!r}")
-        saved = path / "config.yaml"
-        if saved.exists():
-            from agentsim_env.train.config import load_config
-
-            before, now = load_config(saved).to_dict(), cfg.to_dict()
-            before.pop("timesteps")  # a resumed run may be given a longer budget
-            now.pop("timesteps")
-            if before != now:
-                changed = sorted(k for k in now if now[k] != before.get(k))
-                raise ValueError(f"--resume: the config differs from the one the run in {str(path)!r} started "
-                                 f"with (config.yaml there) in {changed}; only timesteps may change")  # fmt: skip
-        from stable_baselines3 import PPO
-
-        model = PPO.load(ckpt, env=vec, device="cpu", tensorboard_log=_tensorboard_dir(path))
-        if ckpt.with_suffix(".json").exists():
-            clocks.update(json.loads(ckpt.with_suffix(".json").read_text(encoding="utf-8")))
-        _truncate_curve(path, model.num_timesteps)
+        for folder in (path, path / "checkpoints"):
+            remove_stale_temps(folder)  # what writes killed half way left
+    if resumed is not None:
+        assert path is not None
+        _say_resumed(resumed, clocks_from_curve=resumed.clocks is None)
+        if curve_bytes is not None:
+            write_atomic(path / "curve.csv", lambda tmp: tmp.write_bytes(curve_bytes))
     else:
         if path is not None and (path / "curve.csv").exists():
             (path / "curve.csv").unlink()  # a fresh run starts a fresh curve
         model = make_model(cfg, vec, _tensorboard_dir(path))
+    recorded: Any = None
+    if record is not None:
+        from agentsim_env.recorder import record as record_env
+
+        label = f"agentsim train {cfg.scenario} worlds={cfg.worlds} seed={cfg.seed}"
+        recorded = vec.batch = record_env(vec.batch, record, label=label)  # the VecEnv steps the recorded env
     if path is not None:
-        save_config(cfg, path / "config.yaml")
+        write_atomic(path / "config.yaml", lambda tmp: save_config(cfg, tmp))
     monitor = TrainMonitor(path, checkpoint_every=cfg.checkpoint_every, progress=progress,
                            desc=desc or cfg.scenario, start_wall=clocks["wall_s"], start_cpu=clocks["cpu_s"],
                            episodes_done=int(clocks["episodes"]))  # fmt: skip
@@ -216,12 +308,14 @@ def train(cfg: TrainConfig, out: str | Path | None = None, *, resume: bool = Fal
     cpu = monitor.cpu_s() if monitor.started else clocks["cpu_s"]
     curve: list[dict[str, float]] = []
     if path is not None:
-        model.save(path / "model.zip")
+        write_model_atomic(model, path / "model.zip")
         meta = {"scenario": cfg.scenario, "env": cfg.env, "train": cfg.to_dict(), "versions": _versions(),
                 "timesteps_done": int(model.num_timesteps), "wall_s": round(wall, 3), "cpu_s": round(cpu, 3),
                 "machine": platform.processor() or platform.machine()}  # fmt: skip
-        (path / "config.json").write_text(json.dumps(meta, indent=2), encoding="utf-8")
+        write_json_atomic(path / "config.json", meta)
         if (path / "curve.csv").exists():
             curve = read_curve(path / "curve.csv")
     vec.close()
-    return TrainResult(model, cfg, path, curve, int(model.num_timesteps), wall, cpu, monitor.checkpoints)
+    return TrainResult(model, cfg, path, curve, int(model.num_timesteps), wall, cpu, monitor.checkpoints,
+                       resumed_from=None if resumed is None else resumed.path,
+                       skipped=[] if resumed is None else resumed.skipped)  # fmt: skip
