@@ -24,11 +24,11 @@ from agentsim_env.env.buffers import Recycled
 from agentsim_env.env.guard import CallGuard
 from agentsim_env.env.spaces import (
     FORMATS,
-    REAL_KINDS,
     action_space_for,
     flat_layout,
     observation_space_for,
     split_action,
+    stack_rows,
 )
 from agentsim_env.scenarios.base import (
     Scenario,
@@ -314,11 +314,11 @@ class AgentSimParallelEnv(ParallelEnv):
         s = self.world.state.n_slots
         out: dict[str, np.ndarray] = {}
         try:
-            # one rule (env.spaces.ACTION_RULE): real numbers of exactly the part's shape
+            # one rule (env.spaces.ACTION_RULE), per agent: real numbers of exactly the part's shape
             if self.action_format == "flat":
                 total = sum(p.size for p in parts.values())
-                arr = np.asarray(acts)
-                if arr.shape != (n, total) or arr.dtype.kind not in REAL_KINDS:
+                arr = stack_rows(acts)
+                if arr.shape != (n, total):
                     raise ValueError
                 start = 0
                 for name, p in parts.items():
@@ -328,11 +328,11 @@ class AgentSimParallelEnv(ParallelEnv):
                 if set(map(len, acts)) != {len(parts)}:
                     raise ValueError
                 for name, p in parts.items():
-                    arr = np.asarray(list(map(operator.itemgetter(name), acts)))
-                    if arr.shape != (n, *p.shape) or arr.dtype.kind not in REAL_KINDS:
+                    arr = stack_rows(list(map(operator.itemgetter(name), acts)))
+                    if arr.shape != (n, *p.shape):
                         raise ValueError
                     out[name] = _checked(scatter_part(arr.reshape(n, p.size), idx, s, p.low, p.high))
-        except (ValueError, TypeError, KeyError):
+        except (ValueError, TypeError, KeyError, RuntimeError):
             for a in live:  # slow path: find the culprit and raise naming it
                 split_action(actions[a], parts, self.action_format, a)
             raise ValueError(

@@ -22,7 +22,7 @@ from agentsim_env.core.validation import check_int, is_int, short_repr
 from agentsim_env.env.batch_kernels import finish_step, prepare_actions
 from agentsim_env.env.buffers import Recycled
 from agentsim_env.env.guard import CallGuard
-from agentsim_env.env.spaces import flat_layout
+from agentsim_env.env.spaces import ACTION_RULE, REAL_KINDS, as_array, flat_layout
 from agentsim_env.scenarios.base import (
     assert_finite,
     check_finite_default,
@@ -172,13 +172,15 @@ class BatchedEnv:
         """Advance every world by one step.
 
         Args:
-            actions: ``(B, N, act_dim)`` values in [-1, 1] (clipped); rows of dead agents are ignored.
+            actions: ``(B, N, act_dim)`` real numbers (ints or floats, not bools; an array, nested sequences or
+                a tensor) in [-1, 1] (clipped); rows of dead agents are ignored.
 
         Returns:
             The batch step result.
 
         Raises:
-            ValueError: Wrong shape, or a NaN/inf action of a live agent (the message names world and agent).
+            ValueError: Wrong shape or dtype, or a NaN/inf action of a live agent (the message names world
+                and agent).
             RuntimeError: Another thread is inside ``reset`` or ``step`` of this env.
         """
         self._guard.enter("step")
@@ -190,7 +192,12 @@ class BatchedEnv:
     def _step(self, actions: np.ndarray) -> BatchStep:
         if not self._started:
             raise ValueError("call reset() before step()")
-        a = np.asarray(actions, dtype=np.float64)
+        try:
+            a = as_array(actions)  # a tensor (gradients, any device) is read as its values
+        except (TypeError, ValueError, RuntimeError) as exc:
+            raise ValueError(f"actions must be an array of real numbers ({ACTION_RULE}): {exc}") from None
+        if a.dtype.kind not in REAL_KINDS:
+            raise ValueError(f"actions must be real numbers (ints or floats), got dtype {a.dtype} ({ACTION_RULE})")
         if a.shape != (self.n_worlds, self.n_agents, self.act_dim):
             raise ValueError(
                 f"actions must have shape {(self.n_worlds, self.n_agents, self.act_dim)}, got {a.shape}"
