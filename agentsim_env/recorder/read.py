@@ -31,7 +31,8 @@ from types import TracebackType
 from typing import TYPE_CHECKING, Any, TypeAlias
 
 from agentsim_env.outdirs import prepare_out
-from agentsim_env.recorder.schema import StoreError, connect
+from agentsim_env.recorder.checks import RUN_RULES, check_values, open_read
+from agentsim_env.recorder.schema import StoreError
 
 if TYPE_CHECKING:  # pragma: no cover - typing only
     import pandas as pd
@@ -146,18 +147,20 @@ def _check_table(name: str) -> str:
 class Store:
     """A store opened for reading (use :func:`open_store`); a context manager that closes it.
 
+    The file is opened read-only (``mode=ro``; ``immutable=1`` on read-only media), and its schema is checked:
+    see ``agentsim_env.recorder.checks.open_read``.
+
     Args:
         path: The SQLite file written by the recorder.
 
     Raises:
-        StoreError: Missing file, not an SQLite store, or a store of another schema version.
+        StoreError: Missing file, not an SQLite store, a store of another schema version, or a damaged store (a
+            table or column missing).
     """
 
     def __init__(self, path: str | os.PathLike[str]) -> None:
         self.path = Path(path)
-        # connect() marks runs of dead writers incomplete; after that this connection only reads
-        self._con: sqlite3.Connection | None = connect(self.path, create=False)
-        self._con.execute("PRAGMA query_only = ON")
+        self._con: sqlite3.Connection | None = open_read(self.path)
 
     # ------------------------------------------------------------------ basics
     @property
@@ -197,7 +200,13 @@ class Store:
     def run_rows(self) -> list[dict[str, Any]]:
         """One dict per run (plain Python values, no pandas): the ``runs`` columns, ``seconds`` (ended - started;
         None while running or when incomplete) and the row counts ``episodes``, ``step_rows``, ``messages``,
-        ``events``, ``sensors``."""
+        ``events``, ``sensors``.
+
+        Raises:
+            StoreError: A ``runs`` value of the wrong type, a start or end time that is no date (Unix seconds up
+                to the year 9999), a count < 1 or an unknown status.
+        """
+        check_values(self.con, self.path, "runs", rules=RUN_RULES)
         joins = "".join(
             f" LEFT JOIN (SELECT run, COUNT(*) AS n FROM {table} GROUP BY run) AS c{i} ON c{i}.run = r.run"
             for i, (_, table) in enumerate(_COUNTS)
@@ -291,14 +300,14 @@ class Store:
         chosen = _check_tables(tables)
         pa = _pyarrow() if fmt == "parquet" else None
         out = Path(out_dir)
-        prepare_out(out, "export folder")
-        written = []
-        snapshot = (
-            not self.con.in_transaction
-        )  # one read transaction: the tables agree while a writer goes on
+        snapshot = not self.con.in_transaction  # one read transaction: the tables agree while a writer goes on
         if snapshot:
             self.con.execute("BEGIN")
+        written = []
         try:
+            for table in chosen:  # every table is checked before any file is written
+                check_values(self.con, self.path, table)
+            prepare_out(out, "export folder")
             for table in chosen:
                 path = out / f"{table}.{fmt}"
                 tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
@@ -377,7 +386,8 @@ def open_store(path: str | os.PathLike[str]) -> Store:
         A :class:`Store` (close it, or use it in a ``with`` block).
 
     Raises:
-        StoreError: Missing file, not an SQLite store, or a store of another schema version (a ValueError).
+        StoreError: Missing file, not an SQLite store, a store of another schema version, or a damaged store (a
+            table or column missing); a ValueError.
     """
     return Store(path)
 
@@ -392,8 +402,10 @@ def export(
 
     A file holds every row and column of its table in rowid order (the order :meth:`Store.table` returns).
     CSV: a header line, NULL as an empty field, floats with every digit; no pandas needed. Parquet: typed by
-    the declared column types (INTEGER: int64, REAL: float64, TEXT: string), needs pyarrow. Each file is
-    written to a temporary name first, so an interrupted export never leaves a partial file.
+    the declared column types (INTEGER: int64, REAL: float64, TEXT: string), needs pyarrow.
+
+    Every value of every exported table is checked against its column's declared type before any file is
+    written. Each file is written to a temporary name first, so an interrupted export never leaves a partial file.
 
     Args:
         path: The store.
@@ -406,7 +418,8 @@ def export(
 
     Raises:
         ValueError: An unknown format or table, or a folder that cannot be created or written.
-        StoreError: Missing file, not a store, or another schema version (a ValueError).
+        StoreError: Missing file, not a store, another schema version, or a damaged store: a table or column
+            missing, a value not of its column's type (a ValueError).
         ImportError: Parquet without pyarrow (naming the ``store`` extra).
     """
     if fmt not in FORMATS:

@@ -8,25 +8,24 @@ sensors of the ``sensors`` table (released and falling: an orange ring at the re
 dot). A header line names the run, scenario, episode, world and step. Obstacles and goals are not stored, so
 they are not drawn.
 
-The map extent comes from the run's scenario and config (the scenario is built again, never stepped), widened to
-every recorded position; when the scenario cannot be built from its stored config (a bare ``World``, a config
-that no longer validates), the recorded positions give the extent. Every frame of a replay has one size.
+The map extent comes from the run's scenario and config, widened to every recorded position, and the store is
+checked before anything is drawn (``replay_load``). Every frame of a replay has one size.
 """
 
 from __future__ import annotations
 
 import functools
-import json
 import os
 import sqlite3
 from collections.abc import Iterator
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from agentsim_env.recorder.schema import connect
+from agentsim_env.core.budget import check_memory
+from agentsim_env.recorder.checks import open_read
+from agentsim_env.recorder.replay_load import HEADER, Canvas, ReplayInfo, _check_int, replay_info
 
 __all__ = [
     "BACKGROUND",
@@ -40,8 +39,6 @@ __all__ = [
     "write_replay",
 ]
 
-HEADER = 20
-"""Height in pixels of the header line above the map."""
 BACKGROUND = 236
 """Grey level of the map background."""
 COLLISION_HOLD = 10
@@ -65,216 +62,12 @@ def agent_color(agent: int) -> np.ndarray:
     return _PALETTE[agent % len(_PALETTE)].copy()
 
 
-@dataclass(frozen=True)
-class Canvas:
-    """Pixel geometry of replay frames: the map ``bounds`` scaled so its longest side is ``size`` pixels, north
-    up, under a header of :data:`HEADER` pixels.
-
-    Attributes:
-        bounds: ``(xmin, xmax, ymin, ymax)`` in metres.
-        size: Longest side of the map in pixels.
-    """
-
-    bounds: tuple[float, float, float, float]
-    size: int
-
-    @property
-    def scale(self) -> float:
-        """Pixels per metre."""
-        xmin, xmax, ymin, ymax = self.bounds
-        return self.size / max(xmax - xmin, ymax - ymin)
-
-    @property
-    def shape(self) -> tuple[int, int, int]:
-        """``(H, W, 3)`` of every frame (header included)."""
-        xmin, xmax, ymin, ymax = self.bounds
-        s = self.scale
-        return HEADER + max(1, int((ymax - ymin) * s)), max(1, int((xmax - xmin) * s)), 3
-
-    def px(self, x: Any, y: Any) -> tuple[np.ndarray, np.ndarray]:
-        """Frame coordinates ``(column, row)`` (floats; pixel ``(r, c)`` covers ``[c, c+1) x [r, r+1)``)."""
-        xmin, _, _, ymax = self.bounds
-        s = self.scale
-        return (np.asarray(x, float) - xmin) * s, (ymax - np.asarray(y, float)) * s + HEADER
-
-
-@dataclass(frozen=True)
-class ReplayInfo:
-    """What a replay draws, checked against the store.
-
-    Attributes:
-        path: The store.
-        run, episode, world: The episode replayed.
-        scenario: The run's scenario name.
-        n_agents: Agents per world.
-        steps: The recorded step numbers of the episode, ascending (step 0 first).
-        canvas: The frames' geometry.
-        dt: Seconds per step (None when the config does not say).
-        radius: Agent radius in metres used for drawing.
-    """
-
-    path: str
-    run: int
-    episode: int
-    world: int
-    scenario: str
-    n_agents: int
-    steps: tuple[int, ...]
-    canvas: Canvas
-    dt: float | None
-    radius: float
-
-    def frame_steps(self, every: int = 1) -> list[int]:
-        """The steps drawn with ``every``: every ``every``-th recorded step from the first, and the last."""
-        picked = list(self.steps[::every])
-        if picked[-1] != self.steps[-1]:
-            picked.append(self.steps[-1])
-        return picked
-
-    def fps(self, every: int = 1) -> float:
-        """The frame rate that plays the replay in real time (10 when ``dt`` is unknown)."""
-        return 10.0 / every if not self.dt else 1.0 / (self.dt * every)
-
-
-# --------------------------------------------------------------------------------------------- loading
-def _ranges(values: list[int]) -> str:
-    """``[0, 1, 2, 5]`` -> ``"0-2, 5"``."""
-    spans: list[list[int]] = []
-    for v in sorted(set(values)):
-        if spans and v == spans[-1][1] + 1:
-            spans[-1][1] = v
-        else:
-            spans.append([v, v])
-    return ", ".join(str(a) if a == b else f"{a}-{b}" for a, b in spans)
-
-
-def _check_int(name: str, value: Any, low: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
-        raise ValueError(f"{name} must be an integer >= {low}, got {value!r}")
-    return int(value)
-
-
-def _scenario_bounds(name: str, config: dict[str, Any]) -> tuple[float, float, float, float] | None:
-    """The map bounds of scenario ``name`` built from its stored config (the world is made, never stepped).
-
-    A config that no longer validates as a whole is retried without each sub-config in turn (the map rarely
-    depends on them); None when nothing builds.
-    """
-    try:
-        from agentsim_env.scenarios.registry import make_scenario
-    except ImportError:  # pragma: no cover
-        return None
-    attempts = [config] + [{k: v for k, v in config.items() if k != drop}
-                           for drop, sub in config.items() if isinstance(sub, dict)]  # fmt: skip
-    for cfg in attempts:
-        try:
-            world = make_scenario(name, **cfg).make_world(1)
-        except Exception:  # noqa: BLE001 - any failure means: not buildable from this config
-            continue
-        return tuple(float(b) for b in world.config.bounds)  # type: ignore[return-value]
-    return None
-
-
-def _extent(con: sqlite3.Connection, run: int, episode: int, world: int) -> tuple[float, ...] | None:
-    """``(xmin, xmax, ymin, ymax)`` of the recorded agent and sensor positions of the episode."""
-    key = (run, episode, world)
-    a = con.execute("SELECT min(x), max(x), min(y), max(y) FROM steps WHERE run = ? AND episode = ? AND world = ?",
-                    key).fetchone()  # fmt: skip
-    b = con.execute("SELECT min(min(release_x, coalesce(land_x, release_x))), "
-                    "max(max(release_x, coalesce(land_x, release_x))), "
-                    "min(min(release_y, coalesce(land_y, release_y))), "
-                    "max(max(release_y, coalesce(land_y, release_y))) "
-                    "FROM sensors WHERE run = ? AND episode = ? AND world = ?", key).fetchone()  # fmt: skip
-    boxes = [r for r in (a, b) if r is not None and None not in r]
-    if not boxes:
-        return None
-    return (
-        min(r[0] for r in boxes),
-        max(r[1] for r in boxes),
-        min(r[2] for r in boxes),
-        max(r[3] for r in boxes),
-    )
-
-
-def _bounds(
-    scenario: tuple[float, float, float, float] | None, data: tuple[float, ...] | None
-) -> tuple[float, float, float, float]:
-    """The scenario's bounds widened to the data, or the data's extent with a margin."""
-    if scenario is not None:
-        xmin, xmax, ymin, ymax = scenario
-        if data is not None:
-            xmin, xmax = min(xmin, data[0]), max(xmax, data[1])
-            ymin, ymax = min(ymin, data[2]), max(ymax, data[3])
-        if xmax > xmin and ymax > ymin:
-            return xmin, xmax, ymin, ymax
-    if data is None:
-        return 0.0, 1.0, 0.0, 1.0
-    pad = max(0.05 * max(data[1] - data[0], data[3] - data[2]), 1.0)
-    return data[0] - pad, data[1] + pad, data[2] - pad, data[3] + pad
-
-
-def replay_info(
-    path: str | os.PathLike[str], run: int | None = None, episode: int = 0, world: int = 0, size: int = 512
-) -> ReplayInfo:
-    """Check that the store holds the episode and work out what its replay draws.
-
-    Args:
-        path: The store.
-        run: The run (None: the last one recorded).
-        episode: The episode within the run (0: the first).
-        world: The world of a batched run (0 for a ParallelEnv run).
-        size: Longest side of the map in pixels.
-
-    Raises:
-        ValueError: Missing store, no such run, world or episode (the message lists those that exist), an
-            episode without recorded steps, or bad arguments.
-    """
-    episode = _check_int("episode", episode, 0)
-    world = _check_int("world", world, 0)
-    size = _check_int("size", size, 32)
-    con = connect(path, create=False)
-    try:
-        runs = [r for (r,) in con.execute("SELECT run FROM runs ORDER BY run")]
-        if not runs:
-            raise ValueError(f"{path}: the store holds no runs")
-        if run is None:
-            run = runs[-1]
-        elif _check_int("run", run, 0) not in runs:
-            raise ValueError(f"{path}: no run {run}; runs in the store: {_ranges(runs)}")
-        name, config_text, n_worlds, n_agents = con.execute(
-            "SELECT scenario, config, n_worlds, n_agents FROM runs WHERE run = ?", (run,)
-        ).fetchone()
-        if world >= n_worlds:
-            worlds = _ranges(list(range(n_worlds)))
-            raise ValueError(f"{path}: run {run} has no world {world}; its worlds: {worlds}")
-        episodes = [e for (e,) in con.execute("SELECT episode FROM episodes WHERE run = ? AND world = ?",
-                                              (run, world))]  # fmt: skip
-        if episode not in episodes:
-            have = _ranges(episodes) if episodes else "none"
-            raise ValueError(
-                f"{path}: run {run} world {world} has no episode {episode}; recorded episodes: {have}"
-            )
-        steps = tuple(s for (s,) in con.execute(
-            "SELECT DISTINCT step FROM steps WHERE run = ? AND episode = ? AND world = ? ORDER BY step",
-            (run, episode, world)))  # fmt: skip
-        if not steps:
-            raise ValueError(f"{path}: run {run} world {world} episode {episode} has no recorded steps")
-        try:
-            config = json.loads(config_text)
-        except ValueError:
-            config = {}
-        config = config if isinstance(config, dict) else {}
-        bounds = _bounds(_scenario_bounds(name, config), _extent(con, run, episode, world))
-    finally:
-        con.close()
-    dt = config.get("dt")
-    body = config.get("body")
-    radius = body.get("radius") if isinstance(body, dict) else None
-    return ReplayInfo(
-        path=str(path), run=int(run), episode=episode, world=world, scenario=str(name), n_agents=int(n_agents),
-        steps=steps, canvas=Canvas(bounds, size), dt=float(dt) if isinstance(dt, (int, float)) and dt > 0 else None,
-        radius=float(radius) if isinstance(radius, (int, float)) and radius > 0 else 0.5,
-    )  # fmt: skip
+def _check_frame_memory(info: ReplayInfo) -> None:
+    """The drawing's memory fits the limit (``core.budget``): per-agent state and a few frames' worth of pixels."""
+    h, w, _ = info.canvas.shape
+    check_memory(f"{info.path}: the replay of run {info.run} episode {info.episode} (runs.n_agents={info.n_agents}, "
+                 f"{w} x {h} pixels)", 128 * info.n_agents + 4 * h * w * 3 + 64 * _FETCH * 6,
+                 "lower --size, or the store's runs.n_agents is damaged")  # fmt: skip
 
 
 def _step_rows(con: sqlite3.Connection, info: ReplayInfo) -> Iterator[tuple[int, np.ndarray]]:
@@ -451,7 +244,7 @@ class _Replay:
 
 def _frames(info: ReplayInfo, every: int) -> Iterator[np.ndarray]:
     wanted = set(info.frame_steps(every))
-    con = connect(info.path, create=False)
+    con = open_read(info.path)
     try:
         rp = _Replay(info, con)
         for step, rows in _step_rows(con, info):
@@ -491,7 +284,9 @@ def replay_frames(
         ValueError: See :func:`replay_info`; also ``every`` < 1.
     """
     every = _check_int("every", every, 1)
-    return _frames(replay_info(path, run, episode, world, size), every)
+    info = replay_info(path, run, episode, world, size)
+    _check_frame_memory(info)
+    return _frames(info, every)
 
 
 def write_replay(
@@ -526,6 +321,7 @@ def write_replay(
 
     every = _check_int("every", every, 1)
     info = replay_info(path, run, episode, world, size)
+    _check_frame_memory(info)
     if fps is not None and (isinstance(fps, bool) or not isinstance(fps, (int, float)) or not fps > 0):
         raise ValueError(f"fps must be a number > 0, got {fps!r}")
     target = Path(out)

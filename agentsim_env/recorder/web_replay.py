@@ -13,7 +13,6 @@ objects cannot be known and the log says so.
 
 from __future__ import annotations
 
-import json
 import os
 import sys
 import threading
@@ -22,8 +21,10 @@ from typing import Any
 import numpy as np
 
 from agentsim_env.comms.messages import AGENT, KIND_NAMES
+from agentsim_env.core.budget import check_memory
+from agentsim_env.recorder.checks import check_values, open_read
 from agentsim_env.recorder.replay import ReplayInfo, replay_info
-from agentsim_env.recorder.schema import connect
+from agentsim_env.recorder.schema import StoreError
 from agentsim_env.render.web.frames import MAX_MESSAGE_LINES, pack_frame, page_kinds, scene_message
 from agentsim_env.render.web.server import ClientError, WebServer
 from agentsim_env.render.web.viewer import Controls, clamp_speed
@@ -40,13 +41,21 @@ class ReplayData:
         messages: Per step index, ``(M, 2)`` sender / receiver and ``(M,)`` page kind codes.
         sensors: ``(K, 7)`` release step, release x, y, z, land step (-1: never), land x, y.
         log: Per step index, the log lines.
+
+    Raises:
+        ValueError: When the arrays would not fit the memory limit (``core.budget``), checked before allocating.
+        StoreError: A ``messages`` row of the episode of the wrong type (the other tables: ``replay_info``).
     """
 
     def __init__(self, info: ReplayInfo, names: list[str] | None = None) -> None:
         self.info = info
-        self.names = names or [f"#{i}" for i in range(info.n_agents)]
         self.steps = np.asarray(info.steps, dtype=np.int64)
         t, n = len(self.steps), info.n_agents
+        # (T, N) arrays of 20 bytes a cell, and the episode's rows as read (a Python tuple and a float64 row each)
+        check_memory(f"{info.path}: the replay of run {info.run} episode {info.episode} (runs.n_agents={n} x {t} "
+                     f"steps, {info.rows} rows)", 20 * t * n + 360 * info.rows,
+                     "replay fewer agents or a shorter episode, or the store's runs.n_agents is damaged")  # fmt: skip
+        self.names = names or [f"#{i}" for i in range(n)]
         self.pos = np.zeros((t, n, 3), np.float32)
         self.heading = np.zeros((t, n), np.float32)
         self.group = np.full((t, n), -1, np.int16)
@@ -60,8 +69,9 @@ class ReplayData:
         info, n = self.info, self.info.n_agents
         key = (info.run, info.episode, info.world)
         index = {int(s): i for i, s in enumerate(self.steps)}
-        con = connect(info.path, create=False)
+        con = open_read(info.path)
         try:
+            check_values(con, info.path, "messages", "run = ? AND episode = ? AND world = ?", key)
             rows = np.array(con.execute(
                 "SELECT step, agent, x, y, coalesce(z, 0), coalesce(heading, 0), coalesce(online, 0), "
                 "coalesce(grp, -1) FROM steps WHERE run = ? AND episode = ? AND world = ? ORDER BY step, agent",
@@ -168,14 +178,19 @@ def rebuild_scene(info: ReplayInfo) -> tuple[dict[str, Any], str | None]:
     """
     from agentsim_env.env.parallel_env import build_parallel_env
 
-    con = connect(info.path, create=False)
+    con = open_read(info.path)
     try:
-        config_text, n_worlds = con.execute("SELECT config, n_worlds FROM runs WHERE run = ?", (info.run,)).fetchone()
+        (n_worlds,) = con.execute("SELECT n_worlds FROM runs WHERE run = ?", (info.run,)).fetchone()
         seeds = con.execute("SELECT episode, seed FROM episodes WHERE run = ? AND world = ? AND episode <= ? "
                             "ORDER BY episode", (info.run, info.world, info.episode)).fetchall()  # fmt: skip
     finally:
         con.close()
-    config = json.loads(config_text) if config_text else {}
+    for e, s in seeds:
+        if s not in (None, "None") and not (isinstance(s, str) and s.isascii() and s.isdigit() and len(s) <= 100):
+            raise StoreError(f"{info.path}: episodes.seed holds {str(s)[:40]!r} in the row of run {info.run}, "
+                             f"episode {e}, world {info.world}, but it must be an integer >= 0 or None: "
+                             "the store is damaged")  # fmt: skip
+    config = info.config  # validated by replay_info
     replay = {"run": info.run, "episode": info.episode, "n_steps": len(info.steps), "first_step": int(info.steps[0]),
               "last_step": int(info.steps[-1])}  # fmt: skip
     title = f"replay: {info.scenario}, run {info.run}, episode {info.episode}"
