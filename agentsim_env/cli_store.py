@@ -9,7 +9,12 @@ unknown format or table, an unwritable ``--out``) raises ``ValueError``, which `
 from __future__ import annotations
 
 import argparse
+import contextlib
+import signal
+import threading
 import time
+from collections.abc import Iterator
+from types import FrameType
 from typing import Any
 
 EXPORT_EPILOG = """\
@@ -52,12 +57,31 @@ def add_store_commands(sub: argparse._SubParsersAction) -> None:  # type: ignore
     r.set_defaults(func=cmd_runs)
 
 
+@contextlib.contextmanager
+def _sigterm_exits() -> Iterator[None]:
+    """While inside, SIGTERM ends the process with ``SystemExit(128 + SIGTERM)`` (exit status 143, as a shell
+    reports it) instead of killing it at once, so the export's cleanup (its temporary files) runs first."""
+    if threading.current_thread() is not threading.main_thread():  # only the main thread may set handlers
+        yield
+        return
+
+    def stop(signum: int, frame: FrameType | None) -> None:
+        raise SystemExit(128 + signum)
+
+    old = signal.signal(signal.SIGTERM, stop)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, old)
+
+
 def cmd_export(args: argparse.Namespace) -> int:
-    """Export the store's tables; print the files written."""
+    """Export the store's tables; print the files written (SIGTERM stops it without leaving temporary files)."""
     from agentsim_env.recorder.read import export
 
     try:
-        paths = export(args.store, args.out, args.format, args.tables)
+        with _sigterm_exits():
+            paths = export(args.store, args.out, args.format, args.tables)
     except ImportError as exc:  # pyarrow missing: one error line naming the extra
         raise ValueError(str(exc)) from None
     for p in paths:

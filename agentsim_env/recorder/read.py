@@ -32,6 +32,7 @@ from typing import TYPE_CHECKING, Any, TypeAlias
 
 from agentsim_env.outdirs import prepare_out
 from agentsim_env.recorder.checks import RUN_RULES, check_values, open_read
+from agentsim_env.recorder.export_files import remove_stale, temp_path
 from agentsim_env.recorder.schema import StoreError
 
 if TYPE_CHECKING:  # pragma: no cover - typing only
@@ -303,29 +304,33 @@ class Store:
         snapshot = not self.con.in_transaction  # one read transaction: the tables agree while a writer goes on
         if snapshot:
             self.con.execute("BEGIN")
-        written = []
+        temps: dict[Path, Path] = {}
         try:
             for table in chosen:  # every table is checked before any file is written
                 check_values(self.con, self.path, table)
             prepare_out(out, "export folder")
+            remove_stale(out, [f"{t}.{f}" for t in TABLES for f in FORMATS])
             for table in chosen:
                 path = out / f"{table}.{fmt}"
-                tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+                temps[path] = tmp = temp_path(path)
                 try:
                     if pa is None:
                         self._write_csv(table, tmp)
                     else:
                         self._write_parquet(table, tmp, *pa)
+                except OSError as exc:
+                    raise ValueError(f"cannot write {str(path)!r}: {exc.strerror or exc}") from None
+            for path, tmp in temps.items():  # all tables written: now they replace earlier exports
+                try:
                     os.replace(tmp, path)
                 except OSError as exc:
                     raise ValueError(f"cannot write {str(path)!r}: {exc.strerror or exc}") from None
-                finally:
-                    tmp.unlink(missing_ok=True)
-                written.append(path)
         finally:
+            for tmp in temps.values():  # an error, Ctrl-C or SIGTERM (see the CLI) leaves no temporary file
+                tmp.unlink(missing_ok=True)
             if snapshot:
                 self.con.rollback()  # nothing was written: ends the read transaction
-        return written
+        return list(temps)
 
     def _write_csv(self, table: str, path: Path) -> None:
         """Header, then rows; NULL is an empty field, floats keep every digit (``repr``)."""
@@ -405,7 +410,9 @@ def export(
     the declared column types (INTEGER: int64, REAL: float64, TEXT: string), needs pyarrow.
 
     Every value of every exported table is checked against its column's declared type before any file is
-    written. Each file is written to a temporary name first, so an interrupted export never leaves a partial file.
+    written. Each file is written to a temporary name (``.steps.csv.tmp-<pid>-<host>``) and all are renamed once
+    every table is written, so an error or Ctrl-C leaves no file of this export and the files of an earlier one
+    as they were; the temporary files of exports killed outright (their process gone) are removed first.
 
     Args:
         path: The store.
