@@ -15,12 +15,15 @@ import dataclasses
 import functools
 import math
 import re
+import sys
 import types
 import typing
 from collections.abc import Iterable, Mapping
 from typing import Any, TypeVar
 
 import numpy as np
+
+from agentsim_env.core.short_text import short_repr  # re-exported: every message builder uses this one
 
 T = TypeVar("T")
 
@@ -49,12 +52,6 @@ def build_config(cls: type[T], values: Mapping[str, Any], label: str = "config")
         return cls(**values)
     except TypeError as exc:  # e.g. a value of the wrong type reaching a comparison
         raise ValueError(f"bad value for {cls.__name__}: {exc}") from exc
-
-
-def short_repr(value: Any, limit: int = 120) -> str:
-    """``repr(value)`` cut to ``limit`` characters, so an error message stays short whatever the input."""
-    text = repr(value)
-    return text if len(text) <= limit else f"{text[: limit - 20]}... ({len(text):,} characters)"
 
 
 #: Characters no text field takes: C0 controls, DEL and C1 controls (a terminal acts on them), the
@@ -123,16 +120,21 @@ def check_int(name: str, value: Any, lo: int | None = None, hi: int | None = Non
     if not is_int(value):
         raise ValueError(f"{name} must be an integer, got {short_repr(value)}")
     if lo is not None and value < lo:
-        raise ValueError(f"{name} must be >= {lo}, got {value}")
+        raise ValueError(f"{name} must be >= {lo}, got {short_repr(value)}")  # an int may have 10**6 digits
     if hi is not None and value > hi:
-        raise ValueError(f"{name} must be <= {hi}, got {value}")
+        raise ValueError(f"{name} must be <= {hi}, got {short_repr(value)}")
 
 
 def check_float(
     name: str, value: Any, lo: float | None = None, hi: float | None = None, *, lo_open: bool = False
 ) -> None:
     """Raise unless ``value`` is a finite real within the bounds (``lo_open`` makes ``lo`` exclusive)."""
-    if not is_real(value) or not math.isfinite(value):
+    # an integer past the float range (400 digits in a config file) is no finite number: math.isfinite overflows
+    if (
+        not is_real(value)
+        or (is_int(value) and abs(int(value)) > sys.float_info.max)
+        or not math.isfinite(value)
+    ):
         raise ValueError(f"{name} must be a finite number, got {short_repr(value)}")
     if lo is not None and (value <= lo if lo_open else value < lo):
         raise ValueError(f"{name} must be {'>' if lo_open else '>='} {lo}, got {value}")
