@@ -214,10 +214,10 @@ class BatchedEnv:
         term = np.asarray(term, dtype=bool)
         trunc, done_worlds, n_done = finish_step(term, acting, self.steps >= self.scenario.max_steps, self.alive,
                                                  obs.reshape(-1, self.obs_dim))  # fmt: skip
-        # Copies taken before the automatic reset: the scenario's arrays may be state that a reset (or any later
-        # step) writes, and what is returned belongs to the caller.
+        # Taken before the automatic reset, which starts the next episode of the finished worlds: the step's
+        # results are the ended episode's (the scenario's info arrays are fresh each step, never its state).
         shape = (self.n_worlds, self.n_agents)
-        info = {k: np.array(v).reshape(shape) for k, v in res.info.items()}
+        info = {k: v.reshape(shape) for k, v in res.info.items()}
         rewards = res.rewards.reshape(shape).astype(np.float32)
         final = np.zeros(obs.shape, dtype=obs.dtype)  # calloc: pages stay untouched unless a world resets
         if n_done:

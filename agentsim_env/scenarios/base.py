@@ -47,6 +47,9 @@ SlotT = TypeVar("SlotT", bound="SlotState")
 class StepResult:
     """What the scenario computes in stage 9 (arrays over slots).
 
+    Every array is fresh, never one of the world's state arrays (``world.task``, ``world.state``): the batched
+    env hands them to the caller as they are, and a reset or a later step writes the state.
+
     Attributes:
         rewards: Reward per slot ``(S,)``.
         terminated: Slots whose episode ended this step (goal reached, collision, dead battery...) ``(S,)``.

@@ -280,7 +280,7 @@ class NavigationScenario(Scenario[NavigationConfig]):
             t.goal, st.pos, st.vel, t.prev_dist, t.arrived, st.energy, acting, st.online, events.went_offline,
             float(c.goal_radius), float(c.arrival_bonus), float(world.config.dt),
         )  # fmt: skip
-        t.prev_dist = dist  # dist is fresh each step: the info array handed out below is never mutated
+        np.copyto(t.prev_dist, dist)  # the state keeps its array (resets write it); dist goes out as info
         rewards = compose_rewards(c.reward, task, group=st.group, world=st.world_id, acting=acting,
                                   n_groups=int(c.n_groups or 1), collided=collided, energy=effort,
                                   messages_sent=None if world.comms is None else world.comms.sent)  # fmt: skip

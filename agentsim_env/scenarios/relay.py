@@ -146,7 +146,7 @@ class RelayScenario(Scenario[RelayConfig]):
         member = acting & ~t.scout
         arrived = member & st.online & (dist <= c.arrival_radius)
         task = np.where(member, t.prev_dist - dist, 0.0) + c.arrival_bonus * arrived
-        t.prev_dist = dist
+        np.copyto(t.prev_dist, dist)  # the state keeps its array (resets write it); dist goes out as info
         t.arrived |= arrived
         # a scout is done once no member of its (world, group) is still live
         key = st.world_id.astype(np.int64) * c.n_groups + np.clip(st.group, 0, c.n_groups - 1)

@@ -73,7 +73,7 @@ class Rendezvous(Scenario[RendezvousConfig]):
         near = ((dist <= self.config.radius) | ~st.online).reshape(-1, self.n_agents).all(axis=1)
         met = acting & np.repeat(near, self.n_agents)
         reward = np.where(acting, t.prev_dist - dist, 0.0) + self.config.bonus * met
-        t.prev_dist = dist
+        np.copyto(t.prev_dist, dist)  # the state keeps its array (resets write it); dist goes out as info
         return StepResult(reward, met, {"distance": dist, "met": met.astype(np.int8)})
 
     def observe(self, world: World) -> dict[str, np.ndarray]:
