@@ -2,7 +2,8 @@
 
 A potential field on the Dict observation: attraction toward the goal plus repulsion from every ray of the
 horizontal ring that hits an agent or an object, with a sideways component so an agent facing an obstacle head
-on slides around it instead of stalling. Works in velocity action mode with Dict observations.
+on slides around it instead of stalling. Works with Dict observations, in either action mode, with or without
+comms (it stays silent: ``policies.parts``).
 """
 
 from __future__ import annotations
@@ -10,6 +11,8 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+
+from agentsim_env.policies.parts import ActionParts
 
 
 class GoToGoalPolicy:
@@ -21,6 +24,7 @@ class GoToGoalPolicy:
         map_diagonal: The map diagonal in metres (the ``task`` part is scaled by it).
         avoid_gain: Strength of the repulsion.
         influence: Distance (m) under which obstacles repel.
+        parts: The env's action parts (default: velocity mode, no comms).
     """
 
     def __init__(
@@ -30,6 +34,7 @@ class GoToGoalPolicy:
         map_diagonal: float = 60.0 * np.sqrt(2.0),
         avoid_gain: float = 1.6,
         influence: float = 5.0,
+        parts: ActionParts | None = None,
     ) -> None:
         self.n_azimuth = n_azimuth
         self.sensor_range = sensor_range
@@ -37,18 +42,20 @@ class GoToGoalPolicy:
         self.avoid_gain = avoid_gain
         self.influence = influence
         self._az = 2 * np.pi * np.arange(n_azimuth) / n_azimuth
+        self.parts = parts if parts is not None else ActionParts({"motion": (3,)}, "GoToGoalPolicy")
 
     @classmethod
     def for_env(cls, env: Any) -> GoToGoalPolicy:
         """A policy configured from a navigation env's scenario config."""
         c = env.scenario.config
-        return cls(n_azimuth=c.sensing.n_azimuth, sensor_range=c.sensing.range, map_diagonal=c.side * np.sqrt(2.0))
+        return cls(n_azimuth=c.sensing.n_azimuth, sensor_range=c.sensing.range, map_diagonal=c.side * np.sqrt(2.0),
+                   parts=ActionParts.for_env(env, "GoToGoalPolicy"))  # fmt: skip
 
     def reset(self, seed: int | None = None) -> None:
         """No state to reset (the policy is deterministic)."""
 
     def act(self, observations: dict[str, Any]) -> dict[str, Any]:
-        """Velocity actions ``{"motion": (3,)}`` for every observed agent."""
+        """Every observed agent's action: its velocity as ``motion`` (and a silent ``comm`` with comms on)."""
         if not observations:
             return {}
         names = list(observations)
@@ -72,4 +79,4 @@ class GoToGoalPolicy:
         v[:, :2] += self.avoid_gain * (push + 0.5 * side) / self.n_azimuth * 4.0
         norm = np.linalg.norm(v, axis=1, keepdims=True)
         v = np.where(norm > 1.0, v / np.maximum(norm, 1e-9), v)
-        return {a: {"motion": v[i].astype(np.float32)} for i, a in enumerate(names)}
+        return self.parts.pack(names, v)

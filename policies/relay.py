@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from agentsim_env.comms.stack import CHANNELS
+from agentsim_env.policies.parts import ActionParts
 
 _KIND_AGENT, _KIND_GROUP, _KIND_OVERLAY = 1, 2, 4  # one-hot columns of an inbox row (comms.messages)
 _PAYLOAD0 = 11  # first payload column of an inbox row
@@ -50,8 +51,10 @@ class _RelayBase:
     """What both baselines share: the map scale, agent indices and the Dict-observation plumbing."""
 
     def __init__(self, agents: list[str], length: float, width: float, n_groups: int, n_azimuth: int,
-                 sensor_range: float, payload_dim: int) -> None:  # fmt: skip
+                 sensor_range: float, payload_dim: int, parts: ActionParts | None = None) -> None:  # fmt: skip
         self.index = {a: i for i, a in enumerate(agents)}
+        # the env's action parts (default: velocity mode; relay always has comms)
+        self.parts = parts if parts is not None else ActionParts({"motion": (3,), "comm": (3 + payload_dim,)})
         self.scale = np.array([length, width])
         self.diag = float(np.hypot(length, width))
         self.n_groups = n_groups
@@ -65,7 +68,8 @@ class _RelayBase:
         c = env.scenario.config
         return {"agents": list(env.possible_agents), "length": c.length, "width": c.corridor_width,
                 "n_groups": c.n_groups, "n_azimuth": c.sensing.n_azimuth, "sensor_range": c.sensing.range,
-                "payload_dim": c.comms.payload_dim}  # fmt: skip
+                "payload_dim": c.comms.payload_dim,
+                "parts": ActionParts.for_env(env, "the relay baselines")}  # fmt: skip
 
     def _unpack(self, observations: dict[str, Any]) -> tuple[list[str], dict[str, np.ndarray]]:
         names = list(observations)
@@ -89,8 +93,7 @@ class _RelayBase:
         return np.where(norm > 1.0, v / np.maximum(norm, 1e-9), v)
 
     def _pack(self, names: list[str], motion: np.ndarray, comm: np.ndarray) -> dict[str, Any]:
-        return {a: {"motion": motion[i].astype(np.float32), "comm": comm[i].astype(np.float32)}
-                for i, a in enumerate(names)}  # fmt: skip
+        return self.parts.pack(names, motion, comm)
 
 
 class FloodPolicy(_RelayBase):
@@ -110,13 +113,16 @@ class FloodPolicy(_RelayBase):
         sensor_range: Sensor range (m).
         payload_dim: Payload width D (>= 4).
         period: Steps between two reports of one agent on the same channel.
+        parts: The env's action parts (default: velocity mode; in primitive mode the velocity is flown as the
+            "velocity" primitive, ``policies.parts``).
     """
 
     def __init__(self, agents: list[str], length: float, width: float, n_groups: int, n_azimuth: int,
-                 sensor_range: float, payload_dim: int, period: int = 6) -> None:  # fmt: skip
+                 sensor_range: float, payload_dim: int, period: int = 6,
+                 parts: ActionParts | None = None) -> None:  # fmt: skip
         if payload_dim < 4:
             raise ValueError(f"comms.payload_dim must be >= 4 for the target report, got {payload_dim}")
-        super().__init__(agents, length, width, n_groups, n_azimuth, sensor_range, payload_dim)
+        super().__init__(agents, length, width, n_groups, n_azimuth, sensor_range, payload_dim, parts)
         self.period = period
         self.known = np.full((len(agents), 2), np.nan)
 
@@ -187,11 +193,13 @@ class SilentPolicy(_RelayBase):
         sensor_range: Sensor range (m).
         payload_dim: Payload width D.
         sweep_deg: Angle between the sweep and the corridor axis.
+        parts: The env's action parts (default: velocity mode; see :class:`FloodPolicy`).
     """
 
     def __init__(self, agents: list[str], length: float, width: float, n_groups: int, n_azimuth: int,
-                 sensor_range: float, payload_dim: int, sweep_deg: float = 35.0) -> None:  # fmt: skip
-        super().__init__(agents, length, width, n_groups, n_azimuth, sensor_range, payload_dim)
+                 sensor_range: float, payload_dim: int, sweep_deg: float = 35.0,
+                 parts: ActionParts | None = None) -> None:  # fmt: skip
+        super().__init__(agents, length, width, n_groups, n_azimuth, sensor_range, payload_dim, parts)
         self.sweep = np.radians(sweep_deg)
         self.direction = np.ones((len(agents), 2))
         self.rng = np.random.default_rng(0)
