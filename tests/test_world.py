@@ -112,6 +112,16 @@ def test_scene_random_placement_no_overlap_and_runtime_add() -> None:
         sc.add("box", [[0, 0, 0]], [[1, -1, 1]])
 
 
+@given(st.lists(st.integers(0, 4), min_size=1, max_size=30), st.data())
+def test_object_index_in_world_counts_its_world_only(worlds: list[int], data: st.DataObject) -> None:
+    sc = Scene()
+    for w in worlds:  # interleaved worlds, as automatic resets of a batch leave them
+        sc.add("box", [[0.0, 0.0, 1.0]], [[1.0, 1.0, 1.0]], world=w)
+    ids = np.array(data.draw(st.lists(st.integers(-1, len(worlds) - 1), max_size=10)), dtype=np.int64)
+    want = [-1 if i < 0 else worlds[:i].count(worlds[i]) for i in ids.tolist()]
+    assert sc.index_in_world(ids).tolist() == want
+
+
 def test_runtime_obstacle_ends_agent_with_object_id() -> None:
     env = agentsim_env.make("navigation", n_agents=2, obstacle_density=0.0)
     env.reset(seed=0)

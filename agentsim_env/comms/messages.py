@@ -67,7 +67,7 @@ REASON_NAMES = {
 }
 
 # Environment message encoding: payload[0] says what the slot collided with, payload[1] which one
-# (the other agent's index within its world, ``slot % n_agents``, or the static object's index);
+# (the other agent's index within its world, ``slot % n_agents``, or the static object's index within its world);
 # the remaining payload values are 0. Exact in float32 for ids below 2**24. A narrower payload keeps what fits:
 # D = 1 carries only what was hit, D = 0 only the message itself (its kind says it is from the environment).
 ENV_COLLISION_AGENT = 1
@@ -79,7 +79,8 @@ def env_collision_payload(what: np.ndarray | int, ident: np.ndarray, payload_dim
 
     Args:
         what: ``ENV_COLLISION_AGENT`` or ``ENV_COLLISION_OBJECT``, a scalar or ``(k,)``.
-        ident: The other agent's index within the world (``slot % n_agents``) or the object index ``(k,)``.
+        ident: The other agent's index within the world (``slot % n_agents``) or the object's index within
+            its world (``Scene.index_in_world``) ``(k,)``.
         payload_dim: Payload width D of the bus (>= 0; the fields that do not fit are left out).
 
     Returns:

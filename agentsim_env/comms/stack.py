@@ -21,7 +21,10 @@ The ``comm`` action of an agent, all values in [-1, 1] (``COMM_HEADER + payload_
 nearest online agent of the world within ``nearest_range`` (nothing when none is that close); "named" a
 unicast (nothing when it names the sender itself); "overlay" starts a flood (no bus involved).
 Collision messages from the environment are written straight into the hit agent's inbox (the environment is
-local to the agent, no channel applies), so the agent's final observation names what hit it.
+local to the agent, no channel applies), so the agent's final observation names what hit it: the other agent's
+index in the world, or the object's index among its world's objects (as a single env of the same seed numbers it).
+They take message ids from the bus and are reported with the step's bus traffic (a ``sent`` and a ``delivered``
+row each, kind ENV), so the data store records every message an agent receives.
 """
 
 from __future__ import annotations
@@ -32,6 +35,7 @@ import numba as nb
 import numpy as np
 
 from agentsim_env.comms.bus import ChannelConfig, DeliveryEvents, MessageBus
+from agentsim_env.comms.events import MessageLog
 from agentsim_env.comms.messages import (
     AGENT,
     ENV,
@@ -201,7 +205,8 @@ class CommsEvents:
     """The step's traffic for the data store (arrays).
 
     Attributes:
-        bus: Bus messages sent, delivered and dropped (with reasons) this step.
+        bus: Bus messages sent, delivered and dropped (with reasons) this step, the environment's collision
+            notices included (kind ENV: sent and delivered at once).
         overlay: Overlay deliveries of this step's hop.
         sent: ``(S,)`` messages each slot sent this step.
         answers: ``(slots, steps)`` heartbeat answers that reached the controller (for the groups stage).
@@ -244,6 +249,7 @@ class CommsStack:
         self.graph = RangeGraph(s, max(cfg.overlay_range, cfg.nearest_range), cfg.nearest_range)
         self._no_near = np.full(s, -1, dtype=np.int64)
         self._inbox_out = np.zeros((s, cfg.inbox_size, cfg.features), dtype=np.float32)
+        self._notices: list[MessageLog] = []  # collision notices pushed this step, reported by ``deliver``
         self.events = CommsEvents(None, None, self.sent.copy())
 
     @property
@@ -359,7 +365,8 @@ class CommsStack:
         """
         st, tick = ctx.state, ctx.tick
         col = ctx.collisions
-        self.on_collisions(tick, col.agent, col.other_agent, col.obj)
+        if col.agent.size:
+            self.on_collisions(tick, col.agent, col.other_agent, ctx.scene.index_in_world(col.obj))
         groups = ctx.outputs.get("groups")
         ping = getattr(groups, "ping", None)
         if ping is not None and ping.size:
@@ -369,15 +376,28 @@ class CommsStack:
         return self.deliver(tick, st.pos, st.online, st.group, st.world_id, ctx.grid)
 
     def on_collisions(self, step: int, agent: np.ndarray, other_agent: np.ndarray, obj: np.ndarray) -> None:
-        """Write an ENV message into each hit agent's inbox naming the other agent (index in world) or object."""
+        """Write an ENV message into each hit agent's inbox naming the other agent or the object.
+
+        Args:
+            step: Current global tick.
+            agent: ``(k,)`` hit slots.
+            other_agent: ``(k,)`` slot of the other agent, or -1 for an object.
+            obj: ``(k,)`` the object's index within its world (``Scene.index_in_world``), or -1.
+        """
         if agent.size == 0:
             return
         what = np.where(other_agent >= 0, ENV_COLLISION_AGENT, ENV_COLLISION_OBJECT)
         ident = np.where(other_agent >= 0, other_agent % self.n_agents, obj)
         pay = env_collision_payload(what, ident, self.cfg.payload_dim)
         k = agent.size
-        self.bus.inbox.push(agent, np.full(k, ENV, np.int8), np.full(k, -1, np.int64), np.zeros(k, np.int16),
-                            np.full(k, step, np.int64), pay)  # fmt: skip
+        receiver = np.asarray(agent, dtype=np.int64)
+        created = np.full(k, step, np.int64)
+        self.bus.inbox.push(receiver, np.full(k, ENV, np.int8), np.full(k, -1, np.int64), np.zeros(k, np.int16),
+                            created, pay)  # fmt: skip
+        # ids from the bus's counter: a notice is a message of the run like any other (unique id)
+        self._notices.append(MessageLog(self.bus._new_ids(k), np.full(k, ENV, np.int8), np.full(k, -1, np.int64),
+                                        receiver.copy(), receiver.copy(), created, created.copy(),
+                                        np.zeros(k, np.int8)))  # fmt: skip
 
     def deliver(
         self,
@@ -394,6 +414,11 @@ class CommsStack:
         """
         self.update_graph(pairs, pos, online, world)
         bus_ev = self.bus.deliver(step, pos, online, group, push=False)
+        if self._notices:  # the collision notices already in the inboxes: sent and delivered this step
+            env = MessageLog.concat(self._notices)
+            self._notices = []
+            bus_ev = DeliveryEvents(bus_ev.step, MessageLog.concat([env, bus_ev.sent]),
+                                    MessageLog.concat([env, bus_ev.delivered]), bus_ev.dropped)  # fmt: skip
         pushes = self.bus.take_pushes()
         if self.overlay.frontier_size:
             ov = self.overlay.advance_graph(*self.graph.links(self.overlay.link_range))

@@ -107,6 +107,31 @@ class Scene:
         r[box] = np.hypot(self.half[box, 0], self.half[box, 1])
         return r
 
+    def index_in_world(self, ids: np.ndarray) -> np.ndarray:
+        """Each object's index among the objects of its own world, in id order (what a single world numbers it).
+
+        Object ids run over every world of a batch, and a world reset moves its objects to the end; the index
+        within the world is the same as in a single env of the same seed.
+
+        Args:
+            ids: Object ids ``(k,)``; -1 (no object) stays -1.
+
+        Returns:
+            ``(k,)`` int64 indices.
+        """
+        ids = np.asarray(ids, dtype=np.int64)
+        out = np.full(ids.shape, -1, dtype=np.int64)
+        hit = ids >= 0
+        if hit.any():
+            order = np.argsort(self.world, kind="stable")  # by world, id order within each world
+            place = np.empty(self.n_objects, dtype=np.int64)
+            place[order] = np.arange(self.n_objects)
+            counts = np.bincount(self.world)
+            first = np.cumsum(counts) - counts  # where each world's objects start in that order
+            hit_ids = ids[hit]
+            out[hit] = place[hit_ids] - first[self.world[hit_ids]]
+        return out
+
     def top(self) -> np.ndarray:
         """Top z of each object ``(O,)``."""
         return self.centre[:, 2] + self.half[:, 2]

@@ -440,8 +440,9 @@ class Recorder:
             ep, w = self._where(col.agent)
             step = world.step_count[np.asarray(w, dtype=np.int64)].tolist()
             other = np.where(col.other_agent >= 0, col.other_agent % n, -1)
+            obj = world.scene.index_in_world(col.obj)  # numbered within the world, as a single env numbers it
             rows += zip(repeat(self.run), ep, w, step, repeat("collision"), (col.agent % n).tolist(),
-                        other.tolist(), col.obj.tolist(), repeat(None), repeat(None))  # fmt: skip
+                        other.tolist(), obj.tolist(), repeat(None), repeat(None))  # fmt: skip
         if ev.timed_out.size:
             ep, w = self._where(ev.timed_out)
             step = world.step_count[np.asarray(w, dtype=np.int64)].tolist()
