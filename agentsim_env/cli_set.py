@@ -23,6 +23,9 @@ dataclass); dotted keys recurse into them, and the leaf is parsed by the sub-con
 ``max_steps``) are resolved before the type is looked up. An unknown key raises ``ValueError`` listing the
 allowed keys. Values are only parsed here; the config classes still validate ranges and choices.
 
+JSON values refuse a key given twice and nesting deeper than ``MAX_JSON_DEPTH`` (32) levels, and an error
+quotes at most about 80 characters of the value it refuses (an argument may be 100 KB long).
+
 This module imports nothing from the package: it reads whatever config class it is given.
 """
 
@@ -38,7 +41,7 @@ import typing
 from collections.abc import Iterable, Mapping
 from typing import Any
 
-__all__ = ["BOOL_WORDS", "NONE_WORDS", "TOP_ALIASES", "canonical", "parse_set"]
+__all__ = ["BOOL_WORDS", "MAX_JSON_DEPTH", "NONE_WORDS", "TOP_ALIASES", "canonical", "parse_set"]
 
 #: Accepted spellings of booleans (compared lower-case).
 BOOL_WORDS: dict[str, bool] = {"true": True, "false": False, "1": True, "0": False, "yes": True, "no": False}
@@ -53,6 +56,58 @@ _NoneType = type(None)
 
 class _Bad(Exception):
     """A value that does not fit a type (turned into a ``ValueError`` naming the key by the caller)."""
+
+
+class _Refused(_Bad):
+    """JSON that parses but is refused (a duplicate key, nesting too deep); ``str()`` says why."""
+
+
+#: Most levels of lists and objects in a JSON value (configs nest a few levels; Python's parser recurses).
+MAX_JSON_DEPTH = 32
+#: Characters of a command-line value quoted in an error (an argument may be 100 KB long).
+_SHOWN = 80
+
+
+def _shown(value: Any) -> str:
+    """``repr`` of a command-line value or key, cut to about ``_SHOWN`` characters."""
+    if isinstance(value, str) and len(value) > _SHOWN:
+        return f"{value[:_SHOWN]!r}... ({len(value):,} characters)"
+    text = repr(value)  # decoded JSON: as long as the argument at most
+    return text if len(text) <= _SHOWN + 20 else f"{text[:_SHOWN]}... ({len(text):,} characters)"
+
+
+def _unique_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    """A JSON object's pairs as a dict, refusing a key given twice (``json`` keeps the last one silently)."""
+    out: dict[str, Any] = {}
+    for key, value in pairs:
+        if key in out:
+            raise _Refused(f"duplicate key {_shown(key)} in a JSON object; give each key once")
+        out[key] = value
+    return out
+
+
+def _json(text: str) -> Any:
+    """Decode JSON, refusing duplicate keys and nesting past ``MAX_JSON_DEPTH`` (``_Refused``).
+
+    Raises:
+        json.JSONDecodeError: On text that is not JSON.
+        _Refused: On a duplicate key or too deep a nesting.
+    """
+    try:
+        value = json.loads(text, object_pairs_hook=_unique_keys)
+    except RecursionError:
+        value = None
+    else:
+        stack = [(value, 0)]
+        while stack:  # iterative: the depth is what is being bounded
+            item, depth = stack.pop()
+            if isinstance(item, (dict, list)):
+                if depth >= MAX_JSON_DEPTH:
+                    break
+                stack.extend((v, depth + 1) for v in (item.values() if isinstance(item, dict) else item))
+        else:
+            return value
+    raise _Refused(f"JSON nested deeper than {MAX_JSON_DEPTH} levels; at most {MAX_JSON_DEPTH} are allowed")
 
 
 @functools.cache
@@ -109,7 +164,7 @@ def _plural(tp: Any) -> str:
 def _legacy(text: str) -> Any:
     """JSON when it parses (lists become tuples), else the text: the rule for ``Any`` fields."""
     try:
-        value = json.loads(text)
+        value = _json(text)
     except json.JSONDecodeError:
         return text
     return _tuples(value)
@@ -190,7 +245,7 @@ def _parse_text(tp: Any, text: str) -> Any:
     if _is_tuple(tp):
         if s.startswith("["):
             try:
-                items = json.loads(s)
+                items = _json(s)
             except json.JSONDecodeError:
                 raise _Bad from None
             return _coerce(tp, items)
@@ -262,7 +317,7 @@ def _resolve(cls: type, name: str, where: str, top: bool) -> str:
             f" (aliases: {', '.join(f'{a} -> {k}' for a, k in sorted(aliases.items()))})" if aliases else ""
         )
         raise ValueError(
-            f"unknown --set key {where + name!r} for {cls.__name__}; allowed keys: {sorted(fields)}{also}"
+            f"unknown --set key {_shown(where + name)} for {cls.__name__}; allowed keys: {sorted(fields)}{also}"
         )
     return field_name
 
@@ -290,7 +345,7 @@ def _object(cls: type, value: Any, where: str) -> dict[str, Any]:
         try:
             out[name] = _coerce(tp, item)
         except _Bad:
-            raise ValueError(f"--set {where + name}: expected {_describe(tp)}, got {item!r}") from None
+            raise ValueError(f"--set {where + name}: expected {_describe(tp)}, got {_shown(item)}") from None
     return out
 
 
@@ -302,20 +357,24 @@ def _leaf(cls: type, name: str, text: str, where: str) -> Any:
     if sub is None:
         try:
             return _parse_text(tp, text)
+        except _Refused as exc:
+            raise ValueError(f"--set {key}: {exc}") from None
         except _Bad:
-            raise ValueError(f"--set {key}: expected {_describe(tp)}, got {text!r}") from None
+            raise ValueError(f"--set {key}: expected {_describe(tp)}, got {_shown(text)}") from None
     members = _union_members(tp) or [tp]
     if _NoneType in members and text.strip().lower() in NONE_WORDS:
         return None
     try:
-        value = json.loads(text)
+        value = _json(text)
     except json.JSONDecodeError:
         value = None
+    except _Refused as exc:
+        raise ValueError(f"--set {key}: {exc}") from None
     if not isinstance(value, dict):
         none = " or none" if _NoneType in members else ""
         raise ValueError(
             f'--set {key}: expected a JSON object of {sub.__name__} fields{none} (e.g. {key}={{"field": 1}}) '
-            f"or dotted keys ({key}.FIELD=VALUE), got {text!r}"
+            f"or dotted keys ({key}.FIELD=VALUE), got {_shown(text)}"
         )
     return _object(sub, value, f"{key}.")
 
@@ -364,7 +423,9 @@ def parse_set(config_cls: type, pairs: Iterable[str]) -> dict[str, Any]:
         key = key.strip()
         path = key.split(".")
         if not sep or not key or any(not p for p in path):
-            raise ValueError(f"--set expects KEY=VALUE (e.g. n_agents=8 or body.radius=1.0), got {pair!r}")
+            raise ValueError(
+                f"--set expects KEY=VALUE (e.g. n_agents=8 or body.radius=1.0), got {_shown(pair)}"
+            )
         name = _resolve(config_cls, path[0], "", top=True)
         if spelled.setdefault(name, path[0]) != path[0]:
             raise ValueError(

@@ -26,6 +26,8 @@ from agentsim_env.env.spaces import flat_layout
 __all__ = ["LearnedPolicy", "ModelFileError", "is_model_path", "load_model", "load_policy", "model_env_config",
            "model_files"]  # fmt: skip
 
+#: Largest ``config.json`` beside a model read (it holds a training config: a few kilobytes).
+MAX_CONFIG_JSON_BYTES = 1 << 20
 #: Parts every stable-baselines3 model zip holds (the class parameters and the policy's weights).
 _REQUIRED_PARTS = ("data", "policy.pth")
 
@@ -68,8 +70,10 @@ def model_files(path: str | Path) -> tuple[Path, Path]:
 
 
 def _read_config(path: Path) -> dict[str, Any]:
-    try:
-        meta = json.loads(path.read_text(encoding="utf-8"))
+    from agentsim_env.core.files import parse_json, read_regular
+
+    try:  # bounded like every config file: size, regular file, duplicate keys, depth
+        meta = parse_json(read_regular(path, MAX_CONFIG_JSON_BYTES, "a model's config.json").decode("utf-8"), 32)
     except (OSError, ValueError) as exc:
         raise ValueError(f"{str(path)!r} is not a readable JSON file: {exc}") from None
     if not isinstance(meta, dict) or not isinstance(meta.get("scenario"), str):

@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, ClassVar
 
-from agentsim_env.core.validation import check_float, check_int, coerce_fields
+from agentsim_env.core.validation import check_float, check_int, coerce_fields, short_repr
 
 __all__ = [
     "ACTIVATIONS",
@@ -175,7 +175,7 @@ class TrainConfig:
 
         names = list_scenarios()
         if self.scenario not in names:
-            raise ValueError(f"scenario must be one of {names}, got {self.scenario!r}")
+            raise ValueError(f"scenario must be one of {names}, got {short_repr(self.scenario)}")
         check_int("timesteps", self.timesteps, 1, 10_000_000_000)
         check_int("worlds", self.worlds, 1, 4096)
         check_int("seed", self.seed, 0, 2**32 - 1)
@@ -214,7 +214,7 @@ class TrainConfig:
 
 def _choice(name: str, value: str, allowed: tuple[str, ...]) -> None:
     if value not in allowed:
-        raise ValueError(f"{name} must be one of {list(allowed)}, got {value!r}")
+        raise ValueError(f"{name} must be one of {list(allowed)}, got {short_repr(value)}")
 
 
 def _plain(value: Any) -> Any:
@@ -231,9 +231,10 @@ def _build(cls: type, data: Any, where: str) -> Any:
         raise ValueError(f"{where.rstrip('.') or 'the config'} must be a mapping of keys, "
                          f"got {type(data).__name__}")  # fmt: skip
     allowed = [f.name for f in dataclasses.fields(cls)]
-    unknown = sorted(set(data) - set(allowed))
+    unknown = sorted(set(data) - set(allowed), key=repr)  # YAML keys may mix types (1 and "a")
     if unknown:
-        raise ValueError(f"unknown key {where}{unknown[0]!s}; allowed: {allowed}")
+        first = unknown[0] if isinstance(unknown[0], str) and len(unknown[0]) <= 60 else short_repr(unknown[0], 60)
+        raise ValueError(f"unknown key {where}{first}; allowed: {allowed}")
     for key, value in data.items():
         if key in ("env", "baseline_env") and not isinstance(value, dict):
             raise ValueError(f"{where}{key} must be a mapping of scenario config keys, got {type(value).__name__}")
@@ -259,10 +260,10 @@ def load_config(source: str | Path | dict[str, Any] | None = None, overrides: di
         The validated config.
 
     Raises:
-        ValueError: A missing file, bad YAML, an unknown key or a bad value (the message names it).
+        ValueError: A missing file, bad YAML, a file outside the bounds of ``agentsim_env.train.yaml_load``
+            (1 MiB, 32 levels, 10,000 values with aliases expanded, no duplicate keys), an unknown key or a bad
+            value (the message names it).
     """
-    import yaml
-
     data: dict[str, Any]
     if source is None:
         shipped = shipped_configs()
@@ -273,12 +274,20 @@ def load_config(source: str | Path | dict[str, Any] | None = None, overrides: di
         path = Path(source)
         if not path.suffix and str(source) in shipped_configs():
             path = shipped_configs()[str(source)]
-        if not path.is_file():
-            raise ValueError(f"config file {str(source)!r} not found; shipped configs: {list(shipped_configs())}")
         try:
-            loaded = yaml.safe_load(path.read_text(encoding="utf-8"))
-        except (yaml.YAMLError, UnicodeDecodeError) as exc:
-            raise ValueError(f"config file {str(path)!r} is not valid YAML: {exc}") from None
+            found = path.exists()
+        except OSError as exc:  # e.g. a name too long for the file system
+            raise ValueError(f"config file {short_repr(str(source))}: {exc.strerror}") from None
+        if not found:
+            raise ValueError(f"config file {short_repr(str(source))} not found; shipped configs: "
+                             f"{list(shipped_configs())}")  # fmt: skip
+        from agentsim_env.train.yaml_load import load_yaml_file
+
+        # bounded: size, depth, aliases expanded, duplicate keys (a device or FIFO is refused, never read)
+        try:
+            loaded = load_yaml_file(path, f"config file {short_repr(str(path))}")
+        except OSError as exc:  # unreadable: one line, as for every other bad file
+            raise ValueError(f"config file {short_repr(str(path))}: {exc.strerror}") from None
         if loaded is None:
             loaded = {}
         if not isinstance(loaded, dict):
@@ -286,7 +295,7 @@ def load_config(source: str | Path | dict[str, Any] | None = None, overrides: di
         data = loaded
     if scenario is not None:
         if data.get("scenario", scenario) != scenario:
-            raise ValueError(f"the config is for scenario {data['scenario']!r}, not {scenario!r}")
+            raise ValueError(f"the config is for scenario {short_repr(data['scenario'])}, not {scenario!r}")
         data["scenario"] = scenario
     for key, value in (overrides or {}).items():
         if key in TrainConfig.nested and isinstance(value, dict) and isinstance(data.get(key), dict):
