@@ -114,7 +114,7 @@ class Controls:
     def _speed(self, msg: dict[str, Any]) -> dict[str, Any]:
         self._only(msg, ("value",))
         v = msg.get("value")
-        if not speed_ok(v):
+        if not speed_ok(v) or not isinstance(v, (int, float)):  # (the second test: for the type checker)
             raise ClientError(f"speed: 'value' must be {SPEED_RANGE}, got {_shown(v)}")
         with self._cond:
             self.speed = float(v)
