@@ -4,8 +4,10 @@ The page draws zones on a top-down map, edits them in a form and asks the server
 validates with the zone file's own validator (``uav_zones.zones_from_dict``), so every message the page shows is
 the one ``load_zones`` would give. Messages (JSON objects, ``cmd`` names the request):
 
-* ``{"cmd": "zones.preview", "zones": {zone file}}`` -> ``{"type": "zones.preview", "ok": true, "zones": [...],
-  "overlaps": [[i, j], ...]}``, or ``{"ok": false, "error": message}`` when the zone file is invalid.
+* ``{"cmd": "zones.preview", "zones": {zone file}, "id": n}`` -> ``{"type": "zones.preview", "ok": true, "zones":
+  [...], "overlaps": [[i, j], ...], "id": n}``, or ``{"ok": false, "error": message, "id": n}`` when the zone file
+  is invalid (``id`` optional, echoed). Computed on a worker thread, one at a time per page; a request that waits
+  meanwhile is replaced by a newer one (no reply), so the newest is always answered.
 * ``{"cmd": "zones.save", "zones": {zone file}}`` -> ``{"type": "zones.saved", "path", "n_zones"}``; writes only the
   file the designer was started with, never a path named by the page: atomically, through a symbolic link to the
   file it names, keeping an existing file's mode and owner (a new file follows the umask), and refusing (with
@@ -26,7 +28,7 @@ import numpy as np
 
 from agentsim_env.core.files import write_atomically
 from agentsim_env.render.web.frames import DENSITY_SAMPLES, density_curve
-from agentsim_env.render.web.server import ClientError, Handler, WebServer
+from agentsim_env.render.web.server import Background, ClientError, Handler, WebServer
 from agentsim_env.scenarios import uav_zones
 from agentsim_env.scenarios.uav_zones import (
     ZoneSet,
@@ -51,7 +53,7 @@ __all__ = [
 MAX_POINTS_PER_ZONE = 2000
 MAX_POINTS_TOTAL = 40_000
 
-_KEYS = {"zones.preview": ("cmd", "zones"), "zones.save": ("cmd", "zones"), "zones.load": ("cmd",)}
+_KEYS = {"zones.preview": ("cmd", "zones", "id"), "zones.save": ("cmd", "zones"), "zones.load": ("cmd",)}
 
 
 def _check_message(msg: Any, cmd: str) -> dict[str, Any]:
@@ -144,19 +146,25 @@ def designer_handlers(path: Path | None) -> dict[str, Handler]:
         path: The zone file the designer reads and writes, or ``None`` (saving is then refused).
 
     Returns:
-        ``{"zones.preview": fn, "zones.save": fn, "zones.load": fn}``.
+        ``{"zones.preview": fn, "zones.save": fn, "zones.load": fn}``; the preview is a ``Background`` handler
+        (tenths of a second at the largest zone files): the server runs it on a worker thread, one at a time per
+        page, the newest waiting request next, so other pages are answered meanwhile.
     """
     target = None if path is None else Path(path)
     lock = threading.Lock()
 
     def on_preview(msg: dict[str, Any]) -> dict[str, Any]:
-        """Validate the page's zone file and return its preview, or the validator's message."""
+        """Validate the page's zone file and return its preview, or the validator's message (with its ``id``)."""
         d = _check_message(msg, "zones.preview")["zones"]
+        rid = msg.get("id")
+        if "id" in msg and (isinstance(rid, bool) or not isinstance(rid, int)):
+            raise ClientError(f"zones.preview: 'id' must be an integer (echoed in the reply), got {type(rid).__name__}")
+        echo = {} if rid is None else {"id": rid}  # the page tells from it which request a reply answers
         try:
             zs = _validate(d)
         except ValueError as exc:
-            return {"type": "zones.preview", "ok": False, "error": str(exc)}
-        return preview(zs)
+            return {"type": "zones.preview", "ok": False, "error": str(exc), **echo}
+        return {**preview(zs), **echo}
 
     def on_save(msg: dict[str, Any]) -> dict[str, Any]:
         """Validate and write the zone file to ``path`` (only there)."""
@@ -193,7 +201,7 @@ def designer_handlers(path: Path | None) -> dict[str, Handler]:
             raise ClientError(str(exc)) from exc
         return {"type": "zones.loaded", "zones": zones_to_dict(zs), "path": str(target)}
 
-    return {"zones.preview": on_preview, "zones.save": on_save, "zones.load": on_load}
+    return {"zones.preview": Background(on_preview), "zones.save": on_save, "zones.load": on_load}
 
 
 def _limits() -> dict[str, Any]:

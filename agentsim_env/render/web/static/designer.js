@@ -22,7 +22,8 @@ const state = {
 };
 let ws = null;
 let previewTimer = null;
-let inFlight = 0;
+let previewSent = 0;      // id of the newest preview request; the server may skip older ones that had to wait
+let previewAnswered = 0;  // id of the newest preview answered
 let downloadUrl = null;
 
 // ------------------------------------------------------------------ zone file <-> state
@@ -67,8 +68,8 @@ function schedulePreview() {
   clearTimeout(previewTimer);
   previewTimer = setTimeout(() => {
     previewTimer = null;
-    inFlight += 1;
-    send({ cmd: "zones.preview", zones: zoneFile() });
+    previewSent += 1;
+    send({ cmd: "zones.preview", zones: zoneFile(), id: previewSent });
   }, PREVIEW_DELAY_MS);
 }
 
@@ -88,7 +89,7 @@ function onMessage(msg) {
       window.designer.ready = true;
       break;
     case "zones.preview":
-      inFlight = Math.max(0, inFlight - 1);
+      if (typeof msg.id === "number") previewAnswered = Math.max(previewAnswered, msg.id);
       window.designer.lastPreview = msg;
       if (msg.ok) {
         state.preview = msg;
@@ -499,7 +500,7 @@ window.designer = {
   ready: false,
   lastPreview: null,
   zones: () => zoneFile(),
-  idle: () => previewTimer === null && inFlight === 0,
+  idle: () => previewTimer === null && previewAnswered === previewSent,
   toPixel: (p) => {
     const rect = canvas().getBoundingClientRect();
     const [px, py] = toCanvas(geometry(), p);
