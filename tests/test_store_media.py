@@ -21,10 +21,9 @@ from pathlib import Path
 
 import pytest
 
-import agentsim_env
 from agentsim_env.cli import main
-from agentsim_env.recorder import record
 from agentsim_env.recorder.read import TABLES
+from tests.store_helpers import small_store
 
 ROOT = Path(__file__).resolve().parents[1]
 CHILD_TIMEOUT_S = 120
@@ -32,13 +31,7 @@ CHILD_TIMEOUT_S = 120
 
 @pytest.fixture(scope="module")
 def store(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    path = tmp_path_factory.mktemp("media") / "run.db"
-    env = record(agentsim_env.make("navigation", n_agents=3, max_steps=5), path)
-    env.reset(seed=0)
-    while env.agents:
-        env.step({a: env.action_space(a).sample() for a in env.agents})
-    env.close()
-    return path
+    return small_store(tmp_path_factory.mktemp("media") / "run.db")
 
 
 # ------------------------------------------------------------------------------------------ read-only media

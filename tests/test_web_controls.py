@@ -6,8 +6,6 @@ A plain WebSocket client (``websockets``) stands in for the page.
 
 from __future__ import annotations
 
-import asyncio
-import json
 import threading
 import time
 from pathlib import Path
@@ -17,40 +15,16 @@ import pytest
 
 import agentsim_env
 from agentsim_env.cli import main
-from agentsim_env.render.web.frames import unpack_frame
 from agentsim_env.render.web.server import ClientError
 from agentsim_env.render.web.viewer import MAX_SPEED, MIN_SPEED, Controls
 
 pytest.importorskip("websockets")
-from websockets.asyncio.client import connect  # noqa: E402
+
+from tests.web_client import talk  # noqa: E402
 
 #: Speeds a page may send that are outside the documented range (JSON can carry NaN and Infinity too).
 BAD_SPEEDS = [5e-324, 1e-6, MIN_SPEED / 2, -1, MAX_SPEED * 1.01, float("inf"), float("nan"), True, "5", None]
 
-
-def _talk(url: str, send: list[Any], seconds: float) -> tuple[list[dict[str, Any]], list[bytes]]:
-    """Connect to the page's socket, send ``send``, collect (and acknowledge frames) for ``seconds``."""
-    texts: list[dict[str, Any]] = []
-    frames: list[bytes] = []
-
-    async def run() -> None:
-        async with connect(url.replace("http", "ws") + "ws", max_size=None) as ws:
-            for m in send:
-                await ws.send(json.dumps(m))
-            end = time.monotonic() + seconds
-            while time.monotonic() < end:
-                try:
-                    m = await asyncio.wait_for(ws.recv(), 0.1)
-                except asyncio.TimeoutError:
-                    continue
-                if isinstance(m, bytes):
-                    frames.append(m)
-                    await ws.send(json.dumps({"cmd": "ack", "seq": unpack_frame(m)[0]["seq"]}))
-                else:
-                    texts.append(json.loads(m))
-
-    asyncio.run(run())
-    return texts, frames
 
 
 @pytest.mark.parametrize("value", BAD_SPEEDS, ids=repr)
@@ -124,13 +98,13 @@ def test_render_mode_web_steps_on_whatever_speed_a_page_sends() -> None:
     t = threading.Thread(target=loop, daemon=True)
     t.start()
     try:
-        texts, _ = _talk(url, [{"cmd": "speed", "value": v} for v in (5e-324, 1e-6)], seconds=0.5)
+        texts, _ = talk(url, [{"cmd": "speed", "value": v} for v in (5e-324, 1e-6)], seconds=0.5)
         errors = [m["message"] for m in texts if m["type"] == "error"]
         assert len(errors) == 2 and all(f"{MIN_SPEED:g}..{MAX_SPEED:g}" in e for e in errors), errors
         # the slowest speed allowed, then a fast one: the simulation does not stay parked
-        _talk(url, [{"cmd": "speed", "value": MIN_SPEED}], seconds=0.3)
+        talk(url, [{"cmd": "speed", "value": MIN_SPEED}], seconds=0.3)
         time.sleep(0.3)
-        _talk(url, [{"cmd": "speed", "value": 50}, {"cmd": "resume"}], seconds=0.2)
+        talk(url, [{"cmd": "speed", "value": 50}, {"cmd": "resume"}], seconds=0.2)
         s0 = env.world.tick
         time.sleep(0.5)
         assert env.world.tick >= s0 + 5, (s0, env.world.tick)
@@ -158,12 +132,12 @@ def test_replay_playback_survives_any_speed_and_wakes_for_a_new_one(recorded: Pa
     v = ReplayViewer(recorded, episode=0, quiet=True, speed=20.0)
     url = v.start()
     try:
-        texts, _ = _talk(url, [{"cmd": "speed", "value": 5e-324}], seconds=0.3)
+        texts, _ = talk(url, [{"cmd": "speed", "value": 5e-324}], seconds=0.3)
         assert any(m["type"] == "error" and "speed" in m["message"] for m in texts), texts
         assert v._thread is not None and v._thread.is_alive()
-        _talk(url, [{"cmd": "seek", "step": 1}, {"cmd": "speed", "value": MIN_SPEED}], seconds=0.3)
+        talk(url, [{"cmd": "seek", "step": 1}, {"cmd": "speed", "value": MIN_SPEED}], seconds=0.3)
         at = v.index
-        _talk(url, [{"cmd": "speed", "value": 100}], seconds=0.4)
+        talk(url, [{"cmd": "speed", "value": 100}], seconds=0.4)
         assert v.index > at + 5, (at, v.index)  # the playback woke for the new speed
         assert v._thread.is_alive()
     finally:

@@ -27,6 +27,8 @@ from agentsim_env.render.web.viewer import WebViewer
 pytest.importorskip("websockets")
 from websockets.asyncio.client import connect  # noqa: E402
 
+from tests.web_client import talk  # noqa: E402
+
 
 def _get(url: str) -> tuple[int, bytes]:
     try:
@@ -35,33 +37,6 @@ def _get(url: str) -> tuple[int, bytes]:
     except urllib.error.HTTPError as exc:
         return exc.code, b""
 
-
-def _talk(url: str, send: list[Any], seconds: float = 1.0, ack_delay: float = 0.0) -> tuple[list[dict], list[bytes]]:
-    """Connect to the page's socket, send ``send`` (objects or raw strings), collect for ``seconds``; each frame
-    is acknowledged ``ack_delay`` seconds after it arrived (a slow page)."""
-    texts: list[dict] = []
-    frames: list[bytes] = []
-
-    async def run() -> None:
-        async with connect(url.replace("http", "ws") + "ws", max_size=None) as ws:
-            for m in send:
-                await ws.send(m if isinstance(m, (str, bytes)) else json.dumps(m))
-            end = time.monotonic() + seconds
-            while time.monotonic() < end:
-                try:
-                    m = await asyncio.wait_for(ws.recv(), 0.1)
-                except asyncio.TimeoutError:
-                    continue
-                if isinstance(m, bytes):
-                    frames.append(m)
-                    if ack_delay:
-                        await asyncio.sleep(ack_delay)
-                    await ws.send(json.dumps({"cmd": "ack", "seq": unpack_frame(m)[0]["seq"]}))
-                else:
-                    texts.append(json.loads(m))
-
-    asyncio.run(run())
-    return texts, frames
 
 
 @given(n=st.integers(0, 50), m=st.integers(0, 7), seq=st.integers(0, 10**9), step=st.integers(0, 10**6))
@@ -145,7 +120,7 @@ def test_bad_messages_get_an_error_and_the_server_goes_on() -> None:
     try:
         bad = ["not json", "[1, 2]", "3", json.dumps({"cmd": 5}), json.dumps({"cmd": "nope"}), b"\x00\x01",
                json.dumps({"cmd": "ack", "seq": "x"}), json.dumps({"cmd": "boom"}), json.dumps({"cmd": "echo", "x": 7})]  # fmt: skip
-        texts, _ = _talk(url, bad, seconds=0.8)
+        texts, _ = talk(url, bad, seconds=0.8)
         errors = [t["message"] for t in texts if t["type"] == "error"]
         assert len(errors) == 8, errors
         assert any("not JSON" in e for e in errors) and any("unknown command 'nope'" in e for e in errors)
@@ -160,7 +135,7 @@ def test_every_log_line_reaches_the_page_once_in_order() -> None:
     url = srv.start()
     try:
         lines: list[dict] = []
-        t = threading.Thread(target=lambda: lines.extend(_talk(url, [], seconds=1.0)[0]))
+        t = threading.Thread(target=lambda: lines.extend(talk(url, [], seconds=1.0)[0]))
         t.start()
         while srv.n_pages == 0:
             time.sleep(0.01)
@@ -180,7 +155,7 @@ def test_a_slow_page_gets_only_the_latest_frames_and_never_blocks_the_publisher(
     try:
         frames: list[bytes] = []
         # a slow page: 0.3 s per frame
-        t = threading.Thread(target=lambda: frames.extend(_talk(url, [], seconds=1.5, ack_delay=0.3)[1]))
+        t = threading.Thread(target=lambda: frames.extend(talk(url, [], seconds=1.5, ack_delay=0.3)[1]))
         t.start()
         while srv.n_pages == 0:
             time.sleep(0.01)
@@ -214,18 +189,18 @@ def test_render_mode_web_streams_steps_and_obeys_pause_and_step() -> None:
     t = threading.Thread(target=loop, daemon=True)
     t.start()
     try:
-        texts, frames = _talk(url, [{"cmd": "select", "slot": 1}], seconds=1.0)
+        texts, frames = talk(url, [{"cmd": "select", "slot": 1}], seconds=1.0)
         kinds = [t["type"] for t in texts]
         assert "scene" in kinds and "agent" in kinds, kinds
         assert len(frames) > 5, [unpack_frame(f)[0] for f in frames]
         assert "rays" in unpack_frame(frames[-1])[1]
-        _talk(url, [{"cmd": "pause"}], seconds=0.6)
+        talk(url, [{"cmd": "pause"}], seconds=0.6)
         s0 = env.world.tick  # steps ever taken (episodes may end and reset meanwhile)
         time.sleep(0.3)
         assert env.world.tick == s0  # paused: the env waits in its step hook
-        _talk(url, [{"cmd": "step"}, {"cmd": "step"}], seconds=0.5)
+        talk(url, [{"cmd": "step"}, {"cmd": "step"}], seconds=0.5)
         assert env.world.tick == s0 + 2
-        texts, _ = _talk(url, [{"cmd": "speed", "value": -1}, {"cmd": "select", "slot": 99}, {"cmd": "resume"}],
+        texts, _ = talk(url, [{"cmd": "speed", "value": -1}, {"cmd": "select", "slot": 99}, {"cmd": "resume"}],
                          seconds=0.4)  # fmt: skip
         errors = [t["message"] for t in texts if t["type"] == "error"]
         assert any("speed" in e and "0.1..10000" in e for e in errors) and any("0..3" in e for e in errors)
@@ -248,7 +223,7 @@ def test_the_last_step_of_a_burst_reaches_the_page_when_the_simulation_goes_idle
     got: list[int] = []
 
     def page() -> None:
-        _, frames = _talk(v.url, [], seconds=1.5)
+        _, frames = talk(v.url, [], seconds=1.5)
         got.extend(unpack_frame(f)[0]["step"] for f in frames)
 
     t = threading.Thread(target=page)
@@ -290,10 +265,10 @@ def test_replay_serves_the_recorded_positions(tmp_path: Any) -> None:
     v = ReplayViewer(db, episode=0, quiet=True)
     url = v.start()
     try:
-        texts, frames = _talk(url, [{"cmd": "pause"}, {"cmd": "seek", "step": 5}, {"cmd": "seek", "step": 10**6}],
+        texts, frames = talk(url, [{"cmd": "pause"}, {"cmd": "seek", "step": 5}, {"cmd": "seek", "step": 10**6}],
                               seconds=0.8)  # fmt: skip
-        _, stepped = _talk(url, [{"cmd": "step"}], seconds=0.5)  # paused at 5: one step shows 6, no more
-        _, played = _talk(url, [{"cmd": "play"}], seconds=0.5)
+        _, stepped = talk(url, [{"cmd": "step"}], seconds=0.5)  # paused at 5: one step shows 6, no more
+        _, played = talk(url, [{"cmd": "play"}], seconds=0.5)
     finally:
         v.close()
     assert unpack_frame(stepped[-1])[0]["step"] == 6
