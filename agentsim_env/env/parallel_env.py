@@ -117,6 +117,11 @@ class AgentSimParallelEnv(ParallelEnv):
             environment variable ``AGENTSIM_CHECK_FINITE`` is ``1``; the test suite sets it).
         num_threads: Threads for the per-agent kernels, 1..256 (default 1). Worth it from tens of thousands of
             agents; results are identical for every count (``core.threads``).
+
+    Attributes:
+        observation_spaces: ``{agent: space}`` for every possible agent, the objects ``observation_space``
+            returns (one shared object).
+        action_spaces: ``{agent: space}``, likewise for ``action_space``.
     """
 
     def __init__(
@@ -158,8 +163,9 @@ class AgentSimParallelEnv(ParallelEnv):
         self._obs_out = Recycled((self.world.state.n_slots, sum(p.size for p in obs_parts.values())), np.float32)
         self._act_parts = scenario.act_parts()  # fixed per config; read on every step
         act_space = action_space_for(self._act_parts, action_format)
-        self._obs_spaces = dict.fromkeys(self.possible_agents, obs_space)
-        self._act_spaces = dict.fromkeys(self.possible_agents, act_space)
+        # public, as PettingZoo's ParallelEnv declares them (skrl reads them); observation_space(a) is a lookup here
+        self.observation_spaces = dict.fromkeys(self.possible_agents, obs_space)
+        self.action_spaces = dict.fromkeys(self.possible_agents, act_space)
         n = scenario.state_size()
         self.state_space = spaces.Box(-10.0, 10.0, shape=(n,), dtype=np.float32)
         self._set_agents([])
@@ -174,11 +180,11 @@ class AgentSimParallelEnv(ParallelEnv):
     # ------------------------------------------------------------------ spaces
     def observation_space(self, agent: str) -> spaces.Space:
         """The observation space of ``agent``: one object shared by every agent (seeding it seeds all)."""
-        return self._obs_spaces[self._check_known(agent)]
+        return self.observation_spaces[self._check_known(agent)]
 
     def action_space(self, agent: str) -> spaces.Space:
         """The action space of ``agent``: one object shared by every agent (seeding it seeds all)."""
-        return self._act_spaces[self._check_known(agent)]
+        return self.action_spaces[self._check_known(agent)]
 
     def _check_known(self, agent: str) -> str:
         if agent not in self._index:
