@@ -6,9 +6,7 @@ let the scenario score (9), then build the per-agent dicts once from arrays.
 
 from __future__ import annotations
 
-import functools
 import operator
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -19,6 +17,7 @@ from pettingzoo.utils.conversions import parallel_to_aec
 from agentsim_env.core.pipeline import EpisodeSeeds
 from agentsim_env.core.threads import check_num_threads
 from agentsim_env.core.validation import check_choice
+from agentsim_env.env.agent_dicts import per_agent, rows
 from agentsim_env.env.batch_kernels import scatter_part
 from agentsim_env.env.buffers import Recycled
 from agentsim_env.env.guard import CallGuard
@@ -41,58 +40,6 @@ from agentsim_env.scenarios.base import (
 from agentsim_env.scenarios.registry import make_scenario
 
 RENDER_MODES = ("human", "rgb_array", "web")
-
-
-@functools.lru_cache(maxsize=64)
-def _builder(keys: tuple[str, ...]) -> Callable[..., dict[str, Any]]:
-    """A function ``f(v0, v1, ...) -> {keys[0]: v0, ...}`` for a fixed key tuple.
-
-    A dict display over closure keys builds each small dict about twice as fast as ``dict(zip(keys, values))``,
-    which matters when thousands of per-agent dicts are built every step. Written out for up to eight keys
-    (every observation and info layout of the shipped scenarios); longer tuples fall back to ``zip``.
-    """
-    n = len(keys)
-    k0, k1, k2, k3, k4, k5, k6, k7 = (*keys, *[""] * 8)[:8]  # padding keys are never used
-    builders: dict[int, Callable[..., dict[str, Any]]] = {
-        1: lambda a: {k0: a},
-        2: lambda a, b: {k0: a, k1: b},
-        3: lambda a, b, c: {k0: a, k1: b, k2: c},
-        4: lambda a, b, c, d: {k0: a, k1: b, k2: c, k3: d},
-        5: lambda a, b, c, d, e: {k0: a, k1: b, k2: c, k3: d, k4: e},
-        6: lambda a, b, c, d, e, f: {k0: a, k1: b, k2: c, k3: d, k4: e, k5: f},
-        7: lambda a, b, c, d, e, f, g: {k0: a, k1: b, k2: c, k3: d, k4: e, k5: f, k6: g},
-        8: lambda a, b, c, d, e, f, g, h: {k0: a, k1: b, k2: c, k3: d, k4: e, k5: f, k6: g, k7: h},
-    }
-    return builders.get(n, lambda *vals: dict(zip(keys, vals)))
-
-
-def _per_agent(agents: list[str], keys: tuple[str, ...], columns: list[Any]) -> dict[str, dict[str, Any]]:
-    """``{agents[j]: {keys[i]: columns[i][j]}}``: one small dict per agent, built in a single pass.
-
-    A dict comprehension with the keys as locals for up to four keys (every observation and info layout of the
-    plain scenarios), :func:`_builder` beyond.
-    """
-    if len(keys) == 3:
-        k0, k1, k2 = keys
-        c0, c1, c2 = columns
-        return {a: {k0: x, k1: y, k2: z} for a, x, y, z in zip(agents, c0, c1, c2)}
-    if len(keys) == 4:
-        k0, k1, k2, k3 = keys
-        c0, c1, c2, c3 = columns
-        return {a: {k0: x, k1: y, k2: z, k3: u} for a, x, y, z, u in zip(agents, c0, c1, c2, c3)}
-    if len(keys) == 2:
-        k0, k1 = keys
-        c0, c1 = columns
-        return {a: {k0: x, k1: y} for a, x, y in zip(agents, c0, c1)}
-    if len(keys) == 1:
-        k0 = keys[0]
-        return {a: {k0: x} for a, x in zip(agents, columns[0])}
-    return dict(zip(agents, map(_builder(keys), *columns)))
-
-
-def _rows(values: np.ndarray, idx: np.ndarray | None) -> list[Any]:
-    """``values[idx]`` (every row when ``idx`` is None) as a list of Python scalars."""
-    return (values if idx is None else values[idx]).tolist()  # type: ignore[no-any-return]
 
 
 def _checked(part: np.ndarray | None) -> np.ndarray:
@@ -258,13 +205,13 @@ class AgentSimParallelEnv(ParallelEnv):
         obs = self._obs_dicts(self._flat_obs(acting, res))
         live = self.agents
         idx = None if len(live) == world.state.n_slots else self._live_idx  # None: every slot is live
-        rewards = dict(zip(live, _rows(np.asarray(res.rewards, dtype=np.float64), idx)))
+        rewards = dict(zip(live, rows(np.asarray(res.rewards, dtype=np.float64), idx)))
         # terminated and truncated are False outside the live slots: a dict of False is copied when none ended
         ended_t, ended_u = bool(terminated.any()), over and bool(truncated.any())
-        terms = dict(zip(live, _rows(terminated, idx))) if ended_t else self._all_false.copy()
-        truncs = dict(zip(live, _rows(truncated, idx))) if ended_u else self._all_false.copy()
+        terms = dict(zip(live, rows(terminated, idx))) if ended_t else self._all_false.copy()
+        truncs = dict(zip(live, rows(truncated, idx))) if ended_u else self._all_false.copy()
         keys = tuple(res.info)
-        infos = _per_agent(live, keys, [_rows(res.info[k], idx) for k in keys]) if keys else {a: {} for a in live}
+        infos = per_agent(live, keys, [rows(res.info[k], idx) for k in keys]) if keys else {a: {} for a in live}
         if ended_t or ended_u:
             keep = ~(terminated | truncated)[self._live_idx]
             self._set_agents([a for a, k in zip(live, keep.tolist()) if k], self._live_idx[keep])
@@ -369,7 +316,7 @@ class AgentSimParallelEnv(ParallelEnv):
             return dict(zip(self.agents, flat))
         n = flat.shape[0]
         cols = [list(flat[:, sl].reshape(n, *shape)) for sl, shape in self._obs_cols]
-        return _per_agent(self.agents, self._obs_keys, cols)
+        return per_agent(self.agents, self._obs_keys, cols)
 
     # ------------------------------------------------------------------ extras
     def _comms(self) -> Any:
