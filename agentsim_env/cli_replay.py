@@ -7,6 +7,8 @@
 from __future__ import annotations
 
 import argparse
+import os
+from pathlib import Path
 from typing import Any
 
 REPLAY_EPILOG = """\
@@ -14,6 +16,31 @@ examples:
   agentsim replay run.db --episode 0 --out outputs/replay.mp4
   agentsim replay run.db --run 2 --episode 3 --world 1 --every 2 --fps 20 --out outputs/replay.gif
   agentsim replay run.db --episode 0 --out outputs/frames/        (frame_00000.png, frame_00001.png, ...)"""
+
+
+def check_out(out: str) -> None:
+    """Refuse an ``--out`` whose extension is neither a video format nor a folder's.
+
+    A name such as ``x.avi`` would otherwise become a folder of PNG frames called ``x.avi``. A name ending in
+    a path separator, or an existing folder, is a folder whatever its dots.
+
+    Args:
+        out: The ``--out`` value.
+
+    Raises:
+        ValueError: For an extension other than the supported video ones (the message lists them).
+    """
+    from agentsim_env.render.video import VIDEO_FORMATS
+
+    path = Path(out)
+    suffix = path.suffix.lower().lstrip(".")
+    if not suffix or suffix in VIDEO_FORMATS or out.endswith(("/", os.sep)) or path.is_dir():
+        return
+    shown = ", ".join(f".{f}" for f in VIDEO_FORMATS)
+    raise ValueError(
+        f"--out {out!r}: unknown extension '.{suffix}'; supported: {shown} (a video), or a folder for PNG "
+        f"frames (a name without an extension, or ending in '/')"
+    )
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
@@ -26,6 +53,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
 
     if args.fps is not None and not args.fps > 0:
         raise ValueError(f"--fps must be > 0, got {args.fps}")
+    check_out(args.out)
     try:
         paths = write_replay(args.store, args.out, run=args.run, episode=args.episode, world=args.world,
                              every=args.every, size=args.size, fps=args.fps)  # fmt: skip
@@ -56,9 +84,10 @@ def add_replay_command(sub: Any) -> argparse.ArgumentParser:
     )
     p.add_argument("--fps", type=float, default=None, help="video frames per second (default: real time)")
     p.add_argument("--size", type=int, default=512, help="longest side of the map in pixels")
-    p.add_argument("--out", required=True, help="video.mp4, video.gif, or a folder for PNG frames")
+    p.add_argument("--out", required=True, help="video.mp4, video.gif, or a folder for PNG frames (a name "
+                   "without an extension, or ending in '/'); another extension is an error")  # fmt: skip
     p.set_defaults(func=cmd_replay)
     return p
 
 
-__all__ = ["add_replay_command", "cmd_replay"]
+__all__ = ["add_replay_command", "check_out", "cmd_replay"]

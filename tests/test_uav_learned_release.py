@@ -132,7 +132,7 @@ def test_model_folder_token_is_checked(tmp_path: Path) -> None:
     assert is_model_token(str(empty)) and not is_model_token("B0_uniform")
     with pytest.raises(ValueError, match="lacks model.zip and config.json"):
         runner.resolve_strategies([str(empty)])
-    with pytest.raises(ValueError, match="not a folder"):
+    with pytest.raises(ValueError, match="does not exist"):
         runner.resolve_strategies([str(tmp_path / "nope") + "/"])
     other = tmp_path / "other"
     other.mkdir()

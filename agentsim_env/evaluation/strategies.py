@@ -117,13 +117,15 @@ def model_env(token: str, scenario: str) -> dict[str, Any]:
         The scenario config keys of its ``config.json`` ``env``.
 
     Raises:
-        ValueError: The folder is missing, lacks ``model.zip`` or ``config.json``, its config cannot be read, or
-            it was trained on another scenario.
+        ValueError: The path does not exist or is a file, the folder lacks ``model.zip`` or ``config.json``,
+            its config cannot be read, or it was trained on another scenario.
     """
     folder = Path(str(token))
     if not folder.is_dir():
-        raise ValueError(f"strategy {token!r} is a path but not a folder; a trained model is a folder holding "
-                         "model.zip and config.json (as 'agentsim train --out DIR' writes them)")  # fmt: skip
+        what = "is a file, not a folder" if folder.exists() else "does not exist"
+        raise ValueError(f"strategy {token!r} {what}; a trained model is a folder holding model.zip and "
+                         "config.json (as 'agentsim train --out DIR' writes them), and a strategy name is "
+                         "one of 'agentsim evaluate --help'")  # fmt: skip
     missing = [f for f in ("model.zip", "config.json") if not (folder / f).is_file()]
     if missing:
         raise ValueError(f"trained model folder {token!r} lacks {' and '.join(missing)} (a trained model folder "

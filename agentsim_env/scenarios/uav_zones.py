@@ -423,16 +423,21 @@ def validate_against_payload(zs: ZoneSet, n_uavs: int, payload_per_uav: int) -> 
         payload_per_uav: Sensors each UAV carries (>= 0).
 
     Raises:
-        ValueError: If ``zs.n_sensors > n_uavs * payload_per_uav`` (the message gives the numbers).
+        ValueError: If ``zs.n_sensors > n_uavs * payload_per_uav`` (the message gives the numbers and names the
+            ``uav_release`` config keys to raise: ``n_uavs`` and ``payload``).
     """
     check_int("n_uavs", n_uavs, 1)
     check_int("payload_per_uav", payload_per_uav, 0)
     capacity = n_uavs * payload_per_uav
     if zs.n_sensors > capacity:
         per_zone = ", ".join(f"{_zone_label(i, z.name)}: {z.n_sensors}" for i, z in enumerate(zs.zones))
+        # the advice names the scenario's config keys (what a user can --set), not this function's arguments
+        fleet = -(-zs.n_sensors // payload_per_uav) if payload_per_uav > 0 else None
+        more = f" (--set n_uavs={fleet})" if fleet is not None else ""
         raise ValueError(
             f"the zones need {zs.n_sensors} sensors ({per_zone}) but {n_uavs} UAV(s) x {payload_per_uav} "
-            f"sensors carry only {capacity}; raise n_uavs or payload_per_uav, or lower n_sensors"
+            f"sensors carry only {capacity}; raise n_uavs or payload (sensors per UAV){more}, or lower the "
+            "zones' n_sensors"
         )
 
 
