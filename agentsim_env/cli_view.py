@@ -26,7 +26,8 @@ ZONES_EPILOG = """\
 examples:
   agentsim zones design my_zones.json    draw zones on the map; Save writes my_zones.json (only that file)
   agentsim zones design                  start from the default zones; nothing is written (Download instead)
-  agentsim zones check my_zones.json     validate a zone file and list its zones
+  agentsim zones check my_zones.json     validate a zone file, list its zones, check the default fleet carries them
+  agentsim zones check my_zones.json --set n_uavs=6    ... for another fleet
 then: agentsim evaluate --zones my_zones.json --strategies B5_cvt"""
 
 
@@ -138,9 +139,19 @@ def cmd_zones_design(args: argparse.Namespace) -> int:
 
 
 def cmd_zones_check(args: argparse.Namespace) -> int:
-    """Validate a zone file; print its zones."""
+    """Validate a zone file; print its zones and whether the fleet carries their sensors.
+
+    The fleet is the ``uav_release`` default, or the ``--set`` values (checked as ``agentsim run`` checks them,
+    with these zones); a fleet that cannot carry every sensor ends the check with one error line (exit 2).
+    """
+    from agentsim_env.cli_set import parse_set
+    from agentsim_env.scenarios.uav_capacity import capacity_text, default_fleet, fleet_capacity
+    from agentsim_env.scenarios.uav_config import UavReleaseConfig
     from agentsim_env.scenarios.uav_zones import load_zones, overlaps
 
+    overrides = parse_set(UavReleaseConfig, getattr(args, "set", None) or [])
+    if "zones" in overrides:
+        raise ValueError("--set zones=... is not allowed here: the zones are FILE's")
     try:
         zs = load_zones(args.file)
     except OSError as exc:
@@ -154,6 +165,14 @@ def cmd_zones_check(args: argparse.Namespace) -> int:
               f"{z.profile} | {z.weight:g} |")  # fmt: skip
     for i, j in overlaps(zs):
         print(f"note: zones {i} and {j} overlap")
+    n_uavs, payload = default_fleet()
+    cap = fleet_capacity(zs, overrides.get("n_agents", n_uavs), overrides.get("payload", payload))
+    text = capacity_text(cap, "fleet (--set)" if overrides else "default fleet")
+    if not cap["carried"]:
+        raise ValueError(text)
+    print(text)
+    if overrides:  # the other values must build with these zones too
+        UavReleaseConfig(**{**overrides, "zones": zs})
     return 0
 
 
@@ -198,8 +217,10 @@ def add_view_commands(sub: Any, set_help: str, announce: Any) -> None:
     d.add_argument("file", nargs="?", default=None, metavar="FILE", help="zone file to edit (created on Save)")
     _network_options(d)
     d.set_defaults(func=cmd_zones_design)
-    c = zsub.add_parser("check", help="validate a zone file and list its zones")
+    c = zsub.add_parser("check", help="validate a zone file, list its zones and check the fleet carries them")
     c.add_argument("file", metavar="FILE", help="a zone file (JSON)")
+    c.add_argument("--set", nargs="*", metavar="KEY=VALUE", help="uav_release config values for the fleet "
+                   "(n_uavs=6 payload=50 ...; default: the scenario's defaults), checked with these zones")  # fmt: skip
     c.set_defaults(func=cmd_zones_check)
 
 

@@ -5,7 +5,8 @@ validates with the zone file's own validator (``uav_zones.zones_from_dict``), so
 the one ``load_zones`` would give. Messages (JSON objects, ``cmd`` names the request):
 
 * ``{"cmd": "zones.preview", "zones": {zone file}, "id": n}`` -> ``{"type": "zones.preview", "ok": true, "zones":
-  [...], "overlaps": [[i, j], ...], "id": n}``, or ``{"ok": false, "error": message, "id": n}`` when the zone file
+  [...], "overlaps": [[i, j], ...], "fleet": {...}, "id": n}`` (``fleet``: whether the default fleet carries the
+  sensors, see ``preview``), or ``{"ok": false, "error": message, "id": n}`` when the zone file
   is invalid (``id`` optional, echoed). Computed on a worker thread, one at a time per page; a request that waits
   meanwhile is replaced by a newer one (no reply), so the newest is always answered.
 * ``{"cmd": "zones.save", "zones": {zone file}}`` -> ``{"type": "zones.saved", "path", "n_zones"}``; writes only the
@@ -30,6 +31,7 @@ from agentsim_env.core.files import write_atomically
 from agentsim_env.render.web.frames import DENSITY_SAMPLES, density_curve
 from agentsim_env.render.web.server import Background, ClientError, Handler, WebServer
 from agentsim_env.scenarios import uav_zones
+from agentsim_env.scenarios.uav_capacity import capacity_text, default_fleet, fleet_capacity
 from agentsim_env.scenarios.uav_zones import (
     ZoneSet,
     load_zones,
@@ -110,7 +112,9 @@ def preview(zs: ZoneSet) -> dict[str, Any]:
         zs: A validated zone set.
 
     Returns:
-        ``{"type": "zones.preview", "ok": True, "zones": [...], "overlaps": [[i, j], ...]}``.
+        ``{"type": "zones.preview", "ok": True, "zones": [...], "overlaps": [[i, j], ...], "fleet": {...}}``;
+        ``fleet`` is ``uav_capacity.fleet_capacity`` for the default ``uav_release`` fleet plus its ``text``
+        (the line ``agentsim zones check`` prints), so the page shows whether the fleet carries the zones.
     """
     out = []
     for z in zs.zones:
@@ -131,7 +135,9 @@ def preview(zs: ZoneSet) -> dict[str, Any]:
             }
         )
     pairs = [[i, j] for i, j in uav_zones.overlaps(zs)]
-    return {"type": "zones.preview", "ok": True, "zones": out, "overlaps": pairs}
+    cap = fleet_capacity(zs, *default_fleet())
+    fleet = {**cap, "text": capacity_text(cap, "default fleet")}
+    return {"type": "zones.preview", "ok": True, "zones": out, "overlaps": pairs, "fleet": fleet}
 
 
 def _write_atomically(zs: ZoneSet, path: Path) -> None:
@@ -223,7 +229,8 @@ def designer_hello(path: Path | None) -> list[dict[str, Any]]:
     """The messages sent to each page when it connects.
 
     The first is ``{"type": "zones.hello", "zones": {zone file}, "path", "source", "can_save",
-    "profile_kinds", "limits", "defaults"}``: the zones come from ``path`` when it exists and is valid
+    "profile_kinds", "limits", "defaults", "fleet"}`` (``fleet``: the default ``uav_release`` fleet's
+    ``n_uavs``, ``payload`` and ``capacity``): the zones come from ``path`` when it exists and is valid
     (``source`` "file"), else from the package's default file (``source`` "default"). When ``path`` exists but
     is invalid, a second message ``{"type": "error", "message": ...}`` gives the loader's message.
 
@@ -243,6 +250,7 @@ def designer_hello(path: Path | None) -> list[dict[str, Any]]:
             messages.append({"type": "error", "message": f"{exc} (showing the default zones instead)"})
     if zs is None:
         zs = load_zones(uav_zones.default_zones_path())
+    n_uavs, payload = default_fleet()
     hello = {
         "type": "zones.hello",
         "zones": zones_to_dict(zs),
@@ -252,6 +260,7 @@ def designer_hello(path: Path | None) -> list[dict[str, Any]]:
         "profile_kinds": list(PROFILE_KINDS),
         "limits": _limits(),
         "defaults": {"n_sensors": 50, "profile": "gauss", "alpha": 1.0, "floor": 0.0, "weight": 1.0},
+        "fleet": {"n_uavs": n_uavs, "payload": payload, "capacity": n_uavs * payload},
     }
     return [hello, *messages]
 

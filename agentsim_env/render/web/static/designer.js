@@ -240,6 +240,10 @@ function renderList() {
   const pairs = state.preview ? state.preview.overlaps : [];
   $("overlaps").textContent = pairs.length ? "overlapping: " + pairs.map(([a, b]) =>
     `${zoneLabel(state.zones[a], a)} & ${zoneLabel(state.zones[b], b)}`).join(", ") : "";
+  // the server's line (the one `agentsim zones check` prints), refreshed with every preview
+  const fleet = state.preview ? state.preview.fleet : null;
+  $("capacity").textContent = fleet ? fleet.text : "";
+  $("capacity").classList.toggle("short", !!fleet && !fleet.carried);
 }
 
 function select(i) {
