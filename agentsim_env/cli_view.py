@@ -20,6 +20,7 @@ examples:
   agentsim view relay --speed 5                      (5 steps per second; 0 = as fast as it runs)
   agentsim view navigation --policy outputs/train/navigation
   agentsim view --replay runs.db --episode 0         (play / pause / step / speed / time slider)
+  agentsim view --replay runs.db --episode 0 --out replay.mp4   (the 3D view as a video, headless Chromium)
 open the printed URL in a browser; Ctrl-C stops. See docs/viewer.md."""
 
 ZONES_EPILOG = """\
@@ -46,9 +47,15 @@ def cmd_view(args: argparse.Namespace) -> int:
 
         if not speed_ok(args.speed):
             raise ValueError(f"--speed must be {SPEED_RANGE}, got {args.speed}")
+    export = [f"--{n}" for n in ("fps", "size", "every") if getattr(args, n) is not None]
+    if (args.out is None or not args.replay) and (export or args.out is not None):
+        raise ValueError(f"{' '.join(export or ['--out'])}: --out exports a replay to a video; give --replay RUN.db "
+                         "--out VIDEO.mp4")  # fmt: skip
     if args.replay:
         if args.scenario or args.policy or args.set:
             raise ValueError("--replay plays a store: give no SCENARIO, --policy or --set with it")
+        if args.out is not None:
+            return _export(args)
         return _replay(args)
     if not args.scenario:
         raise ValueError("give a SCENARIO to run ('agentsim scenarios' lists them) or --replay RUN.db")
@@ -74,6 +81,23 @@ def _replay(args: argparse.Namespace) -> int:
         pass
     finally:
         viewer.close()
+    return 0
+
+
+def _export(args: argparse.Namespace) -> int:
+    from agentsim_env.render.web.export_video import DEFAULT_SIZE, export_replay_video
+
+    if args.speed is not None:
+        raise ValueError("--speed sets the pace of a live page; an exported video's rate is --fps")
+    try:
+        path, n = export_replay_video(args.replay, args.out, run=args.run, episode=args.episode or 0, world=args.world,
+                                      fps=args.fps, size=DEFAULT_SIZE if args.size is None else args.size,
+                                      every=1 if args.every is None else args.every,
+                                      progress=True)  # fmt: skip
+    except KeyboardInterrupt:
+        print("agentsim view: interrupted; no video written", file=sys.stderr)
+        return 130
+    print(f"written: {path} ({n} frames)")
     return 0
 
 
@@ -211,6 +235,11 @@ def add_view_commands(sub: Any, set_help: str, announce: Any) -> None:
     v.set_defaults(func=cmd_view, announce=announce)
     z = sub.add_parser("zones", help="hot-zone files: the designer page, or a check",
                        description="Design hot zones in the browser, or check a zone file (docs/zones.md).",
+    v.add_argument("--out", default=None, metavar="VIDEO", help="replay: write the 3D view to VIDEO (.mp4 or .gif) "
+                   "through headless Chromium instead of serving it")  # fmt: skip
+    v.add_argument("--fps", type=float, default=None, help="--out: frames per second (default: real time)")
+    v.add_argument("--size", type=int, default=None, help="--out: video width in pixels, 160..1920 (16:9; 960)")
+    v.add_argument("--every", type=int, default=None, help="--out: draw every K-th recorded step (and the last)")
                        epilog=ZONES_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
     zsub = z.add_subparsers(dest="zones_command", required=True, metavar="ACTION")
     d = zsub.add_parser("design", help="the hot-zone designer page (saves only to FILE)")

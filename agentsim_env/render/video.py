@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["VIDEO_FORMATS", "VideoWriter", "check_video_support", "video_format", "write_video"]
+__all__ = ["VIDEO_FORMATS", "VideoWriter", "check_video_support", "png_rgb", "video_format", "write_video"]
 
 #: File suffixes a video can be written as.
 VIDEO_FORMATS: tuple[str, ...] = ("mp4", "gif")
@@ -226,3 +226,19 @@ def write_video(frames: Iterable[np.ndarray], path: str | os.PathLike[str], fps:
     if out is None:
         raise ValueError(f"{str(path)!r}: no frames to write")
     return out
+
+
+def png_rgb(data: bytes) -> np.ndarray:
+    """A PNG image (the bytes of a file, such as a browser's screenshot) as an ``(H, W, 3)`` uint8 array.
+
+    Raises:
+        ImportError: When Pillow is missing (names the ``video`` extra).
+    """
+    import io
+
+    try:
+        from PIL import Image
+    except ImportError as exc:
+        raise ImportError(f"reading PNG frames needs Pillow: {_EXTRA} ({exc})") from None
+    with Image.open(io.BytesIO(data)) as im:
+        return np.asarray(im.convert("RGB"))
