@@ -5,7 +5,8 @@ keeps the positions of world 0's agents after the reset and after every step, an
 (arrived, collided, went offline, still flying). :func:`plot_trajectories` draws the result with matplotlib
 (headless, no pyplot state): map bounds, obstacles (boxes and cylinders, shaded by height), the scenario's
 markers (goals, zones, landed sensors: ``scenario.markers(world, 0)``), each path as a line from a start
-marker to an end marker whose colour and shape say the agent's outcome, a legend and a title.
+marker to an end marker whose shape says the agent's outcome, a legend and a title. Each agent has its own colour
+(``render.palette``) while there are at most a dozen; beyond that the colour says the agent's group.
 
 The recorder reads ``env.world``, ``env.scenario`` and ``env.possible_agents`` only; it imports nothing above
 the render layer.
@@ -21,18 +22,19 @@ from typing import Any
 import numpy as np
 
 from agentsim_env.core.scene import BOX
+from agentsim_env.render.palette import MAX_DISTINCT, PALETTE, agent_colors
 
 __all__ = ["MAX_PATHS", "OUTCOMES", "TrajectoryRecorder", "Trajectories", "plot_trajectories"]
 
 MAX_PATHS = 5_000
 """Most agent paths drawn (evenly spaced agents beyond that; the legend says how many); counts cover all."""
 
-#: Agent outcomes, in drawing priority, with their colour and end marker.
-OUTCOMES: dict[str, tuple[str, str]] = {
-    "collided": ("#d62728", "X"),
-    "arrived": ("#2ca02c", "*"),
-    "offline": ("#7f7f7f", "v"),
-    "active": ("#1f77b4", "s"),
+#: Agent outcomes, in drawing priority, with their end marker (filled with the agent's colour).
+OUTCOMES: dict[str, str] = {
+    "collided": "X",
+    "arrived": "*",
+    "offline": "v",
+    "active": "s",
 }
 #: Info keys that mean an agent reached its objective (``met``: rendezvous).
 ARRIVAL_KEYS: tuple[str, ...] = ("arrived", "met")
@@ -52,6 +54,7 @@ class Trajectories:
         obstacle_top: ``(k,)`` obstacle top heights in metres (for shading).
         markers: ``(xy (m, 2), rgb (m, 3) uint8, radius (m,))`` of the scenario at the end, or None.
         steps: Steps of the episode.
+        group: Per agent, its group at the start (``-1``: none; empty: unknown, all drawn as one group).
     """
 
     agents: list[str]
@@ -63,6 +66,7 @@ class Trajectories:
     obstacle_top: np.ndarray = field(default_factory=lambda: np.zeros(0))
     markers: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
     steps: int = 0
+    group: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
 
 
 class TrajectoryRecorder:
@@ -75,6 +79,7 @@ class TrajectoryRecorder:
         self._arrived: np.ndarray = np.zeros(0, dtype=bool)
         self._collided: np.ndarray = np.zeros(0, dtype=bool)
         self._agents: list[str] = []
+        self._group: np.ndarray = np.zeros(0, dtype=np.int64)
 
     def __call__(self, env: Any, infos: dict[str, dict[str, Any]]) -> None:
         """Record the positions now and the outcome flags in ``infos`` (empty right after the reset)."""
@@ -85,6 +90,7 @@ class TrajectoryRecorder:
             n = len(self._agents)
             self._xy, self._live = [], []
             self._arrived, self._collided = np.zeros(n, dtype=bool), np.zeros(n, dtype=bool)
+            self._group = np.array(st.group[slots], dtype=np.int64)
         self._xy.append(np.array(st.pos[slots, :2], dtype=float))
         live = set(env.agents)
         self._live.append(np.array([a in live for a in self._agents], dtype=bool))
@@ -149,6 +155,7 @@ class TrajectoryRecorder:
             obstacle_top=tops,
             markers=markers,
             steps=len(xy) - 1,
+            group=self._group.copy(),
         )
 
 
@@ -187,7 +194,8 @@ def plot_trajectories(traj: Trajectories, path: str | os.PathLike[str], title: s
         handles.append(Patch(facecolor="0.5", label=f"obstacles ({len(traj.obstacles)})"))
     if traj.markers is not None and len(traj.markers[0]):
         mxy, rgb, rad = traj.markers
-        discs = [Circle((float(x), float(y)), max(float(r), 0.3)) for (x, y), r in zip(mxy, rad)]
+        floor = 0.006 * max(w, h)  # a goal of a metre still shows on a map of kilometres
+        discs = [Circle((float(x), float(y)), max(float(r), floor)) for (x, y), r in zip(mxy, rad)]
         ax.add_collection(PatchCollection(discs, facecolors=np.asarray(rgb, dtype=float) / 255.0, edgecolors="none",
                                           alpha=0.6))  # fmt: skip
         handles.append(Patch(facecolor=tuple(np.asarray(rgb[0], dtype=float) / 255.0), alpha=0.6,
@@ -198,27 +206,41 @@ def plot_trajectories(traj: Trajectories, path: str | os.PathLike[str], title: s
     outcome = np.asarray(traj.outcome, dtype=object)
     for name, k in zip(*np.unique(outcome, return_counts=True)):
         counts[str(name)] = int(k)
+    group = traj.group if len(traj.group) == n else np.zeros(n, dtype=np.int64)
+    colours = agent_colors(n, group).astype(float) / 255.0
     crowd = min(1.0, 200.0 / max(shown.size, 1))  # markers and lines shrink past 200 paths, to stay readable
-    for name, (colour, end) in OUTCOMES.items():
+    if shown.size:
+        paths = [traj.xy[: traj.last[i] + 1, i] for i in shown.tolist()]
+        ax.add_collection(LineCollection(paths, colors=colours[shown], linewidths=max(0.4, 1.4 * crowd ** 0.5),
+                                         alpha=0.9, zorder=3))  # fmt: skip
+        first = np.array([p[0] for p in paths])
+        ax.scatter(first[:, 0], first[:, 1], s=max(1.0, 25 * crowd), marker="o", facecolors="white",
+                   edgecolors=colours[shown].tolist(), linewidths=max(0.3, 1.2 * crowd), zorder=4)  # fmt: skip
+    for name, end in OUTCOMES.items():
         mine = shown[outcome[shown] == name]
         if not mine.size:
             continue
-        paths = [traj.xy[: traj.last[i] + 1, i] for i in mine.tolist()]
-        ax.add_collection(LineCollection(paths, colors=colour, linewidths=max(0.3, 1.1 * crowd ** 0.5), alpha=0.85,
-                                         zorder=3))  # fmt: skip
-        first = np.array([p[0] for p in paths])
-        last = np.array([p[-1] for p in paths])
-        ax.scatter(first[:, 0], first[:, 1], s=max(1.0, 25 * crowd), marker="o", facecolors="white",
-                   edgecolors=colour, linewidths=max(0.2, crowd), zorder=4)  # fmt: skip
-        ax.scatter(last[:, 0], last[:, 1], s=max(2.0, 81 * crowd), marker=end, c=colour, edgecolors="black",
-                   linewidths=0.4 * crowd, zorder=5)  # fmt: skip
+        last = np.array([traj.xy[traj.last[i], i] for i in mine.tolist()])
+        ax.scatter(last[:, 0], last[:, 1], s=max(2.0, 90 * crowd), marker=end, c=colours[mine], edgecolors="black",
+                   linewidths=0.5 * crowd ** 0.5, zorder=5)  # fmt: skip
+    if n <= MAX_DISTINCT:
+        for i in range(n):
+            handles.append(Line2D([], [], color=colours[i], linewidth=1.6, label=traj.agents[i]))
+    else:
+        groups, sizes = np.unique(group, return_counts=True)
+        for g, k in list(zip(groups.tolist(), sizes.tolist()))[:MAX_DISTINCT]:
+            handles.append(Line2D([], [], color=PALETTE[max(g, 0) % MAX_DISTINCT] / 255.0,
+                                  linewidth=1.6, label=f"group {g} ({k:,} agents)"))  # fmt: skip
+        if len(groups) > MAX_DISTINCT:
+            handles.append(Patch(facecolor="none", edgecolor="none",
+                                 label=f"... {len(groups) - MAX_DISTINCT} more groups (colours repeat)"))  # fmt: skip
     handles.append(Line2D([], [], linestyle="none", marker="o", markerfacecolor="white",
                           markeredgecolor="black", label="start"))  # fmt: skip
     for name, k in counts.items():
         if k:
-            colour, end = OUTCOMES[name]
-            handles.append(Line2D([], [], color=colour, marker=end, markeredgecolor="black",
-                                  markeredgewidth=0.4, label=f"{name} ({k})"))  # fmt: skip
+            handles.append(Line2D([], [], linestyle="none", marker=OUTCOMES[name], markerfacecolor="0.85",
+                                  markeredgecolor="black", markersize=8, markeredgewidth=0.6,
+                                  label=f"{name} ({k})"))  # fmt: skip
     if shown.size < n:
         handles.append(Patch(facecolor="none", edgecolor="none", label=f"paths of {shown.size:,} of {n:,} agents"))
     pad = 0.03 * max(w, h)

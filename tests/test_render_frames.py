@@ -1,0 +1,110 @@
+"""What the 2D frames show: ``render_mode="rgb_array"`` frames (``render.topdown``), trajectory PNGs
+(``render.trajectories``): agents a few pixels wide on any map, one colour per agent up to a dozen (per group
+beyond), goals where the env has them."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+import agentsim_env
+from agentsim_env.policies.registry import make_policy
+from agentsim_env.policies.rollout import run_episode
+from agentsim_env.render.trajectories import TrajectoryRecorder, plot_trajectories
+
+Image = pytest.importorskip("PIL.Image")
+SIZE = 512  # render_topdown's default longest side
+BIG_MAP = 5000.0  # metres: an agent of radius 0.5 m is a tenth of a pixel at true size
+
+
+def _frame(**config: Any) -> tuple[Any, np.ndarray]:
+    env = agentsim_env.make("navigation", render_mode="rgb_array", **config)
+    env.reset(seed=0)
+    frame = env.render()
+    assert frame is not None
+    return env, frame
+
+
+def _px(env: Any, frame: np.ndarray, x: float, y: float) -> tuple[float, float]:
+    """Frame ``(column, row)`` of world point ``(x, y)`` (north up, the longest side ``SIZE`` pixels)."""
+    xmin, xmax, ymin, ymax = env.world.config.bounds
+    scale = max(frame.shape[:2]) / max(xmax - xmin, ymax - ymin)
+    return (x - xmin) * scale, (ymax - y) * scale
+
+
+def _blob(frame: np.ndarray, cx: float, cy: float, reach: int = 20) -> tuple[np.ndarray, int]:
+    """The colour at ``(cx, cy)`` and how many pixels of exactly that colour lie within ``reach`` pixels."""
+    color = frame[int(cy), int(cx)]
+    r0, r1 = max(int(cy) - reach, 0), int(cy) + reach + 1
+    c0, c1 = max(int(cx) - reach, 0), int(cx) + reach + 1
+    return color, int((frame[r0:r1, c0:c1] == color).all(axis=2).sum())
+
+
+def _agent_centres(env: Any, frame: np.ndarray) -> list[tuple[float, float]]:
+    st = env.world.state
+    return [_px(env, frame, *st.pos[s, :2]) for s in st.slots_of_world(0)]
+
+
+def test_agents_cover_many_pixels_on_a_large_map() -> None:
+    env, frame = _frame(n_agents=6, map_size=BIG_MAP, obstacle_density=0.0)
+    assert max(frame.shape[:2]) == SIZE
+    for k, (cx, cy) in enumerate(_agent_centres(env, frame)):
+        color, n = _blob(frame, cx, cy)
+        assert not (color == frame[0, 0]).all(), f"agent {k}: background at its position"
+        assert n >= 60, f"agent {k}: only {n} pixels of its colour {color} around its position"
+
+
+def test_a_dozen_agents_have_a_dozen_distinct_colours() -> None:
+    env, frame = _frame(n_agents=12, map_size=BIG_MAP, obstacle_density=0.0)
+    colors = np.array([frame[int(cy), int(cx)] for cx, cy in _agent_centres(env, frame)], dtype=float)
+    gaps = np.sqrt(((colors[:, None] - colors[None]) ** 2).sum(axis=2))
+    np.fill_diagonal(gaps, np.inf)
+    assert gaps.min() >= 60, f"two agents look alike: RGB distance {gaps.min():.0f}\n{colors}"
+
+
+def test_beyond_a_dozen_agents_one_colour_per_group() -> None:
+    env, frame = _frame(n_agents=30, n_groups=3, map_size=BIG_MAP, obstacle_density=0.0)
+    group = env.world.state.group[env.world.state.slots_of_world(0)]
+    centres = _agent_centres(env, frame)
+    # agents whose discs overlap no other agent's
+    alone = [i for i, (x, y) in enumerate(centres)
+             if all(np.hypot(x - u, y - v) > 30 for j, (u, v) in enumerate(centres) if j != i)]  # fmt: skip
+    by_group: dict[int, set[tuple[int, ...]]] = {}
+    for i in alone:
+        by_group.setdefault(int(group[i]), set()).add(tuple(int(c) for c in frame[int(centres[i][1]),
+                                                                                    int(centres[i][0])]))  # fmt: skip
+    assert len(by_group) == 3 and all(len(c) == 1 for c in by_group.values()), by_group
+    assert len(set().union(*by_group.values())) == 3
+
+
+def test_goals_drawn_at_the_env_goal_positions_on_a_large_map() -> None:
+    env, frame = _frame(n_agents=4, map_size=BIG_MAP, obstacle_density=0.0)
+    xy, rgb, _ = env.scenario.markers(env.world, 0)
+    centres = _agent_centres(env, frame)
+    for k, ((x, y), c) in enumerate(zip(xy, rgb)):
+        gx, gy = _px(env, frame, x, y)
+        if any(np.hypot(gx - u, gy - v) < 20 for u, v in centres):
+            continue  # an agent drawn over its goal
+        color, n = _blob(frame, gx, gy)
+        assert (color == c).all(), f"goal {k}: {color} at its position, the scenario says {c}"
+        assert n >= 20, f"goal {k}: only {n} pixels wide"
+
+
+def _trajectory_png(tmp_path: Path, n_agents: int) -> np.ndarray:
+    env = agentsim_env.make("navigation", n_agents=n_agents, max_steps=20)
+    rec = TrajectoryRecorder()
+    run_episode(env, make_policy("navigation", env), 0, on_step=rec)
+    path = plot_trajectories(rec.result(env), tmp_path / "t.png", "test")
+    return np.asarray(Image.open(path).convert("RGB")).astype(int)
+
+
+def test_trajectory_png_draws_each_agent_in_its_own_colour(tmp_path: Path) -> None:
+    from agentsim_env.render.palette import agent_colors
+
+    img = _trajectory_png(tmp_path, 4)
+    for k, c in enumerate(agent_colors(4)):
+        near = (np.abs(img - c.astype(int)).sum(axis=2) <= 30).sum()
+        assert near >= 40, f"agent {k}: its colour {c} covers {near} pixels of the figure"
