@@ -37,7 +37,9 @@ def make(name: str, **config: Any) -> Any:
         name: A registered scenario (see ``list_scenarios()``).
         **config: ``render_mode`` (None or "rgb_array"), ``obs_format`` / ``action_format`` ("dict" or "flat"),
             ``check_finite`` (a debug switch: fail fast on a NaN or inf observation, reward or info, naming the
-            part and the agent; default from ``AGENTSIM_CHECK_FINITE``), and the scenario's config fields
+            part and the agent; default from ``AGENTSIM_CHECK_FINITE``), ``num_threads`` (1..256),
+            ``ended_agents`` (``"leave"``, the default: an agent that ends leaves ``agents``; ``"stay"``: it stays
+            with zero observations and reward 0 until the episode ends), and the scenario's config fields
             (unknown keys raise ``ValueError`` naming them).
 
     Returns:

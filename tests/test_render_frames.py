@@ -1,6 +1,6 @@
 """What the 2D frames show: ``render_mode="rgb_array"`` frames (``render.topdown``), trajectory PNGs
-(``render.trajectories``): agents a few pixels wide on any map, one colour per agent up to a dozen (per group
-beyond), goals where the env has them."""
+(``render.trajectories``) and the store's replay frames (``recorder.replay``): agents a few pixels wide on any
+map, one colour per agent up to a dozen (per group beyond), goals and obstacles where the env has them."""
 
 from __future__ import annotations
 
@@ -11,8 +11,11 @@ import numpy as np
 import pytest
 
 import agentsim_env
+from agentsim_env.core.scene import BOX
 from agentsim_env.policies.registry import make_policy
 from agentsim_env.policies.rollout import run_episode
+from agentsim_env.recorder import record
+from agentsim_env.recorder.replay import replay_frames, replay_info
 from agentsim_env.render.trajectories import TrajectoryRecorder, plot_trajectories
 
 Image = pytest.importorskip("PIL.Image")
@@ -108,3 +111,44 @@ def test_trajectory_png_draws_each_agent_in_its_own_colour(tmp_path: Path) -> No
     for k, c in enumerate(agent_colors(4)):
         near = (np.abs(img - c.astype(int)).sum(axis=2) <= 30).sum()
         assert near >= 40, f"agent {k}: its colour {c} covers {near} pixels of the figure"
+
+
+def test_replay_frames_show_the_obstacles_and_goals_of_the_episode(tmp_path: Path) -> None:
+    path = tmp_path / "run.db"
+    env = record(agentsim_env.make("navigation", n_agents=3, max_steps=3, obstacle_density=0.004), path)
+    seen: list[Any] = []
+
+    def at_reset(e: Any, infos: dict[str, Any]) -> None:
+        if not seen:  # the scene and the goals right after the reset
+            sc = e.world.scene
+            seen.append([(sc.centre[o, 0], sc.centre[o, 1]) for o in np.flatnonzero(sc.world == 0)
+                         if sc.kind[o] == BOX])  # fmt: skip
+            seen.append([np.array(a) for a in e.scenario.markers(e.world, 0)])
+
+    run_episode(env, make_policy("navigation", env), 5, on_step=at_reset)
+    env.close()
+    boxes, (goals, goal_rgb, _) = seen
+    info = replay_info(path)
+    first = next(iter(replay_frames(path)))
+    background = first[-1, -1]
+    assert len(boxes) >= 3
+    drawn = [not (first[int(cy), int(cx)] == background).all() for cx, cy in (info.canvas.px(x, y) for x, y in boxes)]
+    assert sum(drawn) >= len(boxes) - 1, f"{sum(drawn)} of {len(boxes)} obstacles drawn"
+    hits = [(first[int(cy), int(cx)] == c).all() for (cx, cy), c in
+            zip((info.canvas.px(x, y) for x, y in goals), goal_rgb)]  # fmt: skip
+    assert sum(hits) >= 2, f"{sum(hits)} of {len(goals)} goals drawn in their colour"
+
+
+def test_replay_of_a_damaged_seed_fails_when_called_and_names_the_column(tmp_path: Path) -> None:
+    import sqlite3
+
+    from agentsim_env.recorder.schema import StoreError
+    from tests.store_helpers import small_store
+
+    path = small_store(tmp_path / "run.db")
+    con = sqlite3.connect(path)
+    with con:
+        con.execute("UPDATE episodes SET seed = 'x1'")
+    con.close()
+    with pytest.raises(StoreError, match=r"episodes\.seed holds 'x1'"):
+        replay_frames(path)  # before any frame is taken

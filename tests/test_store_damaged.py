@@ -131,7 +131,7 @@ CASES = {
         "runs.started",
     ),  # fmt: skip
     "started 1e308": ("UPDATE runs SET started = 1e308;", {"runs", "replay", "view"}, "runs.started"),
-    "seed as text": ("UPDATE episodes SET seed = 'abc';", {"view"}, "episodes.seed"),
+    "seed as text": ("UPDATE episodes SET seed = 'abc';", {"replay", "view"}, "episodes.seed"),
     "sender as text": (
         "INSERT INTO messages (run, episode, world, step, event, kind, sender, receiver) "
         "VALUES (1, 0, 0, 1, 'delivered', 1, 'x', 0);",

@@ -17,7 +17,7 @@ from pettingzoo.utils.conversions import parallel_to_aec
 from agentsim_env.core.pipeline import EpisodeSeeds
 from agentsim_env.core.threads import check_num_threads
 from agentsim_env.core.validation import check_choice
-from agentsim_env.env.agent_dicts import per_agent, rows
+from agentsim_env.env.agent_dicts import per_agent, rows, stay_dicts
 from agentsim_env.env.batch_kernels import scatter_part
 from agentsim_env.env.buffers import Recycled
 from agentsim_env.env.guard import CallGuard
@@ -40,6 +40,9 @@ from agentsim_env.scenarios.base import (
 from agentsim_env.scenarios.registry import make_scenario
 
 RENDER_MODES = ("human", "rgb_array", "web")
+ENDED_AGENTS = ("leave", "stay")
+"""What becomes of an agent that ends before its episode does (``ended_agents``): ``"leave"`` (PettingZoo's rule:
+it leaves ``agents``) or ``"stay"`` (it stays, observing zeros with reward 0, until the episode ends)."""
 
 
 def _checked(part: np.ndarray | None) -> np.ndarray:
@@ -64,6 +67,12 @@ class AgentSimParallelEnv(ParallelEnv):
             environment variable ``AGENTSIM_CHECK_FINITE`` is ``1``; the test suite sets it).
         num_threads: Threads for the per-agent kernels, 1..256 (default 1). Worth it from tens of thousands of
             agents; results are identical for every count (``core.threads``).
+        ended_agents: ``"leave"`` (default, PettingZoo's rule): an agent that terminates or truncates leaves
+            ``agents`` and the dicts ``step`` returns. ``"stay"``: it stays in ``agents`` and in every dict until
+            the episode ends, observing zeros, with reward 0, neutral infos (each key at 0) and the terminated /
+            truncated flags it ended with; its actions are accepted and ignored. The episode ends (``agents``
+            empty) in the step where the last live agent ends, at the latest at ``max_steps``. For clients that
+            need a fixed set of agents (SuperSuit's ``MarkovVectorEnv`` without ``black_death``, AgileRL, skrl).
 
     Attributes:
         observation_spaces: ``{agent: space}`` for every possible agent, the objects ``observation_space``
@@ -80,17 +89,21 @@ class AgentSimParallelEnv(ParallelEnv):
         action_format: str = "dict",
         check_finite: bool | None = None,
         num_threads: int = 1,
+        ended_agents: str = "leave",
     ) -> None:
         if render_mode is not None:
             check_choice("render_mode", render_mode, RENDER_MODES + (None,))
         check_choice("obs_format", obs_format, FORMATS)
         check_choice("action_format", action_format, FORMATS)
+        check_choice("ended_agents", ended_agents, ENDED_AGENTS)
         num_threads = check_num_threads(num_threads)
         self.scenario = scenario
         self.check_finite = check_finite_default(check_finite)
         self.render_mode = render_mode
         self.obs_format = obs_format
         self.action_format = action_format
+        self.ended_agents = ended_agents
+        self._stay = ended_agents == "stay"
         self.world = scenario.build(1)
         self.world.set_num_threads(num_threads)
         self.metadata: dict[str, Any] = {
@@ -115,7 +128,11 @@ class AgentSimParallelEnv(ParallelEnv):
         self.action_spaces = dict.fromkeys(self.possible_agents, act_space)
         n = scenario.state_size()
         self.state_space = spaces.Box(-10.0, 10.0, shape=(n,), dtype=np.float32)
+        self.agents: list[str] = []
         self._set_agents([])
+        # "stay": the flags each agent ended with, reported until the episode ends
+        self._terminated = np.zeros(self.world.state.n_slots, dtype=bool)
+        self._truncated = np.zeros(self.world.state.n_slots, dtype=bool)
         self._info_keys = scenario.info_keys()
         self._seeds = EpisodeSeeds()  # fresh entropy until a reset gives a seed
         self._steps = 0
@@ -163,16 +180,23 @@ class AgentSimParallelEnv(ParallelEnv):
         self._steps = 0
         self._started = True
         self._set_agents(list(self.possible_agents))
+        if self._stay:
+            self.agents = list(self.possible_agents)
+            self._terminated[:] = False
+            self._truncated[:] = False
         flat = self._flat_obs(self.world.state.online)
         if self.render_mode == "human":
             self.render()
         elif self.render_mode == "web":
             self._web_episode()
         infos = self._reset_infos()
-        return self._obs_dicts(flat), infos
+        return self._obs_dicts(flat, self._live, self._live_idx), infos
 
     def step(self, actions: dict[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
         """Advance one step with an action for every live agent (see the scenario docstring for layouts).
+
+        Actions for agents that ended earlier in the episode are ignored (``ended_agents="stay"`` keeps them in
+        ``agents``, so clients send them).
 
         Raises:
             ValueError: A bad action (the message names the agent and the part) or no episode running.
@@ -202,19 +226,31 @@ class AgentSimParallelEnv(ParallelEnv):
         self._steps += 1
         over = self._steps >= sc.max_steps
         truncated = acting & ~terminated if over else np.zeros(acting.shape[0], dtype=bool)
-        obs = self._obs_dicts(self._flat_obs(acting, res))
-        live = self.agents
-        idx = None if len(live) == world.state.n_slots else self._live_idx  # None: every slot is live
-        rewards = dict(zip(live, rows(np.asarray(res.rewards, dtype=np.float64), idx)))
-        # terminated and truncated are False outside the live slots: a dict of False is copied when none ended
+        flat = self._flat_obs(acting, res)
+        live = self._live
         ended_t, ended_u = bool(terminated.any()), over and bool(truncated.any())
-        terms = dict(zip(live, rows(terminated, idx))) if ended_t else self._all_false.copy()
-        truncs = dict(zip(live, rows(truncated, idx))) if ended_u else self._all_false.copy()
-        keys = tuple(res.info)
-        infos = per_agent(live, keys, [rows(res.info[k], idx) for k in keys]) if keys else {a: {} for a in live}
+        if self._stay:
+            flat[~acting] = 0.0  # agents that ended earlier observe zeros (a fresh array of this step's)
+            obs = self._obs_dicts(flat, self.agents, None)
+            self._terminated |= terminated
+            self._truncated |= truncated
+            rewards, terms, truncs, infos = stay_dicts(
+                self.agents, acting, res.rewards, self._terminated, self._truncated, res.info
+            )
+        else:
+            obs = self._obs_dicts(flat, live, self._live_idx)
+            idx = None if len(live) == world.state.n_slots else self._live_idx  # None: every slot is live
+            rewards = dict(zip(live, rows(np.asarray(res.rewards, dtype=np.float64), idx)))
+            # terminated and truncated are False outside the live slots: a dict of False is copied when none ended
+            terms = dict(zip(live, rows(terminated, idx))) if ended_t else self._all_false.copy()
+            truncs = dict(zip(live, rows(truncated, idx))) if ended_u else self._all_false.copy()
+            keys = tuple(res.info)
+            infos = per_agent(live, keys, [rows(res.info[k], idx) for k in keys]) if keys else {a: {} for a in live}
         if ended_t or ended_u:
             keep = ~(terminated | truncated)[self._live_idx]
             self._set_agents([a for a, k in zip(live, keep.tolist()) if k], self._live_idx[keep])
+            if self._stay and not self._live:
+                self.agents = []  # the last live agents ended: so does the episode
         if self.render_mode == "human":
             self.render()
         return obs, rewards, terms, truncs, infos
@@ -230,9 +266,12 @@ class AgentSimParallelEnv(ParallelEnv):
     def _set_agents(self, agents: list[str], idx: np.ndarray | None = None) -> None:
         """Set the live agents and the lookups derived from them (rebuilt only when the list changes).
 
-        ``idx``: their slots, when the caller has them.
+        ``idx``: their slots, when the caller has them. With ``ended_agents="leave"`` the live agents are
+        ``agents``; with ``"stay"``, ``agents`` keeps every agent of the episode while it runs.
         """
-        self.agents = agents
+        self._live = agents
+        if not self._stay:
+            self.agents = agents
         if idx is None:
             idx = np.fromiter((self._index[a] for a in agents), dtype=np.int64, count=len(agents))
         self._live_idx = idx
@@ -249,7 +288,7 @@ class AgentSimParallelEnv(ParallelEnv):
         """
         if not isinstance(actions, dict):
             raise ValueError(f"actions must be a dict agent id -> action, got {type(actions).__name__}")
-        live = self.agents
+        live = self._live
         if actions.keys() != self._all_false.keys():
             for a in actions:
                 if a not in self._index:
@@ -295,7 +334,7 @@ class AgentSimParallelEnv(ParallelEnv):
 
     def _reset_infos(self) -> dict[str, dict[str, Any]]:
         """Infos at reset: the keys ``step`` returns, each at its neutral value (0)."""
-        return {a: dict.fromkeys(self._info_keys, 0) for a in self.agents}
+        return {a: dict.fromkeys(self._info_keys, 0) for a in self._live}
 
     def _flat_obs(self, rows: np.ndarray, result: Any = None) -> np.ndarray:
         """Flat observations ``(S, obs_dim)`` of every slot (a fresh array); with ``check_finite``, ``rows`` (and
@@ -307,16 +346,17 @@ class AgentSimParallelEnv(ParallelEnv):
             return flat_parts(parts, self.world.state.n_slots, out)
         return self.scenario.flat_observation(self.world, out)
 
-    def _obs_dicts(self, flat: np.ndarray) -> dict[str, Any]:
-        """Per-agent observations of the live agents from the fresh flat array: rows of it (``"flat"``) or dicts
-        of views of its part columns (``"dict"``); a later step never writes into them."""
-        if len(self.agents) != flat.shape[0]:
-            flat = flat[self._live_idx]
+    def _obs_dicts(self, flat: np.ndarray, agents: list[str], idx: np.ndarray | None) -> dict[str, Any]:
+        """Per-agent observations of ``agents`` (in slots ``idx``; None: every slot) from the fresh flat array:
+        rows of it (``"flat"``) or dicts of views of its part columns (``"dict"``); a later step never writes
+        into them."""
+        if idx is not None and len(agents) != flat.shape[0]:
+            flat = flat[idx]
         if self.obs_format == "flat":
-            return dict(zip(self.agents, flat))
+            return dict(zip(agents, flat))
         n = flat.shape[0]
         cols = [list(flat[:, sl].reshape(n, *shape)) for sl, shape in self._obs_cols]
-        return per_agent(self.agents, self._obs_keys, cols)
+        return per_agent(agents, self._obs_keys, cols)
 
     # ------------------------------------------------------------------ extras
     def _comms(self) -> Any:
@@ -426,12 +466,22 @@ class AgentSimParallelEnv(ParallelEnv):
 
 
 def to_aec(env: AgentSimParallelEnv) -> Any:
-    """The AEC version of a parallel env (PettingZoo's ``parallel_to_aec``)."""
+    """The AEC version of a parallel env (PettingZoo's ``parallel_to_aec``).
+
+    Raises:
+        ValueError: ``env`` was built with ``ended_agents="stay"``: in the AEC API an agent that ended takes one
+            ``None`` action and leaves, so it cannot stay listed.
+    """
+    if env.ended_agents != "leave":
+        raise ValueError(
+            f"ended_agents must be 'leave' for the AEC API (an agent that ended steps once with None and leaves), "
+            f"got {env.ended_agents!r}; ended_agents='stay' is for parallel clients"
+        )
     return parallel_to_aec(env)
 
 
 #: The keys of ``build_parallel_env`` (and ``agentsim_env.make``) that configure the env, not the scenario.
-ENV_KEYS = ("render_mode", "obs_format", "action_format", "check_finite", "num_threads")
+ENV_KEYS = ("render_mode", "obs_format", "action_format", "check_finite", "num_threads", "ended_agents")
 
 
 def build_parallel_env(name: str, defaults: dict[str, Any] | None = None, **config: Any) -> AgentSimParallelEnv:

@@ -1,12 +1,15 @@
 """Replay a recorded episode from the store alone: RGB frames, a folder of PNGs, or an MP4 / GIF video.
 
 Nothing is simulated again. Each frame is drawn with numpy from the ``steps`` rows of one step of one episode of
-one world: every agent at its recorded position (a disc in its own colour with a heading dot), the trail it has
+one world: every agent at its recorded position (a disc in its own colour, one per agent up to a dozen and per
+group beyond: ``render.palette``, at least a few pixels wide, with a dark rim and a heading dot), the trail it has
 flown, agents that went offline in grey, agents already done (no row any more) faded at their last position,
 collisions from the ``events`` table as red rings for :data:`COLLISION_HOLD` steps, and for ``uav_release`` the
 sensors of the ``sensors`` table (released and falling: an orange ring at the release point; landed: a green
-dot). A header line names the run, scenario, episode, world and step. Obstacles and goals are not stored, so
-they are not drawn.
+dot). Under them lie the obstacles (grey, darker when taller) and the scenario's markers as they were after the
+reset (goals, targets, zones), which are not stored but rebuilt from the run's config and the episode's seed
+(``replay_scene``; not for batched runs or episodes without a recorded seed). A header line names the run,
+scenario, episode, world and step.
 
 The map extent comes from the run's scenario and config, widened to every recorded position, and the store is
 checked before anything is drawn (``replay_load``). Every frame of a replay has one size.
@@ -26,6 +29,8 @@ import numpy as np
 from agentsim_env.core.budget import check_memory
 from agentsim_env.recorder.checks import open_read
 from agentsim_env.recorder.replay_load import HEADER, Canvas, ReplayInfo, _check_int, replay_info
+from agentsim_env.recorder.replay_scene import StaticScene, static_scene
+from agentsim_env.render.palette import PALETTE, agent_colors, min_agent_px, min_marker_px
 
 __all__ = [
     "BACKGROUND",
@@ -43,13 +48,9 @@ BACKGROUND = 236
 """Grey level of the map background."""
 COLLISION_HOLD = 10
 """Steps a collision ring stays around an agent."""
-_PALETTE = np.array(
-    [[31, 119, 180], [255, 127, 14], [44, 160, 44], [214, 39, 40], [148, 103, 189],
-     [140, 86, 75], [227, 119, 194], [23, 190, 207], [188, 189, 34], [60, 60, 160]],
-    dtype=np.uint8,
-)  # fmt: skip
 _OFFLINE = np.array([150, 150, 150], dtype=np.uint8)
 _HEADING = np.array([20, 20, 60], dtype=np.uint8)
+_RIM = np.array([30, 30, 40], dtype=np.uint8)
 _COLLISION = np.array([220, 20, 20], dtype=np.uint8)
 _FALLING = np.array([240, 150, 20], dtype=np.uint8)
 _LANDED = np.array([20, 130, 40], dtype=np.uint8)
@@ -57,9 +58,17 @@ _HEADER_BG = np.array([40, 44, 52], dtype=np.uint8)
 _FETCH = 20_000  # steps rows read per batch
 
 
-def agent_color(agent: int) -> np.ndarray:
-    """The RGB colour (uint8) of agent ``agent`` (its index within the world) in replay frames."""
-    return _PALETTE[agent % len(_PALETTE)].copy()
+def agent_color(agent: int, n_agents: int = 1, group: int = 0) -> np.ndarray:
+    """The RGB colour (uint8) of agent ``agent`` (its index within the world) in replay frames.
+
+    Args:
+        agent: The agent's index within its world.
+        n_agents: Agents per world: beyond ``render.palette.MAX_DISTINCT`` the colour is the group's.
+        group: The agent's group at its first recorded step (used only then).
+    """
+    if n_agents > len(PALETTE):
+        return PALETTE[max(group, 0) % len(PALETTE)].copy()
+    return PALETTE[agent % len(PALETTE)].copy()
 
 
 def _check_frame_memory(info: ReplayInfo) -> None:
@@ -162,22 +171,57 @@ def _header(img: np.ndarray, text: str) -> None:
     img[4 : 4 + h, 6 : 6 + w] = (band * (1 - a) + 255.0 * a).astype(np.uint8)
 
 
+def _draw_scene(img: np.ndarray, scene: StaticScene, cv: Canvas) -> None:
+    """Obstacles (grey, darker when taller; at least a pixel) and markers (at least a few pixels) into ``img``."""
+    s = cv.scale
+    shade = np.clip(170 - 110 * scene.top / max(scene.z_top, 1.0), 40, 170).astype(np.uint8)
+    cx, cy = cv.px(scene.centre[:, 0], scene.centre[:, 1])
+    h, w, _ = img.shape
+    for k in np.flatnonzero(scene.box):
+        hx, hy = max(scene.half[k, 0] * s, 0.5), max(scene.half[k, 1] * s, 0.5)
+        r0, r1 = max(int(cy[k] - hy), HEADER), min(int(np.ceil(cy[k] + hy)), h)
+        c0, c1 = max(int(cx[k] - hx), 0), min(int(np.ceil(cx[k] + hx)), w)
+        if r0 < r1 and c0 < c1:
+            img[r0:r1, c0:c1] = shade[k]
+    for k in np.flatnonzero(~scene.box):
+        _discs(img, cx[k : k + 1], cy[k : k + 1], max(scene.half[k, 0] * s, 0.75), np.repeat(shade[k], 3))
+    if scene.markers is not None:
+        mxy, rgb, rad = scene.markers
+        mx, my = cv.px(np.asarray(mxy)[:, 0], np.asarray(mxy)[:, 1])
+        floor = min_marker_px(cv.size)
+        for m in range(len(mx)):
+            _discs(img, mx[m : m + 1], my[m : m + 1], max(float(rad[m]) * s, floor), np.asarray(rgb[m], np.uint8))
+
+
+def _first_groups(con: sqlite3.Connection, info: ReplayInfo) -> np.ndarray:
+    """Each agent's group at its first recorded step (-1 when not recorded)."""
+    groups = np.full(info.n_agents, -1, dtype=np.int64)
+    rows = con.execute("SELECT agent, grp FROM steps WHERE run = ? AND episode = ? AND world = ? AND step = ? "
+                       "AND grp IS NOT NULL", (info.run, info.episode, info.world, info.steps[0])).fetchall()  # fmt: skip
+    for a, g in rows:
+        if isinstance(a, int) and isinstance(g, int) and 0 <= a < info.n_agents:
+            groups[a] = g
+    return groups
+
+
 class _Replay:
     """The state carried from step to step while frames are drawn."""
 
-    def __init__(self, info: ReplayInfo, con: sqlite3.Connection) -> None:
+    def __init__(self, info: ReplayInfo, con: sqlite3.Connection, scene: StaticScene | None) -> None:
         self.info = info
         cv = info.canvas
         n = info.n_agents
-        self.base = np.full(cv.shape, BACKGROUND, dtype=np.uint8)  # background and trails
-        self.colors = _PALETTE[np.arange(n) % len(_PALETTE)]
+        self.base = np.full(cv.shape, BACKGROUND, dtype=np.uint8)  # background, the static scene and trails
+        if scene is not None:
+            _draw_scene(self.base, scene, cv)
+        self.colors = agent_colors(n, _first_groups(con, info) if n > len(PALETTE) else None)
         self.trail_colors = (self.colors.astype(np.float32) * 0.45 + BACKGROUND * 0.55).astype(np.uint8)
-        self.done_colors = (self.colors.astype(np.float32) * 0.3 + BACKGROUND * 0.7).astype(np.uint8)
+        self.done_colors = (self.colors.astype(np.float32) * 0.5 + BACKGROUND * 0.5).astype(np.uint8)
         self.xy = np.full((n, 2), np.nan)  # last known position (pixels)
         self.heading = np.zeros(n)
         self.online = np.ones(n, dtype=bool)
         self.present = np.zeros(n, dtype=bool)
-        self.r = max(info.radius * cv.scale, 3.0)
+        self.r = max(info.radius * cv.scale, min_agent_px(cv.size))
         key = (info.run, info.episode, info.world)
         col = np.array(con.execute("SELECT step, agent FROM events WHERE run = ? AND episode = ? AND world = ? "
                                    "AND event = 'collision' AND agent >= 0", key).fetchall(),
@@ -220,9 +264,10 @@ class _Replay:
         r = self.r
         _discs(img, self.xy[done, 0], self.xy[done, 1], r * 0.8, self.done_colors[done])
         _discs(img, self.xy[off, 0], self.xy[off, 1], r, _OFFLINE)
-        _discs(img, self.xy[live, 0], self.xy[live, 1], r, self.colors[live])
+        _discs(img, self.xy[live, 0], self.xy[live, 1], r, _RIM)
+        _discs(img, self.xy[live, 0], self.xy[live, 1], r - max(1.0, r / 6), self.colors[live])
         hx, hy = np.cos(self.heading[live]), np.sin(self.heading[live])
-        _discs(img, self.xy[live, 0] + hx * r, self.xy[live, 1] - hy * r, max(r / 3, 1.0), _HEADING)
+        _discs(img, self.xy[live, 0] + hx * r * 0.7, self.xy[live, 1] - hy * r * 0.7, max(r / 3, 1.0), _HEADING)
         recent = (self.col_step <= step) & (self.col_step > step - COLLISION_HOLD)
         hit = np.unique(self.col_agent[recent])
         hit = hit[hit < len(self.xy)]
@@ -242,11 +287,11 @@ class _Replay:
         return img
 
 
-def _frames(info: ReplayInfo, every: int) -> Iterator[np.ndarray]:
+def _frames(info: ReplayInfo, every: int, scene: StaticScene | None) -> Iterator[np.ndarray]:
     wanted = set(info.frame_steps(every))
     con = open_read(info.path)
     try:
-        rp = _Replay(info, con)
+        rp = _Replay(info, con, scene)
         for step, rows in _step_rows(con, info):
             rp.advance(rows)
             if step in wanted:
@@ -282,11 +327,13 @@ def replay_frames(
 
     Raises:
         ValueError: See :func:`replay_info`; also ``every`` < 1.
+        StoreError: Also an ``episodes.seed`` of the world that is not an integer (``replay_scene``).
     """
     every = _check_int("every", every, 1)
     info = replay_info(path, run, episode, world, size)
     _check_frame_memory(info)
-    return _frames(info, every)
+    scene, _ = static_scene(info)
+    return _frames(info, every, scene)
 
 
 def write_replay(
@@ -322,6 +369,7 @@ def write_replay(
     every = _check_int("every", every, 1)
     info = replay_info(path, run, episode, world, size)
     _check_frame_memory(info)
+    scene, _ = static_scene(info)
     if fps is not None and (isinstance(fps, bool) or not isinstance(fps, (int, float)) or not fps > 0):
         raise ValueError(f"fps must be a number > 0, got {fps!r}")
     target = Path(out)
@@ -335,7 +383,7 @@ def write_replay(
         folder.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise ValueError(f"{str(folder)!r} cannot be created: {exc.strerror or exc}") from None
-    frames = _frames(info, every)
+    frames = _frames(info, every, scene)
     try:
         if fmt is not None:
             return [write_video(frames, target, fps or info.fps(every))]
