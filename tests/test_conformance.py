@@ -100,3 +100,51 @@ def test_registry_lists_navigation() -> None:
     assert env.metadata["name"] == "navigation_v0"
     spaces = [env.observation_space(a) for a in env.possible_agents]
     assert all(s == spaces[0] for s in spaces)
+
+
+def _zero(x: Any) -> bool:
+    return not any(np.any(v) for v in x.values()) if isinstance(x, dict) else not np.any(x)
+
+
+@pytest.mark.parametrize("case", CASES, ids=IDS)
+def test_ended_agents_stay(case: tuple[str, dict]) -> None:
+    """``ended_agents="stay"`` in lockstep with the default over 300 steps (an agent is taken offline at step 3 of
+    every episode, so every scenario has agents ending early): the live agents get exactly the default's results
+    and the same state; the agents that ended stay in ``agents`` and in every dict with zero observations (inside
+    the space), reward 0, zero infos and the flags they ended with, until the default's episode ends."""
+    parallel, _ = _ctor(*case)
+    leave, stay = parallel(), parallel(ended_agents="stay")
+    every = stay.possible_agents
+    space = stay.action_space(every[0])
+    space.seed(5)
+    ended: dict[str, tuple[bool, bool]] = {}
+    steps = episodes = gone_steps = 0
+    while steps < 300:
+        assert _equal(leave.reset(seed=episodes), stay.reset(seed=episodes))
+        episodes += 1
+        ended.clear()
+        t = 0
+        while leave.agents:
+            assert stay.agents == every
+            t += 1
+            if t == 3:
+                slot = episodes % len(every)
+                leave.world.set_offline(np.array([slot]))
+                stay.world.set_offline(np.array([slot]))
+            drawn = {a: space.sample() for a in every}
+            live = list(leave.agents)
+            res_l = leave.step({a: drawn[a] for a in live})
+            res_s = stay.step(drawn)  # the ended agents' actions are ignored
+            steps += 1
+            assert np.array_equal(leave.state(), stay.state())
+            obs, rew, term, trunc, info = res_s
+            for d_l, d_s in zip(res_l, res_s):
+                assert list(d_s) == every and set(d_l) == set(live)
+                assert all(_equal(d_l[a], d_s[a]) for a in live)
+            for a, flags in ended.items():
+                assert _zero(obs[a]) and stay.observation_space(a).contains(obs[a])
+                assert rew[a] == 0.0 and (term[a], trunc[a]) == flags and not any(info[a].values())
+                gone_steps += 1
+            ended.update({a: (term[a], trunc[a]) for a in live if term[a] or trunc[a]})
+        assert stay.agents == [] and stay.step({}) == ({}, {}, {}, {}, {})
+    assert gone_steps > 0
