@@ -21,6 +21,7 @@ from agentsim_env.env.agent_dicts import per_agent, rows, stay_dicts
 from agentsim_env.env.batch_kernels import scatter_part
 from agentsim_env.env.buffers import Recycled
 from agentsim_env.env.guard import CallGuard
+from agentsim_env.env.messaging import MessageCalls
 from agentsim_env.env.spaces import (
     FORMATS,
     action_space_for,
@@ -52,7 +53,7 @@ def _checked(part: np.ndarray | None) -> np.ndarray:
     return part
 
 
-class AgentSimParallelEnv(ParallelEnv):
+class AgentSimParallelEnv(MessageCalls, ParallelEnv):
     """A PettingZoo ``ParallelEnv`` over one world of a scenario.
 
     Args:
@@ -357,70 +358,6 @@ class AgentSimParallelEnv(ParallelEnv):
         n = flat.shape[0]
         cols = [list(flat[:, sl].reshape(n, *shape)) for sl, shape in self._obs_cols]
         return per_agent(agents, self._obs_keys, cols)
-
-    # ------------------------------------------------------------------ extras
-    def _comms(self) -> Any:
-        if self.world.comms is None:
-            raise ValueError(f"scenario {self.scenario.name!r} has no communication: set its comms config")
-        return self.world.comms
-
-    def _live_slot(self, agent: str, what: str) -> int:
-        if agent not in self._index:
-            raise ValueError(f"{what}: unknown agent id {agent!r}")
-        slot = self._index[agent]
-        if not self.world.state.online[slot]:
-            raise ValueError(f"{what}: agent {agent!r} is offline")
-        return slot
-
-    def send_message(
-        self, sender: str, payload: Any, *, to: str | None = None, group: int | None = None
-    ) -> bool:
-        """Send a bus message from code (besides the ``comm`` action): to one agent or to a group.
-
-        Args:
-            sender: Sending agent id (must be live).
-            payload: ``D`` finite floats.
-            to: Receiver agent id (unicast), or
-            group: Group id (the sender's world), exactly one of the two.
-
-        Returns:
-            Whether the bus accepted it (False: over the sender's bandwidth this step).
-
-        Raises:
-            ValueError: Unknown or offline agent, unknown group, wrong payload width, NaN payload.
-        """
-        with self._guard.hold("send_message"):
-            comms = self._comms()
-            s = self._live_slot(sender, "sender")
-            if (to is None) == (group is None):
-                raise ValueError("give exactly one of to= (an agent id) or group= (a group id)")
-            pay = np.asarray(payload, dtype=np.float64).reshape(1, -1)
-            d = comms.cfg.payload_dim
-            if pay.shape[1] != d:
-                raise ValueError(f"payload must have {d} values (comms.payload_dim), got {pay.shape[1]}")
-            if not np.isfinite(pay).all():
-                raise ValueError(f"payload must be finite, got {pay.ravel().tolist()}")
-            if group is None:
-                return bool(comms.unicast(s, self._live_slot(str(to), "receiver"), pay[0], self.world.tick))
-            known = np.unique(self.world.state.group[self.world.state.group >= 0]).tolist()
-            if group not in known:
-                raise ValueError(f"group: unknown group {group!r}; groups are {known}")
-            return bool(comms.to_group(s, int(group), pay[0], self.world.tick))
-
-    def assign_group(self, agent: str, group: int) -> None:
-        """Move ``agent`` to ``group`` for the rest of the episode (-1: no group); the change is logged as an event.
-
-        Group ids run from -1 to ``n_agents - 1`` (at most one group per agent); ``reset`` returns every agent to
-        the group the scenario dealt it.
-        """
-        with self._guard.hold("assign_group"):
-            self._comms()
-            slot = self._live_slot(agent, "agent")
-            n = self.scenario.n_agents
-            if isinstance(group, bool) or not isinstance(group, (int, np.integer)) or not -1 <= group < n:
-                raise ValueError(f"group must be an integer in -1..{n - 1} (-1 = no group), got {group!r}")
-            assert self.world.groups is not None
-            self.world.groups.assign(np.array([slot]), int(group), self.world.tick)
 
     def state(self) -> np.ndarray:
         """Global state of the world for centralised critics (see ``state_space``)."""
