@@ -75,3 +75,38 @@ def rows(values: np.ndarray, idx: np.ndarray | None) -> list[Any]:
         The list.
     """
     return (values if idx is None else values[idx]).tolist()  # type: ignore[no-any-return]
+
+
+def stay_dicts(
+    agents: list[str],
+    acting: np.ndarray,
+    rewards: np.ndarray,
+    terminated: np.ndarray,
+    truncated: np.ndarray,
+    info: dict[str, np.ndarray],
+) -> tuple[dict[str, float], dict[str, bool], dict[str, bool], dict[str, dict[str, Any]]]:
+    """Rewards, flags and infos of a step over every agent of the episode (``ended_agents="stay"``).
+
+    An agent that ended in an earlier step gets reward 0 and every info key at 0 (in the key's dtype: False for
+    a flag); the flags are the ones it ended with.
+
+    Args:
+        agents: Every agent of the episode, one per slot.
+        acting: ``(S,)`` the slots that acted this step.
+        rewards: ``(S,)`` this step's rewards.
+        terminated: ``(S,)`` whether each agent has terminated so far in the episode.
+        truncated: ``(S,)`` whether each agent has been truncated so far.
+        info: ``{key: (S,) values}`` of this step.
+
+    Returns:
+        ``(rewards, terminated, truncated, infos)`` dicts keyed by agent.
+    """
+    gone = ~acting
+    rew = dict(zip(agents, np.where(acting, np.asarray(rewards, dtype=np.float64), 0.0).tolist()))
+    cols = []
+    for values in info.values():
+        col = np.array(values, copy=True)
+        col[gone] = 0
+        cols.append(col.tolist())
+    infos = per_agent(agents, tuple(info), cols) if cols else {a: {} for a in agents}
+    return rew, dict(zip(agents, terminated.tolist())), dict(zip(agents, truncated.tolist())), infos
