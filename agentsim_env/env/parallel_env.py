@@ -6,6 +6,7 @@ let the scenario score (9), then build the per-agent dicts once from arrays.
 
 from __future__ import annotations
 
+import importlib.util
 import operator
 from typing import Any
 
@@ -41,9 +42,28 @@ from agentsim_env.scenarios.base import (
 from agentsim_env.scenarios.registry import make_scenario
 
 RENDER_MODES = ("human", "rgb_array", "web")
+_MODE_NEEDS = {"human": "pygame", "web": "websockets"}  # the package of the extra a mode needs (render, viewer)
 ENDED_AGENTS = ("leave", "stay")
 """What becomes of an agent that ends before its episode does (``ended_agents``): ``"leave"`` (PettingZoo's rule:
 it leaves ``agents``) or ``"stay"`` (it stays, observing zeros with reward 0, until the episode ends)."""
+
+
+def available_render_modes() -> list[str]:
+    """The render modes that can start in this installation, in ``RENDER_MODES`` order (``metadata``'s list).
+
+    ``"human"`` needs the ``render`` extra (pygame-ce) and ``"web"`` the ``viewer`` extra (websockets): a mode
+    whose package cannot be found is left out, since PettingZoo's ``render_test`` starts every listed mode. The
+    package is looked up, not imported. ``render_mode`` still takes every mode of ``RENDER_MODES``; one whose
+    extra is missing fails on the first ``reset`` with the install command.
+    """
+    return [m for m in RENDER_MODES if m not in _MODE_NEEDS or _findable(_MODE_NEEDS[m])]
+
+
+def _findable(module: str) -> bool:
+    try:
+        return importlib.util.find_spec(module) is not None
+    except (ImportError, ValueError):  # a blocked import (None in sys.modules, a refusing finder)
+        return False
 
 
 def _checked(part: np.ndarray | None) -> np.ndarray:
@@ -109,7 +129,7 @@ class AgentSimParallelEnv(MessageCalls, ParallelEnv):
         self.world.set_num_threads(num_threads)
         self.metadata: dict[str, Any] = {
             "name": f"{scenario.name}_v{scenario.version}",
-            "render_modes": list(RENDER_MODES),
+            "render_modes": available_render_modes(),
             "render_fps": max(1, int(round(1.0 / self.world.config.dt))),
             "is_parallelizable": True,
         }

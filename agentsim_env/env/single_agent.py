@@ -26,7 +26,7 @@ from typing import Any, SupportsFloat
 import gymnasium
 import numpy as np
 
-from agentsim_env.env.parallel_env import RENDER_MODES, AgentSimParallelEnv
+from agentsim_env.env.parallel_env import AgentSimParallelEnv, available_render_modes
 from agentsim_env.scenarios.registry import list_scenarios, make_scenario, scenario_class
 
 OthersPolicy = Callable[[dict[str, np.ndarray]], dict[str, Any]]
@@ -50,7 +50,7 @@ class SingleAgentEnv(gymnasium.Env):
         ValueError: Unknown scenario, agent id or config key, or ``obs_format`` / ``action_format`` given.
     """
 
-    metadata: dict[str, Any] = {"render_modes": list(RENDER_MODES), "render_fps": 10}
+    metadata: dict[str, Any] = {"render_modes": available_render_modes(), "render_fps": 10}
 
     def __init__(
         self,
@@ -83,7 +83,7 @@ class SingleAgentEnv(gymnasium.Env):
             )
         self.others = others
         self.render_mode = render_mode
-        self.metadata = {**self.par_env.metadata, "render_modes": list(RENDER_MODES)}
+        self.metadata = dict(self.par_env.metadata)
         self.observation_space = self.par_env.observation_space(self.agent)
         self.action_space = self.par_env.action_space(self.agent)
         self._zero = np.zeros(self.action_space.shape or (), dtype=np.float32)
