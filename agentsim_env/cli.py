@@ -234,16 +234,18 @@ def _step_bar(total: int, desc: str) -> Any:
     return tqdm(total=total, desc=desc, unit="step")
 
 
-def _observers(recorder: Any, bar: Any) -> Any:
-    """One ``run_episode`` observer: the trajectory recorder (or None) and a step bar (or None)."""
-    if bar is None:
+def _observers(recorder: Any, bar: Any, check: Callable[[], None] | None = None) -> Any:
+    """One ``run_episode`` observer: the trajectory recorder, a step bar and a stop check (each may be None)."""
+    if bar is None and check is None:
         return recorder
 
     def on_step(env: Any, infos: dict[str, Any]) -> None:
         if recorder is not None:
             recorder(env, infos)
-        if int(env.world.step_count[0]):  # not the call right after the reset
+        if bar is not None and int(env.world.step_count[0]):  # not the call right after the reset
             bar.update(1)
+        if check is not None:  # a live run stops here, between steps, when SIGTERM or Ctrl-C asked it to
+            check()
 
     return on_step
 
@@ -262,6 +264,8 @@ def _check_record(path: str | None) -> None:
 
 def cmd_run(args: argparse.Namespace) -> int:
     """Roll out the baseline over seeds; print success and return statistics; draw the first episode."""
+    if args.episodes is None:  # a live window plays in real time: one episode unless more are asked for
+        args.episodes = 1 if args.render else 5
     _check_count("--episodes", args.episodes)
     if args.seed < 0:
         raise ValueError(f"--seed must be an integer >= 0, got {args.seed}")
@@ -283,10 +287,18 @@ def cmd_run(args: argparse.Namespace) -> int:
     from agentsim_env.policies.registry import resolve_policy
 
     policy_name, config = resolve_policy(args.scenario, args.policy, config)
+    if args.render:
+        from agentsim_env.cli_live import check_display
+
+        check_display(args.scenario)
     _check_record(getattr(args, "record", None))
     created = prepare_out(args.out) if args.out else []
     try:
         return _run(args, config, policy_name)
+    except KeyboardInterrupt:  # before the first step: one line, not a traceback
+        remove_created(created)
+        print("agentsim: stopped by Ctrl-C", file=sys.stderr)
+        return 130
     except BaseException:
         remove_created(created)
         raise
@@ -325,31 +337,38 @@ def _run(args: argparse.Namespace, config: dict[str, Any], policy_name: str) -> 
         env.scenario.n_agents >= BIG_WORLD and not args.quiet) else None  # fmt: skip
     episodes = range(args.episodes) if bar is not None else _progress(range(args.episodes), args.episodes,
                                                                       args.scenario, not args.quiet)  # fmt: skip
+    from agentsim_env.cli_live import LiveStop, StopRun, as_stop, is_stop, stop_line
+
+    halt: StopRun | None = None
     try:
-        for k in episodes:
-            recorder = TrajectoryRecorder() if k == 0 and args.out else None
-            ep = run_episode(env, policy, args.seed + k, on_step=_observers(recorder, bar))
-            if recorder is not None:
-                traj = recorder.result(env)
-            rows.append((ep.seed, ep.steps, float(np.mean(list(ep.returns.values()))), ep.info_sums))
-    except BaseException:
+        with LiveStop() as live:  # SIGTERM and Ctrl-C end the run between two steps (a second one at once)
+            for k in episodes:
+                recorder = TrajectoryRecorder() if k == 0 and args.out else None
+                ep = run_episode(env, policy, args.seed + k, on_step=_observers(recorder, bar, live.check))
+                if recorder is not None:
+                    traj = recorder.result(env)
+                rows.append((ep.seed, ep.steps, float(np.mean(list(ep.returns.values()))), ep.info_sums))
+    except BaseException as exc:
         if store:
             env.recorder.finish("incomplete")
-        raise
+        if not is_stop(exc):
+            raise
+        halt = as_stop(exc)  # the window closed, SIGTERM or Ctrl-C: report the episodes that ended
     if bar is not None:
         bar.total = bar.n
         bar.close()
     mark_warm()
     n = env.scenario.n_agents
     keys = sorted({k for *_, s in rows for k in s if k in ("arrived", "collided", "released", "landed")})
-    print(f"\n{args.scenario}: {args.episodes} episodes x {n} agents, policy={policy_name}")
-    print("| metric | mean | std |")
-    print("|---|---|---|")
-    print(f"| steps | {np.mean([r[1] for r in rows]):.1f} | {np.std([r[1] for r in rows]):.1f} |")
-    print(f"| mean return | {np.mean([r[2] for r in rows]):.2f} | {np.std([r[2] for r in rows]):.2f} |")
-    for key in keys:
-        frac = np.array([r[3].get(key, 0.0) / n for r in rows])
-        print(f"| {key} per agent | {frac.mean():.3f} | {frac.std():.3f} |")
+    if rows:  # none when a live run was stopped during its first episode
+        print(f"\n{args.scenario}: {len(rows)} episodes x {n} agents, policy={policy_name}")
+        print("| metric | mean | std |")
+        print("|---|---|---|")
+        print(f"| steps | {np.mean([r[1] for r in rows]):.1f} | {np.std([r[1] for r in rows]):.1f} |")
+        print(f"| mean return | {np.mean([r[2] for r in rows]):.2f} | {np.std([r[2] for r in rows]):.2f} |")
+        for key in keys:
+            frac = np.array([r[3].get(key, 0.0) / n for r in rows])
+            print(f"| {key} per agent | {frac.mean():.3f} | {frac.std():.3f} |")
     if traj is not None:
         shown = Path(policy_name).name.removesuffix(".zip") or "model"  # a model path: its folder's name
         name = f"{args.scenario}_{shown}_seed{args.seed}{config_tag(config)}.png"
@@ -363,6 +382,9 @@ def _run(args: argparse.Namespace, config: dict[str, Any], policy_name: str) -> 
         failed = env.recorder.error
         stopped = f"; recording stopped early: {failed}" if failed else ""
         print(f"recorded to {store} (run {store_run}){stopped}")
+    if halt is not None:
+        print(stop_line(halt, len(rows), args.episodes, store, store_run if store else None), file=sys.stderr)
+        return halt.code
     return 0
 
 
@@ -494,12 +516,14 @@ def build_parser() -> argparse.ArgumentParser:
         lazy=_fill_run,
     )
     r.add_argument("scenario", metavar="SCENARIO", help="a registered scenario ('agentsim scenarios')")
-    r.add_argument("--episodes", type=int, default=5, help="episodes (seeds SEED, SEED+1, ...), >= 1")
+    r.add_argument("--episodes", type=int, default=None, help="episodes (seeds SEED, SEED+1, ...), >= 1 "
+                   "(default: 5; 1 with --render)")  # fmt: skip
     r.add_argument("--seed", type=int, default=0, help="seed of the first episode, >= 0")
     r.add_argument("--policy", default=None, help="baseline name (default: the scenario's first; see below) or "
                    "a trained model (a folder from 'agentsim train', or its .zip)")  # fmt: skip
     r.add_argument("--set", nargs="*", metavar="KEY=VALUE", help=SET_HELP)
-    r.add_argument("--render", action="store_true", help="show a live window (graphical mode)")
+    r.add_argument("--render", action="store_true", help="show a live window, in real time unless --fps is "
+                   "given (needs a display); closing it, Esc, SIGTERM or Ctrl-C end the run")  # fmt: skip
     r.add_argument("--fps", type=int, default=None, help="frames per second of the live window, > 0 "
                    "(default: real time)")  # fmt: skip
     r.add_argument("--out", default="outputs", help="folder for the trajectory PNG ('' for none)")

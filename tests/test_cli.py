@@ -136,7 +136,7 @@ def test_run_help_names_scenarios_baselines_and_defaults(capsys: pytest.CaptureF
         first, *rest = policies
         assert f"{first} (default)" in text
         assert all(p in text for p in rest), scenario
-    assert "(default: 5)" in text and "(default: outputs)" in text and "(default: 0)" in text
+    assert "(default: 5; 1 with --render)" in text and "(default: outputs)" in text and "(default: 0)" in text
     assert "examples:" in text and "agentsim run navigation" in text
     assert "body.radius=1.0" in text  # the --set syntax
 
