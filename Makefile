@@ -26,12 +26,17 @@ run: $(STAMP)
 	$(VENV)/bin/agentsim evaluate --zones default --strategies all --seeds 3 --out outputs/evaluation
 
 # The browser tests (tests/test_web_*.py) drive the system's Chromium through Playwright; Debian's package is
-# installed here when missing (Playwright's own browser download is never used).
+# installed here when missing (Playwright's own browser download is never used). The live-window tests
+# (tests/test_render_window.py) open a real pygame window on an Xvfb server (Debian's xvfb, installed likewise).
 browser:
 	@command -v chromium >/dev/null 2>&1 || command -v chromium-browser >/dev/null 2>&1 || { \
 	  echo "installing Chromium (Debian package) for the browser tests"; \
 	  if [ "$$(id -u)" = 0 ]; then SUDO=; else SUDO=sudo; fi; \
 	  $$SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -qq chromium >/dev/null; }
+	@command -v Xvfb >/dev/null 2>&1 || { \
+	  echo "installing Xvfb (Debian package) for the live-window tests"; \
+	  if [ "$$(id -u)" = 0 ]; then SUDO=; else SUDO=sudo; fi; \
+	  $$SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -qq xvfb >/dev/null; }
 
 test: $(STAMP) browser
 	$(PY) -m pytest -n 2 -q tests
