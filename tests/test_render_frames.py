@@ -4,6 +4,7 @@ map, one colour per agent up to a dozen (per group beyond), goals and obstacles 
 
 from __future__ import annotations
 
+import sqlite3
 from pathlib import Path
 from typing import Any
 
@@ -140,8 +141,6 @@ def test_replay_frames_show_the_obstacles_and_goals_of_the_episode(tmp_path: Pat
 
 
 def test_replay_of_a_damaged_seed_fails_when_called_and_names_the_column(tmp_path: Path) -> None:
-    import sqlite3
-
     from agentsim_env.recorder.schema import StoreError
     from tests.store_helpers import small_store
 
@@ -152,3 +151,27 @@ def test_replay_of_a_damaged_seed_fails_when_called_and_names_the_column(tmp_pat
     con.close()
     with pytest.raises(StoreError, match=r"episodes\.seed holds 'x1'"):
         replay_frames(path)  # before any frame is taken
+
+
+def test_replay_frames_colour_agents_by_group_beyond_a_dozen(tmp_path: Path) -> None:
+    from agentsim_env.recorder.replay import agent_color
+
+    path = tmp_path / "run.db"
+    env = record(agentsim_env.make("navigation", n_agents=16, n_groups=2, max_steps=2, map_size=400.0,
+                                   obstacle_density=0.0), path)  # fmt: skip
+    run_episode(env, make_policy("navigation", env), 0)
+    group = np.array(env.world.state.group[env.world.state.slots_of_world(0)])
+    env.close()
+    info = replay_info(path)
+    first = next(iter(replay_frames(path)))
+    con = sqlite3.connect(path)
+    rows = con.execute("SELECT agent, x, y FROM steps WHERE step = 0").fetchall()
+    con.close()
+    centres = {a: info.canvas.px(x, y) for a, x, y in rows}
+    seen = set()
+    for a, (cx, cy) in centres.items():
+        if any(np.hypot(cx - u, cy - v) < 20 for b, (u, v) in centres.items() if b != a):
+            continue  # overlapping discs
+        assert (first[int(cy), int(cx)] == agent_color(a, 16, int(group[a]))).all(), a
+        seen.add(tuple(first[int(cy), int(cx)]))
+    assert len(seen) == 2
