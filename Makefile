@@ -59,14 +59,15 @@ clean:
 	rm -rf $(VENV) outputs .pytest_cache .hypothesis
 
 # Other RL stacks: one virtual environment per stack under .venv-eco/ (BenchMARL pins an older TorchRL than
-# TorchRL's latest), built once from the versions verified in examples/constraints-<stack>.txt (torch stays the
-# CPU build) and rebuilt when pyproject.toml or those pins change; then each example runs a few hundred frames.
+# TorchRL's latest, AgileRL an older PettingZoo), built once from the versions verified in
+# examples/constraints-<stack>.txt (torch stays the CPU build) and rebuilt when pyproject.toml or those pins
+# change; then each example runs a few hundred frames. `make test-ecosystem-<stack>` builds and runs one stack.
 ECO := .venv-eco
 ECO_FRAMES ?= 400
 ECO_TIMEOUT ?= 300
-ECO_STAMPS := $(ECO)/rllib/.installed $(ECO)/torchrl/.installed $(ECO)/benchmarl/.installed
+ECO_STACKS := rllib torchrl benchmarl cleanrl skrl agilerl
 
-.PHONY: test-ecosystem
+.PHONY: test-ecosystem $(addprefix test-ecosystem-,$(ECO_STACKS))
 
 $(ECO)/%/.installed: pyproject.toml examples/constraints-%.txt
 	test -x $(ECO)/$*/bin/python || $(PYTHON) -m venv $(ECO)/$*
@@ -79,7 +80,24 @@ $(ECO)/%/.installed: pyproject.toml examples/constraints-%.txt
 eco_run = @echo "== $(1): $(2)"; s=$$(date +%s); timeout $(ECO_TIMEOUT) $(ECO)/$(1)/bin/python $(2) \
 	&& echo "== $(1): passed in $$(( $$(date +%s) - s )) s"
 
-test-ecosystem: $(ECO_STAMPS)
+test-ecosystem: test-ecosystem-rllib test-ecosystem-torchrl test-ecosystem-benchmarl test-ecosystem-cleanrl test-ecosystem-skrl test-ecosystem-agilerl
+
+test-ecosystem-rllib: $(ECO)/rllib/.installed
 	$(call eco_run,rllib,examples/rllib_ppo_shared.py --frames $(ECO_FRAMES) --iterations 2)
+
+test-ecosystem-torchrl: $(ECO)/torchrl/.installed
 	$(call eco_run,torchrl,examples/torchrl_mappo.py --frames $(ECO_FRAMES) --frames-per-batch 200)
+
+test-ecosystem-benchmarl: $(ECO)/benchmarl/.installed
 	$(call eco_run,benchmarl,examples/benchmarl_mappo.py --frames $(ECO_FRAMES) --out outputs/benchmarl)
+
+test-ecosystem-cleanrl: $(ECO)/cleanrl/.installed
+	$(call eco_run,cleanrl,examples/cleanrl_ppo.py --frames $(ECO_FRAMES) --num-steps 100 --num-minibatches 4 \
+	  --runs-dir outputs/cleanrl)
+
+test-ecosystem-skrl: $(ECO)/skrl/.installed
+	$(call eco_run,skrl,examples/skrl_mappo.py --frames $(ECO_FRAMES) --rollouts 100 --out outputs/skrl)
+
+test-ecosystem-agilerl: $(ECO)/agilerl/.installed
+	$(call eco_run,agilerl,examples/agilerl_matd3.py --frames $(ECO_FRAMES) --envs 2 --population 2 \
+	  --out outputs/agilerl)

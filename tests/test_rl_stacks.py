@@ -1,7 +1,8 @@
 """The adapters for other RL stacks (RLlib, TorchRL, BenchMARL) without those stacks installed: each raises
 ImportError with its install hint when its stack is missing, the RLlib env ends episodes correctly (checked over
-stand-in ray modules), and the ecosystem examples exist, take ``--frames`` and are run by ``make test-ecosystem``.
-The examples themselves run in their own environments (``make test-ecosystem``)."""
+stand-in ray modules), and the ecosystem examples (those three, CleanRL, skrl and AgileRL) exist, take
+``--frames`` and are run by ``make test-ecosystem``, each stack by its own ``make test-ecosystem-<stack>``. The
+examples themselves run in their own environments (``make test-ecosystem``)."""
 
 from __future__ import annotations
 
@@ -28,8 +29,29 @@ EXAMPLES = {
     "rllib_ppo_shared.py": "rllib",
     "torchrl_mappo.py": "torchrl",
     "benchmarl_mappo.py": "benchmarl",
+    "cleanrl_ppo.py": "cleanrl",
+    "skrl_mappo.py": "skrl",
+    "agilerl_matd3.py": "agilerl",
 }
-STACK_MODULES = ("ray", "torchrl", "tensordict", "benchmarl")
+# stack -> the top-level modules its example imports (and no other stack's)
+STACK_IMPORTS = {
+    "rllib": {"ray"},
+    "torchrl": {"torchrl", "tensordict"},
+    "benchmarl": {"benchmarl"},
+    "cleanrl": {"tyro"},  # CleanRL is a single file, not a package: tyro is its own import
+    "skrl": {"skrl"},
+    "agilerl": {"agilerl"},
+}
+# stack -> the package its constraints must pin
+STACK_PIN = {
+    "rllib": "ray",
+    "torchrl": "torchrl",
+    "benchmarl": "benchmarl",
+    "cleanrl": "tyro",
+    "skrl": "skrl",
+    "agilerl": "agilerl",
+}
+STACK_MODULES = ("ray", "torchrl", "tensordict", "benchmarl", "tyro", "skrl", "agilerl")
 
 
 @pytest.mark.parametrize("module", sorted(ADAPTERS))
@@ -66,14 +88,14 @@ def test_core_install_and_default_extras_leave_the_stacks_out() -> None:
     tomllib = pytest.importorskip("tomllib")
     project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
     extras = project["optional-dependencies"]
-    assert {"rllib", "torchrl", "benchmarl"} <= set(extras)
+    assert set(STACK_IMPORTS) <= set(extras)
     default = re.search(r"^EXTRAS\s*:?=\s*(\S+)", (ROOT / "Makefile").read_text(), re.M)
     assert default is not None
     deps = list(project["dependencies"])
     for extra in default.group(1).split(","):
         deps += extras[extra]
     names = {re.split(r"[\[<>=!~; ]", d, maxsplit=1)[0].lower() for d in deps}
-    assert not names & {"torchrl", "tensordict", "benchmarl"}, names
+    assert not names & {"torchrl", "tensordict", "benchmarl", "tyro", "skrl", "agilerl", "peft"}, names
     # plain Ray (the distributed shards' extra, whose tests run in make test) is in; RLlib stays out
     assert not [d for d in deps if "rllib" in d.lower()], deps
     assert "ray" not in {re.split(r"[\[<>=!~; ]", d, maxsplit=1)[0].lower() for d in project["dependencies"]}
@@ -88,7 +110,7 @@ def test_constraints_pin_the_cpu_torch_and_the_stack(stack: str) -> None:
     )
     pins = {k.lower(): v for k, v in pins.items()}
     assert pins["torch"] == "2.13.0+cpu"
-    assert {"rllib": "ray", "torchrl": "torchrl", "benchmarl": "benchmarl"}[stack] in pins
+    assert STACK_PIN[stack] in pins
     assert not [k for k in pins if k.startswith("nvidia")], "a CUDA package in the pins"
 
 
@@ -98,20 +120,22 @@ def test_example_exists_takes_frames_and_imports_only_its_stack(example: str) ->
     source = path.read_text()
     assert '"--frames"' in source
     tops = _imported_tops(path)
-    own = {"rllib": {"ray"}, "torchrl": {"torchrl", "tensordict"}, "benchmarl": {"benchmarl"}}[
-        EXAMPLES[example]
-    ]
+    own = STACK_IMPORTS[EXAMPLES[example]]
     assert own & tops and not (tops & set(STACK_MODULES)) - own, tops
     assert example in (ROOT / "examples" / "README.md").read_text()
 
 
 def test_make_target_runs_every_example_in_its_venv() -> None:
     text = (ROOT / "Makefile").read_text()
-    recipe = re.search(r"^test-ecosystem:.*\n((?:\t.*\n?)+)", text, re.M)
-    assert recipe is not None, "no test-ecosystem target"
-    lines = recipe.group(1)
+    whole = re.search(r"^test-ecosystem:(.*)$", text, re.M)
+    assert whole is not None, "no test-ecosystem target"
     for example, stack in EXAMPLES.items():
-        assert re.search(rf"{stack},examples/{re.escape(example)} --frames", lines), example
+        # one target per stack, built on that stack's venv, and test-ecosystem runs them all
+        recipe = re.search(rf"^test-ecosystem-{stack}:(.*)\n((?:\t.*\n?)+)", text, re.M)
+        assert recipe is not None, f"no test-ecosystem-{stack} target"
+        assert f"$(ECO)/{stack}/.installed" in recipe.group(1), stack
+        assert re.search(rf"{stack},examples/{re.escape(example)} --frames", recipe.group(2)), example
+        assert f"test-ecosystem-{stack}" in whole.group(1).split(), stack
     assert ".venv-eco/" in (ROOT / ".gitignore").read_text().splitlines()
     ci = (ROOT / ".ci" / "run").read_text()
     assert ci.index("make test\n") < ci.index("make test-ecosystem")
