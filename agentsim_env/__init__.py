@@ -9,12 +9,17 @@ Example:
     >>> import agentsim_env
     >>> env = agentsim_env.make("navigation", n_agents=8)
     >>> obs, infos = env.reset(seed=0)
+
+PettingZoo's constructor names: ``agentsim_env.parallel_env(name, **config)`` (the same as ``make``) and
+``agentsim_env.env(name, **config)`` (the AEC env); per scenario, ``agentsim_env.scenarios.<name>_v<version>``
+has ``parallel_env``, ``env`` and ``raw_env``. Gymnasium ids: see ``agentsim_env.gymnasium_envs``.
 """
 
 from __future__ import annotations
 
 from typing import Any
 
+from agentsim_env import env  # the env package, callable: env(name, **config) is the AEC env
 from agentsim_env._compile_notice import install as _install_compile_notice
 from agentsim_env._numba_cache import ensure_numba_cache as _ensure_numba_cache
 
@@ -55,4 +60,4 @@ def parallel_env(name: str, **config: Any) -> Any:
     return make(name, **config)
 
 
-__all__ = ["__version__", "list_scenarios", "make", "parallel_env"]
+__all__ = ["__version__", "env", "list_scenarios", "make", "parallel_env"]

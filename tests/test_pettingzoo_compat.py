@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+import types
 
 import pytest
 
@@ -61,3 +62,62 @@ def test_render_modes_with_the_extras_installed() -> None:
     pytest.importorskip("websockets")
     pytest.importorskip("pygame")
     assert agentsim_env.make("navigation", n_agents=2).metadata["render_modes"] == ["human", "rgb_array", "web"]
+
+
+def test_aec_constructor_beside_parallel_env() -> None:
+    from pettingzoo import AECEnv
+    from pettingzoo.test import api_test
+
+    aec = agentsim_env.env("navigation", n_agents=3, max_cycles=20)
+    assert isinstance(aec, AECEnv)
+    assert aec.possible_agents == agentsim_env.parallel_env("navigation", n_agents=3).possible_agents
+    api_test(aec, num_cycles=30)
+    with pytest.raises(ValueError, match="ended_agents must be 'leave' for the AEC API"):
+        agentsim_env.env("navigation", ended_agents="stay")
+    with pytest.raises(ValueError, match="unknown config key"):
+        agentsim_env.env("navigation", n_agnets=3)
+    # the name is also the env subpackage's: its modules stay reachable as attributes
+    import agentsim_env.env.vector as vector
+    from agentsim_env.env import single_agent
+
+    assert agentsim_env.env.vector is vector and agentsim_env.env.single_agent is single_agent
+
+
+@pytest.mark.parametrize("name", agentsim_env.list_scenarios())
+def test_per_scenario_modules_the_pettingzoo_way(name: str) -> None:
+    # as pettingzoo.mpe.simple_v3: module <name>_v<version> with parallel_env, env (AEC) and raw_env
+    import importlib
+
+    from pettingzoo import AECEnv
+    from pettingzoo.test import max_cycles_test
+
+    from agentsim_env.scenarios.registry import scenario_class
+
+    module_name = f"{name}_v{scenario_class(name).version}"
+    mod = importlib.import_module(f"agentsim_env.scenarios.{module_name}")
+    par = mod.parallel_env()
+    assert par.metadata["name"] == module_name
+    assert isinstance(mod.env(), AECEnv) and isinstance(mod.raw_env(), AECEnv)
+    assert mod.raw_env().unwrapped is not None
+    # PettingZoo's check drives random actions and wants every agent to reach max_cycles: collisions off
+    collisions_off = types.SimpleNamespace(parallel_env=lambda **kw: mod.parallel_env(collisions=False, **kw),
+                                           env=lambda **kw: mod.env(collisions=False, **kw))  # fmt: skip
+    max_cycles_test(collisions_off)
+
+
+GYMNASIUM_BY_ID = """
+import gymnasium
+import agentsim_env
+assert not [i for i in gymnasium.registry if i.startswith("agentsim/")]  # importing the package registers nothing
+env = gymnasium.make("agentsim_env.gymnasium_envs:agentsim/navigation-v0", n_agents=1)
+print(type(env.unwrapped).__name__, env.observation_space.shape)
+print(sorted(i for i in gymnasium.registry if i.startswith("agentsim/")))
+"""
+
+
+def test_gymnasium_ids_registered_by_importing_one_module() -> None:
+    res = subprocess.run([sys.executable, "-c", GYMNASIUM_BY_ID], capture_output=True, text=True, timeout=120)
+    assert res.returncode == 0, res.stderr[-3000:]
+    first, ids = res.stdout.splitlines()[:2]
+    assert first.startswith("SingleAgentEnv (")
+    assert ids == str(sorted(f"agentsim/{n}-v0" for n in agentsim_env.list_scenarios()))

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
-from pettingzoo.utils.conversions import parallel_to_aec
+from pettingzoo.utils.conversions import parallel_to_aec, parallel_to_aec_wrapper
 
 from agentsim_env.core.pipeline import EpisodeSeeds
 from agentsim_env.core.threads import check_num_threads
@@ -422,8 +422,15 @@ class AgentSimParallelEnv(MessageCalls, ParallelEnv):
                 self._window = None
 
 
-def to_aec(env: AgentSimParallelEnv) -> Any:
+def to_aec(env: AgentSimParallelEnv, *, raw: bool = False) -> Any:
     """The AEC version of a parallel env (PettingZoo's ``parallel_to_aec``).
+
+    Args:
+        env: The parallel env.
+        raw: Without PettingZoo's order checks (its ``parallel_to_aec_wrapper`` alone), as a ``raw_env``.
+
+    Returns:
+        The AEC env.
 
     Raises:
         ValueError: ``env`` was built with ``ended_agents="stay"``: in the AEC API an agent that ended takes one
@@ -434,7 +441,7 @@ def to_aec(env: AgentSimParallelEnv) -> Any:
             f"ended_agents must be 'leave' for the AEC API (an agent that ended steps once with None and leaves), "
             f"got {env.ended_agents!r}; ended_agents='stay' is for parallel clients"
         )
-    return parallel_to_aec(env)
+    return parallel_to_aec_wrapper(env) if raw else parallel_to_aec(env)
 
 
 #: The keys of ``build_parallel_env`` (and ``agentsim_env.make``) that configure the env, not the scenario.
