@@ -371,7 +371,11 @@ def _run(args: argparse.Namespace, config: dict[str, Any], policy_name: str) -> 
             print(f"| {key} per agent | {frac.mean():.3f} | {frac.std():.3f} |")
     if traj is not None:
         shown = Path(policy_name).name.removesuffix(".zip") or "model"  # a model path: its folder's name
-        name = f"{args.scenario}_{shown}_seed{args.seed}{config_tag(config)}.png"
+        # HASH names the --set values only: a trained model's own env config is named by the model's folder
+        from agentsim_env.scenarios.registry import scenario_class
+
+        given = parse_set(scenario_class(args.scenario).config_cls, args.set or [])
+        name = f"{args.scenario}_{shown}_seed{args.seed}{config_tag(given)}.png"
         title = f"{args.scenario} | policy {policy_name} | seed {args.seed} | {traj.steps} steps"
         if args.set:
             title += "\n" + textwrap.shorten(" ".join(args.set), 110, placeholder=" ...")
