@@ -395,8 +395,19 @@ class AgentSimParallelEnv(MessageCalls, ParallelEnv):
     def render(self) -> np.ndarray | None:
         """A top-down RGB frame (altitude shown as shading); in ``"human"`` mode it is shown and None returned.
 
-        In ``"web"`` mode the page follows every step by itself: ``render()`` returns None.
+        In ``"web"`` mode the page follows every step by itself: ``render()`` returns None. Without a render mode
+        it returns None and warns, once per env (as PettingZoo's and Gymnasium's envs do), since a None frame is
+        otherwise easy to miss.
         """
+        if self.render_mode is None and not getattr(self, "_render_warned", False):
+            self._render_warned = True
+            from gymnasium import logger
+
+            logger.warn(
+                "render() was called without a render mode, so it returns None; build the env with "
+                f"render_mode= one of {self.metadata['render_modes']} (e.g. agentsim_env.make(name, "
+                "render_mode='rgb_array'))"
+            )
         if self.render_mode is None or self.render_mode == "web":
             return None
         from agentsim_env.render.topdown import render_topdown
