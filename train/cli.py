@@ -25,6 +25,7 @@ for the scenario config (env.n_agents=8, env.comms.loss=0.5).
 examples:
   agentsim train navigation                                  # train/configs/navigation.yaml
   agentsim train navigation --timesteps 200000 --out outputs/train/nav_small
+  agentsim train uav_release --timesteps 20000 --eval-baselines default   # evaluate beside B5_cvt only
   agentsim train relay --config relay_nocomm --set seed=1 ppo.learning_rate=0.0001
   agentsim train navigation --out outputs/train/nav --resume  # continue from the newest checkpoint that loads
   agentsim train navigation --out outputs/train/nav --eval-only --record eval.db
@@ -77,6 +78,9 @@ def _arguments(t: argparse.ArgumentParser) -> None:
                    help="continue the run in --out from its newest checkpoint that loads")  # fmt: skip
     t.add_argument("--eval-only", action="store_true", help="evaluate the model in --out, do not train")
     t.add_argument("--no-eval", action="store_true", help="skip the evaluation against the baselines")
+    t.add_argument("--eval-baselines", choices=["none", "default", "all"], default=None,
+                   help="baselines the evaluation plays beside the model: none, the scenario's default one, or all "
+                   "(over the config's eval.baselines; all can take far longer than a short training run)")  # fmt: skip
     t.add_argument("--record", default=None, metavar="PATH",
                    help="record the evaluation episodes to this SQLite store (one run per policy)")  # fmt: skip
     t.add_argument("--record-training", default=None, metavar="PATH",
@@ -91,6 +95,8 @@ def _load(args: argparse.Namespace) -> Any:
     for key in ("timesteps", "seed", "worlds", "vec"):
         if getattr(args, key) is not None:
             overrides[key] = getattr(args, key)
+    if getattr(args, "eval_baselines", None) is not None:
+        overrides["eval"] = {**overrides.get("eval", {}), "baselines": args.eval_baselines}
     return load_config(args.config, overrides, scenario=args.scenario)
 
 
@@ -145,7 +151,11 @@ def _train_and_report(args: argparse.Namespace, cfg: Any, out: Path) -> int:
     print(f"\n{cfg.scenario}: {summary}")
     rows: list[dict[str, Any]] = []
     if not args.no_eval:
-        rows = evaluate_policies(cfg, model, name=out.name, record=args.record, progress=progress)
+        from tqdm.auto import tqdm
+
+        # the cost lines go through tqdm so that they do not break its progress bar
+        rows = evaluate_policies(cfg, model, name=out.name, record=args.record, progress=progress,
+                                 report=lambda line: tqdm.write(line, file=sys.stdout))  # fmt: skip
         csv_path, md_path = write_table(rows, out)
         seeds = cfg.eval.seed_list()
         print(f"\nevaluation over seeds {seeds[0]}..{seeds[-1]} ({len(seeds)} episodes per policy):\n")

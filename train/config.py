@@ -116,7 +116,8 @@ class EvalConfig:
         env: Scenario config keys for every evaluation episode, over the training ``env``.
         baseline_env: Keys for the scripted baselines' episodes only, over ``env`` (for a learned mode
             that the scripted policies do not use).
-        baselines: ``all`` (every scripted baseline of the scenario), ``none``, or a comma-separated list.
+        baselines: ``all`` (every scripted baseline of the scenario), ``default`` (the scenario's default
+            baseline), ``none``, or a comma-separated list (``agentsim train --eval-baselines`` sets it).
     """
 
     seeds: int = 20

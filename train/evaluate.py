@@ -12,7 +12,8 @@ got there.
 from __future__ import annotations
 
 import csv
-from collections.abc import Sequence
+import time
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -24,20 +25,23 @@ __all__ = ["baselines_of", "evaluate_policies", "format_table", "write_table"]
 
 
 def baselines_of(cfg: TrainConfig) -> list[str]:
-    """The scripted baselines ``cfg.eval.baselines`` selects (``all``, ``none`` or a comma list)."""
+    """The scripted baselines ``cfg.eval.baselines`` selects (``all``, ``default``: the scenario's default
+    baseline, ``none`` or a comma list)."""
     from agentsim_env.policies.registry import BASELINES
 
     known = list(BASELINES.get(cfg.scenario, {}))
     sel = cfg.eval.baselines.strip()
     if sel == "all":
         return known
+    if sel == "default":
+        return known[:1]  # the registry lists the default first
     if sel in ("none", ""):
         return []
     names = [s.strip() for s in sel.split(",") if s.strip()]
     bad = [n for n in names if n not in known]
     if bad:
         raise ValueError(f"eval.baselines: {bad[0]!r} is not a baseline of {cfg.scenario!r}; "
-                         f"choose 'all', 'none' or from {known}")  # fmt: skip
+                         f"choose 'all', 'default', 'none' or from {known}")  # fmt: skip
     return names
 
 
@@ -50,7 +54,9 @@ def _episode_extras(env: Any) -> dict[str, float]:
     return {}
 
 
-def _play(env: Any, policy: Any, name: str, kind: str, seeds: Sequence[int], bar: Any) -> dict[str, Any]:
+def _play(env: Any, policy: Any, name: str, kind: str, seeds: Sequence[int], bar: Any,
+          first: Callable[[float], None] | None = None) -> dict[str, Any]:  # fmt: skip
+    """Play ``seeds``; ``first`` is told the first episode's wall time (s)."""
     from agentsim_env.policies.rollout import run_episode
 
     n = len(env.possible_agents)
@@ -66,7 +72,11 @@ def _play(env: Any, policy: Any, name: str, kind: str, seeds: Sequence[int], bar
 
     for s in seeds:
         last.clear()
+        t0 = time.perf_counter()
         ep = run_episode(env, policy, s, on_step=note_finals if finals else None)
+        if first is not None:
+            first(time.perf_counter() - t0)
+            first = None
         returns.append(float(np.mean(list(ep.returns.values()))))
         sums.append({k: v / n for k, v in ep.info_sums.items() if k in events})
         extras.append({**last, **_episode_extras(env)})
@@ -81,8 +91,25 @@ def _play(env: Any, policy: Any, name: str, kind: str, seeds: Sequence[int], bar
     return row
 
 
+def _secs(t: float) -> str:
+    """Seconds to two significant digits or so (0.4, 3.2, 87, 1240)."""
+    return f"{t:.1f}" if t < 10 else f"{t:.0f}"
+
+
+def _cost_line(cfg: TrainConfig, with_model: bool, n_baselines: int, n_seeds: int) -> str:
+    """What the evaluation will play, e.g. ``evaluating the model and 10 baselines (--eval-baselines all) x
+    10 seeds = 110 episodes``."""
+    sel = cfg.eval.baselines.strip()
+    how = f"--eval-baselines {sel}" if sel in ("none", "default", "all") else f"eval.baselines={sel}"
+    played = f"{n_baselines} baseline{'' if n_baselines == 1 else 's'} ({how})"
+    n = (n_baselines + int(with_model)) * n_seeds
+    line = f"evaluating {'the model and ' if with_model else ''}{played} x {n_seeds} seeds = {n} episodes"
+    return line + ("; --eval-baselines default or none for a quicker one" if n_baselines > 1 else "")
+
+
 def evaluate_policies(cfg: TrainConfig, model: Any = None, *, name: str = "learned",
-                      record: str | Path | None = None, progress: bool = False) -> list[dict[str, Any]]:  # fmt: skip
+                      record: str | Path | None = None, progress: bool = False,
+                      report: Callable[[str], None] | None = None) -> list[dict[str, Any]]:  # fmt: skip
     """Play the trained model (if given) and the selected baselines over ``cfg.eval``'s seeds.
 
     Args:
@@ -91,6 +118,9 @@ def evaluate_policies(cfg: TrainConfig, model: Any = None, *, name: str = "learn
         name: The model's name in the table.
         record: An SQLite store to record every evaluation episode to (one run per policy).
         progress: Show a progress bar over episodes.
+        report: Told what the evaluation costs, in three lines: the episodes it plays, an estimate of the time
+            after the first episode (its time x the episodes; baselines differ, so it is rough), and the time
+            taken. Evaluating every baseline can take far longer than a short training run.
 
     Returns:
         One row per policy (the model first), as described in the module docstring.
@@ -105,14 +135,18 @@ def evaluate_policies(cfg: TrainConfig, model: Any = None, *, name: str = "learn
     if model is not None:
         jobs.append((name, "learned", model, cfg.eval_env()))
     jobs += [(b, "baseline", b, cfg.eval_env(baseline=True)) for b in baselines]
+    total = len(jobs) * len(seeds)
+    say = report if report is not None else (lambda _line: None)
+    say(_cost_line(cfg, model is not None, len(baselines), len(seeds)))
     bar = None
     if progress:
         from tqdm.auto import tqdm
 
-        bar = tqdm(total=len(jobs) * len(seeds), desc=f"evaluate {cfg.scenario}", unit="episode")
+        bar = tqdm(total=total, desc=f"evaluate {cfg.scenario}", unit="episode")
     rows = []
+    t0 = time.perf_counter()
     try:
-        for label, kind, what, env_cfg in jobs:
+        for i, (label, kind, what, env_cfg) in enumerate(jobs):
             env = agentsim_env.make(cfg.scenario, **env_cfg)
             if record is not None:
                 from agentsim_env.recorder import record as record_env
@@ -125,7 +159,9 @@ def evaluate_policies(cfg: TrainConfig, model: Any = None, *, name: str = "learn
             else:
                 policy = LearnedPolicy(what, env, name=label)
             try:
-                rows.append(_play(env, policy, label, kind, seeds, bar))
+                first = (lambda t: say(f"~{_secs(t * total)} s in all at the first episode's pace ({t:.2f} s)")) if (
+                    i == 0) else None  # fmt: skip
+                rows.append(_play(env, policy, label, kind, seeds, bar, first))
             except BaseException:
                 if record is not None:
                     env.recorder.finish("incomplete")
@@ -134,6 +170,7 @@ def evaluate_policies(cfg: TrainConfig, model: Any = None, *, name: str = "learn
     finally:
         if bar is not None:
             bar.close()
+    say(f"evaluation: {total} episodes in {time.perf_counter() - t0:.1f} s")
     return rows
 
 
