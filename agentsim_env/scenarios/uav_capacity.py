@@ -25,7 +25,9 @@ def default_fleet() -> tuple[int, int]:
     from agentsim_env.scenarios.uav_config import UavReleaseConfig
 
     f = UavReleaseConfig.__dataclass_fields__
-    return int(f["n_agents"].default), int(f["payload"].default)
+    n_uavs, payload = f["n_agents"].default, f["payload"].default
+    assert isinstance(n_uavs, int) and isinstance(payload, int)  # plain int defaults, no factories
+    return n_uavs, payload
 
 
 def _ceil_div(a: int, b: int) -> int:
