@@ -59,12 +59,12 @@ PLAYWRIGHT_HINT = 'exporting the 3D view needs Playwright: pip install "agentsim
 CHROMIUM_HINT = ("exporting the 3D view needs Chromium (none found): install it (Debian/Ubuntu: apt install "
                  "chromium) or set AGENTSIM_CHROMIUM to its executable")  # fmt: skip
 
-# Only the 3D view and its legend: the panel, header, replay bar and error banner are hidden; a label names the
-# replay and the step (the page's own status line is in the hidden panel). Below LEGEND_MIN_WIDTH the legend's
-# lines would take a third of the frame, so it is hidden too.
+# Only the 3D view and its legend: the panel, header, replay bar, error banner and the view's own buttons are
+# hidden; a label names the replay and the step (the page's own status line is in the hidden panel). Below
+# LEGEND_MIN_WIDTH the legend's lines would take a third of the frame, so it is hidden too.
 LEGEND_MIN_WIDTH = 480
 _PAGE_CSS = """
-#header, #side, #replay-bar, #error-banner { display: none !important; }
+#header, #side, #replay-bar, #error-banner, #view-options { display: none !important; }
 #export-label { position: fixed; left: 8px; top: 6px; z-index: 5; padding: 2px 6px; border-radius: 3px;
   font: 13px/1.3 system-ui, sans-serif; color: #222; background: rgba(255, 255, 255, .8); pointer-events: none; }
 """
