@@ -122,9 +122,11 @@ def _live(args: argparse.Namespace) -> int:
     policy = make_policy(args.scenario, env, policy_name)
     speed = args.speed if args.speed is not None else clamp_speed(1.0 / env.world.config.dt)
     viewer = WebViewer(host=args.host, port=args.port, speed=speed, title=f"{args.scenario} | {policy_name}",
-                       quiet=True)  # fmt: skip
+                       quiet=True, wait=not args.no_wait)  # fmt: skip
     url = viewer.attach(env.world, env.scenario)
-    print(f"agentsim view: {args.scenario} with policy {policy_name} at {url}  (Ctrl-C stops)", file=sys.stderr)
+    waits = "" if args.no_wait else "; it starts when the page opens"
+    print(f"agentsim view: {args.scenario} with policy {policy_name} at {url}  (Ctrl-C stops{waits})",
+          file=sys.stderr)  # fmt: skip
     _warn_host(args.host)
     if args.open:
         webbrowser.open(url)
@@ -227,19 +229,21 @@ def add_view_commands(sub: Any, set_help: str, announce: Any) -> None:
                    help="steps per second, 0.1..10000 (default: real time; 0: as fast as it runs)")
     v.add_argument("--episodes", type=int, default=None, help="stop after this many episodes (default: run on)")
     v.add_argument("--steps", type=int, default=None, help="stop after this many steps (default: run on)")
+    v.add_argument("--no-wait", action="store_true", help="start the simulation at once (default: wait for the "
+                   "first page, so that it shows the episode from step 0)")  # fmt: skip
     v.add_argument("--replay", default=None, metavar="RUN.db", help="replay an episode of this store instead")
     v.add_argument("--run", type=int, default=None, help="replay: run id (default: the last)")
     v.add_argument("--episode", type=int, default=None, help="replay: episode of the run (default: 0)")
     v.add_argument("--world", type=int, default=0, help="replay: world of a batched run")
-    _network_options(v)
-    v.set_defaults(func=cmd_view, announce=announce)
-    z = sub.add_parser("zones", help="hot-zone files: the designer page, or a check",
-                       description="Design hot zones in the browser, or check a zone file (docs/zones.md).",
     v.add_argument("--out", default=None, metavar="VIDEO", help="replay: write the 3D view to VIDEO (.mp4 or .gif) "
                    "through headless Chromium instead of serving it")  # fmt: skip
     v.add_argument("--fps", type=float, default=None, help="--out: frames per second (default: real time)")
     v.add_argument("--size", type=int, default=None, help="--out: video width in pixels, 160..1920 (16:9; 960)")
     v.add_argument("--every", type=int, default=None, help="--out: draw every K-th recorded step (and the last)")
+    _network_options(v)
+    v.set_defaults(func=cmd_view, announce=announce)
+    z = sub.add_parser("zones", help="hot-zone files: the designer page, or a check",
+                       description="Design hot zones in the browser, or check a zone file (docs/zones.md).",
                        epilog=ZONES_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
     zsub = z.add_subparsers(dest="zones_command", required=True, metavar="ACTION")
     d = zsub.add_parser("design", help="the hot-zone designer page (saves only to FILE)")

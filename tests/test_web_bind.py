@@ -42,7 +42,7 @@ def test_agentsim_view_listens_on_loopback_only(monkeypatch: pytest.MonkeyPatch)
         return real(*args, **kw)
 
     monkeypatch.setattr(rollout, "run_episode", first_episode)
-    assert main(["view", "navigation", "--set", "n_agents=3", "--steps", "2", "--speed", "0"]) == 0
+    assert main(["view", "navigation", "--set", "n_agents=3", "--steps", "2", "--speed", "0", "--no-wait"]) == 0
     _assert_loopback(seen[0], "agentsim view")
 
 

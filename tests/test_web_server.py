@@ -317,7 +317,7 @@ def test_zones_check_lists_the_zones(capsys: Any) -> None:
 
 
 def test_view_runs_a_few_steps_and_stops(capsys: Any) -> None:
-    assert main(["view", "navigation", "--set", "n_agents=3", "--steps", "15", "--speed", "0"]) == 0
+    assert main(["view", "navigation", "--set", "n_agents=3", "--steps", "15", "--speed", "0", "--no-wait"]) == 0
     assert "http://127.0.0.1:" in capsys.readouterr().err
 
 

@@ -25,7 +25,16 @@ from agentsim_env.core.budget import check_memory
 from agentsim_env.recorder.checks import check_values, open_read
 from agentsim_env.recorder.replay import ReplayInfo, replay_info
 from agentsim_env.recorder.schema import StoreError
-from agentsim_env.render.web.frames import MAX_MESSAGE_LINES, pack_frame, page_kinds, scene_message
+from agentsim_env.render.web.frames import (
+    COLLIDED,
+    ENDED,
+    MAX_MESSAGE_LINES,
+    OFFLINE,
+    message_log_kind,
+    pack_frame,
+    page_kinds,
+    scene_message,
+)
 from agentsim_env.render.web.server import ClientError, WebServer
 from agentsim_env.render.web.viewer import Controls, clamp_speed
 
@@ -41,6 +50,8 @@ class ReplayData:
         messages: Per step index, ``(M, 2)`` sender / receiver and ``(M,)`` page kind codes.
         sensors: ``(K, 7)`` release step, release x, y, z, land step (-1: never), land x, y.
         log: Per step index, the log lines.
+        status: ``(T, N)`` why each agent is not active (``frames.STATUS_NAMES``): collided or offline from the
+            recorded event on, ended once offline otherwise (the store does not say who arrived).
 
     Raises:
         ValueError: When the arrays would not fit the memory limit (``core.budget``), checked before allocating.
@@ -69,6 +80,7 @@ class ReplayData:
         info, n = self.info, self.info.n_agents
         key = (info.run, info.episode, info.world)
         index = {int(s): i for i, s in enumerate(self.steps)}
+        why = [(-1, 0)] * n  # per agent: (step index, status code) of the first collision or timeout recorded
         con = open_read(info.path)
         try:
             check_values(con, info.path, "messages", "run = ? AND episode = ? AND world = ?", key)
@@ -101,12 +113,14 @@ class ReplayData:
                 self.messages.append((np.array([(a, b) for a, b, _ in m], np.int32).reshape(-1, 2),
                                       page_kinds(np.array([k for *_, k in m], np.int64))))  # fmt: skip
                 for a, b, k in m[:MAX_MESSAGE_LINES]:
-                    self._add(s, "message", f"{KIND_NAMES.get(k, k)} {self._name(a)} -> {self._name(b)}", [b])
+                    self._add(s, message_log_kind(k), f"{KIND_NAMES.get(k, k)} {self._name(a)} -> {self._name(b)}", [b])
                 if len(m) > MAX_MESSAGE_LINES:
                     self._add(s, "message", f"... and {len(m) - MAX_MESSAGE_LINES} more deliveries this step", [])
             for s, ev, a, b, obj, old, new in con.execute(
                 "SELECT step, event, agent, other_agent, object, old, new FROM events WHERE run = ? AND "
                 "episode = ? AND world = ? ORDER BY step", key):  # fmt: skip
+                if ev in ("collision", "offline") and a is not None and 0 <= a < n and s in index:
+                    why[a] = (index[s], COLLIDED if ev == "collision" else OFFLINE) if why[a][0] < 0 else why[a]
                 if ev == "collision":
                     other = f"agent {self._name(b)}" if b is not None and b >= 0 else f"object #{obj}"
                     self._add(s, "collision", f"{self._name(a)} collided with {other}", [a])
@@ -126,6 +140,11 @@ class ReplayData:
                 self._add(s, "landing", f"{k} sensor{'s' if k > 1 else ''} landed", [])
         finally:
             con.close()
+        # the frame's status: collided or offline from the step the event was recorded, else ended once offline
+        self.status = np.where(self.online == 0, ENDED, 0).astype(np.uint8)
+        for a, (i, code) in enumerate(why):
+            if i >= 0:
+                self.status[i:, a] = np.where(self.online[i:, a] == 0, code, 0)
         for i in range(1, len(self.steps)):
             ended = np.flatnonzero(self.online[i - 1].astype(bool) & ~self.online[i].astype(bool))
             if ended.size:
@@ -148,7 +167,7 @@ class ReplayData:
         """The frame arrays of step index ``i``."""
         step = int(self.steps[i])
         out = {"pos": self.pos[i], "heading": self.heading[i], "group": self.group[i], "online": self.online[i],
-               "msg": self.messages[i][0], "msg_kind": self.messages[i][1]}  # fmt: skip
+               "status": self.status[i], "msg": self.messages[i][0], "msg_kind": self.messages[i][1]}  # fmt: skip
         if len(self.sensors):
             s = self.sensors
             out_pos, state = [], []
@@ -250,6 +269,7 @@ class ReplayViewer:
                                         "text": why, "slots": []})  # fmt: skip
         rate = speed if speed is not None else clamp_speed(1.0 / self.info.dt if self.info.dt else 10.0)
         self.controls = Controls(rate)
+        self.controls.reply = self._status  # replies to the controls carry the step and the steps/s shown
         self.controls.n_agents = self.info.n_agents
         self.server = WebServer("viewer.html", host=host, port=port, title="agentsim replay",
                                 handlers=self.controls.handlers({"seek": self._seek, "play": self.controls._resume}),

@@ -166,6 +166,29 @@ class Scenario(ABC, Generic[ConfigT]):
         """Scenario markers for the renderer: ``(xy (m, 2), rgb (m, 3) uint8, radius (m,))`` or ``None``."""
         return None
 
+    def view_markers(self, world: World, w: int) -> list[dict[str, Any]]:
+        """What the 3D viewer draws on the ground for world ``w`` (sent once per episode; docs/viewer.md).
+
+        Each marker is a dict: ``kind`` (``"goal"``, ``"target"``, ``"zone"`` or ``"marker"``), ``pos`` (x, y, z),
+        ``radius`` (m), ``colour`` (``"#rrggbb"``), ``label``, and optionally ``slot`` (the agent it belongs to),
+        ``group`` and, for zones, ``density`` (samples from the centre to the rim, max 1). The default draws
+        ``markers()`` as plain discs; scenarios override it to say what each marker is.
+
+        Args:
+            world: The scenario's world.
+            w: World index.
+
+        Returns:
+            The markers (possibly none).
+        """
+        found = self.markers(world, w)
+        if found is None:
+            return []
+        xy, rgb, radius = found
+        return [{"kind": "marker", "pos": [round(float(x), 3), round(float(y), 3), 0.0],
+                 "radius": round(float(r), 3), "colour": "#{:02x}{:02x}{:02x}".format(*(int(v) for v in c)),
+                 "label": f"marker {i}"} for i, ((x, y), c, r) in enumerate(zip(xy, rgb, radius))]  # fmt: skip
+
     # -- sizes ---------------------------------------------------------------------------------------------
     @property
     def n_agents(self) -> int:

@@ -40,7 +40,7 @@ Version history: v0, first release.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import numba as nb
 import numpy as np
@@ -331,6 +331,14 @@ class NavigationScenario(Scenario[NavigationConfig]):
         t = world.task
         rgb = np.where(t.arrived[sl, None], [160, 200, 160], [40, 170, 60]).astype(np.uint8)
         return t.goal[sl, :2], rgb, np.full(self.n_agents, self.config.goal_radius)
+
+    def view_markers(self, world: World, w: int) -> list[dict[str, Any]]:
+        """Each agent's goal (the viewer draws it in its agent's colour and links the two)."""
+        sl = slice(w * self.n_agents, (w + 1) * self.n_agents)
+        names, r = self.agent_names(), round(float(self.config.goal_radius), 3)
+        return [{"kind": "goal", "pos": [round(float(x), 3), round(float(y), 3), 0.0], "radius": r,
+                 "colour": "#2e9e44", "label": f"goal of {names[i]}", "slot": i}
+                for i, (x, y) in enumerate(world.task.goal[sl, :2].tolist())]  # fmt: skip
 
 
 SCENARIO = NavigationScenario

@@ -49,6 +49,7 @@ Version history: v0, first release.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -206,6 +207,21 @@ class RelayScenario(Scenario[RelayConfig]):
         g = np.arange(self.n_groups)
         rgb = np.column_stack([40 + 70 * (g % 3), 170 - 50 * (g % 2), 60 + 60 * ((g + 1) % 3)]).astype(np.uint8)
         return world.task.target[sl][: self.n_groups].copy(), rgb, np.full(self.n_groups, self.config.arrival_radius)
+
+    def view_markers(self, world: World, w: int) -> list[dict[str, Any]]:
+        """Each group's target, with the scout that sees it (``slot``)."""
+        n = self.n_agents
+        sl = slice(w * n, (w + 1) * n)
+        t, names = world.task, self.agent_names()
+        scouts = np.flatnonzero(t.scout[sl])
+        out = []
+        for s in scouts.tolist():
+            g = s % self.n_groups  # slot i is in group i % n_groups
+            x, y = t.target[sl][s].tolist()
+            out.append({"kind": "target", "pos": [round(x, 3), round(y, 3), 0.0],
+                        "radius": round(float(self.config.arrival_radius), 3), "colour": "#2e9e44",
+                        "label": f"target of group {g} (seen by its scout {names[s]})", "slot": s, "group": g})  # fmt: skip
+        return out
 
     def group_success(self, world: World, w: int = 0, fraction: float = 0.5) -> np.ndarray:
         """Per group of world ``w``: whether at least ``fraction`` of its non-scouts arrived (so far).

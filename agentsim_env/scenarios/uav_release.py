@@ -57,6 +57,7 @@ Version history: v0, first release; autopilot mode added (off by default, layout
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -330,5 +331,22 @@ class UavReleaseScenario(Scenario[UavReleaseConfig]):
         rad = np.concatenate([self.zones.radii(), np.full(landed.sum() + falling.sum(), 1.2)])
         return xy, rgb, rad
 
+    def view_markers(self, world: World, w: int) -> list[dict[str, Any]]:
+        """The hot zones, each with its areal density sampled from the centre to the rim (scaled to max 1)."""
+        out = []
+        for i, z in enumerate(self.zones.zones):
+            r = np.linspace(0.0, z.radius, ZONE_SAMPLES)
+            prof = z.radial_profile()
+            d = np.asarray(prof.density(r), dtype=np.float64)
+            if not np.isfinite(d[0]):  # a power law is infinite at the centre: take the value half a step out
+                d[0] = float(prof.density(0.5 * r[1]))
+            top = float(d.max())
+            d = d / top if top > 0.0 and np.isfinite(top) else np.ones_like(d)
+            out.append({"kind": "zone", "pos": [float(z.centre[0]), float(z.centre[1]), 0.0], "radius": z.radius,
+                        "colour": "#d7301f", "label": z.name or f"zone {i}", "name": z.name or f"zone {i}",
+                        "n_sensors": z.n_sensors, "density": np.round(d, 4).tolist()})  # fmt: skip
+        return out
 
+
+ZONE_SAMPLES = 64  # density samples per zone sent to the viewer
 SCENARIO = UavReleaseScenario

@@ -13,8 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from agentsim_env.comms.messages import AGENT, ENV, GROUP, KIND_NAMES, OVERLAY
-from agentsim_env.scenarios.uav_zones import ZoneSet
+from agentsim_env.comms.messages import AGENT, ENV, GROUP, HEARTBEAT, KIND_NAMES, OVERLAY
 from agentsim_env.sim.world import StepEvents, World
 
 MAGIC = b"ASF1"
@@ -24,7 +23,17 @@ MSG_KIND = {AGENT: 0, GROUP: 1, ENV: 2, OVERLAY: 3}
 _PAGE_KIND = np.zeros(max(KIND_NAMES) + 1, np.uint8)  # any other kind (heartbeats) draws as an agent message
 for _k, _v in MSG_KIND.items():
     _PAGE_KIND[_k] = _v
-LOG_KINDS = ("collision", "timeout", "group", "release", "landing", "terminated", "episode", "message")
+LOG_KINDS = ("collision", "timeout", "group", "release", "landing", "terminated", "episode", "message", "broadcast",
+             "heartbeat")  # fmt: skip
+#: Log kinds the page hides until its filter box is ticked: periodic traffic that would flood the log (the
+#: controller's heartbeats, and GROUP broadcasts such as the UAVs' HELLO heartbeats every few steps).
+LOG_HIDDEN = ("broadcast", "heartbeat")
+#: The log kind of a delivered bus message, by bus kind (AGENT and ENV unicasts are "message").
+_MESSAGE_LOG_KIND = {GROUP: "broadcast", HEARTBEAT: "heartbeat"}
+#: Why an agent is drawn as it is (the frame's ``status`` array): still acting, reached its goal, ended by a
+#: collision, taken offline (missed heartbeats), or ended otherwise (a scout done, a battery empty...).
+STATUS_NAMES = ("active", "arrived", "collided", "offline", "ended")
+ACTIVE, ARRIVED, COLLIDED, OFFLINE, ENDED = range(len(STATUS_NAMES))
 MAX_MESSAGE_LINES = 40  # message log lines per step (the rest are counted in one line)
 MAX_DRAWN_MESSAGES = 4000  # message segments per frame
 DENSITY_SAMPLES = 64
@@ -103,17 +112,44 @@ def density_curve(zone: Any, samples: int = DENSITY_SAMPLES) -> np.ndarray:
     return d / top if top > 0.0 and np.isfinite(top) else np.ones_like(d)
 
 
-def _zones(scenario: Any) -> list[dict[str, Any]]:
-    """The scenario's hot zones with their density profiles sampled from the centre to the rim."""
-    zs = getattr(scenario, "zones", None)
-    if not isinstance(zs, ZoneSet):
-        return []
-    out = []
-    for i, z in enumerate(zs.zones):
-        d = density_curve(z)
-        out.append({"name": z.name or f"zone {i}", "centre": list(z.centre), "radius": z.radius,
-                    "n_sensors": z.n_sensors, "density": np.round(d, 4).tolist()})  # fmt: skip
-    return out
+def _zones(markers: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The ``zones`` list of the scene message (its older form): the scenario's zone markers."""
+    return [{"name": m.get("name", m.get("label", "")), "centre": list(m["pos"][:2]), "radius": m["radius"],
+             "n_sensors": m.get("n_sensors", 0), "density": m.get("density", [])}
+            for m in markers if m.get("kind") == "zone"]  # fmt: skip
+
+
+def new_status(n: int) -> np.ndarray:
+    """A fresh ``status`` array for ``n`` agents (all ``ACTIVE``): the start of an episode."""
+    return np.zeros(n, np.uint8)
+
+
+def track_status(status: np.ndarray, world: World, w: int, events: StepEvents) -> None:
+    """Record in ``status`` why agents of world ``w`` stopped this step (kept until the next episode).
+
+    A collision (stage 5) is ``COLLIDED``, a heartbeat timeout ``OFFLINE``; a termination the scenario scored is
+    ``ARRIVED`` when its ``arrived`` info says so, else ``ENDED``. The first reason an agent gets is kept.
+    """
+    n = status.shape[0]
+    lo = w * n
+
+    def mark(slots: np.ndarray, code: int) -> None:
+        s = np.asarray(slots, dtype=np.int64) - lo
+        s = s[(s >= 0) & (s < n)]
+        s = s[status[s] == ACTIVE]
+        status[s] = code
+
+    mark(events.went_offline, COLLIDED)
+    mark(events.timed_out, OFFLINE)
+    sc = events.scores
+    if sc is not None:
+        term = sc.terminated[lo : lo + n] & sc.acting[lo : lo + n]
+        arrived = sc.info.get("arrived")
+        hit = term & (np.asarray(arrived[lo : lo + n]) > 0) if arrived is not None else np.zeros(n, bool)
+        mark(np.flatnonzero(hit) + lo, ARRIVED)
+        mark(np.flatnonzero(term & ~hit) + lo, ENDED)
+    gone = ~world.state.online[lo : lo + n].astype(bool) & (status == ACTIVE)
+    status[gone] = OFFLINE  # offline by any other road (a shard lost)
 
 
 def scene_message(world: World, scenario: Any, w: int = 0, *, title: str = "", mode: str = "live",
@@ -124,6 +160,7 @@ def scene_message(world: World, scenario: Any, w: int = 0, *, title: str = "", m
     st = world.state
     slots = st.slots_of_world(w)
     names = scenario.agent_names()
+    markers = scenario.view_markers(world, w)
     return {
         "type": "scene",
         "mode": mode,
@@ -141,8 +178,11 @@ def scene_message(world: World, scenario: Any, w: int = 0, *, title: str = "", m
             "centre": np.round(sc.centre[mine], 3).tolist(),
             "half": np.round(sc.half[mine], 3).tolist(),
         },
-        "zones": _zones(scenario),
+        "zones": _zones(markers),
+        "markers": markers,
         "log_kinds": list(LOG_KINDS),
+        "log_hidden": list(LOG_HIDDEN),
+        "status_names": list(STATUS_NAMES),
         "replay": replay,
     }
 
@@ -188,8 +228,13 @@ def _rays(world: World, slot: int) -> tuple[np.ndarray, np.ndarray] | None:
     return ends.astype(np.float32), (np.asarray(scan.hit_kind[slot]) != 0).astype(np.uint8)
 
 
-def state_arrays(world: World, w: int, events: StepEvents | None, selected: int | None) -> dict[str, np.ndarray]:
-    """The frame's arrays for world ``w`` (positions, headings, groups, online, messages, payloads, rays)."""
+def state_arrays(world: World, w: int, events: StepEvents | None, selected: int | None,
+                 status: np.ndarray | None = None) -> dict[str, np.ndarray]:  # fmt: skip
+    """The frame's arrays for world ``w`` (positions, headings, groups, online, status, messages, payloads, rays).
+
+    ``status``: why each agent is (not) active (``STATUS_NAMES``, kept by ``track_status``); without it, an
+    offline agent is ``OFFLINE``.
+    """
     st = world.state
     n = st.n_agents
     lo, hi = w * n, (w + 1) * n
@@ -198,6 +243,8 @@ def state_arrays(world: World, w: int, events: StepEvents | None, selected: int 
         "heading": st.heading[lo:hi].astype(np.float32),
         "group": st.group[lo:hi].astype(np.int16),
         "online": st.online[lo:hi].astype(np.uint8),
+        "status": (status.astype(np.uint8) if status is not None
+                   else np.where(st.online[lo:hi], ACTIVE, OFFLINE).astype(np.uint8)),  # fmt: skip
     }
     if events is not None:
         out["msg"], out["msg_kind"] = _messages(events, lo, hi)
@@ -215,6 +262,12 @@ def state_arrays(world: World, w: int, events: StepEvents | None, selected: int 
         if rays is not None:
             out["rays"], out["ray_hit"] = rays
     return out
+
+
+def message_log_kind(kind: int) -> str:
+    """The log kind of a delivered message of bus kind ``kind``: ``broadcast`` (GROUP), ``heartbeat`` or
+    ``message``."""
+    return _MESSAGE_LOG_KIND.get(int(kind), "message")
 
 
 def _line(step: int, episode: int, kind: str, text: str, slots: list[int]) -> dict[str, Any]:
@@ -271,7 +324,7 @@ def log_lines(world: World, scenario: Any, events: StepEvents, w: int, episode: 
         keep = np.flatnonzero((d.receiver >= lo) & (d.receiver < hi))
         for j in keep[:MAX_MESSAGE_LINES].tolist():
             kind = KIND_NAMES.get(int(d.kind[j]), str(int(d.kind[j])))
-            out.append(_line(step, episode, "message",
+            out.append(_line(step, episode, message_log_kind(int(d.kind[j])),
                              f"{kind} {name(int(d.sender[j]))} -> {name(int(d.receiver[j]))}",
                              [int(d.receiver[j]) - lo]))  # fmt: skip
         if keep.size > MAX_MESSAGE_LINES:
@@ -320,5 +373,5 @@ def agent_message(world: World, scenario: Any, w: int, slot: int) -> dict[str, A
             "inbox": inbox}  # fmt: skip
 
 
-__all__ = ["LOG_KINDS", "MAGIC", "page_kinds", "agent_message", "density_curve", "log_lines", "pack_frame", "scene_message", "state_arrays",
+__all__ = ["LOG_HIDDEN", "LOG_KINDS", "MAGIC", "STATUS_NAMES", "message_log_kind", "new_status", "track_status", "page_kinds", "agent_message", "density_curve", "log_lines", "pack_frame", "scene_message", "state_arrays",
            "unpack_frame"]  # fmt: skip

@@ -12,9 +12,20 @@ from __future__ import annotations
 import sys
 import threading
 import time
+from collections.abc import Callable
 from typing import Any
 
-from agentsim_env.render.web.frames import agent_message, log_lines, pack_frame, scene_message, state_arrays
+import numpy as np
+
+from agentsim_env.render.web.frames import (
+    agent_message,
+    log_lines,
+    new_status,
+    pack_frame,
+    scene_message,
+    state_arrays,
+    track_status,
+)
 from agentsim_env.render.web.server import TICK_S, ClientError, WebServer
 from agentsim_env.sim.world import StepEvents, World
 
@@ -76,6 +87,9 @@ class Controls:
         self._tokens = 0
         self._cond = threading.Condition()
         self._next = 0.0
+        #: The full status message the replies to pause / resume / step / speed carry (the viewer's: with the
+        #: step and the steps/s a page shows); by default the controls' own fields only.
+        self.reply: Callable[[], dict[str, Any]] = self.status
 
     def handlers(self, extra: dict[str, Any] | None = None) -> dict[str, Any]:
         """The server's command handlers for pause, resume, step, speed and select."""
@@ -93,7 +107,7 @@ class Controls:
         with self._cond:
             self.paused = True
             self._cond.notify_all()  # a pacing driver stops waiting and holds in gate() instead
-        return self.status()
+        return self.reply()
 
     def _resume(self, msg: dict[str, Any]) -> dict[str, Any]:
         self._only(msg, ())
@@ -101,7 +115,7 @@ class Controls:
             self.paused = False
             self._next = 0.0
             self._cond.notify_all()
-        return self.status()
+        return self.reply()
 
     def _step(self, msg: dict[str, Any]) -> dict[str, Any]:
         self._only(msg, ())
@@ -109,7 +123,7 @@ class Controls:
             self.paused = True
             self._tokens += 1
             self._cond.notify_all()
-        return self.status()
+        return self.reply()
 
     def _speed(self, msg: dict[str, Any]) -> dict[str, Any]:
         self._only(msg, ("value",))
@@ -120,7 +134,7 @@ class Controls:
             self.speed = float(v)
             self._next = 0.0
             self._cond.notify_all()  # a driver pacing at the old speed takes the new one at once
-        return self.status()
+        return self.reply()
 
     def _select(self, msg: dict[str, Any]) -> dict[str, Any] | None:
         self._only(msg, ("slot",))
@@ -191,11 +205,15 @@ class WebViewer:
         w: Which world of a batched world to show.
         quiet: Print nothing (otherwise the URL is printed when the server starts).
         max_fps: Most frames a second sent to a page.
+        wait: Hold the first episode until a page is connected (``agentsim view`` does; ``--no-wait`` does not),
+            so that the page shows it from step 0. ``render_mode="web"`` does not wait: call
+            ``env.viewer.wait_for_page()`` after the first ``reset`` to hold there.
     """
 
     def __init__(self, *, host: str = "127.0.0.1", port: int = 0, speed: float = 0.0, title: str = "",
-                 w: int = 0, quiet: bool = False, max_fps: float = 60.0) -> None:  # fmt: skip
+                 w: int = 0, quiet: bool = False, max_fps: float = 60.0, wait: bool = False) -> None:  # fmt: skip
         self.controls = Controls(speed)
+        self.controls.reply = self._status
         handlers = self.controls.handlers({"select": self._select})
         self.server = WebServer("viewer.html", host=host, port=port, title=title or "agentsim viewer",
                                 handlers=handlers, on_connect=self._hello, max_fps=max_fps,
@@ -216,6 +234,8 @@ class WebViewer:
         self._last_hook = 0.0
         self._frame_lock = threading.Lock()
         self._names: list[str] = []
+        self.wait = wait
+        self._why = np.zeros(0, np.uint8)  # why each agent is (not) active (frames.STATUS_NAMES)
 
     @property
     def url(self) -> str:
@@ -245,10 +265,41 @@ class WebViewer:
         assert self.world is not None, "attach() first"
         self.episode = self.episode + 1 if episode is None else episode
         self._scene = scene_message(self.world, self.scenario, self.w, title=self.title)
+        self._reset_status()
         self.server.broadcast(self._scene)
         self.server.publish_log([{"step": 0, "episode": self.episode, "kind": "episode",
                                   "text": f"episode {self.episode} started", "slots": []}])  # fmt: skip
         self._send_frame(None)
+        if self.wait:  # the first episode only: later ones go on whether or not a page watches
+            self.wait = False
+            self.wait_for_page()
+
+    def wait_for_page(self, timeout: float | None = None) -> bool:
+        """Block until a page is connected (or ``close``, or ``timeout`` seconds); whether one is.
+
+        Waits in short slices so that Ctrl-C in the calling thread is seen at once.
+        """
+        if not self.quiet and not self.server.n_pages and self.server.url:
+            print(f"agentsim viewer: waiting for a page at {self.server.url} (open it to start)", file=sys.stderr,
+                  flush=True)  # fmt: skip
+        end = None if timeout is None else time.perf_counter() + timeout
+        while not self.server.n_pages and not self.controls.closed:
+            if end is not None and time.perf_counter() >= end:
+                break
+            time.sleep(0.05)
+        return self.server.n_pages > 0
+
+    def _reset_status(self) -> None:
+        """A new episode: every agent active."""
+        assert self.world is not None
+        self._why = new_status(self.world.state.n_agents)
+
+    def _track(self, events: StepEvents) -> None:
+        """Record why agents stopped this step (every step, whether or not a frame is sent)."""
+        if self.world is not None:
+            if self._why.shape[0] != self.world.state.n_agents:
+                self._reset_status()
+            track_status(self._why, self.world, self.w, events)
 
     def _flush(self) -> None:
         """Server thread: when steps stopped after one the frame-rate cap held back, send that step's frame.
@@ -283,13 +334,15 @@ class WebViewer:
         assert world is not None
         with self._frame_lock:  # the simulation's thread and the server's (_flush, _select) both send frames
             self.seq += 1
-            arrays = state_arrays(world, self.w, events, self.controls.selected)
+            arrays = state_arrays(world, self.w, events, self.controls.selected,
+                                  self._why if self._why.shape[0] == world.state.n_agents else None)  # fmt: skip
             frame = pack_frame(self.seq, int(world.step_count[self.w]), self.episode, arrays)
             self.server.publish_frame(self.seq, frame)
 
     def hook(self, world: World, events: StepEvents) -> None:
         """Stage 10: log lines, a frame when a page can take one, status; then pace and pause."""
         srv = self.server
+        self._track(events)
         if srv.n_pages:
             srv.publish_log(log_lines(world, self.scenario, events, self.w, self.episode, self._names))
             if srv.wants_frame():
