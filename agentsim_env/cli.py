@@ -6,7 +6,8 @@ Subcommands:
     scenarios  list the registered scenarios
     evaluate   batch evaluation of the UAV sensor-release strategies (zone files x strategies x seeds):
                sensors.csv, runs.csv, summary.md (ranking) and PNG plots
-    warmup     compile and cache every simulation kernel (steps each scenario briefly); ``make install`` runs it
+    warmup     compile and cache every simulation kernel the commands reach (``agentsim_env.warmup``);
+               ``make install`` runs it
     view       the 3D web viewer: a live run with a policy, or a replay from the store (``cli_view``)
     zones      the hot-zone designer page, and a zone-file check (``cli_view``)
 
@@ -22,7 +23,6 @@ import hashlib
 import os
 import sys
 import textwrap
-import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -36,10 +36,6 @@ from agentsim_env.outdirs import prepare_out, remove_created
 #: File in the numba cache directory whose content (versions) says the kernels were compiled and cached.
 WARM_MARKER = ".agentsim-kernels-warm"
 COMPILE_NOTICE = "agentsim: compiling simulation kernels (first run only, ~30 s)..."
-#: Tiny configs for ``agentsim warmup`` (every scenario gets a short scripted episode and a short random one).
-WARMUP_CONFIG: dict[str, dict[str, Any]] = {"navigation": {"n_agents": 2}, "rendezvous": {"n_agents": 2},
-                                            "uav_release": {"zones": "tiny"}}  # fmt: skip
-WARMUP_STEPS = 5
 SET_HELP = (
     "config values, parsed by each field's type: booleans true/false/1/0/yes/no, integers, numbers, "
     "lists as 12,20 or [12,20], none/null for optional fields, sub-configs as a JSON object or dotted keys "
@@ -477,27 +473,11 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 
 
 def cmd_warmup(args: argparse.Namespace) -> int:
-    """Build and step every registered scenario briefly, which compiles and caches every kernel."""
-    import agentsim_env
-    from agentsim_env.policies.registry import BASELINES, make_policy
-    from agentsim_env.policies.rollout import run_episode
+    """Compile and cache every kernel the commands reach (``agentsim_env.warmup``), then mark the cache warm."""
+    from agentsim_env.warmup import warm_up
 
     announce_compile()
-    for name in agentsim_env.list_scenarios():
-        t0 = time.perf_counter()
-        config = {**WARMUP_CONFIG.get(name, {}), "max_steps": WARMUP_STEPS}
-        env = agentsim_env.make(name, **config)
-        if name in BASELINES:
-            run_episode(env, make_policy(name, env), 0)
-        # random actions too: they reach kernels a short scripted episode does not (messages, falling payloads)
-        env.reset(seed=0)
-        for a in env.agents:
-            env.action_space(a).seed(0)
-        while env.agents:
-            env.step({a: env.action_space(a).sample() for a in env.agents})
-        env.close()
-        if not args.quiet:
-            print(f"  {name:14s} ready ({time.perf_counter() - t0:.1f} s)")
+    warm_up(None if args.quiet else lambda name, s: print(f"  {name:14s} ready ({s:.1f} s)", flush=True))
     mark_warm()
     if not args.quiet:
         print("agentsim: simulation kernels compiled and cached")
@@ -570,8 +550,9 @@ def build_parser() -> argparse.ArgumentParser:
     w = sub.add_parser(
         "warmup",
         help="compile and cache the simulation kernels (done once; make install runs it)",
-        description="Build and step every registered scenario for a few steps, which compiles every numba\n"
-        "kernel into the on-disk cache, so later runs start at once.",
+        description="Run every scenario with every scripted baseline, its variants (comms, pymunk), the\n"
+        "batched and sharded envs, on small configs and for a few steps: this compiles every numba kernel\n"
+        "the commands reach into the on-disk cache, so later runs start at once.",
     )
     w.add_argument("--quiet", action="store_true", help="print only the compile notice")
     w.set_defaults(func=cmd_warmup)

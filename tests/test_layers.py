@@ -35,6 +35,7 @@ LAYERS: dict[str, float] = {
     "cli_replay": 7.5,  # the replay subcommand of cli; over the recorder and render
     "cli_store": 7.5,  # the export and runs subcommands of cli; over the recorder
     "cli_view": 7.7,  # the view and zones subcommands of cli; over the recorder, render, policies and cli_set
+    "warmup": 7.6,  # agentsim warmup's runs; over env, distributed and policies
 }
 # folders installed under the package's name (pyproject's package-dir)
 MAPPED = {"policies": ROOT / "policies", "train": ROOT / "train"}

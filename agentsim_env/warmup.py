@@ -1,0 +1,223 @@
+"""``agentsim warmup``: compile and cache, ahead of time, every simulation kernel a shipped command reaches.
+
+numba compiles a ``cache=True`` kernel once per signature, the types of its arguments: dtype, number of
+dimensions, layout (C-contiguous or any, ``'A'``, as for a column slice or a stride-0 broadcast) and whether
+the array is read-only. A command that calls a kernel with a signature the warm-up never produced compiles it
+there and then. So the warm-up does not call kernels one by one: it drives, on small configs, the same code
+paths the commands drive, which hands every kernel the argument types those paths hand it:
+
+- every scenario with every scripted baseline (``agentsim run``, ``agentsim evaluate``'s strategies, the
+  baselines ``agentsim train`` compares against) and with random actions (messages, falling payloads);
+- the variants that reach other kernels or other signatures: navigation with comms and with pymunk physics
+  (when pymunk is installed), relay long enough for relayed messages;
+- ``BatchedEnv``, the vector env ``agentsim train`` learns on, for every scenario;
+- the distributed front end over in-process shards (``agentsim run --shards``), for the scenarios that shard;
+- the inbox's push kernel for every form of the pairs of message batches those runs hand it
+  (``inbox_pair_forms``).
+
+The kernels of those paths are the same at any size, so small worlds and short episodes suffice; the whole
+warm-up then takes about as long as compiling takes.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from functools import partial
+from itertools import product
+from typing import Any
+
+import numpy as np
+
+#: Small configs per scenario for the warm-up (the kernels' argument types do not depend on the sizes).
+WARMUP_CONFIG: dict[str, dict[str, Any]] = {"navigation": {"n_agents": 2}, "rendezvous": {"n_agents": 2},
+                                            "uav_release": {"zones": "tiny", "n_uavs": 2}}  # fmt: skip
+#: Steps of each short episode.
+WARMUP_STEPS = 5
+#: Worlds of the warm-up's ``BatchedEnv``.
+WARMUP_WORLDS = 2
+
+
+@dataclass(frozen=True)
+class Variant:
+    """One extra run of a scenario's default baseline: config keys over its warm-up config.
+
+    Attributes:
+        config: Scenario config keys over ``WARMUP_CONFIG`` (``max_steps`` included).
+        needs: A module that must import for the variant to run (an optional extra); skipped when it does not.
+    """
+
+    config: dict[str, Any] = field(default_factory=dict)
+    needs: str | None = None
+
+
+#: Extra runs of the default baseline that reach kernels, or kernel signatures, the short episodes do not.
+VARIANTS: dict[str, list[Variant]] = {
+    "navigation": [Variant({"comms": {}}), Variant({"physics": "pymunk", "collisions": False}, needs="pymunk")],
+    # direct, flooded and relayed messages (forwarded once the scout has seen its target), for inbox_pair_forms
+    "relay": [Variant({"max_steps": 60})],
+}
+#: Scenarios that run over shards (``agentsim run --shards``).
+SHARDED = ("navigation", "relay")
+
+
+def _config(name: str, extra: dict[str, Any] | None = None) -> dict[str, Any]:
+    return {**WARMUP_CONFIG.get(name, {}), "max_steps": WARMUP_STEPS, **(extra or {})}
+
+
+def _random_episode(env: Any) -> None:
+    """Step ``env`` with seeded random actions until the episode ends."""
+    env.reset(seed=0)
+    for a in env.agents:
+        env.action_space(a).seed(0)
+    while env.agents:
+        env.step({a: env.action_space(a).sample() for a in env.agents})
+
+
+def _baselines(name: str, config: dict[str, Any], every: bool = True) -> None:
+    """One episode per scripted baseline of ``name`` (only the default one unless ``every``), then a random one."""
+    import agentsim_env
+    from agentsim_env.policies.registry import BASELINES, make_policy
+    from agentsim_env.policies.rollout import run_episode
+
+    env = agentsim_env.make(name, **config)
+    try:
+        for policy in list(BASELINES.get(name, {}))[: None if every else 1]:
+            run_episode(env, make_policy(name, env, policy), 0)
+        _random_episode(env)
+    finally:
+        env.close()
+
+
+def _batched(name: str) -> None:
+    """A few steps of ``BatchedEnv`` (training's vector env) with random actions, past an episode's end."""
+    from agentsim_env.env.vector import BatchedEnv
+
+    batch = BatchedEnv(name, WARMUP_WORLDS, **_config(name))
+    rng = np.random.default_rng(0)
+    batch.reset(seed=0)
+    for _ in range(WARMUP_STEPS + 1):  # one step past max_steps: the worlds reset automatically
+        batch.step(rng.uniform(-1.0, 1.0, (batch.n_worlds, batch.n_agents, batch.act_dim)))
+
+
+def _sharded(name: str) -> None:
+    """A short episode over two in-process shards (the same shard code Ray runs in its workers)."""
+    from agentsim_env.distributed.env import make as make_distributed
+
+    env = make_distributed(name, shards=2, backend="local", **_config(name))
+    try:
+        _random_episode(env)
+    finally:
+        env.close()
+
+
+def _batch_forms(batch: tuple[np.ndarray, ...]) -> list[tuple[np.ndarray, ...]]:
+    """``batch`` and its one-message version (when it holds more than one message).
+
+    A stride-0 broadcast (one kind or hop count for the whole batch) is a non-contiguous array, of layout
+    ``'A'`` to numba, when it has two or more elements and a contiguous one when it has one: the same code
+    path hands the kernel either signature depending on how many messages a step delivers.
+    """
+    k = batch[0].shape[0]
+    if k < 2:
+        return [batch]
+    rows = batch[6]
+    one = tuple(a[:1] for a in batch[:5]) + (batch[5], rows[:1] if rows.shape[0] else rows)
+    return [batch, one]
+
+
+@contextmanager
+def inbox_pair_forms() -> Iterator[set[tuple[Any, ...]]]:
+    """While open, every pair of message batches pushed into an inbox is also pushed in its other forms.
+
+    ``Inbox.push_batches`` hands its kernel two batches at a time (the bus's deliveries, then the overlay's or
+    an empty batch), whose arrays differ in dtype, layout and read-only flag; each batch's one-message form
+    (``_batch_forms``) may differ again. Which of these a run meets depends on its seed, so each pair the
+    warm-up's own episodes push (their types being the ones the simulation makes) is pushed once more in every
+    combination of its forms, into a scratch inbox of the same shape (the episode's inboxes stay as they are),
+    and one message goes through ``Inbox.push``.
+
+    ``Inbox.push_batches`` is replaced on the class while open (the warm-up runs in one thread).
+
+    Yields:
+        The signatures pushed so far (one per pair of forms).
+    """
+    from numba import typeof
+
+    from agentsim_env.comms.messages import Inbox
+
+    push = Inbox.push_batches
+    done: set[tuple[Any, ...]] = set()
+    scratch: dict[tuple[int, int, int], Inbox] = {}
+
+    def push_and_vary(self: Inbox, batches: list[tuple[np.ndarray, ...]]) -> None:
+        push(self, batches)
+        for k in range(0, len(batches), 2):  # the pairs push_batches hands its kernel
+            seconds = _batch_forms(batches[k + 1]) if k + 1 < len(batches) else [None]
+            for a, b in product(_batch_forms(batches[k]), seconds):
+                pair = [a] if b is None else [a, b]  # alone: paired with the empty batch
+                key = tuple(typeof(x) for batch in pair for x in batch)
+                if key in done:
+                    continue
+                done.add(key)
+                shape = (self.n_slots, self.size, self.payload_dim)
+                push(scratch.get(shape) or scratch.setdefault(shape, Inbox(*shape)), pair)
+
+    Inbox.push_batches = push_and_vary  # type: ignore[method-assign]
+    try:
+        # ``Inbox.push`` (the collision notices) makes its own arrays, alone in their pair, whatever it is given;
+        # an episode pushes them only when an agent hits something
+        one = np.zeros(1, dtype=np.int64)
+        Inbox(1, 1, 1).push(one, np.ones(1, dtype=np.int8), one - 1, np.zeros(1, dtype=np.int16), one,
+                            np.zeros((1, 1), dtype=np.float32))  # fmt: skip
+        yield done
+    finally:
+        Inbox.push_batches = push  # type: ignore[method-assign]
+
+
+def _importable(module: str | None) -> bool:
+    if module is None:
+        return True
+    import importlib.util
+
+    return importlib.util.find_spec(module) is not None
+
+
+def scenario_steps(name: str) -> list[tuple[str, Callable[[], None]]]:
+    """The warm-up's runs of scenario ``name``, each a label and a function that runs it."""
+    steps: list[tuple[str, Callable[[], None]]] = [("baselines", lambda: _baselines(name, _config(name)))]
+    for i, v in enumerate(VARIANTS.get(name, [])):
+        if _importable(v.needs):
+            steps.append((f"variant {i}", partial(_baselines, name, _config(name, v.config), every=False)))
+    steps.append(("batched", lambda: _batched(name)))
+    if name in SHARDED:
+        steps.append(("sharded", lambda: _sharded(name)))
+    return steps
+
+
+def warm_up(report: Callable[[str, float], None] | None = None) -> float:
+    """Run every warm-up step of every registered scenario, which compiles and caches the kernels they reach.
+
+    Args:
+        report: Called with each scenario's name and its seconds once that scenario is done.
+
+    Returns:
+        The total seconds.
+    """
+    import agentsim_env
+
+    start = time.perf_counter()
+    with inbox_pair_forms():
+        for name in agentsim_env.list_scenarios():
+            t0 = time.perf_counter()
+            for _, run in scenario_steps(name):
+                run()
+            if report is not None:
+                report(name, time.perf_counter() - t0)
+    return time.perf_counter() - start
+
+
+__all__ = ["SHARDED", "VARIANTS", "WARMUP_CONFIG", "WARMUP_STEPS", "WARMUP_WORLDS", "Variant", "inbox_pair_forms",
+           "scenario_steps", "warm_up"]  # fmt: skip

@@ -1,0 +1,169 @@
+"""``agentsim warmup`` covers every kernel the shipped commands reach: after it, nothing compiles.
+
+One empty numba cache directory (``NUMBA_CACHE_DIR`` in a temporary folder, as in ``tests/test_cold_start.py``)
+is warmed by ``agentsim warmup``; then one process runs, on small sizes, the README's command lines, every
+scenario with every scripted baseline, ``evaluate`` with every strategy, short ``train`` runs with their
+evaluation against the baselines, a recorded run and its replay, and the README quickstart. A listener on
+numba's compile event names every package kernel that compiled, and under which command: the list must be
+empty. (A kernel compiles once per signature, so a command that hands a kernel other argument types than the
+warm-up did, another dtype, layout or read-only flag, shows up here.)
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+# Runs the commands given as a JSON list of argument lists (``agentsim ARGS...``) and Python snippets
+# (``["python", CODE]``) in this one process; prints one JSON line: {command: [kernels compiled]}.
+DRIVER = r"""
+import contextlib, io, json, sys
+from numba.core import event
+from agentsim_env.cli import main
+
+current = ["import"]
+compiled = {}
+
+class Listener(event.Listener):
+    def on_start(self, ev):
+        func = getattr(ev.data.get("dispatcher"), "py_func", None)
+        module = getattr(func, "__module__", "") or ""
+        if module.startswith("agentsim_env"):
+            compiled.setdefault(current[0], []).append(f"{module}.{func.__name__} {ev.data.get('args')}")
+
+    def on_end(self, ev):
+        pass
+
+event.register("numba:compile", Listener())
+for command in json.loads(sys.argv[1]):
+    current[0] = " ".join(command)[:200]
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        if command[0] == "python":
+            exec(command[1], {})
+            rc = 0
+        else:
+            rc = main(command)
+    if rc != 0:
+        raise SystemExit(f"{current[0]!r} exited with {rc}: {out.getvalue()[-2000:]}")
+print("COMPILED " + json.dumps(compiled))
+"""
+
+QUICKSTART = """
+import agentsim_env
+from agentsim_env.policies.registry import make_policy
+from agentsim_env.wsn import evaluate_deployment
+
+env = agentsim_env.make("uav_release", render_mode="rgb_array")
+obs, infos = env.reset(seed=0)
+policy = make_policy("uav_release", env, "B5_cvt")
+policy.reset(seed=0)
+while env.agents:
+    obs, rewards, terminations, truncations, infos = env.step(policy.act({a: obs[a] for a in env.agents}))
+frame = env.render()
+zones = env.scenario.zones
+evaluate_deployment(env.world.payloads.objects.landed_xy(), None, zones.centres(), zones.radii(),
+                    [z.radial_profile() for z in zones.zones])
+"""
+
+
+def _commands(out: Path) -> list[list[str]]:
+    from agentsim_env.policies.registry import BASELINES
+
+    o = ["--quiet", "--out", str(out / "runs")]
+    tiny_uav = ["zones=tiny", "n_uavs=2"]
+    commands = [
+        # the README's command lines, at small sizes (a live window replaced by a batch run)
+        ["run", "navigation", "--episodes", "2", *o],
+        ["run", "navigation", "--episodes", "1", "--set", "comms={}", *o],
+        ["run", "navigation", "--set", "n_agents=32", "physics=pymunk", "collisions=false", "body.radius=0.8",
+         "--policy", "go_to_goal", "--episodes", "1", *o],
+        ["run", "navigation", "--policy", "random", "--set", "n_agents=8", "collisions=false", "body.max_speed=8",
+         "--episodes", "1", *o],
+        ["run", "navigation", "--threads", "2", "--set", "n_agents=64", "--episodes", "1", *o],
+        ["run", "relay", "--episodes", "3", *o],
+        ["run", "relay", "--set", "gap=12,20", "comms.loss=0.1", "--episodes", "1", *o],
+        ["run", "uav_release", "--set", *tiny_uav, "--episodes", "1", *o],
+        ["evaluate", "--zones", "tiny", "--strategies", "all", "--seeds", "1", "--no-plots", "--quiet",
+         "--out", str(out / "evaluation")],
+        ["run", "navigation", "--episodes", "1", "--record", str(out / "run.db"), *o],
+        ["replay", str(out / "run.db"), "--episode", "0", "--every", "100", "--out", str(out / "frames") + "/"],
+        ["python", QUICKSTART],
+    ]
+    for scenario, baselines in BASELINES.items():  # every scenario x every baseline
+        sets = ["--set", *tiny_uav] if scenario == "uav_release" else []
+        commands += [["run", scenario, "--policy", b, "--episodes", "1", *sets, *o] for b in baselines]
+    for scenario in ("navigation", "relay"):  # training's vector env, then its quick evaluation
+        commands.append(["train", scenario, "--timesteps", "256", "--worlds", "2", "--quiet", "--set",
+                         "eval.seeds=1", "--out", str(out / "train" / scenario)])  # fmt: skip
+    commands.append(["train", "uav_release", "--timesteps", "256", "--worlds", "2", "--quiet", "--no-eval",
+                     "--set", *[f"env.{s}" for s in tiny_uav], "--out", str(out / "train" / "uav_release")])  # fmt: skip
+    return commands
+
+
+def _env(cache: Path) -> dict[str, str]:
+    env = {k: v for k, v in os.environ.items() if k != "AGENTSIM_QUIET_COMPILE"}
+    env["PYTHONPATH"] = str(ROOT) + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+    env |= {"NUMBA_CACHE_DIR": str(cache), "NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1",
+            "SDL_VIDEODRIVER": "dummy", "MPLBACKEND": "Agg"}  # fmt: skip
+    return env
+
+
+@pytest.mark.slow
+def test_after_warmup_no_shipped_command_compiles_a_kernel(tmp_path: Path) -> None:
+    env = _env(tmp_path / "numba-cache")
+    warm = subprocess.run([sys.executable, "-m", "agentsim_env.cli", "warmup", "--quiet"], cwd=ROOT, env=env,
+                          capture_output=True, text=True, timeout=600)  # fmt: skip
+    assert warm.returncode == 0, warm.stderr[-3000:]
+    res = subprocess.run([sys.executable, "-c", DRIVER, json.dumps(_commands(tmp_path))], cwd=tmp_path, env=env,
+                         capture_output=True, text=True, timeout=900)  # fmt: skip
+    assert res.returncode == 0, res.stderr[-3000:]
+    line = next(x for x in res.stdout.splitlines() if x.startswith("COMPILED "))
+    compiled = json.loads(line[len("COMPILED "):])
+    assert compiled == {}, "compiled after 'agentsim warmup':\n" + json.dumps(compiled, indent=1)[:6000]
+    assert "compiling simulation kernels" not in res.stderr
+
+
+# ------------------------------------------------------------------------------------------------ fast
+def test_batch_forms_give_the_one_message_layout_of_a_broadcast() -> None:
+    # a stride-0 broadcast of 3 messages is layout 'A' to numba, its one-message cut 'C': two signatures
+    from numba import typeof
+
+    from agentsim_env.warmup import _batch_forms
+
+    ids = np.arange(3, dtype=np.int64)
+    hops = np.broadcast_to(np.zeros(1, dtype=np.int16), (3,))
+    batch = (ids, np.ones(3, dtype=np.int8), ids, hops, ids, np.zeros((3, 2), dtype=np.float32), ids[:0])
+    full, one = _batch_forms(batch)
+    assert full is batch and typeof(full[3]).layout == "A" and typeof(one[3]).layout == "C"
+    assert [a.shape[0] for a in one[:5]] == [1] * 5 and one[5] is batch[5] and one[6].shape == (0,)
+    single = tuple(a[:1] for a in batch)
+    (only,) = _batch_forms(single)
+    assert only is single
+
+
+def test_inbox_pair_forms_pushes_each_form_pair_once_and_restores_the_inbox() -> None:
+    from agentsim_env.comms.messages import Inbox
+    from agentsim_env.warmup import inbox_pair_forms
+
+    original = Inbox.push_batches
+    inbox = Inbox(4, 2, 2)
+    ids = np.arange(3, dtype=np.int64)
+    bus = (ids, np.ones(3, dtype=np.int8), ids, np.broadcast_to(np.zeros(1, dtype=np.int16), (3,)), ids,
+           np.zeros((3, 2), dtype=np.float32), ids[:0])  # fmt: skip
+    with inbox_pair_forms() as done:
+        first = len(done)  # the collision-notice form
+        inbox.push_batches([bus])
+        inbox.push_batches([bus, bus])
+        inbox.push_batches([bus, bus])  # nothing new
+        assert len(done) - first == 2 + 4
+    assert Inbox.push_batches is original
+    assert inbox.received.tolist() == [5, 5, 5, 0]  # the episode's own inbox got the real pushes only
