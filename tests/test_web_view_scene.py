@@ -179,6 +179,7 @@ def test_replay_keeps_one_status_per_agent_and_its_replies_carry_steps_per_secon
     env.reset(seed=0)
     st = env.unwrapped.world.state if hasattr(env, "unwrapped") else env.world.state
     st.pos[1] = st.pos[0] + np.array([0.1, 0.0, 0.0])  # 0 and 1 collide at the first step
+    st.pos[2] = env.world.task.goal[2]  # 2 arrives
     zero = {a: {k: np.zeros(s.shape, np.float32) for k, s in env.action_space(a).items()} for a in env.agents}
     while env.agents:
         env.step({a: zero[a] for a in env.agents})
@@ -186,7 +187,7 @@ def test_replay_keeps_one_status_per_agent_and_its_replies_carry_steps_per_secon
     v = ReplayViewer(tmp_path / "r.db", quiet=True)
     try:
         names = [frames.STATUS_NAMES[int(s)] for s in v.data.status[-1]]
-        assert names[:2] == ["collided", "collided"], names
+        assert names == ["collided", "collided", "arrived"], names
         assert v.data.status[0].tolist() == [0, 0, 0]
         url = v.start()
         texts, _ = talk(url, [{"cmd": "pause"}, {"cmd": "speed", "value": 5}], seconds=0.4)

@@ -24,8 +24,9 @@ from agentsim_env.comms.messages import AGENT, KIND_NAMES
 from agentsim_env.core.budget import check_memory
 from agentsim_env.recorder.checks import check_values, open_read
 from agentsim_env.recorder.replay import ReplayInfo, replay_info
-from agentsim_env.recorder.schema import StoreError
+from agentsim_env.recorder.schema import StoreError, info_columns
 from agentsim_env.render.web.frames import (
+    ARRIVED,
     COLLIDED,
     ENDED,
     MAX_MESSAGE_LINES,
@@ -50,8 +51,8 @@ class ReplayData:
         messages: Per step index, ``(M, 2)`` sender / receiver and ``(M,)`` page kind codes.
         sensors: ``(K, 7)`` release step, release x, y, z, land step (-1: never), land x, y.
         log: Per step index, the log lines.
-        status: ``(T, N)`` why each agent is not active (``frames.STATUS_NAMES``): collided or offline from the
-            recorded event on, ended once offline otherwise (the store does not say who arrived).
+        status: ``(T, N)`` why each agent is not active (``frames.STATUS_NAMES``): arrived (its recorded
+            ``info_arrived``), collided or offline from the recorded step on; ended once offline otherwise.
 
     Raises:
         ValueError: When the arrays would not fit the memory limit (``core.budget``), checked before allocating.
@@ -128,6 +129,11 @@ class ReplayData:
                     self._add(s, "timeout", f"{self._name(a)} missed its heartbeats: offline", [a])
                 elif ev == "group":
                     self._add(s, "group", f"{self._name(a)}: group {old} -> {new}", [a])
+            if "info_arrived" in info_columns(con):  # scenarios that score arrivals record them per step
+                for s, a in con.execute("SELECT step, agent FROM steps WHERE run = ? AND episode = ? AND world = ? "
+                                        "AND info_arrived > 0 ORDER BY step", key):  # fmt: skip
+                    if a is not None and 0 <= a < n and s in index and why[a][0] < 0:
+                        why[a] = (index[s], ARRIVED)
             self.sensors = np.array(con.execute(
                 "SELECT release_step, release_x, release_y, coalesce(release_z, 0), coalesce(land_step, -1), "
                 "coalesce(land_x, release_x), coalesce(land_y, release_y) FROM sensors WHERE run = ? AND "
