@@ -2,23 +2,31 @@
 // arrays straight into preallocated instance / line buffers (no per-agent objects, no per-frame allocation).
 import * as THREE from 'three';
 import { OrbitControls } from '/static/vendor/OrbitControls.js';
+import {
+  Markers, Trails, pixelSize, MSG_COLOURS, addMessages, buildZone, fadeMessages,
+} from '/static/overlays3d.js';
+import { fitTop, followSelected, frameAgents, frameCamera } from '/static/camera3d.js';
+
+export { MSG_COLOURS };
 
 // Colours (sRGB hex). Groups cycle through GROUP_COLOURS; group -1 is NO_GROUP; offline agents are OFFLINE.
 export const GROUP_COLOURS = [0xff7f0e, 0x2ca02c, 0xd62728, 0x9467bd, 0x8c564b, 0xe377c2, 0xbcbd22, 0x17becf,
   0xf1c40f, 0x1abc9c];
 export const NO_GROUP = 0x3f6fb5;
 export const OFFLINE = 0x9a9a9a;
+// Why an agent no longer acts (the frame's `status`: 1 arrived, 2 collided, 3 offline, 4 ended); arrived agents
+// keep a pale form of their own colour, so they still read as "that agent, done".
+export const COLLIDED = 0x1c1c1c;
+export const ENDED = 0xc9c9c9;
+export const STATUS_LABELS = ['active', 'arrived', 'collided', 'offline (missed heartbeats)', 'ended'];
+const MIN_AGENT_PX = 10; // an agent's radius on screen never drops below this (CSS pixels); true size when larger
 export const MSG_KINDS = ['agent', 'group', 'environment', 'overlay'];
-export const MSG_COLOURS = [0x0097a7, 0x7b1fa2, 0x2e7d32, 0xd81b60];
 export const PAYLOAD_FALLING = 0xff8c00;
 export const PAYLOAD_LANDED = 0x2b2b2b;
 const OBJECT_COLOUR = 0x9ea3aa;
-const ZONE_LOW = 0xfff3b0; // density 0
-const ZONE_HIGH = 0xd7301f; // density 1
 const RAY_HIT = [0.9, 0.05, 0.05, 1]; // linear RGBA
 const RAY_MISS = [0.3, 0.3, 0.3, 0.3];
 const MAX_SEGMENTS = 2000; // message lines kept in the ring buffer
-const FADE_MS = 600; // a message line fades out over this time
 
 /** Linear-space [r, g, b] of an sRGB hex colour (instance and vertex colours are read as linear). */
 function rgb(hex) {
@@ -28,12 +36,15 @@ function rgb(hex) {
 const PALETTE = GROUP_COLOURS.map(rgb);
 const NO_GROUP_RGB = rgb(NO_GROUP);
 const OFFLINE_RGB = rgb(OFFLINE);
-const MSG_RGB = MSG_COLOURS.map(rgb);
+const COLLIDED_RGB = rgb(COLLIDED);
+const ENDED_RGB = rgb(ENDED);
+const pale = (c) => c.map((v) => v + (1 - v) * 0.6);
+const PALE = PALETTE.map(pale);
 const FALLING_RGB = rgb(PAYLOAD_FALLING);
 const LANDED_RGB = rgb(PAYLOAD_LANDED);
 
 /** A LineSegments with preallocated position (xyz) and RGBA colour buffers, drawn up to setDrawRange. */
-function makeLines(capacity, opacity = 1) {
+export function makeLines(capacity, opacity = 1) {
   const geometry = new THREE.BufferGeometry();
   geometry.setAttribute('position', new THREE.BufferAttribute(new Float32Array(capacity * 6), 3)
     .setUsage(THREE.DynamicDrawUsage));
@@ -112,12 +123,15 @@ export class Scene3D {
       this.camera.up.set(0, 0, 1);
       this.controls = new OrbitControls(this.camera, canvas);
       this.controls.addEventListener('change', () => { this.dirty = true; });
+      this.controls.addEventListener('start', () => { this.userMoved = true; }); // keep the user's view from now
     }
     this.world = null; // everything rebuilt per scene
     this.bounds = [-1, 1, -1, 1];
     this.radius = new Float32Array(0);
     this.frame = null; // the frame currently shown
     this.selected = null;
+    this.follow = false; // keep the selected agent in the middle of the view
+    this.showTrails = true;
     this.dirty = true;
     this.raycaster = new THREE.Raycaster();
     this.tmp = new THREE.Vector3();
@@ -163,13 +177,18 @@ export class Scene3D {
 
     this.buildObjects(msg.objects || { kind: [], centre: [], half: [] });
     for (const zone of msg.zones || []) this.buildZone(zone, 2 * lift);
+    this.markers = new Markers(world, msg.markers, 4 * lift);
+    this.trails = new Trails(world);
+    this.drops = null;
+    this.trails.lines.visible = this.showTrails;
+    // per agent colour when there are no groups (each agent and its goal share one colour)
+    this.byAgent = (msg.n_groups || 1) <= 1;
 
     // Agents: one InstancedMesh of a cone pointing along +x (heading 0), scaled by the agent radius.
     const n = msg.n_agents || 0;
-    // Display radius: the agent's radius, but at least 1/200 of the map so agents stay visible on big maps.
-    const minRadius = size / 200;
-    this.radius = new Float32Array(n).fill(Math.max(0.5, minRadius));
-    (msg.agent_radius || []).forEach((r, i) => { if (i < n) this.radius[i] = Math.max(r, minRadius); });
+    // The agent's true radius; drawing keeps MIN_AGENT_PX on screen (layoutAgents).
+    this.radius = new Float32Array(n).fill(0.5);
+    (msg.agent_radius || []).forEach((r, i) => { if (i < n) this.radius[i] = Math.max(r, 0.05); });
     this.meanRadius = n ? this.radius.reduce((a, b) => a + b, 0) / n : 0.5;
     this.buildAgents(n);
 
@@ -199,8 +218,13 @@ export class Scene3D {
 
     // Frame the camera on the first scene and when the bounds change, not at every episode (keeps the user's view).
     const key = JSON.stringify(msg.bounds);
-    if (this.top || key !== this.framedBounds) this.frameCamera();
+    if (this.top || key !== this.framedBounds) {
+      this.frameCamera();
+      this.frameOnFrame = !this.top; // then on the first frame: frame the agents' extent
+      this.userMoved = false;
+    }
     this.framedBounds = key;
+    this.sceneMsg = msg;
     this.frame = null;
     this.dirty = true;
   }
@@ -235,92 +259,38 @@ export class Scene3D {
 
   /** A flat disc shaded radially by the zone's density samples (r = 0 .. radius), warm = dense. */
   buildZone(zone, z) {
-    const geometry = new THREE.RingGeometry(0, zone.radius, 48, 24);
-    const position = geometry.attributes.position;
-    const colours = new Float32Array(position.count * 4);
-    const low = new THREE.Color(ZONE_LOW);
-    const high = new THREE.Color(ZONE_HIGH);
-    const c = new THREE.Color();
-    const d = zone.density || [];
-    for (let i = 0; i < position.count; i++) {
-      const r = Math.hypot(position.getX(i), position.getY(i)) / zone.radius;
-      const t = Math.min(Math.max(r, 0), 1) * (d.length - 1); // linear interpolation between samples
-      const k = Math.min(Math.floor(t), Math.max(d.length - 2, 0));
-      const v = d.length ? (d.length > 1 ? d[k] + (d[k + 1] - d[k]) * (t - k) : d[0]) : 0;
-      c.copy(low).lerp(high, v);
-      colours.set([c.r, c.g, c.b, 0.25 + 0.6 * v], i * 4);
-    }
-    geometry.setAttribute('color', new THREE.BufferAttribute(colours, 4));
-    const disc = new THREE.Mesh(geometry, new THREE.MeshBasicMaterial({
-      vertexColors: true, transparent: true, depthWrite: false, side: THREE.DoubleSide,
-    }));
-    disc.position.set(zone.centre[0], zone.centre[1], z);
-    const edge = new THREE.LineLoop(new THREE.BufferGeometry().setFromPoints(
-      Array.from({ length: 64 }, (_, i) => new THREE.Vector3(
-        zone.radius * Math.cos((i / 64) * 2 * Math.PI), zone.radius * Math.sin((i / 64) * 2 * Math.PI), 0))),
-    new THREE.LineBasicMaterial({ color: ZONE_HIGH, transparent: true, opacity: 0.6 }));
-    edge.position.copy(disc.position);
-    this.world.add(disc, edge);
+    buildZone(this, zone, z);
   }
 
   buildAgents(capacity) {
     if (this.agents) {
-      this.world.remove(this.agents);
+      this.world.remove(this.agents, this.ghosts);
       this.agents.geometry.dispose();
       this.agents.material.dispose();
+      this.ghosts.material.dispose();
     }
     const faces = capacity > MANY ? 4 : 8; // a 4-sided cone still shows the heading
     const cone = new THREE.ConeGeometry(1, 2.4, faces).rotateZ(-Math.PI / 2); // tip along +x
     this.agents = makeInstanced(cone, new THREE.MeshLambertMaterial({ flatShading: true }), capacity);
-    this.world.add(this.agents);
+    // The same instances drawn faintly through whatever hides them (an agent behind an obstacle stays seen).
+    this.ghosts = new THREE.InstancedMesh(cone, new THREE.MeshBasicMaterial({
+      transparent: true, opacity: 0.35, depthTest: false, depthWrite: false }), Math.max(1, capacity));
+    this.ghosts.instanceMatrix = this.agents.instanceMatrix;
+    this.ghosts.instanceColor = this.agents.instanceColor;
+    this.ghosts.frustumCulled = false;
+    this.ghosts.renderOrder = 5;
+    this.ghosts.count = 0;
+    this.world.add(this.agents, this.ghosts);
   }
 
   /** Initial camera: a 3/4 perspective view of the bounds, or (top) the whole bounds straight down. */
   frameCamera() {
-    const [x0, x1, y0, y1] = this.bounds;
-    const cx = (x0 + x1) / 2;
-    const cy = (y0 + y1) / 2;
-    const size = this.size;
-    if (this.top) {
-      this.camera.position.set(cx, cy, size * 10);
-      this.camera.near = size * 0.01;
-      this.camera.far = size * 20;
-      this.camera.lookAt(cx, cy, 0);
-      this.fitTop();
-      return;
-    }
-    // Back the camera off along a fixed 3/4 direction until the four bounds corners project inside 90% of the view.
-    const dir = new THREE.Vector3(0.25, -0.75, 0.62).normalize();
-    const corners = [[x0, y0], [x1, y0], [x1, y1], [x0, y1]];
-    let dist = size * 0.5;
-    for (let i = 0; i < 40; i++) {
-      this.camera.position.set(cx + dir.x * dist, cy + dir.y * dist, dir.z * dist);
-      this.camera.near = dist * 0.005;
-      this.camera.far = dist * 20;
-      this.camera.lookAt(cx, cy, 0);
-      this.camera.updateMatrixWorld();
-      this.camera.updateProjectionMatrix();
-      const fits = corners.every(([x, y]) => {
-        const v = this.tmp.set(x, y, 0).project(this.camera);
-        return Math.abs(v.x) <= 0.9 && Math.abs(v.y) <= 0.9;
-      });
-      if (fits) break;
-      dist *= 1.08;
-    }
-    this.controls.target.set(cx, cy, 0);
-    this.controls.update();
+    frameCamera(this);
   }
 
   /** Orthographic frustum holding the bounds (5% margin), centred, at the canvas aspect ratio. */
   fitTop() {
-    const [x0, x1, y0, y1] = this.bounds;
-    const aspect = this.aspect();
-    let w = (x1 - x0) * 1.05;
-    let h = (y1 - y0) * 1.05;
-    if (w / h < aspect) w = h * aspect;
-    else h = w / aspect;
-    Object.assign(this.camera, { left: -w / 2, right: w / 2, top: h / 2, bottom: -h / 2 });
-    this.camera.updateProjectionMatrix();
+    fitTop(this);
   }
 
   aspect() {
@@ -336,6 +306,7 @@ export class Scene3D {
     else {
       this.camera.aspect = w / h;
       this.camera.updateProjectionMatrix();
+      if (!this.userMoved && this.frame && !this.follow) this.frameAgents(); // the page's layout settled later
     }
     this.dirty = true;
   }
@@ -349,26 +320,115 @@ export class Scene3D {
     const n = pos.length / 3;
     if (n > this.agents.instanceMatrix.count) this.buildAgents(n); // grows only
     this.frame = frame;
-    const m = this.agents.instanceMatrix.array;
     const col = this.agents.instanceColor.array;
-    const { heading, group, online } = a;
+    this.active = this.active?.length === n ? this.active : new Uint8Array(n);
     for (let i = 0; i < n; i++) {
-      const r = i < this.radius.length ? this.radius[i] : this.meanRadius;
-      writeMatrix(m, i * 16, pos[3 * i], pos[3 * i + 1], pos[3 * i + 2], heading ? heading[i] : 0, r);
-      const g = group ? group[i] : -1;
-      const c = online && online[i] === 0 ? OFFLINE_RGB : g < 0 ? NO_GROUP_RGB : PALETTE[g % PALETTE.length];
+      const c = this.colourOf(i, true);
       col[3 * i] = c[0]; col[3 * i + 1] = c[1]; col[3 * i + 2] = c[2];
+      this.active[i] = this.statusOf(i) === 0 ? 1 : 0;
     }
     this.agents.count = n;
-    this.agents.instanceMatrix.needsUpdate = true;
+    this.ghosts.count = n;
     this.agents.instanceColor.needsUpdate = true;
-    this.agents.boundingSphere = null; // recomputed lazily for picking
+    this.markers.recolour((slot) => (slot < n ? this.colourOf(slot, false) : null));
+    if (this.showTrails) this.trails.add(pos, frame.step, (i) => this.colourOf(i, false), this.active);
+    if (this.frameOnFrame) {
+      this.frameOnFrame = false;
+      this.frameAgents();
+    }
 
     this.setPayloads(a.payload_pos, a.payload_state);
     if (a.msg) this.addMessages(a.msg, a.msg_kind, pos, n);
     this.setRays(a.rays, a.ray_hit, pos, n);
     this.updateMarker();
     this.dirty = true;
+  }
+
+  /** Why agent i is drawn as it is (0 active .. 4 ended; frames without `status`: offline when not online). */
+  statusOf(i) {
+    const a = this.frame?.arrays || {};
+    if (a.status) return a.status[i];
+    return a.online && a.online[i] === 0 ? 3 : 0;
+  }
+
+  /** Agent i's linear RGB: its group's colour (or its own without groups); `withStatus`: as its status shows. */
+  colourOf(i, withStatus) {
+    const a = this.frame?.arrays || {};
+    const g = a.group ? a.group[i] : -1;
+    const k = this.byAgent ? i : g; // one group (or none): each agent its own colour
+    const own = k < 0 ? NO_GROUP_RGB : PALETTE[k % PALETTE.length];
+    if (!withStatus) return own;
+    const s = this.statusOf(i);
+    if (s === 0) return own;
+    if (s === 1) return k < 0 ? pale(NO_GROUP_RGB) : PALE[k % PALE.length];
+    return s === 2 ? COLLIDED_RGB : s === 3 ? OFFLINE_RGB : ENDED_RGB;
+  }
+
+  /** Agent matrices for the current camera: true radius, or MIN_AGENT_PX on screen when that is larger. */
+  layoutAgents() {
+    const f = this.frame;
+    if (!f || !this.agents) return;
+    const pos = f.arrays.pos;
+    const heading = f.arrays.heading;
+    const n = pos.length / 3;
+    const m = this.agents.instanceMatrix.array;
+    this.camera.updateMatrixWorld();
+    this.shown = this.shown?.length === n ? this.shown : new Float32Array(n);
+    for (let i = 0; i < n; i++) {
+      const p = [pos[3 * i], pos[3 * i + 1], pos[3 * i + 2]];
+      const r = Math.max(i < this.radius.length ? this.radius[i] : this.meanRadius,
+        MIN_AGENT_PX * pixelSize(this.camera, this.canvas, p, this.tmp));
+      this.shown[i] = r;
+      writeMatrix(m, i * 16, p[0], p[1], p[2], heading ? heading[i] : 0, r);
+    }
+    this.agents.instanceMatrix.needsUpdate = true;
+    this.agents.boundingSphere = null; // recomputed lazily for picking
+    this.layoutDrops(pos, n);
+    this.markers.layout(this.camera, this.canvas, pos, true);
+    this.updateMarker();
+  }
+
+  /** A thin line from each agent down to the ground and a dot there: its altitude and ground track read. */
+  layoutDrops(pos, n) {
+    if (!this.drops || this.drops.userData.capacity < n) {
+      if (this.drops) { this.world.remove(this.drops); this.drops.geometry.dispose(); }
+      this.drops = makeLines(Math.max(n, 1), 0.55);
+      this.world.add(this.drops);
+    }
+    const P = this.drops.geometry.attributes.position.array;
+    const C = this.drops.geometry.attributes.color.array;
+    for (let i = 0; i < n; i++) {
+      P.set([pos[3 * i], pos[3 * i + 1], pos[3 * i + 2], pos[3 * i], pos[3 * i + 1], 0], 6 * i);
+      const c = this.colourOf(i, true);
+      C.set([c[0], c[1], c[2], 1, c[0], c[1], c[2], 1], 8 * i);
+    }
+    this.drops.geometry.attributes.position.needsUpdate = true;
+    this.drops.geometry.attributes.color.needsUpdate = true;
+    this.drops.geometry.setDrawRange(0, 2 * n);
+  }
+
+  /** Frame the agents' extent (and the markers'): the 3/4 view backed off until they fill ~80% of it. */
+  frameAgents() {
+    frameAgents(this);
+  }
+
+  /** Keep the selected agent in the middle: move the orbit target and the camera by the agent's motion. */
+  followSelected() {
+    followSelected(this);
+  }
+
+  setTrails(on) {
+    this.showTrails = on;
+    if (this.trails) {
+      this.trails.lines.visible = on;
+      if (!on) this.trails.clear();
+    }
+    this.dirty = true;
+  }
+
+  /** Screen positions of the markers' centres (a test hook). */
+  markerScreen() {
+    return this.markers ? this.markers.screen((p) => this.project(p)) : [];
   }
 
   setPayloads(ppos, pstate) {
@@ -381,7 +441,9 @@ export class Scene3D {
       this.payloads = bigger;
       this.world.add(bigger);
     }
-    const s = this.meanRadius * 0.45;
+    // payloads keep 3 px on screen (landed sensors would vanish on a big map)
+    const s = Math.max(this.meanRadius * 0.45, 3 * pixelSize(this.camera, this.canvas,
+      [this.controls?.target.x ?? 0, this.controls?.target.y ?? 0, 0], this.tmp));
     const m = this.payloads.instanceMatrix.array;
     const col = this.payloads.instanceColor.array;
     for (let i = 0; i < p; i++) {
@@ -396,55 +458,12 @@ export class Scene3D {
 
   /** Append this frame's deliveries to the ring buffer of segments (receiver or sender -1: a vertical tick). */
   addMessages(msg, kinds, pos, n) {
-    const P = this.messages.geometry.attributes.position.array;
-    const C = this.messages.geometry.attributes.color.array;
-    const now = performance.now();
-    for (let k = 0; k < msg.length / 2; k++) {
-      const s = msg[2 * k];
-      const r = msg[2 * k + 1];
-      const sOk = s >= 0 && s < n;
-      const rOk = r >= 0 && r < n;
-      if (!sOk && !rOk) continue;
-      const i = this.msgHead;
-      const o = i * 6;
-      const a = sOk ? s : r;
-      P[o] = pos[3 * a]; P[o + 1] = pos[3 * a + 1]; P[o + 2] = pos[3 * a + 2];
-      if (sOk && rOk) {
-        P[o + 3] = pos[3 * r]; P[o + 4] = pos[3 * r + 1]; P[o + 5] = pos[3 * r + 2];
-      } else { // to or from the environment: a short vertical line above the agent
-        const h = 4 * (a < this.radius.length ? this.radius[a] : this.meanRadius);
-        P[o + 3] = P[o]; P[o + 4] = P[o + 1]; P[o + 5] = P[o + 2] + h;
-      }
-      const c = MSG_RGB[kinds ? kinds[k] % MSG_RGB.length : 0];
-      C.set(c, i * 8); C.set(c, i * 8 + 4);
-      this.msgBorn[i] = now;
-      this.msgHead = (i + 1) % MAX_SEGMENTS;
-      this.msgCount = Math.min(this.msgCount + 1, MAX_SEGMENTS);
-      this.msgLastBorn = now;
-    }
-    this.messages.geometry.attributes.position.needsUpdate = true;
-    this.messages.geometry.setDrawRange(0, this.msgCount * 2);
+    addMessages(this, msg, kinds, pos, n);
   }
 
   /** Update the message alphas; returns true while some segment is still visible. */
   fadeMessages(now) {
-    if (!this.messages || now - this.msgLastBorn > FADE_MS + 50) {
-      if (this.messages && this.msgCount) { // everything has faded: stop drawing the buffer
-        this.msgCount = 0;
-        this.msgHead = 0;
-        this.messages.geometry.setDrawRange(0, 0);
-        return true; // one last render without them
-      }
-      return false;
-    }
-    const C = this.messages.geometry.attributes.color.array;
-    for (let i = 0; i < this.msgCount; i++) {
-      const alpha = Math.max(0, 1 - (now - this.msgBorn[i]) / FADE_MS);
-      C[i * 8 + 3] = alpha;
-      C[i * 8 + 7] = alpha;
-    }
-    this.messages.geometry.attributes.color.needsUpdate = true;
-    return true;
+    return fadeMessages(this, now);
   }
 
   /** The selected agent's proximity rays: red for hits, faint for misses. */
@@ -489,7 +508,7 @@ export class Scene3D {
     if (!this.marker.visible) return;
     const p = f.arrays.pos;
     this.marker.position.set(p[3 * s], p[3 * s + 1], p[3 * s + 2]);
-    this.marker.scale.setScalar(s < this.radius.length ? this.radius[s] : this.meanRadius);
+    this.marker.scale.setScalar(this.shown && s < this.shown.length ? this.shown[s] : this.meanRadius);
   }
 
   // ----- drawing, picking, projection -------------------------------------------------------------------------
@@ -497,7 +516,9 @@ export class Scene3D {
   render(now) {
     const fading = this.fadeMessages(now);
     if (!this.dirty && !fading) return false;
+    this.followSelected();
     this.dirty = false;
+    this.layoutAgents(); // the camera may have moved: keep the minimum on-screen size
     this.renderer.render(this.scene, this.camera);
     return true;
   }

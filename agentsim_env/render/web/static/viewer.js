@@ -2,7 +2,7 @@
 // test hooks on window.agentsim. The 3D part is in scene3d.js, the wire format in protocol.js (docs/viewer.md).
 import { Connection } from '/static/protocol.js';
 import {
-  Scene3D, GROUP_COLOURS, NO_GROUP, OFFLINE, MSG_KINDS, MSG_COLOURS, PAYLOAD_FALLING, PAYLOAD_LANDED,
+  Scene3D, GROUP_COLOURS, NO_GROUP, OFFLINE, COLLIDED, ENDED, MSG_KINDS, MSG_COLOURS, PAYLOAD_FALLING, PAYLOAD_LANDED,
 } from '/static/scene3d.js';
 
 const MAX_LOG_LINES = 1000;
@@ -22,6 +22,8 @@ const state = {
   held: [], // log lines received while the log is paused
   dropped: 0, // log lines the server dropped (reported in `log` messages)
   hidden: new Set(), // log kinds filtered out
+  filtered: {}, // per log kind: lines received while it was filtered out
+  filtersSet: false, // the scene's default filters applied once; later scenes keep the user's choices
   fpsCount: 0,
   fps: 0,
   status: null,
@@ -40,6 +42,8 @@ const hooks = {
   selected: null,
   logLines: () => [...$('log').children].filter((el) => !el.hidden).map((el) => el.textContent),
   project: (p) => view.project(p),
+  markers: () => view.markerScreen(), // [{kind, slot, label, x, y}]: where the scenario's markers are drawn
+  agentSizes: () => Array.from(view.shown || []), // each agent's drawn radius (metres) at the current camera
   // A `select` sent through the hook also updates the page's selection (so the agent reply is shown).
   send: (obj) => (obj && obj.cmd === 'select' && 'slot' in obj ? select(obj.slot) : conn.send(obj)),
 };
@@ -80,6 +84,10 @@ const HANDLERS = {
     document.title = `${msg.title || msg.scenario || 'agentsim'} · agentsim viewer`;
     $('mode').textContent = msg.mode || '';
     $('scenario').textContent = msg.scenario && msg.scenario !== msg.title ? msg.scenario : '';
+    if (!state.filtersSet) {
+      state.filtersSet = true;
+      for (const kind of msg.log_hidden || []) state.hidden.add(kind);
+    }
     buildFilters(msg.log_kinds || []);
     buildLegend(msg);
     setupReplay(msg.replay);
@@ -200,6 +208,10 @@ function addLogLine(step, kind, str) {
   el.dataset.kind = kind;
   el.textContent = `step ${step} · ${kind} · ${str}`;
   el.hidden = state.hidden.has(kind);
+  if (el.hidden) {
+    state.filtered[kind] = (state.filtered[kind] || 0) + 1;
+    renderFilterCounts();
+  }
   if (state.logPaused) { // held (not shown) until the log is resumed; the simulation keeps going
     state.held.push(el);
     if (state.held.length > MAX_LOG_LINES) state.held.shift();
@@ -244,9 +256,26 @@ function buildFilters(kinds) {
       else state.hidden.add(kind);
       for (const el of $('log').children) if (el.dataset.kind === kind) el.hidden = !cb.checked;
     });
-    label.append(cb, ` ${kind}`);
+    const count = Object.assign(document.createElement('span'), { className: 'count' });
+    count.dataset.kind = kind;
+    label.append(cb, ` ${kind}`, count);
     return label;
   }));
+  renderFilterCounts();
+}
+
+/** After each filter box: how many lines of that kind it has filtered out (while it was unticked). */
+let countsQueued = false;
+function renderFilterCounts() {
+  if (countsQueued) return;
+  countsQueued = true;
+  requestAnimationFrame(() => { // at most once a frame: heartbeats can come by the hundred
+    countsQueued = false;
+    for (const el of document.querySelectorAll('#filters .count')) {
+      const n = state.filtered[el.dataset.kind] || 0;
+      el.textContent = n ? ` (${n} filtered)` : '';
+    }
+  });
 }
 
 // ----- errors ----------------------------------------------------------------------------------------------------
@@ -272,6 +301,9 @@ for (const id of ['speed', 'replay-speed']) {
 
 function renderControls() {
   const replay = !!state.scene?.replay;
+  // one set of controls: the replay bar in a replay, the simulation's row live
+  $('sim-row').hidden = replay;
+  $('controls-title').textContent = replay ? 'Replay' : 'Simulation';
   $('sim-pause').textContent = state.paused ? 'Resume sim' : 'Pause sim';
   $('replay-play').textContent = state.paused ? 'Play' : 'Pause';
   $('sim-step').disabled = !state.paused;
@@ -288,7 +320,11 @@ function renderStatus() {
   // episode and step of the frame on screen; the simulation's rate from the server's status
   const s = state.status;
   const parts = [`episode ${hooks.episode}`, `step ${hooks.lastStep}`];
-  if (s) parts.push(`${Number(s.steps_per_s).toFixed(1)} steps/s`);
+  const rate = Number(s?.steps_per_s);
+  if (s && Number.isFinite(rate)) {
+    if (state.scene?.replay) parts.push(rate > 0 ? `${rate} steps/s` : 'as fast as possible');
+    else parts.push(`${rate.toFixed(1)} steps/s`);
+  }
   parts.push(`${state.fps} frames/s drawn`);
   if (state.paused) parts.push('paused');
   el.textContent = parts.join(' · ');
@@ -333,16 +369,37 @@ function buildLegend(msg) {
   };
   const nGroups = Math.min(msg.n_groups || 0, GROUP_COLOURS.length);
   const items = [];
-  for (let g = 0; g < nGroups; g++) items.push(item(GROUP_COLOURS[g], `group ${g}`));
-  if ((msg.n_groups || 0) > nGroups) items.push(text('(colours repeat)', 'item'));
-  items.push(item(NO_GROUP, 'no group'), item(OFFLINE, 'offline'), document.createElement('br'));
-  MSG_KINDS.forEach((k, i) => items.push(item(MSG_COLOURS[i], `${k} msg`, 'line')));
+  if ((msg.n_groups || 1) <= 1) {
+    const k = Math.min(msg.n_agents || 0, 3);
+    items.push(item(null, `one colour per agent${(msg.n_agents || 0) > GROUP_COLOURS.length ? ' (repeating)' : ''}`,
+      'multi'));
+    if (!k) items.pop();
+  } else {
+    for (let g = 0; g < nGroups; g++) items.push(item(GROUP_COLOURS[g], `group ${g}`));
+    if ((msg.n_groups || 0) > nGroups) items.push(text('(colours repeat)', 'item'));
+    items.push(item(NO_GROUP, 'no group'));
+  }
+  items.push(item(null, 'arrived (pale)', 'pale'), item(COLLIDED, 'collided'), item(OFFLINE, 'offline'),
+    item(ENDED, 'ended'), document.createElement('br'));
+  const kinds = new Set((msg.markers || []).map((m) => m.kind));
+  if (kinds.has('goal')) items.push(item(null, 'goal (agent\'s colour)', 'goal'));
+  if (kinds.has('target')) items.push(item(null, 'group target (dashed: its scout)', 'goal'));
+  if (kinds.has('marker')) items.push(item(null, 'marker', 'goal'));
   if ((msg.zones || []).length) items.push(item(null, 'zone density', 'grad'));
+  MSG_KINDS.forEach((k, i) => items.push(item(MSG_COLOURS[i], `${k} msg`, 'line')));
   if (msg.scenario === 'uav_release' || 'payload_pos' in (state.latest?.arrays || {})) {
     items.push(item(PAYLOAD_FALLING, 'falling'), item(PAYLOAD_LANDED, 'landed'));
   }
   $('legend').replaceChildren(...items);
 }
+
+// ----- view options: trails, follow the selected agent, frame the agents -------------------------------------
+$('opt-trails').addEventListener('change', () => view.setTrails($('opt-trails').checked));
+$('opt-follow').addEventListener('change', () => {
+  view.follow = $('opt-follow').checked;
+  view.dirty = true;
+});
+$('opt-frame').addEventListener('click', () => view.frameAgents());
 
 renderControls();
 renderStatus();
