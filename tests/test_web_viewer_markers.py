@@ -76,3 +76,35 @@ def test_default_navigation_view_draws_readable_agents_and_the_goals_where_the_e
     assert all(_changed(full, empty, xy, 2) >= 4 for xy in goals), "a goal is not drawn at its projected position"
     for word in ("arrived", "collided", "offline", "goal"):
         assert word in legend, legend
+
+
+def test_follow_keeps_the_selected_agent_centred_and_the_view_options_work() -> None:
+    env = agentsim_env.make("navigation")
+    env.reset(seed=0)
+    viewer = WebViewer(quiet=True)
+    url = viewer.attach(env.world, env.scenario)
+    viewer.new_episode()
+    st = env.world.state
+    zero = {a: {k: np.zeros(s.shape, np.float32) for k, s in env.action_space(a).items()} for a in env.agents}
+    try:
+        with browser_page(1000, 700) as (page, errors):
+            page.goto(url)
+            page.wait_for_function("window.agentsim && window.agentsim.ready && window.agentsim.lastStep === 0",
+                                   timeout=60000)  # fmt: skip
+            box = page.eval_on_selector("#canvas", "c => { const r = c.getBoundingClientRect(); "
+                                        "return [r.left + r.width / 2, r.top + r.height / 2]; }")  # fmt: skip
+            far = np.hypot(*np.subtract(_project(page, st.pos[2]), box))
+            page.evaluate("window.agentsim.send({cmd: 'select', slot: 2})")
+            page.check("#opt-follow")
+            st.pos[2, :2] += 3.0  # the agent moves; the next frame carries it
+            env.step({a: zero[a] for a in env.agents})
+            page.wait_for_function("window.agentsim.lastStep === 1")
+            time.sleep(0.3)
+            near = np.hypot(*np.subtract(_project(page, st.pos[2]), box))
+            page.uncheck("#opt-trails")
+            page.click("#opt-frame")
+            time.sleep(0.3)
+            assert not errors, errors
+    finally:
+        viewer.close()
+    assert far > 20 and near < 3, (far, near)
