@@ -12,6 +12,8 @@ const MAX_SEGMENTS = 2000; // message lines kept in the ring buffer (as scene3d.
 const FADE_MS = 600; // a message line fades out over this time
 const ZONE_LOW = 0xfff3b0; // density 0
 const ZONE_HIGH = 0xd7301f; // density 1
+const RAY_HIT = [0.9, 0.05, 0.05, 1]; // linear RGBA
+const RAY_MISS = [0.3, 0.3, 0.3, 0.3];
 
 /** World metres per CSS pixel at world point p (perspective: depends on the distance; orthographic: constant). */
 export function pixelSize(camera, canvas, p, tmp) {
@@ -19,6 +21,21 @@ export function pixelSize(camera, canvas, p, tmp) {
   if (camera.isOrthographicCamera) return (camera.top - camera.bottom) / camera.zoom / h;
   const d = tmp.set(p[0], p[1], p[2]).applyMatrix4(camera.matrixWorldInverse).z;
   return (2 * Math.max(-d, camera.near) * Math.tan(THREE.MathUtils.degToRad(camera.fov) / 2)) / h;
+}
+
+/** A LineSegments with preallocated position (xyz) and RGBA colour buffers, drawn up to setDrawRange. */
+export function makeLines(capacity, opacity = 1) {
+  const geometry = new THREE.BufferGeometry();
+  geometry.setAttribute('position', new THREE.BufferAttribute(new Float32Array(capacity * 6), 3)
+    .setUsage(THREE.DynamicDrawUsage));
+  geometry.setAttribute('color', new THREE.BufferAttribute(new Float32Array(capacity * 8), 4)
+    .setUsage(THREE.DynamicDrawUsage));
+  geometry.setDrawRange(0, 0);
+  const material = new THREE.LineBasicMaterial({ vertexColors: true, transparent: true, opacity, depthWrite: false });
+  const lines = new THREE.LineSegments(geometry, material);
+  lines.frustumCulled = false;
+  lines.userData.capacity = capacity;
+  return lines;
 }
 
 /** Markers: a translucent disc, a ring and a pole with a pennant each (one InstancedMesh per part). */
@@ -259,4 +276,49 @@ export function fadeMessages(view, now) {
   }
   view.messages.geometry.attributes.color.needsUpdate = true;
   return true;
+}
+
+/** A thin line from each agent down to the ground and a dot there: its altitude and ground track read. */
+export function layoutDrops(view, pos, n) {
+  if (!view.drops || view.drops.userData.capacity < n) {
+    if (view.drops) { view.world.remove(view.drops); view.drops.geometry.dispose(); }
+    view.drops = makeLines(Math.max(n, 1), 0.55);
+    view.world.add(view.drops);
+  }
+  const P = view.drops.geometry.attributes.position.array;
+  const C = view.drops.geometry.attributes.color.array;
+  for (let i = 0; i < n; i++) {
+    P.set([pos[3 * i], pos[3 * i + 1], pos[3 * i + 2], pos[3 * i], pos[3 * i + 1], 0], 6 * i);
+    const c = view.colourOf(i, true);
+    C.set([c[0], c[1], c[2], 1, c[0], c[1], c[2], 1], 8 * i);
+  }
+  view.drops.geometry.attributes.position.needsUpdate = true;
+  view.drops.geometry.attributes.color.needsUpdate = true;
+  view.drops.geometry.setDrawRange(0, 2 * n);
+}
+
+/** The selected agent's proximity rays: red for hits, faint for misses. */
+export function setRays(view, rays, hits, pos, n) {
+  const sel = view.selected;
+  const k = rays && sel !== null && sel < n ? rays.length / 3 : 0;
+  if (k > view.rays.userData.capacity) {
+    view.world.remove(view.rays);
+    view.rays.geometry.dispose();
+    view.rays.material.dispose();
+    view.rays = makeLines(Math.max(k, 2 * view.rays.userData.capacity));
+    view.world.add(view.rays);
+  }
+  const P = view.rays.geometry.attributes.position.array;
+  const C = view.rays.geometry.attributes.color.array;
+  for (let i = 0; i < k; i++) {
+    for (let j = 0; j < 3; j++) {
+      P[i * 6 + j] = pos[3 * sel + j];
+      P[i * 6 + 3 + j] = rays[3 * i + j];
+    }
+    const c = hits && hits[i] === 1 ? RAY_HIT : RAY_MISS;
+    C.set(c, i * 8); C.set(c, i * 8 + 4);
+  }
+  view.rays.geometry.attributes.position.needsUpdate = true;
+  view.rays.geometry.attributes.color.needsUpdate = true;
+  view.rays.geometry.setDrawRange(0, k * 2);
 }

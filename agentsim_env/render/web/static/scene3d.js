@@ -3,7 +3,7 @@
 import * as THREE from 'three';
 import { OrbitControls } from '/static/vendor/OrbitControls.js';
 import {
-  Markers, Trails, pixelSize, MSG_COLOURS, addMessages, buildZone, fadeMessages,
+  Markers, Trails, pixelSize, MSG_COLOURS, addMessages, buildZone, fadeMessages, layoutDrops, makeLines, setRays,
 } from '/static/overlays3d.js';
 import { fitTop, followSelected, frameAgents, frameCamera } from '/static/camera3d.js';
 
@@ -24,8 +24,6 @@ export const MSG_KINDS = ['agent', 'group', 'environment', 'overlay'];
 export const PAYLOAD_FALLING = 0xff8c00;
 export const PAYLOAD_LANDED = 0x2b2b2b;
 const OBJECT_COLOUR = 0x9ea3aa;
-const RAY_HIT = [0.9, 0.05, 0.05, 1]; // linear RGBA
-const RAY_MISS = [0.3, 0.3, 0.3, 0.3];
 const MAX_SEGMENTS = 2000; // message lines kept in the ring buffer
 
 /** Linear-space [r, g, b] of an sRGB hex colour (instance and vertex colours are read as linear). */
@@ -42,21 +40,6 @@ const pale = (c) => c.map((v) => v + (1 - v) * 0.6);
 const PALE = PALETTE.map(pale);
 const FALLING_RGB = rgb(PAYLOAD_FALLING);
 const LANDED_RGB = rgb(PAYLOAD_LANDED);
-
-/** A LineSegments with preallocated position (xyz) and RGBA colour buffers, drawn up to setDrawRange. */
-export function makeLines(capacity, opacity = 1) {
-  const geometry = new THREE.BufferGeometry();
-  geometry.setAttribute('position', new THREE.BufferAttribute(new Float32Array(capacity * 6), 3)
-    .setUsage(THREE.DynamicDrawUsage));
-  geometry.setAttribute('color', new THREE.BufferAttribute(new Float32Array(capacity * 8), 4)
-    .setUsage(THREE.DynamicDrawUsage));
-  geometry.setDrawRange(0, 0);
-  const material = new THREE.LineBasicMaterial({ vertexColors: true, transparent: true, opacity, depthWrite: false });
-  const lines = new THREE.LineSegments(geometry, material);
-  lines.frustumCulled = false;
-  lines.userData.capacity = capacity;
-  return lines;
-}
 
 /** An InstancedMesh with a dynamic per-instance colour buffer; never frustum-culled (instances move). */
 function makeInstanced(geometry, material, capacity) {
@@ -390,21 +373,7 @@ export class Scene3D {
 
   /** A thin line from each agent down to the ground and a dot there: its altitude and ground track read. */
   layoutDrops(pos, n) {
-    if (!this.drops || this.drops.userData.capacity < n) {
-      if (this.drops) { this.world.remove(this.drops); this.drops.geometry.dispose(); }
-      this.drops = makeLines(Math.max(n, 1), 0.55);
-      this.world.add(this.drops);
-    }
-    const P = this.drops.geometry.attributes.position.array;
-    const C = this.drops.geometry.attributes.color.array;
-    for (let i = 0; i < n; i++) {
-      P.set([pos[3 * i], pos[3 * i + 1], pos[3 * i + 2], pos[3 * i], pos[3 * i + 1], 0], 6 * i);
-      const c = this.colourOf(i, true);
-      C.set([c[0], c[1], c[2], 1, c[0], c[1], c[2], 1], 8 * i);
-    }
-    this.drops.geometry.attributes.position.needsUpdate = true;
-    this.drops.geometry.attributes.color.needsUpdate = true;
-    this.drops.geometry.setDrawRange(0, 2 * n);
+    layoutDrops(this, pos, n);
   }
 
   /** Frame the agents' extent (and the markers'): the 3/4 view backed off until they fill ~80% of it. */
@@ -468,28 +437,7 @@ export class Scene3D {
 
   /** The selected agent's proximity rays: red for hits, faint for misses. */
   setRays(rays, hits, pos, n) {
-    const sel = this.selected;
-    const k = rays && sel !== null && sel < n ? rays.length / 3 : 0;
-    if (k > this.rays.userData.capacity) {
-      this.world.remove(this.rays);
-      this.rays.geometry.dispose();
-      this.rays.material.dispose();
-      this.rays = makeLines(Math.max(k, 2 * this.rays.userData.capacity));
-      this.world.add(this.rays);
-    }
-    const P = this.rays.geometry.attributes.position.array;
-    const C = this.rays.geometry.attributes.color.array;
-    for (let i = 0; i < k; i++) {
-      for (let j = 0; j < 3; j++) {
-        P[i * 6 + j] = pos[3 * sel + j];
-        P[i * 6 + 3 + j] = rays[3 * i + j];
-      }
-      const c = hits && hits[i] === 1 ? RAY_HIT : RAY_MISS;
-      C.set(c, i * 8); C.set(c, i * 8 + 4);
-    }
-    this.rays.geometry.attributes.position.needsUpdate = true;
-    this.rays.geometry.attributes.color.needsUpdate = true;
-    this.rays.geometry.setDrawRange(0, k * 2);
+    setRays(this, rays, hits, pos, n);
   }
 
   setSelected(slot) {
