@@ -89,7 +89,7 @@ def test_heartbeats_and_group_broadcasts_are_their_own_log_kinds_hidden_by_defau
     env.reset(seed=0)
     scene = scene_message(env.world, env.scenario, 0)
     assert {"heartbeat", "broadcast"} <= set(scene["log_kinds"])
-    assert set(scene["log_hidden"]) == set(frames.LOG_HIDDEN) == {"heartbeat", "broadcast"}
+    assert set(scene["log_hidden"]) == set(frames.LOG_HIDDEN) == {"heartbeat", "broadcast", "overlay"}
     from agentsim_env.policies.registry import make_policy
 
     pol = make_policy("uav_release", env, "B5_cvt")
@@ -100,6 +100,22 @@ def test_heartbeats_and_group_broadcasts_are_their_own_log_kinds_hidden_by_defau
         obs, *_ = env.step(pol.act({a: obs[a] for a in env.agents}))
         kinds += [ln["kind"] for ln in log_lines(env.world, env.scenario, env.world.last_events, 0, 0)]
     assert "broadcast" in kinds and "message" not in kinds  # the UAVs' GROUP traffic, not plain messages
+
+
+def test_overlay_hop_summaries_are_their_own_log_kind_hidden_by_default() -> None:
+    env = agentsim_env.make("relay")
+    obs, _ = env.reset(seed=0)
+    from agentsim_env.policies.registry import make_policy
+
+    pol = make_policy("relay", env, "flood")
+    pol.reset(0)
+    lines: list[dict] = []
+    for _ in range(40):
+        obs, *_ = env.step(pol.act({a: obs[a] for a in env.agents}))
+        lines += log_lines(env.world, env.scenario, env.world.last_events, 0, 0)
+    overlay = [ln for ln in lines if ln["text"].startswith("OVERLAY:")]
+    assert overlay and {ln["kind"] for ln in overlay} == {"overlay"}  # one summary a step, not a plain message
+    assert "overlay" in frames.LOG_HIDDEN
 
 
 def test_replies_to_the_controls_carry_a_steps_per_second_number() -> None:

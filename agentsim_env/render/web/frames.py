@@ -24,10 +24,11 @@ _PAGE_KIND = np.zeros(max(KIND_NAMES) + 1, np.uint8)  # any other kind (heartbea
 for _k, _v in MSG_KIND.items():
     _PAGE_KIND[_k] = _v
 LOG_KINDS = ("collision", "timeout", "group", "release", "landing", "terminated", "episode", "message", "broadcast",
-             "heartbeat")  # fmt: skip
+             "heartbeat", "overlay")  # fmt: skip
 #: Log kinds the page hides until its filter box is ticked: periodic traffic that would flood the log (the
-#: controller's heartbeats, and GROUP broadcasts such as the UAVs' HELLO heartbeats every few steps).
-LOG_HIDDEN = ("broadcast", "heartbeat")
+#: controller's heartbeats, GROUP broadcasts such as the UAVs' HELLO heartbeats every few steps, and the overlay's
+#: per-step hop summary, one line every step while a flood spreads).
+LOG_HIDDEN = ("broadcast", "heartbeat", "overlay")
 #: The log kind of a delivered bus message, by bus kind (AGENT and ENV unicasts are "message").
 _MESSAGE_LOG_KIND = {GROUP: "broadcast", HEARTBEAT: "heartbeat"}
 #: Why an agent is drawn as it is (the frame's ``status`` array): still acting, reached its goal, ended by a
@@ -334,7 +335,7 @@ def log_lines(world: World, scenario: Any, events: StepEvents, w: int, episode: 
         o = c.overlay
         k = int(((o.receiver >= lo) & (o.receiver < hi)).sum())
         if k:
-            out.append(_line(step, episode, "message", f"OVERLAY: {k} hop deliveries", []))
+            out.append(_line(step, episode, "overlay", f"OVERLAY: {k} hop deliveries", []))
     return out
 
 
