@@ -85,7 +85,7 @@ def _replay(args: argparse.Namespace) -> int:
 
 
 def _export(args: argparse.Namespace) -> int:
-    from agentsim_env.render.web.export_video import DEFAULT_SIZE, export_replay_video
+    from agentsim_env.recorder.web_video import DEFAULT_SIZE, export_replay_video
 
     if args.speed is not None:
         raise ValueError("--speed sets the pace of a live page; an exported video's rate is --fps")

@@ -35,7 +35,10 @@ LAYERS: dict[str, float] = {
     "cli_replay": 7.5,  # the replay subcommand of cli; over the recorder and render
     "cli_store": 7.5,  # the export and runs subcommands of cli; over the recorder
     "cli_view": 7.7,  # the view and zones subcommands of cli; over the recorder, render, policies and cli_set
-    "warmup": 7.6,  # agentsim warmup's runs; over env, distributed and policies
+    "warmup": 7.6,
+    "cli_live": 4.5,  # the run's display check and signal handling of cli; over render
+    "gymnasium_envs": 5.6,
+    "zoo": 5.6,  # each scenario as a PettingZoo-style module (navigation_v0, ...); over env  # importing it registers the Gymnasium ids; over env  # agentsim warmup's runs; over env, distributed and policies
 }
 # folders installed under the package's name (pyproject's package-dir)
 MAPPED = {"policies": ROOT / "policies", "train": ROOT / "train"}

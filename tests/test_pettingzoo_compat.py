@@ -94,7 +94,7 @@ def test_per_scenario_modules_the_pettingzoo_way(name: str) -> None:
     from agentsim_env.scenarios.registry import scenario_class
 
     module_name = f"{name}_v{scenario_class(name).version}"
-    mod = importlib.import_module(f"agentsim_env.scenarios.{module_name}")
+    mod = importlib.import_module(f"agentsim_env.zoo.{module_name}")
     par = mod.parallel_env()
     assert par.metadata["name"] == module_name
     assert isinstance(mod.env(), AECEnv) and isinstance(mod.raw_env(), AECEnv)

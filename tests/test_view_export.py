@@ -98,7 +98,7 @@ def test_too_many_frames_suggests_an_every_that_fits(
     limit: int,
     every: int,
 ) -> None:
-    from agentsim_env.render.web import export_video
+    from agentsim_env.recorder import web_video as export_video
 
     monkeypatch.setattr(export_video, "MAX_FRAMES", limit)  # the store's episode has 6 recorded steps
     assert main(["view", "--replay", str(store), "--out", str(tmp_path / "v.mp4")]) == 2
@@ -107,7 +107,7 @@ def test_too_many_frames_suggests_an_every_that_fits(
 
 
 def test_frame_size_is_16_9_and_even() -> None:
-    from agentsim_env.render.web.export_video import frame_size
+    from agentsim_env.recorder.web_video import frame_size
 
     assert frame_size(960) == (960, 540)
     assert frame_size(161) == (160, 90)
@@ -156,7 +156,7 @@ def test_export_has_one_frame_per_chosen_step_and_shows_the_agents_moving(tmp_pa
 def test_an_interrupted_export_leaves_no_file(
     store: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    from agentsim_env.render.web import export_video
+    from agentsim_env.recorder import web_video as export_video
 
     calls = []
     decode = export_video._rgb

@@ -1,7 +1,7 @@
 """The ``rendezvous`` scenario under PettingZoo's constructor names (as ``pettingzoo.mpe.simple_v3``).
 
 Example:
-    >>> from agentsim_env.scenarios import rendezvous_v0
+    >>> from agentsim_env.zoo import rendezvous_v0
     >>> par = rendezvous_v0.parallel_env(render_mode="rgb_array")
     >>> aec = rendezvous_v0.env()  # raw_env(): the AEC env without PettingZoo's order checks
 """

@@ -1,7 +1,7 @@
 """The ``uav_release`` scenario under PettingZoo's constructor names (as ``pettingzoo.mpe.simple_v3``).
 
 Example:
-    >>> from agentsim_env.scenarios import uav_release_v0
+    >>> from agentsim_env.zoo import uav_release_v0
     >>> par = uav_release_v0.parallel_env(render_mode="rgb_array")
     >>> aec = uav_release_v0.env()  # raw_env(): the AEC env without PettingZoo's order checks
 """
