@@ -11,7 +11,8 @@ paths the commands drive, which hands every kernel the argument types those path
 - the variants that reach other kernels or other signatures: navigation with comms and with pymunk physics
   (when pymunk is installed), relay long enough for relayed messages;
 - ``BatchedEnv``, the vector env ``agentsim train`` learns on, for every scenario;
-- the distributed front end over in-process shards (``agentsim run --shards``), for the scenarios that shard;
+- the distributed front end over in-process shards (``agentsim run --shards``), for the scenarios that shard,
+  also with arguments and replies passed as Ray passes them (read-only arrays);
 - the inbox's push kernel for every form of the pairs of message batches those runs hand it
   (``inbox_pair_forms``).
 
@@ -21,6 +22,7 @@ warm-up then takes about as long as compiling takes.
 
 from __future__ import annotations
 
+import pickle
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -59,8 +61,9 @@ VARIANTS: dict[str, list[Variant]] = {
     # direct, flooded and relayed messages (forwarded once the scout has seen its target), for inbox_pair_forms
     "relay": [Variant({"max_steps": 60})],
 }
-#: Scenarios that run over shards (``agentsim run --shards``).
-SHARDED = ("navigation", "relay")
+#: Scenarios that run over shards (``agentsim run --shards``), with config keys over the warm-up config: relay
+#: long enough for floods to cross from one shard to the other.
+SHARDED: dict[str, dict[str, Any]] = {"navigation": {}, "relay": {"max_steps": 60}}
 
 
 def _config(name: str, extra: dict[str, Any] | None = None) -> dict[str, Any]:
@@ -76,19 +79,25 @@ def _random_episode(env: Any) -> None:
         env.step({a: env.action_space(a).sample() for a in env.agents})
 
 
-def _baselines(name: str, config: dict[str, Any], every: bool = True) -> None:
-    """One episode per scripted baseline of ``name`` (only the default one unless ``every``), then a random one."""
-    import agentsim_env
+def _play(name: str, env: Any, every: bool) -> None:
+    """One episode of ``env`` per scripted baseline of ``name`` (only the default one unless ``every``), then a
+    random one; closes ``env``."""
     from agentsim_env.policies.registry import BASELINES, make_policy
     from agentsim_env.policies.rollout import run_episode
 
-    env = agentsim_env.make(name, **config)
     try:
         for policy in list(BASELINES.get(name, {}))[: None if every else 1]:
             run_episode(env, make_policy(name, env, policy), 0)
         _random_episode(env)
     finally:
         env.close()
+
+
+def _baselines(name: str, config: dict[str, Any], every: bool = True) -> None:
+    """One episode per scripted baseline of ``name`` (only the default one unless ``every``), then a random one."""
+    import agentsim_env
+
+    _play(name, agentsim_env.make(name, **config), every)
 
 
 def _batched(name: str) -> None:
@@ -102,15 +111,48 @@ def _batched(name: str) -> None:
         batch.step(rng.uniform(-1.0, 1.0, (batch.n_worlds, batch.n_agents, batch.act_dim)))
 
 
+def _through_store(obj: Any) -> Any:
+    """``obj`` as a Ray actor receives it (or the driver, a reply): pickled with out-of-band buffers (protocol 5)
+    and read back from immutable copies of them, so its arrays come back read-only, as from Ray's object store."""
+    buffers: list[pickle.PickleBuffer] = []
+    data = pickle.dumps(obj, protocol=5, buffer_callback=buffers.append)
+    return pickle.loads(data, buffers=[b.raw().tobytes() for b in buffers])
+
+
+class _StoreTransport:
+    """In-process shards whose arguments and replies travel as through Ray (``_through_store``).
+
+    Ray hands a shard its arguments, and the coordinator its replies, as read-only arrays: kernels called
+    with them compile read-only signatures the plain in-process backend never makes.
+    """
+
+    def __init__(self, inner: Any) -> None:
+        self.inner = inner
+        self.n_shards = inner.n_shards
+        self.address = inner.address
+
+    def call(self, method: str, calls: dict[int, tuple[Any, ...]], timeout_s: float) -> dict[int, Any]:
+        """Run ``method`` on the shards with their arguments and replies passed through ``_through_store``."""
+        from agentsim_env.distributed.backends import Failure
+
+        sent = {k: _through_store(args) for k, args in calls.items()}
+        replies = self.inner.call(method, sent, timeout_s)
+        return {k: r if isinstance(r, Failure) else _through_store(r) for k, r in replies.items()}
+
+    def __getattr__(self, name: str) -> Any:  # restart, kill, close: as the in-process shards do them
+        return getattr(self.inner, name)
+
+
 def _sharded(name: str) -> None:
-    """A short episode over two in-process shards (the same shard code Ray runs in its workers)."""
+    """The default baseline and random actions over two in-process shards (the shard code Ray runs in its
+    workers), once as they are and once with Ray's read-only transport."""
     from agentsim_env.distributed.env import make as make_distributed
 
-    env = make_distributed(name, shards=2, backend="local", **_config(name))
-    try:
-        _random_episode(env)
-    finally:
-        env.close()
+    for store in (False, True):
+        env = make_distributed(name, shards=2, backend="local", **_config(name, SHARDED[name]))
+        if store:
+            env.coordinator.backend = _StoreTransport(env.coordinator.backend)
+        _play(name, env, every=False)
 
 
 def _batch_forms(batch: tuple[np.ndarray, ...]) -> list[tuple[np.ndarray, ...]]:

@@ -5,12 +5,14 @@ is warmed by ``agentsim warmup``; then one process runs, on small sizes, the REA
 scenario with every scripted baseline, ``evaluate`` with every strategy, short ``train`` runs with their
 evaluation against the baselines, a recorded run and its replay, and the README quickstart. A listener on
 numba's compile event names every package kernel that compiled, and under which command: the list must be
-empty. (A kernel compiles once per signature, so a command that hands a kernel other argument types than the
-warm-up did, another dtype, layout or read-only flag, shows up here.)
+empty. A run over Ray shards (when Ray is installed) must add no signature to the cache either. (A kernel
+compiles once per signature, so a command that hands a kernel other argument types than the warm-up did,
+another dtype, layout or read-only flag, shows up here.)
 """
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import os
 import subprocess
@@ -130,6 +132,22 @@ def test_after_warmup_no_shipped_command_compiles_a_kernel(tmp_path: Path) -> No
     compiled = json.loads(line[len("COMPILED "):])
     assert compiled == {}, "compiled after 'agentsim warmup':\n" + json.dumps(compiled, indent=1)[:6000]
     assert "compiling simulation kernels" not in res.stderr
+    if importlib.util.find_spec("ray") is None:
+        return
+    # shards on Ray compile in the worker processes, out of the listener's sight: a kernel compiled there adds a
+    # signature to the cache's index files
+    before = _cache_index(tmp_path / "numba-cache")
+    ray = subprocess.run([sys.executable, "-m", "agentsim_env.cli", "run", "relay", "--shards", "2", "--episodes", "1",
+                          "--quiet", "--out", str(tmp_path / "ray")], cwd=tmp_path, env=env, capture_output=True,
+                         text=True, timeout=600)  # fmt: skip
+    assert ray.returncode == 0, ray.stderr[-3000:]
+    after = _cache_index(tmp_path / "numba-cache")
+    assert after == before, f"compiled by the Ray shards: {sorted(k for k in after if after[k] != before.get(k))}"
+
+
+def _cache_index(cache: Path) -> dict[str, bytes]:
+    """Every index file of a numba cache directory (one per kernel, listing its compiled signatures)."""
+    return {str(p.relative_to(cache)): p.read_bytes() for p in cache.rglob("*.nbi")}
 
 
 # ------------------------------------------------------------------------------------------------ fast
