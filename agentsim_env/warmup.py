@@ -12,9 +12,7 @@ paths the commands drive, which hands every kernel the argument types those path
   (when pymunk is installed), relay long enough for relayed messages;
 - ``BatchedEnv``, the vector env ``agentsim train`` learns on, for every scenario;
 - the distributed front end over in-process shards (``agentsim run --shards``), for the scenarios that shard,
-  also with arguments and replies passed as Ray passes them (read-only arrays);
-- the inbox's push kernel for every form of the pairs of message batches those runs hand it
-  (``inbox_pair_forms``).
+  also with arguments and replies passed as Ray passes them (read-only arrays).
 
 The kernels of those paths are the same at any size, so small worlds and short episodes suffice; the whole
 warm-up then takes about as long as compiling takes.
@@ -24,11 +22,9 @@ from __future__ import annotations
 
 import pickle
 import time
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import partial
-from itertools import product
 from typing import Any
 
 import numpy as np
@@ -155,70 +151,6 @@ def _sharded(name: str) -> None:
         _play(name, env, every=False)
 
 
-def _batch_forms(batch: tuple[np.ndarray, ...]) -> list[tuple[np.ndarray, ...]]:
-    """``batch`` and its one-message version (when it holds more than one message).
-
-    A stride-0 broadcast (one kind or hop count for the whole batch) is a non-contiguous array, of layout
-    ``'A'`` to numba, when it has two or more elements and a contiguous one when it has one: the same code
-    path hands the kernel either signature depending on how many messages a step delivers.
-    """
-    k = batch[0].shape[0]
-    if k < 2:
-        return [batch]
-    rows = batch[6]
-    one = tuple(a[:1] for a in batch[:5]) + (batch[5], rows[:1] if rows.shape[0] else rows)
-    return [batch, one]
-
-
-@contextmanager
-def inbox_pair_forms() -> Iterator[set[tuple[Any, ...]]]:
-    """While open, every pair of message batches pushed into an inbox is also pushed in its other forms.
-
-    ``Inbox.push_batches`` hands its kernel two batches at a time (the bus's deliveries, then the overlay's or
-    an empty batch), whose arrays differ in dtype, layout and read-only flag; each batch's one-message form
-    (``_batch_forms``) may differ again. Which of these a run meets depends on its seed, so each pair the
-    warm-up's own episodes push (their types being the ones the simulation makes) is pushed once more in every
-    combination of its forms, into a scratch inbox of the same shape (the episode's inboxes stay as they are),
-    and one message goes through ``Inbox.push``.
-
-    ``Inbox.push_batches`` is replaced on the class while open (the warm-up runs in one thread).
-
-    Yields:
-        The signatures pushed so far (one per pair of forms).
-    """
-    from numba import typeof
-
-    from agentsim_env.comms.messages import Inbox
-
-    push = Inbox.push_batches
-    done: set[tuple[Any, ...]] = set()
-    scratch: dict[tuple[int, int, int], Inbox] = {}
-
-    def push_and_vary(self: Inbox, batches: list[tuple[np.ndarray, ...]]) -> None:
-        push(self, batches)
-        for k in range(0, len(batches), 2):  # the pairs push_batches hands its kernel
-            seconds = _batch_forms(batches[k + 1]) if k + 1 < len(batches) else [None]
-            for a, b in product(_batch_forms(batches[k]), seconds):
-                pair = [a] if b is None else [a, b]  # alone: paired with the empty batch
-                key = tuple(typeof(x) for batch in pair for x in batch)
-                if key in done:
-                    continue
-                done.add(key)
-                shape = (self.n_slots, self.size, self.payload_dim)
-                push(scratch.get(shape) or scratch.setdefault(shape, Inbox(*shape)), pair)
-
-    Inbox.push_batches = push_and_vary  # type: ignore[method-assign]
-    try:
-        # ``Inbox.push`` (the collision notices) makes its own arrays, alone in their pair, whatever it is given;
-        # an episode pushes them only when an agent hits something
-        one = np.zeros(1, dtype=np.int64)
-        Inbox(1, 1, 1).push(one, np.ones(1, dtype=np.int8), one - 1, np.zeros(1, dtype=np.int16), one,
-                            np.zeros((1, 1), dtype=np.float32))  # fmt: skip
-        yield done
-    finally:
-        Inbox.push_batches = push  # type: ignore[method-assign]
-
-
 def _importable(module: str | None) -> bool:
     if module is None:
         return True
@@ -251,15 +183,14 @@ def warm_up(report: Callable[[str, float], None] | None = None) -> float:
     import agentsim_env
 
     start = time.perf_counter()
-    with inbox_pair_forms():
-        for name in agentsim_env.list_scenarios():
-            t0 = time.perf_counter()
-            for _, run in scenario_steps(name):
-                run()
-            if report is not None:
-                report(name, time.perf_counter() - t0)
+    for name in agentsim_env.list_scenarios():
+        t0 = time.perf_counter()
+        for _, run in scenario_steps(name):
+            run()
+        if report is not None:
+            report(name, time.perf_counter() - t0)
     return time.perf_counter() - start
 
 
-__all__ = ["SHARDED", "VARIANTS", "WARMUP_CONFIG", "WARMUP_STEPS", "WARMUP_WORLDS", "Variant", "inbox_pair_forms",
+__all__ = ["SHARDED", "VARIANTS", "WARMUP_CONFIG", "WARMUP_STEPS", "WARMUP_WORLDS", "Variant",
            "scenario_steps", "warm_up"]  # fmt: skip

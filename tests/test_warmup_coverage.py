@@ -151,37 +151,26 @@ def _cache_index(cache: Path) -> dict[str, bytes]:
 
 
 # ------------------------------------------------------------------------------------------------ fast
-def test_batch_forms_give_the_one_message_layout_of_a_broadcast() -> None:
-    # a stride-0 broadcast of 3 messages is layout 'A' to numba, its one-message cut 'C': two signatures
-    from numba import typeof
+def test_the_inbox_push_kernel_has_one_signature_whatever_producers_hand_it() -> None:
+    # strided broadcasts (several messages of one kind or hop count), their one-message cuts (contiguous),
+    # read-only arrays (as Ray hands shards) and other integer dtypes all reach the kernel in one form: a run
+    # can never compile a version the warm-up did not
+    from agentsim_env.comms.messages import Inbox, _push_kernel
 
-    from agentsim_env.warmup import _batch_forms
-
-    ids = np.arange(3, dtype=np.int64)
-    hops = np.broadcast_to(np.zeros(1, dtype=np.int16), (3,))
-    batch = (ids, np.ones(3, dtype=np.int8), ids, hops, ids, np.zeros((3, 2), dtype=np.float32), ids[:0])
-    full, one = _batch_forms(batch)
-    assert full is batch and typeof(full[3]).layout == "A" and typeof(one[3]).layout == "C"
-    assert [a.shape[0] for a in one[:5]] == [1] * 5 and one[5] is batch[5] and one[6].shape == (0,)
-    single = tuple(a[:1] for a in batch)
-    (only,) = _batch_forms(single)
-    assert only is single
-
-
-def test_inbox_pair_forms_pushes_each_form_pair_once_and_restores_the_inbox() -> None:
-    from agentsim_env.comms.messages import Inbox
-    from agentsim_env.warmup import inbox_pair_forms
-
-    original = Inbox.push_batches
     inbox = Inbox(4, 2, 2)
     ids = np.arange(3, dtype=np.int64)
-    bus = (ids, np.ones(3, dtype=np.int8), ids, np.broadcast_to(np.zeros(1, dtype=np.int16), (3,)), ids,
-           np.zeros((3, 2), dtype=np.float32), ids[:0])  # fmt: skip
-    with inbox_pair_forms() as done:
-        first = len(done)  # the collision-notice form
-        inbox.push_batches([bus])
-        inbox.push_batches([bus, bus])
-        inbox.push_batches([bus, bus])  # nothing new
-        assert len(done) - first == 2 + 4
-    assert Inbox.push_batches is original
-    assert inbox.received.tolist() == [5, 5, 5, 0]  # the episode's own inbox got the real pushes only
+    frozen = ids.copy()
+    frozen.flags.writeable = False
+    forms = [
+        (ids, np.ones(3, dtype=np.int8), ids, np.broadcast_to(np.zeros(1, dtype=np.int16), (3,)), ids,
+         np.zeros((3, 2), dtype=np.float32), ids[:0]),
+        (ids[:1], np.broadcast_to(np.ones(1, dtype=np.int8), (1,)), ids[:1], np.zeros(1, dtype=np.int32), ids[:1],
+         np.zeros((1, 2), dtype=np.float32), ids[:0]),
+        (frozen, np.ones(3, dtype=np.int8), frozen, frozen, frozen, np.zeros((3, 2), dtype=np.float64), frozen[:0]),
+    ]  # fmt: skip
+    for a in forms:
+        for b in forms:
+            inbox.push_batches([a, b])
+        inbox.push_batches([a])
+    assert len(_push_kernel.signatures) == 1, _push_kernel.signatures
+    assert inbox.received.tolist() == [21, 14, 14, 0]  # 21 batches reach slot 0, the 14 of three messages 1 and 2

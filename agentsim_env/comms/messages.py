@@ -46,8 +46,27 @@ N_KINDS = 5
 KIND_NAMES = {AGENT: "AGENT", GROUP: "GROUP", ENV: "ENV", OVERLAY: "OVERLAY", HEARTBEAT: "HEARTBEAT"}
 
 _SAME_ROWS = np.zeros(0, dtype=np.int64)  # push_rows: message j takes payload row j
-_EMPTY_BATCH = (_SAME_ROWS, np.zeros(0, dtype=np.int8), _SAME_ROWS, np.zeros(0, dtype=np.int16), _SAME_ROWS,
+#: The push kernel's one signature: receiver, kind, sender, hops, created, payload, rows of each batch.
+_BATCH_DTYPES = (np.int64, np.int8, np.int64, np.int64, np.int64, np.float32, np.int64)
+_EMPTY_BATCH = (_SAME_ROWS, np.zeros(0, dtype=np.int8), _SAME_ROWS, _SAME_ROWS, _SAME_ROWS,
                 np.zeros((0, 0), dtype=np.float32), _SAME_ROWS)  # fmt: skip
+
+
+def _kernel_batch(batch: tuple[np.ndarray, ...]) -> tuple[np.ndarray, ...]:
+    """``batch`` with every array C-contiguous, writable and of the push kernel's dtype.
+
+    numba compiles a kernel once per signature, and a signature tells C-contiguous from strided arrays (a
+    stride-0 broadcast of one kind or hop count is strided with two messages or more, contiguous with one) and
+    writable from read-only ones (Ray hands shards read-only arrays). Producers hand all of these; one form
+    keeps the kernel at one compiled version, whatever a step delivers. The arrays are a step's messages, so
+    the copies this may take are small; arrays already in form pass through untouched.
+    """
+    out = []
+    for a, dtype in zip(batch, _BATCH_DTYPES):
+        if a.dtype != dtype or not a.flags.c_contiguous or not a.flags.writeable:
+            a = np.array(a, dtype=dtype, order="C")  # a fresh array: contiguous and writable
+        out.append(a)
+    return tuple(out)
 
 FEATURES_PER_MESSAGE = 11
 """Observation features of one message before its payload; a row has ``FEATURES_PER_MESSAGE + D`` values."""
@@ -106,8 +125,8 @@ def env_collision_payload(what: np.ndarray | int, ident: np.ndarray, payload_dim
 def _push_kernel(valid, kind, sender, hops, created, payload, received, newest, taken,  # type: ignore[no-untyped-def]
                  ra, ka, sa, ha, ca, pa, qa, rb, kb, sb, hb, cb, pb, qb):  # fmt: skip
     # Two batches a then b, as one push of their concatenation. Message j of a batch goes to slot r[j] (skipped
-    # when < 0) with payload row p[q[j]] (row j when q is empty) and hops clipped to [0, 32767]; the inputs may
-    # be stride-0 broadcasts of one value. Pass 1 walks the messages newest first and keeps, per receiver, the
+    # when < 0) with payload row p[q[j]] (row j when q is empty) and hops clipped to [0, 32767]; the inputs come
+    # in one form (``_kernel_batch``), so this compiles once. Pass 1 walks the messages newest first and keeps, per receiver, the
     # M newest (index into a ++ b) and the count; pass 2 walks the receivers in slot order (the inbox arrays
     # stream through the cache once): shift the old rows down by min(count, M), write the new ones on top.
     n_slots, m = valid.shape
@@ -304,7 +323,7 @@ class Inbox:
         if kd.min() < 1 or kd.max() > N_KINDS:
             raise ValueError(f"kind must be in 1..{N_KINDS} ({', '.join(KIND_NAMES.values())})")
         sd = np.broadcast_to(np.asarray(sender), (k,)).astype(np.int64)
-        hd = np.clip(np.broadcast_to(np.asarray(hops), (k,)), 0, np.iinfo(np.int16).max).astype(np.int16)
+        hd = np.clip(np.broadcast_to(np.asarray(hops), (k,)), 0, np.iinfo(np.int16).max).astype(np.int64)
         cd = np.broadcast_to(np.asarray(created), (k,)).astype(np.int64)
         p = np.asarray(payload, dtype=np.float32)
         if p.ndim == 1:
@@ -345,8 +364,8 @@ class Inbox:
             batches: ``(receiver, kind, sender, hops, created, payload, rows)`` tuples, as for ``push_rows``.
         """
         for k in range(0, len(batches), 2):  # pairs in turn: the same as one push of everything, in order
-            a = batches[k]
-            b = batches[k + 1] if k + 1 < len(batches) else _EMPTY_BATCH
+            a = _kernel_batch(batches[k])
+            b = _kernel_batch(batches[k + 1]) if k + 1 < len(batches) else _EMPTY_BATCH
             _push_kernel(self.valid, self.kind, self.sender, self.hops, self.created, self.payload, self.received,
                          self._newest, self._taken, *a, *b)  # fmt: skip
 
