@@ -14,18 +14,7 @@ from typing import Any
 
 import pytest
 
-CHROMIUM_FLAGS = [
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-quic",
-    "--no-first-run",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-    "--disable-default-apps",
-    "--use-angle=swiftshader",
-    "--enable-unsafe-swiftshader",
-]
+from agentsim_env.recorder.web_video import CHROMIUM_FLAGS  # the flags the package launches Chromium with
 
 
 def chromium_path() -> str:

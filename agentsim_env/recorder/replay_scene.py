@@ -42,8 +42,12 @@ class StaticScene:
     markers: tuple[np.ndarray, np.ndarray, np.ndarray] | None
 
 
-def _seeds(info: ReplayInfo) -> tuple[int, list[tuple[int, int]]]:
-    """The run's world count and the recorded ``(episode, seed)`` of the world's episodes up to this one."""
+def recorded_seeds(info: ReplayInfo) -> tuple[int, list[tuple[int, int]]]:
+    """The run's world count and the recorded ``(episode, seed)`` of the world's episodes up to this one.
+
+    Raises:
+        StoreError: A seed that is neither an integer >= 0 nor None (a damaged store).
+    """
     con = open_read(info.path)
     try:
         (n_worlds,) = con.execute("SELECT n_worlds FROM runs WHERE run = ?", (info.run,)).fetchone()
@@ -77,7 +81,7 @@ def static_scene(info: ReplayInfo) -> tuple[StaticScene | None, str | None]:
     """
     from agentsim_env.env.parallel_env import build_parallel_env
 
-    n_worlds, known = _seeds(info)
+    n_worlds, known = recorded_seeds(info)
     if n_worlds != 1:
         return None, "a batched run: obstacles and goals are not rebuilt"
     if not known:

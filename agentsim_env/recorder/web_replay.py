@@ -24,7 +24,8 @@ from agentsim_env.comms.messages import AGENT, KIND_NAMES
 from agentsim_env.core.budget import check_memory
 from agentsim_env.recorder.checks import check_values, open_read
 from agentsim_env.recorder.replay import ReplayInfo, replay_info
-from agentsim_env.recorder.schema import StoreError, info_columns
+from agentsim_env.recorder.replay_scene import recorded_seeds
+from agentsim_env.recorder.schema import info_columns
 from agentsim_env.render.web.frames import (
     ARRIVED,
     COLLIDED,
@@ -203,18 +204,7 @@ def rebuild_scene(info: ReplayInfo) -> tuple[dict[str, Any], str | None]:
     """
     from agentsim_env.env.parallel_env import build_parallel_env
 
-    con = open_read(info.path)
-    try:
-        (n_worlds,) = con.execute("SELECT n_worlds FROM runs WHERE run = ?", (info.run,)).fetchone()
-        seeds = con.execute("SELECT episode, seed FROM episodes WHERE run = ? AND world = ? AND episode <= ? "
-                            "ORDER BY episode", (info.run, info.world, info.episode)).fetchall()  # fmt: skip
-    finally:
-        con.close()
-    for e, s in seeds:
-        if s not in (None, "None") and not (isinstance(s, str) and s.isascii() and s.isdigit() and len(s) <= 100):
-            raise StoreError(f"{info.path}: episodes.seed holds {str(s)[:40]!r} in the row of run {info.run}, "
-                             f"episode {e}, world {info.world}, but it must be an integer >= 0 or None: "
-                             "the store is damaged")  # fmt: skip
+    n_worlds, known = recorded_seeds(info)  # a damaged seed is refused before anything is built
     config = info.config  # validated by replay_info
     replay = {"run": info.run, "episode": info.episode, "n_steps": len(info.steps), "first_step": int(info.steps[0]),
               "last_step": int(info.steps[-1])}  # fmt: skip
@@ -224,7 +214,6 @@ def rebuild_scene(info: ReplayInfo) -> tuple[dict[str, Any], str | None]:
     except Exception as exc:  # noqa: BLE001 - a config of an older version: draw agents only
         return _bare_scene(info, title, replay), f"the run's config no longer builds ({exc}); no objects"
     why = None
-    known = [(e, s) for e, s in seeds if s not in (None, "None")]
     if n_worlds != 1:
         why = "a batched run: its static objects are not rebuilt"
         env.world.scene = type(env.world.scene)()
