@@ -59,22 +59,12 @@ for command in json.loads(sys.argv[1]):
 print("COMPILED " + json.dumps(compiled))
 """
 
-QUICKSTART = """
-import agentsim_env
-from agentsim_env.policies.registry import make_policy
-from agentsim_env.wsn import evaluate_deployment
-
-env = agentsim_env.make("uav_release", render_mode="rgb_array")
-obs, infos = env.reset(seed=0)
-policy = make_policy("uav_release", env, "B5_cvt")
-policy.reset(seed=0)
-while env.agents:
-    obs, rewards, terminations, truncations, infos = env.step(policy.act({a: obs[a] for a in env.agents}))
-frame = env.render()
-zones = env.scenario.zones
-evaluate_deployment(env.world.payloads.objects.landed_xy(), None, zones.centres(), zones.radii(),
-                    [z.radial_profile() for z in zones.zones])
-"""
+def readme_quickstart() -> str:
+    """The README's quickstart code, as a newcomer copies it (the first Python block of its Quickstart)."""
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    section = text[text.index("## Quickstart"):]
+    start = section.index("```python\n") + len("```python\n")
+    return section[start : section.index("```", start)]
 
 
 def _commands(out: Path) -> list[list[str]]:
@@ -98,7 +88,7 @@ def _commands(out: Path) -> list[list[str]]:
          "--out", str(out / "evaluation")],
         ["run", "navigation", "--episodes", "1", "--record", str(out / "run.db"), *o],
         ["replay", str(out / "run.db"), "--episode", "0", "--every", "100", "--out", str(out / "frames") + "/"],
-        ["python", QUICKSTART],
+        ["python", readme_quickstart()],
     ]
     for scenario, baselines in BASELINES.items():  # every scenario x every baseline
         sets = ["--set", *tiny_uav] if scenario == "uav_release" else []
