@@ -11,8 +11,14 @@ world; the scenario base then adds its observation part, ``gnss (3,)``, to every
 | 2   | measured altitude in [-1, 1] over the altitude band                          |
 
 The horizontal error is Gaussian with ``sigma_h`` per axis, the altimeter's with ``sigma_v``; every reading is
-new noise (no bias or random walk). Offline slots read zeros. Each world draws from its own stream, spawned at
-its reset, so a world's readings do not depend on the other worlds of a batch.
+new noise (no bias or random walk). Offline slots read zeros.
+
+The noise is keyed, not streamed: the error of agent i of world w on axis a is
+``core.keyed.keyed_normal(episode key of w, tick, i, a)``, where the episode key is one 64-bit word drawn from the
+generator the world's reset hands the sensor, and tick is the world tick the reading describes (``ctx.tick + 1``
+inside a step, ``ctx.tick`` when a reset or ``World.refresh`` re-reads the state). A reading therefore depends on
+neither the other worlds of a batch nor the other slots a process holds (a shard draws exactly the numbers one
+process draws for its slots), and reading the same state twice gives the same noise.
 """
 
 from __future__ import annotations
@@ -21,6 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from agentsim_env.core.keyed import keyed_normal
 from agentsim_env.core.pipeline import Part, StepContext
 from agentsim_env.core.validation import check_float, coerce_fields
 
@@ -70,29 +77,39 @@ class GnssSensor:
         self._lo = np.array([bounds[0], bounds[2], z_range[0]], dtype=np.float64)
         self._span = np.array([bounds[1] - bounds[0], bounds[3] - bounds[2], z_range[1] - z_range[0]])
         self._sigma = np.array([config.sigma_h, config.sigma_h, config.sigma_v])
-        self._rngs: list[np.random.Generator | None] = [None] * int(n_worlds)  # each comes with its reset_world
+        self._keys = np.zeros(int(n_worlds), dtype=np.uint64)  # each world's episode key, drawn at its reset
+        self._keyed = np.zeros(int(n_worlds), dtype=bool)
         self._reading = np.full((int(n_worlds) * self.n_agents, 3), np.nan)
 
     def reset_world(self, w: int, rng: np.random.Generator) -> None:
-        """World ``w``'s readings come from ``rng`` this episode."""
-        self._rngs[w] = rng
+        """World ``w``'s noise this episode is keyed by one word drawn from ``rng``."""
+        self._keys[w] = rng.integers(0, 2**64, dtype=np.uint64)
+        self._keyed[w] = True
 
     def step(self, ctx: StepContext) -> np.ndarray:
         """Stage 8: measured positions ``(S, 3)`` in metres (NaN for offline slots).
 
         After a reset only the reset worlds are measured again (``ctx.fresh``); the others keep their reading.
+        Only online slots draw noise, each from its own key (see the module docstring).
         """
         st = ctx.state
         n = self.n_agents
         reading = self._reading.copy()
-        worlds = range(len(self._rngs)) if ctx.fresh is None else ctx.fresh.tolist()
-        for w in worlds:  # each world's rows from its own stream
-            rng = self._rngs[w]
-            if rng is None:
-                raise ValueError(f"gnss: world {w} has no random stream yet: reset it (reset_world) first")
-            sl = slice(w * n, (w + 1) * n)
-            reading[sl] = st.pos[sl] + rng.standard_normal((n, 3)) * self._sigma
-        reading[~st.online] = np.nan
+        # Inside a step the earlier stages left their outputs in the context and the reading describes the state
+        # after the step; a context without them comes from World.refresh, which re-reads the current state.
+        tick = ctx.tick + 1 if ctx.outputs else ctx.tick
+        worlds = np.arange(len(self._keys)) if ctx.fresh is None else np.asarray(ctx.fresh, dtype=np.int64)
+        missing = worlds[~self._keyed[worlds]]
+        if missing.size:
+            raise ValueError(
+                f"gnss: world {int(missing[0])} has no noise key yet: reset it (reset_world) first"
+            )
+        rows = (worlds[:, None] * n + np.arange(n)).ravel()
+        live = rows[st.online[rows]]
+        w_of, agent = np.divmod(live, n)
+        noise = keyed_normal(self._keys[w_of][:, None], tick, agent[:, None], np.arange(3))
+        reading[rows] = np.nan
+        reading[live] = st.pos[live] + noise * self._sigma
         self._reading = reading
         return reading
 
