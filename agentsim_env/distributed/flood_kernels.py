@@ -1,0 +1,168 @@
+"""Numba kernels of the per-part overlay floods (``distributed.floods``).
+
+A part keeps, per flood row, the list of its OWN slots that read the flood: ``pool[rd_start[f]:rd_start[f] +
+rd_len[f]]``, plus reads added since the last rebuild (``add_v[add_start[f]:add_start[f] + add_len[f]]``). Every
+kernel that changes the lists writes them into a fresh pool (double buffering, as ``comms.flooding`` does), which
+drops the lists of rows that were forgotten.
+"""
+
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+
+from agentsim_env.comms.flooding import next_token
+
+
+@nb.njit(cache=True)
+def _copy_readers(f, rd_start, rd_len, pool, add_start, add_len, add_v, keep, new_pool, npool, stamp, tok):  # type: ignore[no-untyped-def]  # noqa: E501
+    # Row f's readers with keep[x] into new_pool (stamped with tok when tok >= 0); returns the new pool length.
+    for k in range(rd_start[f], rd_start[f] + rd_len[f]):
+        x = pool[k]
+        if keep[x]:
+            new_pool[npool] = x
+            npool += 1
+            if tok >= 0:
+                stamp[x] = tok
+    for k in range(add_start[f], add_start[f] + add_len[f]):
+        x = add_v[k]
+        if keep[x]:
+            new_pool[npool] = x
+            npool += 1
+            if tok >= 0:
+                stamp[x] = tok
+    return npool
+
+
+@nb.njit(cache=True)
+def split_reads(rd_start, rd_len, pool, add_start, add_len, add_v, keep):  # type: ignore[no-untyped-def]
+    """Rebuild the reader lists with the readers ``x`` where ``keep[x]``; the others come out.
+
+    Returns:
+        ``(new_pool, new_start, new_len, out_row, out_slot)``: the kept lists and the reads taken out.
+    """
+    n_rows = rd_start.shape[0]
+    total = add_v.shape[0]
+    for f in range(n_rows):
+        total += rd_len[f]
+    new_pool = np.empty(total, dtype=np.int64)
+    out_row = np.empty(total, dtype=np.int64)
+    out_slot = np.empty(total, dtype=np.int64)
+    new_start = np.zeros(n_rows, dtype=np.int64)
+    new_len = np.zeros(n_rows, dtype=np.int64)
+    npool = 0
+    nout = 0
+    for f in range(n_rows):
+        new_start[f] = npool
+        for k in range(rd_start[f], rd_start[f] + rd_len[f]):
+            x = pool[k]
+            if keep[x]:
+                new_pool[npool] = x
+                npool += 1
+            else:
+                out_row[nout] = f
+                out_slot[nout] = x
+                nout += 1
+        for k in range(add_start[f], add_start[f] + add_len[f]):
+            x = add_v[k]
+            if keep[x]:
+                new_pool[npool] = x
+                npool += 1
+            else:
+                out_row[nout] = f
+                out_slot[nout] = x
+                nout += 1
+        new_len[f] = npool - new_start[f]
+    return new_pool[:npool], new_start, new_len, out_row[:nout], out_slot[:nout]
+
+
+@nb.njit(cache=True)
+def hop_kernel(start, end, indices, own, e_row, e_slot, e_own, e_hops, rd_start, rd_len, pool, add_start, add_len,  # type: ignore[no-untyped-def]  # noqa: E501
+               add_v, stamp, token):  # fmt: skip
+    """One hop of the frontier entries ``(e_row, e_slot)`` (grouped by row, rows in key order) into own slots.
+
+    An own slot ``v`` reads row ``f`` when a frontier entry of ``f`` links to it and ``v`` is not among ``f``'s
+    own readers (nor read it earlier in this hop). Links walked are counted for own entries only (``e_own``), so
+    the parts' counts add up to the single process's.
+
+    Returns:
+        ``(new_pool, new_start, new_len, out_v, out_f, out_h, row_h, edges, token)``: the rebuilt reader lists
+        (only readers still own, the added ones and the new ones), the deliveries (receiver, row, hops) grouped by
+        row in entry order, each processed row's new hop count (-1: not processed), the links walked out of own
+        entries and the last stamp token.
+    """
+    n_rows = rd_start.shape[0]
+    ne = e_row.shape[0]
+    n_old = add_v.shape[0]
+    for f in range(n_rows):
+        n_old += rd_len[f]
+    bound = 0
+    for q in range(ne):
+        u = e_slot[q]
+        bound += end[u] - start[u]
+    new_pool = np.empty(n_old + bound, dtype=np.int64)
+    out_v = np.empty(bound, dtype=np.int64)
+    out_f = np.empty(bound, dtype=np.int64)
+    out_h = np.empty(bound, dtype=np.int32)
+    new_start = np.zeros(n_rows, dtype=np.int64)
+    new_len = np.zeros(n_rows, dtype=np.int64)
+    row_h = np.full(n_rows, -1, dtype=np.int32)
+    npool = 0
+    nd = 0
+    edges = 0
+    a = 0
+    while a < ne:
+        f = e_row[a]
+        b = a
+        while b < ne and e_row[b] == f:
+            b += 1
+        token = next_token(stamp, token)
+        tok = np.int32(token)
+        p0 = npool
+        npool = _copy_readers(
+            f, rd_start, rd_len, pool, add_start, add_len, add_v, own, new_pool, npool, stamp, tok
+        )
+        # every frontier entry of a flood holds the same hop count (they all read it at the same hop)
+        h = np.int32(e_hops[a] + 1)
+        row_h[f] = h
+        for q in range(a, b):
+            u = e_slot[q]
+            if e_own[q]:
+                edges += end[u] - start[u]
+            for p in range(start[u], end[u]):
+                v = indices[p]
+                if own[v] and stamp[v] != tok:
+                    stamp[v] = tok
+                    out_v[nd] = v
+                    out_f[nd] = f
+                    out_h[nd] = h
+                    nd += 1
+                    new_pool[npool] = v
+                    npool += 1
+        new_start[f] = p0
+        new_len[f] = npool - p0
+        a = b
+    for f in range(n_rows):  # rows without a frontier entry here keep their own readers
+        if row_h[f] < 0:
+            p0 = npool
+            npool = _copy_readers(f, rd_start, rd_len, pool, add_start, add_len, add_v, own, new_pool, npool, stamp,
+                                  np.int32(-1))  # fmt: skip
+            new_start[f] = p0
+            new_len[f] = npool - p0
+    return new_pool[:npool], new_start, new_len, out_v[:nd], out_f[:nd], out_h[:nd], row_h, edges, token
+
+
+@nb.njit(cache=True)
+def group_by_rank(rank, rows, n_ranks):  # type: ignore[no-untyped-def]
+    """A stable counting sort of entry indices by their row's rank: O(entries + ranks)."""
+    count = np.zeros(n_ranks + 1, dtype=np.int64)
+    for q in range(rows.shape[0]):
+        count[rank[rows[q]] + 1] += 1
+    for r in range(n_ranks):
+        count[r + 1] += count[r]
+    order = np.empty(rows.shape[0], dtype=np.int64)
+    for q in range(rows.shape[0]):
+        r = rank[rows[q]]
+        order[count[r]] = q
+        count[r] += 1
+    return order
