@@ -48,6 +48,8 @@ class StepContext:
         outputs: Events of the stages that already ran this step, by subsystem name.
         fresh: Outside a step, after a reset: the worlds that were reset (the others did not move). A sensor
             with noise draws only for these, so a world's stream never depends on another world's resets.
+        own: ``(S,)`` bool, the slots this process steps (a shard's own agents; its other online slots are
+            ghosts, copies of agents stepped elsewhere), or ``None`` when it steps every slot.
     """
 
     state: AgentState
@@ -60,6 +62,7 @@ class StepContext:
     collisions: CollisionEvents = field(default_factory=CollisionEvents.empty)
     outputs: dict[str, Any] = field(default_factory=dict)
     fresh: np.ndarray | None = None
+    own: np.ndarray | None = None
 
 
 @runtime_checkable
@@ -104,6 +107,26 @@ class Sensor(Subsystem, Protocol):
 
     def observe(self, reading: Any) -> np.ndarray:
         """The reading as an observation part ``(S, *obs_part.shape)`` float32."""
+
+
+@runtime_checkable
+class StepBridge(Protocol):
+    """The exchanges of a world that steps part of a larger one (a shard; ``distributed.worker``).
+
+    ``World.step`` calls it between stages; a world stepped on its own has none (``world.bridge is None``).
+    """
+
+    own: np.ndarray
+    """``(S,)`` bool: the slots this world steps (its other online slots are ghosts)."""
+
+    def after_motion(self, world: Any, ctx: StepContext) -> None:
+        """After stages 2-4: hand over the agents that left, take in arrivals and this step's ghosts."""
+
+    def after_offline(self, world: Any, ctx: StepContext, went: np.ndarray) -> np.ndarray:
+        """After stages 5-6: share the own slots that went offline (``went``); the ghosts that did elsewhere."""
+
+    def combine(self, partials: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """The scenario's per-group partial sums over every shard."""
 
 
 def stream(seed: np.random.SeedSequence, name: str) -> np.random.Generator:

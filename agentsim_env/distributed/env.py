@@ -17,9 +17,12 @@ import numpy as np
 
 from agentsim_env.core.validation import check_choice, check_float, check_int
 from agentsim_env.distributed.backends import Backend, LocalShards
+from agentsim_env.distributed.bridge import Bridge
 from agentsim_env.distributed.coordinator import Coordinator, ShardInfo
+from agentsim_env.distributed.driver import Driver
 from agentsim_env.distributed.partition import Strips, halo_width
 from agentsim_env.distributed.shard import Shard
+from agentsim_env.distributed.worker import Worker
 from agentsim_env.env.parallel_env import ENV_KEYS, AgentSimParallelEnv
 from agentsim_env.env.vector import BatchedEnv
 from agentsim_env.scenarios.base import Scenario
@@ -67,12 +70,36 @@ def check_options(shards: Any, backend: Any, ray_address: Any, timeout_s: Any) -
         check_address(ray_address)
 
 
+def steps_itself(scenario: Scenario, world: Any) -> bool:
+    """Whether the shards of ``world`` step themselves (``distributed.worker``): every config without comms.
+
+    With comms the coordinator still runs the bus, the overlay's table and the groups (``distributed.coordinator``).
+    """
+    import os
+
+    return world.comms is None and os.environ.get("AGENTSIM_SELF_STEPPING") == "1"
+
+
 def build_coordinator(
     scenario: Scenario, world: Any, shards: int, backend: str, ray_address: str | None, timeout_s: float
-) -> Coordinator:
+) -> Coordinator | Driver:
     """Start the shards of ``world`` (the mirror of a front end); the options were checked (``check_options``)."""
     strips = Strips.build(world.config.bounds, int(shards), halo_width(world))
     name, config = scenario.name, _config_fields(scenario)
+    if steps_itself(scenario, world):
+        bridge = Bridge(Strips(strips.edges.copy(), strips.halo, strips.owner.copy()))
+        if backend == "local":
+            from agentsim_env.distributed.pool import LocalPool
+
+            def factory(k: int, swap: Any) -> Worker:
+                return Worker(k, name, config, Strips(strips.edges.copy(), strips.halo, strips.owner.copy()), swap)
+
+            pool: Any = LocalPool(factory, int(shards), bridge)
+        else:
+            from agentsim_env.distributed.ray_pool import RayPool
+
+            pool = RayPool(name, config, strips, int(shards), ray_address, bridge)
+        return Driver(scenario, world, strips, pool, timeout_s)
     if backend == "local":
         be: Backend = LocalShards(lambda k: Shard(k, name, config, strips), int(shards))
     else:
@@ -128,6 +155,15 @@ class DistributedParallelEnv(AgentSimParallelEnv):
     def _step_core(self, parts: dict[str, np.ndarray], acting: np.ndarray) -> tuple[Any, np.ndarray]:
         return self.coordinator.step(parts, acting)
 
+    def _flat_obs(self, rows: np.ndarray, result: Any = None) -> np.ndarray:
+        co = self.coordinator
+        if isinstance(co, Driver):  # the observations were built on the shards
+            assert co.obs is not None
+            out = self._obs_out.get()
+            np.copyto(out, co.obs)
+            return out
+        return super()._flat_obs(rows, result)
+
     def close(self) -> None:
         """Stop the shards (and the viewer or window, if any)."""
         self.coordinator.backend.close()
@@ -175,6 +211,16 @@ class DistributedBatchedEnv(BatchedEnv):
 
     def _step_core(self, parts: dict[str, np.ndarray], acting: np.ndarray) -> tuple[Any, np.ndarray]:
         return self.coordinator.step(parts, acting)
+
+    def _flat_obs(
+        self, rows: np.ndarray | None = None, step: int = 0, result: Any = None, out: np.ndarray | None = None
+    ) -> np.ndarray:
+        co = self.coordinator
+        if isinstance(co, Driver):  # the observations were built on the shards
+            assert co.obs is not None
+            flat = co.obs.copy() if out is None else np.copyto(out, co.obs) or out
+            return flat.reshape(self.n_worlds, self.n_agents, self.obs_dim)
+        return super()._flat_obs(rows, step, result, out)
 
     def close(self) -> None:
         """Stop the shards."""

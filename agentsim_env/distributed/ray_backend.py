@@ -240,3 +240,43 @@ class RayShards:
             _users -= 1
             if _users == 0 and self._ray.is_initialized():
                 self._ray.shutdown()
+
+
+def join_cluster(ray: Any, address: str | None, n_shards: int) -> bool:
+    """Join the Ray cluster at ``address``, or start a local one on 127.0.0.1 (``None``), unless joined already.
+
+    Returns:
+        Whether this env counts as a user of the local cluster this process started (``leave_cluster`` stops it
+        when its last user leaves).
+
+    Raises:
+        ConnectionError: When the cluster at ``address`` cannot be reached.
+    """
+    global _users
+    if address is not None:
+        address = check_address(address)
+    if not ray.is_initialized():
+        if address is None:
+            start_local_cluster(ray, num_cpus=max(os.cpu_count() or 1, n_shards))
+            _users += 1
+            return True
+        check_reachable(address)
+        try:
+            ray.init(address=address, logging_level="ERROR", log_to_driver=False)
+        except Exception as e:  # ray raises ConnectionError, RuntimeError or its own kinds here
+            raise ConnectionError(f"cannot reach the Ray cluster at ray_address={address!r}: "
+                                  f"{type(e).__name__}: {e}") from e  # fmt: skip
+        return False
+    if _users:
+        _users += 1
+        return True
+    return False
+
+
+def leave_cluster(ray: Any, user: bool) -> None:
+    """One user of the local cluster leaves (``user`` from ``join_cluster``); the last one shuts it down."""
+    global _users
+    if user:
+        _users -= 1
+        if _users == 0 and ray.is_initialized():
+            ray.shutdown()

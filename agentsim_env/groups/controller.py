@@ -245,7 +245,7 @@ class GroupController:
             empty = np.empty(0, dtype=np.int64)
             return GroupStepEvents(empty, empty, self.take_events())
         answers, self._answers = self._answers, None
-        timed_out, ping = self.tick(ctx.tick, st.online, answers, ctx.step_count[st.world_id])
+        timed_out, ping = self.tick(ctx.tick, st.online, answers, ctx.step_count[st.world_id], ctx.own)
         return GroupStepEvents(timed_out[st.online[timed_out]], ping, self.take_events())
 
     def take_events(self) -> GroupEvents:
@@ -272,6 +272,7 @@ class GroupController:
         online: np.ndarray,
         answers: tuple[np.ndarray, np.ndarray] | None = None,
         phase: np.ndarray | None = None,
+        mine: np.ndarray | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
         """Read heartbeat answers, choose this step's heartbeats and report newly timed-out slots.
 
@@ -285,6 +286,8 @@ class GroupController:
                 (the bus's ``take_answers``), or ``None``.
             phase: ``(S,)`` steps since each slot's world was reset (heartbeats go out when it is a multiple of
                 the period, so a world's heartbeats do not depend on other worlds); default ``step``.
+            mine: ``(S,)`` bool, the slots this controller monitors (a shard's own agents; the others are
+                monitored by their own shard), or ``None`` for every slot.
 
         Returns:
             ``(timed_out, ping)``: slots (ascending int64) whose last answer is older than ``timeout`` steps,
@@ -304,7 +307,8 @@ class GroupController:
             due = np.full(self.n_slots, step % self.heartbeat_period == 0)
         else:
             due = phase % self.heartbeat_period == 0
-        ping = np.flatnonzero(due & online & (self.group >= 0))
-        late = (self.group >= 0) & ~self.timed_out & (step - self.last_answer > self.timeout)
+        watched = self.group >= 0 if mine is None else (self.group >= 0) & mine
+        ping = np.flatnonzero(due & online & watched)
+        late = watched & ~self.timed_out & (step - self.last_answer > self.timeout)
         self.timed_out |= late
         return np.flatnonzero(late), ping

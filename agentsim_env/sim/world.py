@@ -31,7 +31,7 @@ import numpy as np
 
 from agentsim_env.comms.stack import CommsConfig, CommsEvents, CommsStack
 from agentsim_env.core.collisions import CollisionEvents
-from agentsim_env.core.pipeline import Sensor, StepContext, Subsystem, stream
+from agentsim_env.core.pipeline import Sensor, StepBridge, StepContext, Subsystem, stream
 from agentsim_env.core.scene import Scene
 from agentsim_env.core.spatial import Grid, GridSpec, build_grid, build_object_grid
 from agentsim_env.core.state import AgentState
@@ -160,6 +160,8 @@ class World:
         self.last_events = StepEvents(CollisionEvents.empty(), np.zeros(0, dtype=np.int64))
         self._box: tuple[Any, np.ndarray, np.ndarray] = (None, _NONE, _NONE)  # config, low and high corners
         self.threads = RowThreads(1)
+        self.bridge: StepBridge | None = None
+        """The exchanges of a shard (``distributed.worker``); ``None`` when this world is the whole world."""
 
     def set_num_threads(self, num_threads: int) -> None:
         """Threads for the per-slot kernels of every stage that has them, 1..256 (results do not change).
@@ -263,8 +265,9 @@ class World:
     # ------------------------------------------------------------------ pipeline
     def context(self) -> StepContext:
         """A fresh step context over the current state, scene, grid and counters."""
+        own = None if self.bridge is None else self.bridge.own
         return StepContext(self.state, self.scene, self.agent_grid, self.object_grid(), self.config.dt,
-                           self.tick, self.step_count)  # fmt: skip
+                           self.tick, self.step_count, own=own)  # fmt: skip
 
     def _sense(self, ctx: StepContext) -> dict[str, Any]:
         # 8. sensors: each on the step's shared grid
@@ -280,7 +283,8 @@ class World:
         """Advance every world by one ``dt``: stages 2-8, then the step hooks (10).
 
         The stages run through the phase methods below (``run_motion``, ``run_collisions``, ``run_groups``,
-        ``run_comms``, ``run_sensors``), which the distributed shards and coordinator call one by one.
+        ``run_comms``, ``run_sensors``). A shard's world (``self.bridge`` set) exchanges with the other shards
+        after the motion (hand-overs, ghosts) and after the groups stage (the ghosts that went offline).
 
         Args:
             hooks: Run the step hooks now; ``scenarios.base.run_step`` passes False and calls ``run_hooks``
@@ -288,9 +292,17 @@ class World:
         """
         ctx = self.context()
         contacts, landed = self.run_motion(ctx)  # 2-4
+        if self.bridge is not None:
+            self.bridge.after_motion(self, ctx)
         events, went = self.run_collisions(ctx, contacts)  # 5
         timed_out, group_events = self.run_groups(ctx)  # 6
-        if went.size or timed_out.size:
+        gone = went.size or timed_out.size
+        if self.bridge is not None:
+            elsewhere = self.bridge.after_offline(self, ctx, np.union1d(went, timed_out))
+            if elsewhere.size:
+                self.set_offline(elsewhere)
+                gone = True
+        if gone:
             self.regrid(ctx)
         comm_events = self.run_comms(ctx)  # 7
         readings = self.run_sensors(ctx)  # 8
@@ -321,6 +333,9 @@ class World:
         events = self.collide.step(ctx)  # 5. collisions
         if contacts is not None:
             events = events.concat(contacts)
+        if ctx.own is not None and len(events):  # a shard reports its own agents; a ghost's owner reports it
+            keep = ctx.own[events.agent]
+            events = CollisionEvents(events.agent[keep], events.other_agent[keep], events.obj[keep])
         ctx.collisions = events
         went = np.unique(events.agent) if self.config.collision_ends_agent and len(events) else _NONE
         if went.size:

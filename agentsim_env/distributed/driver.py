@@ -1,0 +1,232 @@
+"""The coordinator of shards that step themselves: it hands out actions, keeps the clock and the heartbeats.
+
+Each worker (``distributed.worker``) runs the whole step for its own agents and meets the others at the exchange
+(``distributed.exchange``, routed by ``distributed.bridge``). The driver does not order stages: a step is one
+``step`` call per live shard, waited for with a deadline. What it keeps: which shard owns which slot (from the
+replies, for splitting the caller's actions), each shard's heartbeat, the strips of a shard that went offline,
+and the rows the caller asked for (rewards, terminations, infos, observations; kinematics into ``world``, the
+mirror the step hooks, ``render`` and ``state()`` read).
+
+Faults: a shard that dies, misses the deadline or raises is offline at once (the pool drops it from the
+exchange, so the others finish their step): its agents report ``terminations`` once, its strips pass to the
+nearest live shard, the rest goes on; ``reset`` restarts it. With no shard left the call raises a
+``RuntimeError`` naming every shard's reason (chained to the exception a shard raised, if any).
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from typing import Any
+
+import numpy as np
+
+from agentsim_env.core.collisions import CollisionEvents
+from agentsim_env.distributed.backends import Failure
+from agentsim_env.distributed.bridge import Packed
+from agentsim_env.distributed.coordinator import ShardInfo, Traffic, nbytes
+from agentsim_env.distributed.partition import Strips
+from agentsim_env.scenarios.base import Scenario, StepResult, StepScores
+from agentsim_env.sim import StepEvents, World
+
+log = logging.getLogger("agentsim_env.distributed")
+_NONE = np.zeros(0, dtype=np.int64)
+
+
+class Driver:
+    """Steps K self-stepping shards over one world (see the module docstring).
+
+    Args:
+        scenario: The scenario (validated config, shardable).
+        world: The mirror world (``scenario.build(1)``): kinematics when asked, the scene, the clock.
+        strips: The partition.
+        pool: The workers (``pool.LocalPool`` or ``ray_pool.RayPool``).
+        timeout_s: Deadline of every call, in seconds.
+    """
+
+    def __init__(self, scenario: Scenario, world: World, strips: Strips, pool: Any, timeout_s: float) -> None:
+        self.scenario = scenario
+        self.world = world
+        self.strips = strips
+        self.backend = pool
+        self.timeout_s = float(timeout_s)
+        self.shards = [ShardInfo(k) for k in range(pool.n_shards)]
+        s = world.state.n_slots
+        self.owner = np.full(s, -1, dtype=np.int64)
+        self._ended = _NONE
+        self._objects: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+        self.lost = _NONE
+        self.traffic = Traffic()
+        self.obs: np.ndarray | None = None
+        self.kinematics = True
+        """Gather every own agent's position each step into ``world`` (the mirror); off for rollouts."""
+
+    # ------------------------------------------------------------------ faults
+    @property
+    def alive(self) -> np.ndarray:
+        """``(K,)`` bool: the shards still answering."""
+        return np.array([i.alive for i in self.shards], dtype=bool)
+
+    def _declare_offline(self, k: int, failure: Failure) -> None:
+        info = self.shards[k]
+        if not info.alive:
+            return
+        info.alive, info.reason = False, failure.reason
+        slots = np.flatnonzero(self.owner == k)
+        self.owner[slots] = -1
+        self.world.set_offline(slots)
+        self.lost = np.union1d(self.lost, slots)
+        if not self.alive.any():
+            reasons = "; ".join(f"shard {i.index}: {i.reason}" for i in self.shards)
+            raise RuntimeError(f"every shard is offline ({reasons}): the simulation cannot go on (reset() restarts "
+                               f"them)") from failure.error  # fmt: skip
+        self.strips.reassign(k, self.alive)
+        self.backend.set_owner(self.strips.owner)
+        log.warning("shard %d (%s) is offline: %s; its %d agents terminate, the simulation goes on",
+                    k, info.address, failure.reason, slots.size, exc_info=failure.error)  # fmt: skip
+
+    def _call(self, method: str, calls: dict[int, tuple[Any, ...]]) -> dict[int, Packed]:
+        calls = {k: a for k, a in calls.items() if self.shards[k].alive}
+        replies = self.backend.call(method, calls, self.timeout_s)
+        out: dict[int, Packed] = {}
+        now = time.time()
+        failed = []
+        for k, r in replies.items():
+            if isinstance(r, Failure):
+                failed.append((k, r))
+                continue
+            beat, info = r["beat"], self.shards[k]
+            info.address, info.last_answer, info.last_step = beat["address"], now, beat["step"]
+            info.step_s = beat["compute_s"]
+            out[k] = r
+        for k, r in failed:
+            self._declare_offline(k, r)
+        return out
+
+    def restart_offline(self) -> None:
+        """Start every offline shard anew and give each its strips back (before an episode)."""
+        for info in self.shards:
+            if not info.alive:
+                self.backend.restart(info.index)
+                info.alive, info.reason = True, ""
+                info.restarts += 1
+                log.info("shard %d restarted", info.index)
+        self.strips.owner = np.arange(self.strips.n_strips, dtype=np.int64)
+        self.backend.set_owner(self.strips.owner)
+
+    def add_objects(self, kind: np.ndarray, centre: np.ndarray, half: np.ndarray) -> None:
+        """Add static objects to the world now; every shard gets them before the next step's motion."""
+        self.world.scene.add(kind, centre, half, 0)
+        sc = self.world.scene
+        k = np.atleast_2d(np.asarray(centre)).shape[0]
+        self._objects.append((sc.kind[-k:].copy(), sc.centre[-k:].copy(), sc.half[-k:].copy()))
+
+    # ------------------------------------------------------------------ gathering
+    def _take(self, replies: dict[int, Packed], obs: bool) -> None:
+        st = self.world.state
+        for k, r in replies.items():
+            self.owner[r["own"]] = k
+        if obs:
+            out = self.obs
+            assert out is not None
+            for r in replies.values():
+                out[r["slots"]] = r["obs"]
+        for r in replies.values():
+            if "pos" in r:
+                mine = r["own"]
+                st.pos[mine], st.vel[mine], st.heading[mine], st.online[mine] = (
+                    r["pos"], r["vel"], r["heading"], r["online"])  # fmt: skip
+
+    # ------------------------------------------------------------------ episode
+    def reset(self, seed: np.random.SeedSequence) -> None:
+        """Start the episode of ``seed`` on the mirror and on every shard (offline shards restarted first)."""
+        self.restart_offline()
+        world, sc = self.world, self.scenario
+        placement = world.reset_world(0, seed)
+        sc.reset_world(world, 0, placement)
+        self._ended, self._objects, self.lost = _NONE, [], _NONE
+        self.owner[:] = -1
+        s = world.state.n_slots
+        self.obs = np.zeros((s, _obs_dim(sc)), np.float32)
+        replies = self._call("reset", {k: (seed, self.strips.owner, True, self.kinematics)
+                                       for k in range(len(self.shards))})  # fmt: skip
+        self._take(replies, obs=True)
+        if not self.alive.all():  # a shard that failed its reset loses its agents at once
+            self.lost = np.flatnonzero(world.state.online & (self.owner < 0))
+            world.set_offline(self.lost)
+
+    def step(self, parts: dict[str, np.ndarray], acting: np.ndarray) -> tuple[StepResult, np.ndarray]:
+        """One step over the shards: each runs it for its own agents; their rows come back.
+
+        Args:
+            parts: Validated action parts ``(S, size)`` of every slot.
+            acting: ``(S,)`` the live slots.
+
+        Returns:
+            The step's result over every slot and the slots that terminated (those of an offline shard too).
+        """
+        world, st = self.world, self.world.state
+        s = st.n_slots
+        self.lost = _NONE
+        tr = self.traffic = Traffic()
+        control: Packed = {"ended": self._ended, "objects": self._objects, "owner": self.strips.owner,
+                           "obs": True, "kinematics": self.kinematics}  # fmt: skip
+        calls: dict[int, tuple[Any, ...]] = {}
+        for k in range(len(self.shards)):
+            slots = np.flatnonzero(acting & (self.owner == k))
+            calls[k] = (slots, {p: v[slots] for p, v in parts.items()}, control)
+            tr.actions += nbytes(calls[k][:2])
+        self._objects = []
+        replies = self._call("step", calls)
+        rewards = np.zeros(s)
+        terminated = np.zeros(s, dtype=bool)
+        info: dict[str, np.ndarray] = {}
+        keys = self.scenario.info_keys()
+        for r in replies.values():
+            sl = r["slots"]
+            rewards[sl] = r["rewards"]
+            terminated[sl] = r["terminated"]
+            for key in keys:
+                v = r["info"][key]
+                if key not in info:
+                    info[key] = np.zeros(s, dtype=v.dtype)
+                info[key][sl] = v
+            tr.readings += nbytes(r)
+            tr.handover += int(r["handed"])
+        for key in keys:
+            info.setdefault(key, np.zeros(s))
+        self._take(replies, obs=True)
+        lost = self.lost
+        if lost.size:  # agents of a shard that went offline: they terminate now, with their last observation
+            terminated[lost[acting[lost]]] = True
+        col = [r for r in replies.values() if r["col.agent"].size]
+        events = _merge_collisions(col)
+        ended = np.flatnonzero(terminated)
+        world.set_offline(ended)
+        self.owner[ended] = -1
+        self._ended = np.union1d(ended, lost)
+        world.tick += 1
+        world.step_count += 1
+        ev = StepEvents(events, _NONE)
+        ev.lost = lost
+        res = StepResult(rewards, terminated, info)
+        world.last_events = ev
+        if world.hooks:
+            ev.scores = StepScores(acting, rewards, terminated, info)
+            world.run_hooks(ev)
+        return res, terminated
+
+
+def _obs_dim(scenario: Scenario) -> int:
+    return int(sum(p.size for p in scenario.obs_parts().values()))
+
+
+def _merge_collisions(replies: list[Packed]) -> CollisionEvents:
+    """Every shard's collisions of its own agents, in slot order of the hit agent (the single-process order)."""
+    if not replies:
+        return CollisionEvents.empty()
+    agent = np.concatenate([r["col.agent"] for r in replies])
+    other = np.concatenate([r["col.other"] for r in replies])
+    obj = np.concatenate([r["col.obj"] for r in replies])
+    order = np.argsort(agent, kind="stable")
+    return CollisionEvents(agent[order], other[order], obj[order])

@@ -1,0 +1,263 @@
+"""A shard that steps itself: the whole step pipeline for the agents it owns, with ghosts from its neighbours.
+
+A ``Worker`` holds a whole-map ``World`` of the scenario (full-length slot arrays, so a slot keeps its index
+everywhere) and a replica of the static scene; its own agents and its ghosts are online in it. One step is one
+call, ``step``: the scenario's ``run_step`` (stage 1 for the own agents that act, ``World.step``, the scoring),
+the same code as one process, with the world's ``bridge`` set to the worker, so ``World.step`` exchanges with
+the other shards through the coordinator's ``distributed.exchange`` at two points (after the motion: hand-overs
+and ghosts; after the groups stage: the ghosts that went offline) and the scoring a third time (the per-group
+sums). What it returns is what the caller asked for: the own agents' rows of rewards, terminations and infos,
+their observations (``obs=True``) and their kinematics (``kinematics=True``, for a mirror of the world).
+
+This module imports no Ray: ``distributed.ray_backend`` wraps a ``Worker`` in an actor.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import socket
+import time
+from typing import Any, Protocol
+
+import numpy as np
+
+from agentsim_env.core.pipeline import StepContext
+from agentsim_env.distributed.bridge import Packed
+from agentsim_env.distributed.partition import Strips
+from agentsim_env.motion import MotionState
+from agentsim_env.scenarios.base import run_step
+from agentsim_env.scenarios.registry import make_scenario
+from agentsim_env.sim import World
+
+#: AgentState fields that travel with an agent handed over to another shard (the rest is fixed per episode).
+AGENT_FIELDS = ("pos", "vel", "heading", "radius", "sensor_range", "max_speed", "max_accel", "online")
+MOTION_FIELDS = tuple(f.name for f in dataclasses.fields(MotionState))
+
+
+class Swap(Protocol):
+    """The exchange as a shard sees it: post, wait, get its part."""
+
+    def __call__(self, key: tuple[int, str], k: int, payload: Packed) -> Packed:
+        """Post ``payload`` for barrier ``key`` as shard ``k`` and return shard ``k``'s part."""
+
+
+def pack_rows(world: World, slots: np.ndarray) -> Packed:
+    """Every per-slot row of ``slots`` an agent takes with it to another shard."""
+    st, rows = world.state, {"slots": slots}
+    for f in AGENT_FIELDS:
+        rows[f"a.{f}"] = getattr(st, f)[slots]
+    for f in MOTION_FIELDS:
+        rows[f"m.{f}"] = getattr(world.motion, f)[slots]
+    task = world.task
+    if task is not None and dataclasses.is_dataclass(task):
+        for f in dataclasses.fields(task):
+            meta = f.metadata
+            if "shape" in meta and not meta.get("per_world", False):
+                rows[f"t.{f.name}"] = getattr(task, f.name)[slots]
+    return rows
+
+
+def unpack_rows(world: World, rows: Packed) -> None:
+    """Write handed-over rows (``pack_rows``) into ``world``."""
+    slots = rows["slots"]
+    st, motion, task = world.state, world.motion, world.task
+    for key, v in rows.items():
+        if key.startswith("a."):
+            getattr(st, key[2:])[slots] = v
+        elif key.startswith("m."):
+            getattr(motion, key[2:])[slots] = v
+        elif key.startswith("t."):
+            getattr(task, key[2:])[slots] = v
+
+
+class Worker:
+    """The own agents of some strips and their ghosts, stepping themselves (see the module docstring).
+
+    Args:
+        index: This shard's index k.
+        name: Registered scenario name.
+        config: The scenario's config fields (as given to ``make``).
+        strips: The partition (strip edges, halo and the strips' owners).
+        swap: The exchange.
+        delay_s: Test hook: sleep this long in every call (a slow machine).
+    """
+
+    def __init__(
+        self, index: int, name: str, config: dict[str, Any], strips: Strips, swap: Swap, delay_s: float = 0.0
+    ) -> None:
+        self.index = int(index)
+        self.scenario = make_scenario(name, **config)
+        self.world = self.scenario.build(1)
+        self.strips = strips
+        self.swap = swap
+        self.delay_s = float(delay_s)
+        s = self.world.state.n_slots
+        self.own = np.zeros(s, dtype=bool)
+        self.ghost = np.zeros(s, dtype=bool)
+        self.acting = np.zeros(s, dtype=bool)
+        self.handed = 0
+        """Bytes of the agents handed over to this shard in the latest step."""
+        self.address = f"{socket.gethostname()}:{os.getpid()}"
+        self.world.bridge = self
+
+    # ------------------------------------------------------------------ helpers
+    def beat(self, t0: float) -> Packed:
+        """The heartbeat every reply carries."""
+        return {"shard": self.index, "address": self.address, "step": int(self.world.tick),
+                "compute_s": time.perf_counter() - t0}  # fmt: skip
+
+    def set_delay(self, delay_s: float) -> None:
+        """Test hook: sleep ``delay_s`` seconds in every later call (0: none)."""
+        self.delay_s = float(delay_s)
+
+    def _pause(self) -> None:
+        if self.delay_s > 0:
+            time.sleep(self.delay_s)
+
+    def _near_edge(self, x: np.ndarray) -> np.ndarray:
+        """Which of these x coordinates (of own agents) lie within a halo of their strip's inner edges."""
+        st = self.strips
+        r = st.strip_of(x)
+        left = (x - st.edges[r] <= st.halo) & (r > 0)
+        right = (st.edges[r + 1] - x <= st.halo) & (r < st.n_strips - 1)
+        return left | right
+
+    def _rows_out(self, slots: np.ndarray, res: Any, terminated: np.ndarray, obs: bool, kin: bool) -> Packed:
+        st = self.world.state
+        out: Packed = {"slots": slots, "own": np.flatnonzero(self.own)}
+        if res is not None:
+            out["rewards"] = np.asarray(res.rewards, dtype=np.float64)[slots]
+            out["terminated"] = terminated[slots]
+            out["info"] = {k: v[slots] for k, v in res.info.items()}
+        if obs:
+            out["obs"] = self.scenario.flat_observation(self.world)[slots]
+        if kin:
+            mine = out["own"]
+            out["pos"], out["vel"], out["heading"] = st.pos[mine], st.vel[mine], st.heading[mine]
+            out["online"] = st.online[mine]
+        return out
+
+    # ------------------------------------------------------------------ the bridge (World.step calls these)
+    def after_motion(self, world: World, ctx: StepContext) -> None:
+        """Hand over the own agents that left this shard's strips; take in arrivals and this step's ghosts."""
+        st = world.state
+        mine = np.flatnonzero(self.own & st.online)
+        x = st.pos[mine, 0]
+        leaving = mine[self.strips.owner_of(x) != self.index]
+        edge = mine[self._near_edge(x)]
+        leave = pack_rows(world, leaving)
+        leave["x"], leave["acting"] = st.pos[leaving, 0], self.acting[leaving]
+        post = {"edge": {"slots": edge, "x": st.pos[edge, 0], "pos": st.pos[edge]}, "leave": leave}
+        got = self.swap((int(world.tick), "motion"), self.index, post)
+        self.own[leaving] = False
+        self.acting[leaving] = False
+        st.online[leaving] = False
+        arrivals = got["arrivals"]
+        self.handed = 0
+        if arrivals is not None and arrivals["slots"].size:
+            new = arrivals["slots"]
+            self.handed = sum(int(v.nbytes) for v in arrivals.values())
+            unpack_rows(world, arrivals)
+            self.own[new] = True
+            self.acting[new] = arrivals["acting"]
+        g = got["ghosts"]["slots"]
+        self.ghost[:] = False
+        self.ghost[g] = True
+        st.pos[g] = got["ghosts"]["pos"]
+        st.online[g] = True
+
+    def after_offline(self, world: World, ctx: StepContext, went: np.ndarray) -> np.ndarray:
+        """Tell the neighbours which own agents near an edge went offline; the ghosts that went offline."""
+        st = world.state
+        near = went[self.own[went] & self._near_edge(st.pos[went, 0])] if went.size else went
+        got = self.swap((int(world.tick), "offline"), self.index, {"slots": near})
+        gone = got["slots"]
+        gone = gone[self.ghost[gone] & st.online[gone]]
+        self.ghost[gone] = False
+        return gone
+
+    def combine(self, partials: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """The per-group sums of every shard."""
+        return self.swap((int(self.world.tick), "groups"), self.index, partials)
+
+    # ------------------------------------------------------------------ episode
+    def reset(self, seed: np.random.SeedSequence, owner: np.ndarray, obs: bool = True, kin: bool = False) -> Packed:
+        """Start the episode of ``seed`` exactly as one process does, then keep this shard's agents online.
+
+        Every shard replays the placement, so every shard knows every agent's start: the ghosts need no
+        exchange here.
+
+        Returns:
+            The own slots with their observation rows (``obs``) and kinematics (``kin``), and a heartbeat.
+        """
+        t0 = time.perf_counter()
+        self._pause()
+        world, st = self.world, self.world.state
+        self.strips.owner = np.asarray(owner, dtype=np.int64).copy()
+        world.bridge = None  # the reset's sensing runs on the whole, identical world first
+        placement = world.reset_world(0, seed)
+        self.scenario.reset_world(world, 0, placement)
+        alive = np.flatnonzero(st.online)
+        x = st.pos[alive, 0]
+        self.own[:] = False
+        self.own[alive[self.strips.owner_of(x) == self.index]] = True
+        self.ghost[:] = False
+        self.ghost[self.strips.ghosts(x, alive, self.index)] = True
+        st.online[:] = self.own | self.ghost
+        world.refresh([0])
+        world.bridge = self
+        self.acting[:] = False
+        out = self._rows_out(np.flatnonzero(self.own), None, self.own, obs, kin)
+        out["beat"] = self.beat(t0)
+        return out
+
+    # ------------------------------------------------------------------ step
+    def step(
+        self,
+        slots: np.ndarray,
+        parts: dict[str, np.ndarray],
+        control: Packed,
+    ) -> Packed:
+        """One whole step of the own agents (see the module docstring).
+
+        Args:
+            slots: The own slots that act this step (sorted).
+            parts: Their validated action parts (rows in the order of ``slots``).
+            control: ``ended`` (slots that ended at the previous step anywhere, or were lost with a shard),
+                ``objects`` (static objects added since the previous step, ``(kind, centre, half)`` each),
+                ``owner`` (``(K,)`` the shard owning each strip), ``obs`` / ``kinematics`` (what to send back).
+
+        Returns:
+            The rows of the slots that acted and are own after the hand-overs (``slots``, ``rewards``,
+            ``terminated``, ``info``, ``obs``), every own slot (``own``, with kinematics when asked), the
+            collisions of own agents and a heartbeat.
+        """
+        t0 = time.perf_counter()
+        self._pause()
+        world, st = self.world, self.world.state
+        self.strips.owner = np.asarray(control["owner"], dtype=np.int64).copy()
+        for kind, centre, half in control.get("objects", ()):
+            world.scene.add(kind, centre, half, 0)
+        ended = control.get("ended")
+        if ended is not None and ended.size:
+            world.set_offline(ended)
+            self.own[ended] = False
+        st.online[self.ghost] = False  # ghosts come fresh after the motion
+        self.ghost[:] = False
+        s = st.n_slots
+        self.acting[:] = False
+        self.acting[slots] = True
+        full = {}
+        for key, rows in parts.items():
+            a = np.zeros((s, *rows.shape[1:]), dtype=rows.dtype)
+            a[slots] = rows
+            full[key] = a
+        res, terminated = run_step(self.scenario, world, full, self.acting)
+        done = np.flatnonzero(self.acting)
+        out = self._rows_out(done, res, terminated, bool(control.get("obs", True)), bool(control.get("kinematics")))
+        col = world.last_events.collisions
+        out["col.agent"], out["col.other"], out["col.obj"] = col.agent, col.other_agent, col.obj
+        out["handed"] = self.handed
+        out["beat"] = self.beat(t0)
+        return out
