@@ -23,6 +23,7 @@ import hashlib
 import os
 import sys
 import textwrap
+import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -246,6 +247,32 @@ def _observers(recorder: Any, bar: Any, check: Callable[[], None] | None = None)
     return on_step
 
 
+class _AgentSteps:
+    """A ``run_episode`` observer counting agent-steps (the agents that acted in each step), then passing on."""
+
+    def __init__(self, inner: Any) -> None:
+        self.inner = inner
+        self.n = 0
+
+    def __call__(self, env: Any, infos: dict[str, Any]) -> None:
+        self.n += len(infos)
+        if self.inner is not None:
+            self.inner(env, infos)
+
+
+def _rollout_row(env: Any, policy: Any, seed: int, bar: Any, check: Callable[[], None] | None) -> tuple:
+    """One episode through ``env.rollout`` (arrays, no per-step dicts): a row of the run's summary table."""
+
+    def on_step(env: Any, step: int) -> None:
+        if bar is not None:
+            bar.update(1)
+        if check is not None:  # a stop asked for by SIGTERM or Ctrl-C ends the run here, between steps
+            check()
+
+    res = env.rollout(policy, env.scenario.max_steps, seed=seed, on_step=on_step)
+    return (seed, res.steps, float(np.mean(res.returns)), res.info_sums, res.steps_per_s, res.agent_steps_per_s)
+
+
 def _check_record(path: str | None) -> None:
     """Fail before any rollout when ``--record PATH`` cannot be recorded to (``recorder.schema.check_store_path``)."""
     if not path:
@@ -340,10 +367,17 @@ def _run(args: argparse.Namespace, config: dict[str, Any], policy_name: str) -> 
         with LiveStop() as live:  # SIGTERM and Ctrl-C end the run between two steps (a second one at once)
             for k in episodes:
                 recorder = TrajectoryRecorder() if k == 0 and args.out else None
-                ep = run_episode(env, policy, args.seed + k, on_step=_observers(recorder, bar, live.check))
+                if recorder is None and not args.render and not store:  # nothing needs per-step dicts
+                    rows.append(_rollout_row(env, policy, args.seed + k, bar, live.check))
+                    continue
+                counted = _AgentSteps(_observers(recorder, bar, live.check))
+                t0 = time.perf_counter()
+                ep = run_episode(env, policy, args.seed + k, on_step=counted)
+                wall = time.perf_counter() - t0
                 if recorder is not None:
                     traj = recorder.result(env)
-                rows.append((ep.seed, ep.steps, float(np.mean(list(ep.returns.values()))), ep.info_sums))
+                rows.append((ep.seed, ep.steps, float(np.mean(list(ep.returns.values()))), ep.info_sums,
+                             ep.steps / wall, counted.n / wall))  # fmt: skip
     except BaseException as exc:
         if store:
             env.recorder.finish("incomplete")
@@ -355,7 +389,7 @@ def _run(args: argparse.Namespace, config: dict[str, Any], policy_name: str) -> 
         bar.close()
     mark_warm()
     n = env.scenario.n_agents
-    keys = sorted({k for *_, s in rows for k in s if k in ("arrived", "collided", "released", "landed")})
+    keys = sorted({k for r in rows for k in r[3] if k in ("arrived", "collided", "released", "landed")})
     if rows:  # none when a live run was stopped during its first episode
         print(f"\n{args.scenario}: {len(rows)} episodes x {n} agents, policy={policy_name}")
         print("| metric | mean | std |")
@@ -365,6 +399,8 @@ def _run(args: argparse.Namespace, config: dict[str, Any], policy_name: str) -> 
         for key in keys:
             frac = np.array([r[3].get(key, 0.0) / n for r in rows])
             print(f"| {key} per agent | {frac.mean():.3f} | {frac.std():.3f} |")
+        print(f"| env-steps/s | {np.mean([r[4] for r in rows]):.1f} | {np.std([r[4] for r in rows]):.1f} |")
+        print(f"| agent-steps/s | {np.mean([r[5] for r in rows]):.0f} | {np.std([r[5] for r in rows]):.0f} |")
     if traj is not None:
         shown = Path(policy_name).name.removesuffix(".zip") or "model"  # a model path: its folder's name
         # HASH names the --set values only: a trained model's own env config is named by the model's folder

@@ -28,6 +28,9 @@ __all__ = ["LearnedPolicy", "ModelFileError", "is_model_path", "load_model", "lo
 
 #: Largest ``config.json`` beside a model read (it holds a training config: a few kilobytes).
 MAX_CONFIG_JSON_BYTES = 1 << 20
+#: Fewest rows of one forward pass in ``act_rows`` (fewer are padded): a row's action is then the same whatever
+#: else is in the batch.
+_MIN_ROWS = 16
 #: Parts every stable-baselines3 model zip holds (the class parameters and the policy's weights).
 _REQUIRED_PARTS = ("data", "policy.pth")
 
@@ -199,6 +202,7 @@ class LearnedPolicy:
         self._obs_keys = list(scenario.obs_parts())
         self._obs_dim = sum(p.size for p in scenario.obs_parts().values())
         self._act_layout = flat_layout(scenario.act_parts())
+        self._act_shapes = {k: p.shape for k, p in scenario.act_parts().items()}
         self._dict_actions = getattr(env, "action_format", "dict") == "dict"
         want = (self._obs_dim,)
         got_obs = tuple(getattr(model.observation_space, "shape", ()) or ())
@@ -232,11 +236,37 @@ class LearnedPolicy:
             return {}
         agents = list(observations)
         batch = np.stack([self._flat(observations[a]) for a in agents])
-        actions, _ = self.model.predict(batch, deterministic=self.deterministic)
-        actions = np.clip(np.asarray(actions, dtype=np.float32), -1.0, 1.0)
+        actions = self._predict(batch)
         if not self._dict_actions:
             return dict(zip(agents, actions))
         return {a: {k: row[sl] for k, sl in self._act_layout.items()} for a, row in zip(agents, actions)}
+
+    def act_rows(self, obs: dict[str, np.ndarray], slots: np.ndarray, step: int) -> dict[str, np.ndarray]:
+        """The action parts of a batch of agents: one forward pass over their flattened observations.
+
+        Args:
+            obs: Every observation part as ``(n, ...)`` arrays.
+            slots: The agents' slots (unused: the network is the same for every agent).
+            step: Steps since the reset (unused).
+
+        Returns:
+            ``{part: (n, *shape)}`` float32 arrays, clipped to [-1, 1] as ``act`` clips them.
+        """
+        n = int(np.asarray(slots).shape[0])
+        batch = np.concatenate([np.asarray(obs[k], dtype=np.float32).reshape(n, -1) for k in self._obs_keys],
+                               axis=1)  # fmt: skip
+        actions = self._predict(batch)
+        return {k: actions[:, sl].reshape(n, *self._act_shapes[k]) for k, sl in self._act_layout.items()}
+
+    def _predict(self, batch: np.ndarray) -> np.ndarray:
+        """``(n, act_dim)`` actions of ``(n, obs_dim)`` flat observations, clipped to [-1, 1]."""
+        n = batch.shape[0]
+        if n < _MIN_ROWS:  # pad: BLAS takes another kernel for one or two rows, whose sums round differently
+            padded = np.zeros((_MIN_ROWS, batch.shape[1]), dtype=np.float32)
+            padded[:n] = batch
+            batch = padded
+        actions, _ = self.model.predict(batch, deterministic=self.deterministic)
+        return np.clip(np.asarray(actions, dtype=np.float32)[:n], -1.0, 1.0)
 
 
 def load_policy(path: str | Path, env: Any, *, deterministic: bool = True) -> LearnedPolicy:

@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from agentsim_env.policies.parts import ActionParts
+from agentsim_env.policies.parts import ActionParts, rows_to_dicts, stack_parts
 
 
 class GoToGoalPolicy:
@@ -59,9 +59,23 @@ class GoToGoalPolicy:
         if not observations:
             return {}
         names = list(observations)
-        selfp = np.stack([observations[a]["self"] for a in names])
-        lidar = np.stack([observations[a]["lidar"] for a in names])
-        task = np.stack([observations[a]["task"] for a in names])
+        parts = stack_parts(observations, names, ("self", "lidar", "task"))
+        return rows_to_dicts(names, self.act_rows(parts, np.zeros(0, dtype=np.int64), 0))
+
+    def act_rows(self, obs: dict[str, np.ndarray], slots: np.ndarray, step: int) -> dict[str, np.ndarray]:
+        """The action parts of a batch of agents (one row each; rows are independent of each other).
+
+        Args:
+            obs: Observation parts ``self``, ``lidar`` and ``task`` as ``(n, ...)`` arrays.
+            slots: The agents' slots (unused: the policy is the same for every agent).
+            step: Steps since the reset (unused).
+
+        Returns:
+            ``{"motion": (n, 3 or 8)}`` (and ``"comm"``, silent, with comms on).
+        """
+        selfp, lidar, task = obs["self"], obs["lidar"], obs["task"]
+        if selfp.shape[0] == 0:
+            return self.parts.arrays(np.zeros((0, 3)))
         heading = np.arctan2(selfp[:, 7], selfp[:, 6])
         goal = task[:, :3] * self.map_diagonal
         dist = np.linalg.norm(goal, axis=1, keepdims=True)
@@ -79,4 +93,4 @@ class GoToGoalPolicy:
         v[:, :2] += self.avoid_gain * (push + 0.5 * side) / self.n_azimuth * 4.0
         norm = np.linalg.norm(v, axis=1, keepdims=True)
         v = np.where(norm > 1.0, v / np.maximum(norm, 1e-9), v)
-        return self.parts.pack(names, v)
+        return self.parts.arrays(v)

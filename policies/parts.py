@@ -66,6 +66,29 @@ class ActionParts:
         out[:, 0] = SILENT_CHANNEL
         return out
 
+    def arrays(self, velocity: np.ndarray, comm: np.ndarray | None = None) -> dict[str, np.ndarray]:
+        """The action parts of ``n`` agents as arrays (float32, one row per agent).
+
+        Args:
+            velocity: ``(n, 3)`` target velocities in units of the maximum speed.
+            comm: ``(n, comm_dim)`` comm rows, or None for silence; dropped when the env has no comms.
+
+        Returns:
+            ``{"motion": (n, 3 or 8), "comm": (n, comm_dim)}`` with exactly the env's parts.
+        """
+        v = np.asarray(velocity, dtype=np.float32).reshape(-1, VELOCITY_ACTION_DIM)
+        n = v.shape[0]
+        if self.primitive:
+            motion = np.zeros((n, PRIMITIVE_ACTION_DIM), dtype=np.float32)
+            motion[:, 0] = selector_action(SEL_VELOCITY)
+            motion[:, 1:4] = v
+        else:
+            motion = v
+        if not self.comm_dim:
+            return {"motion": motion}
+        rows = self.silence(n) if comm is None else np.asarray(comm, dtype=np.float32)
+        return {"motion": motion, "comm": rows}
+
     def pack(self, names: list[str], velocity: np.ndarray, comm: np.ndarray | None = None) -> dict[str, Any]:
         """Every agent's complete action (float32 arrays, one dict per agent).
 
@@ -77,14 +100,16 @@ class ActionParts:
         Returns:
             ``{agent: {"motion": ..., "comm": ...}}`` with exactly the env's parts.
         """
-        v = np.asarray(velocity, dtype=np.float32).reshape(len(names), VELOCITY_ACTION_DIM)
-        if self.primitive:
-            motion = np.zeros((len(names), PRIMITIVE_ACTION_DIM), dtype=np.float32)
-            motion[:, 0] = selector_action(SEL_VELOCITY)
-            motion[:, 1:4] = v
-        else:
-            motion = v
-        if not self.comm_dim:
-            return {a: {"motion": motion[i]} for i, a in enumerate(names)}
-        rows = self.silence(len(names)) if comm is None else np.asarray(comm, dtype=np.float32)
-        return {a: {"motion": motion[i], "comm": rows[i]} for i, a in enumerate(names)}
+        return rows_to_dicts(names, self.arrays(np.reshape(velocity, (len(names), VELOCITY_ACTION_DIM)), comm))
+
+
+def rows_to_dicts(names: list[str], parts: dict[str, np.ndarray]) -> dict[str, dict[str, np.ndarray]]:
+    """Per-agent action dicts from per-part row arrays (row ``i`` is agent ``names[i]``)."""
+    keys = list(parts)
+    cols = [parts[k] for k in keys]
+    return {a: {k: c[i] for k, c in zip(keys, cols)} for i, a in enumerate(names)}
+
+
+def stack_parts(observations: dict[str, Any], names: list[str], keys: tuple[str, ...]) -> dict[str, np.ndarray]:
+    """The observation parts ``keys`` of agents ``names`` stacked into ``(n, ...)`` arrays."""
+    return {k: np.stack([observations[a][k] for a in names]) for k in keys}

@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from agentsim_env.comms.stack import CHANNELS
-from agentsim_env.policies.parts import ActionParts
+from agentsim_env.policies.parts import ActionParts, rows_to_dicts, stack_parts
 
 _KIND_AGENT, _KIND_GROUP, _KIND_OVERLAY = 1, 2, 4  # one-hot columns of an inbox row (comms.messages)
 _PAYLOAD0 = 11  # first payload column of an inbox row
@@ -71,10 +71,20 @@ class _RelayBase:
                 "payload_dim": c.comms.payload_dim,
                 "parts": ActionParts.for_env(env, "the relay baselines")}  # fmt: skip
 
-    def _unpack(self, observations: dict[str, Any]) -> tuple[list[str], dict[str, np.ndarray]]:
+    def act(self, observations: dict[str, Any]) -> dict[str, Any]:
+        """``{"motion": (3,), "comm": (3 + D,)}`` for every observed agent (one step: see ``act_rows``)."""
+        if not observations:
+            return {}
         names = list(observations)
-        parts = {k: np.stack([observations[a][k] for a in names]) for k in ("self", "lidar", "task", "inbox")}
-        return names, parts
+        parts = stack_parts(observations, names, ("self", "lidar", "task", "inbox"))
+        slots = np.array([self.index[a] for a in names], dtype=np.int64)
+        out = self.act_rows(parts, slots, self.step)
+        self.step += 1
+        return rows_to_dicts(names, out)
+
+    def act_rows(self, obs: dict[str, np.ndarray], slots: np.ndarray, step: int) -> dict[str, np.ndarray]:
+        """The action parts of the agents in ``slots`` at ``step`` (rows independent of each other)."""
+        raise NotImplementedError
 
     def _move(self, parts: dict[str, np.ndarray], goal: np.ndarray | None, active: np.ndarray) -> np.ndarray:
         """Velocity actions: toward ``goal`` (absolute x, y) where ``active``, else hover; plus avoidance."""
@@ -92,8 +102,6 @@ class _RelayBase:
         norm = np.linalg.norm(v, axis=1, keepdims=True)
         return np.where(norm > 1.0, v / np.maximum(norm, 1e-9), v)
 
-    def _pack(self, names: list[str], motion: np.ndarray, comm: np.ndarray) -> dict[str, Any]:
-        return self.parts.pack(names, motion, comm)
 
 
 class FloodPolicy(_RelayBase):
@@ -136,13 +144,23 @@ class FloodPolicy(_RelayBase):
         self.known[:] = np.nan
         self.step = 0
 
-    def act(self, observations: dict[str, Any]) -> dict[str, Any]:
-        """``{"motion": (3,), "comm": (3 + D,)}`` for every observed agent."""
-        if not observations:
-            return {}
-        names, parts = self._unpack(observations)
-        idx = np.array([self.index[a] for a in names])
-        selfp, task, inbox = parts["self"], parts["task"], parts["inbox"]
+    def act_rows(self, obs: dict[str, np.ndarray], slots: np.ndarray, step: int) -> dict[str, np.ndarray]:
+        """The action parts of the agents in ``slots`` at ``step`` (steps since the reset).
+
+        Rows are independent: an agent's row depends on its own observation, its own remembered target and
+        ``step`` only, so acting on a subset of the agents gives those agents' rows of acting on all.
+
+        Args:
+            obs: Observation parts ``self``, ``lidar``, ``task`` and ``inbox`` as ``(n, ...)`` arrays.
+            slots: ``(n,)`` the agents' indices in ``possible_agents``.
+            step: Steps since the reset (staggers the reports).
+
+        Returns:
+            ``{"motion": (n, 3 or 8), "comm": (n, 3 + D)}``.
+        """
+        idx = np.asarray(slots, dtype=np.int64)
+        n = idx.shape[0]
+        selfp, task, inbox = obs["self"], obs["task"], obs["inbox"]
         scout = task[:, 0] > 0.5
         pos = (selfp[:, :2] + 1.0) / 2.0 * self.scale
         own = np.where(scout[:, None], pos + task[:, 1:3] * self.diag, np.nan)
@@ -154,18 +172,18 @@ class FloodPolicy(_RelayBase):
         ok &= (np.abs(pay[:, :, 3] - 1.0) < 1e-3) & (
             np.abs(pay[:, :, 2] - selfp[:, None, 8]) < 0.5 / max(self.n_groups, 2)
         )
-        first = np.argmax(ok, axis=1)
+        first = np.argmax(ok, axis=1) if n else np.zeros(0, dtype=np.int64)
         heard = ok.any(axis=1)
-        got = (pay[np.arange(len(names)), first, :2] + 1.0) / 2.0 * self.scale
+        got = (pay[np.arange(n), first, :2] + 1.0) / 2.0 * self.scale
         known = self.known[idx]
         known = np.where(heard[:, None], got, known)
         known = np.where(scout[:, None], own, known)
         self.known[idx] = known
         has = ~np.isnan(known[:, 0])
-        motion = self._move(parts, np.nan_to_num(known), has & ~scout)
+        motion = self._move(obs, np.nan_to_num(known), has & ~scout)
         # reports: overlay flood at phase 0, group bus at half a period, staggered by agent index
-        phase = (self.step + idx) % self.period
-        comm = np.zeros((len(names), 3 + self.payload_dim))
+        phase = (step + idx) % self.period
+        comm = np.zeros((n, 3 + self.payload_dim))
         comm[:, 0] = _CH["none"]
         comm[has & (phase == 0), 0] = _CH["overlay"]
         comm[has & (phase == self.period // 2), 0] = _CH["group"]
@@ -173,8 +191,7 @@ class FloodPolicy(_RelayBase):
         comm[:, 3:5] = np.where(has[:, None], np.nan_to_num(known) / self.scale * 2.0 - 1.0, 0.0)
         comm[:, 5] = selfp[:, 8]
         comm[:, 6] = 1.0
-        self.step += 1
-        return self._pack(names, motion, comm)
+        return self.parts.arrays(motion, comm)
 
 
 class SilentPolicy(_RelayBase):
@@ -215,14 +232,20 @@ class SilentPolicy(_RelayBase):
         self.direction = self.rng.choice([-1.0, 1.0], size=self.direction.shape)
         self.step = 0
 
-    def act(self, observations: dict[str, Any]) -> dict[str, Any]:
-        """``{"motion": (3,), "comm": (3 + D,)}`` (channel none) for every observed agent."""
-        if not observations:
-            return {}
-        names, parts = self._unpack(observations)
-        idx = np.array([self.index[a] for a in names])
-        selfp = parts["self"]
-        member = parts["task"][:, 0] < 0.5
+    def act_rows(self, obs: dict[str, np.ndarray], slots: np.ndarray, step: int) -> dict[str, np.ndarray]:
+        """The action parts of the agents in ``slots`` (channel none; rows independent of each other).
+
+        Args:
+            obs: Observation parts ``self``, ``lidar`` and ``task`` as ``(n, ...)`` arrays.
+            slots: ``(n,)`` the agents' indices in ``possible_agents`` (their sweep directions).
+            step: Steps since the reset (unused).
+
+        Returns:
+            ``{"motion": (n, 3 or 8), "comm": (n, 3 + D)}``.
+        """
+        idx = np.asarray(slots, dtype=np.int64)
+        selfp = obs["self"]
+        member = obs["task"][:, 0] < 0.5
         d = self.direction[idx]
         # turn back near the ends of the corridor and near its walls
         d[:, 0] = np.where(selfp[:, 0] > 0.95, -1.0, np.where(selfp[:, 0] < -0.95, 1.0, d[:, 0]))
@@ -230,8 +253,7 @@ class SilentPolicy(_RelayBase):
         self.direction[idx] = d
         pos = (selfp[:, :2] + 1.0) / 2.0 * self.scale
         goal = pos + 10.0 * d * np.array([np.cos(self.sweep), np.sin(self.sweep)])
-        motion = self._move(parts, goal, member)
-        comm = np.zeros((len(names), 3 + self.payload_dim))
+        motion = self._move(obs, goal, member)
+        comm = np.zeros((idx.shape[0], 3 + self.payload_dim))
         comm[:, 0] = _CH["none"]
-        self.step += 1
-        return self._pack(names, motion, comm)
+        return self.parts.arrays(motion, comm)

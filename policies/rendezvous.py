@@ -6,7 +6,7 @@ from typing import Any
 
 import numpy as np
 
-from agentsim_env.policies.parts import ActionParts
+from agentsim_env.policies.parts import ActionParts, rows_to_dicts
 
 
 class MeetPolicy:
@@ -40,9 +40,25 @@ class MeetPolicy:
     def act(self, observations: dict[str, Any]) -> dict[str, Any]:
         """Every observed agent's action (Dict observations): its velocity as ``motion``, a silent ``comm``."""
         names = list(observations)
-        v = np.zeros((len(names), 3))
-        for i, a in enumerate(names):
-            d = np.asarray(observations[a]["task"], dtype=np.float64) * self.side  # metres to the centroid
-            speed = min(self.max_speed, float(np.linalg.norm(d)) / self.slow_radius * self.max_speed)
-            v[i] = np.clip(d / max(float(np.linalg.norm(d)), 1e-9) * speed / self.max_speed, -1.0, 1.0)
-        return self.parts.pack(names, v)
+        if not names:
+            return {}
+        task = np.stack([np.asarray(observations[a]["task"]) for a in names])
+        return rows_to_dicts(names, self.act_rows({"task": task}, np.zeros(0, dtype=np.int64), 0))
+
+    def act_rows(self, obs: dict[str, np.ndarray], slots: np.ndarray, step: int) -> dict[str, np.ndarray]:
+        """The action parts of a batch of agents (one row each; rows are independent of each other).
+
+        Args:
+            obs: Observation parts as ``(n, ...)`` arrays; only ``task`` is read.
+            slots: The agents' slots (unused).
+            step: Steps since the reset (unused).
+
+        Returns:
+            ``{"motion": (n, 3 or 8)}`` (and a silent ``"comm"`` with comms on).
+        """
+        d = np.asarray(obs["task"], dtype=np.float64).reshape(-1, 3) * self.side  # metres to the centroid
+        # per-row norms written out (not a BLAS dot), so a row's value does not depend on the batch
+        dist = np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2])
+        speed = np.minimum(self.max_speed, dist / self.slow_radius * self.max_speed)
+        v = np.clip(d / np.maximum(dist, 1e-9)[:, None] * speed[:, None] / self.max_speed, -1.0, 1.0)
+        return self.parts.arrays(v)

@@ -23,6 +23,7 @@ from agentsim_env.env.batch_kernels import scatter_part
 from agentsim_env.env.buffers import Recycled
 from agentsim_env.env.guard import CallGuard
 from agentsim_env.env.messaging import MessageCalls
+from agentsim_env.env.rollout import RolloutCallback, RolloutResult, run_rollout
 from agentsim_env.env.spaces import (
     FORMATS,
     action_space_for,
@@ -195,6 +196,12 @@ class AgentSimParallelEnv(MessageCalls, ParallelEnv):
             self._guard.exit()
 
     def _reset(self, seed: int | None) -> tuple[dict[str, Any], dict[str, dict[str, Any]]]:
+        flat = self._begin(seed)
+        infos = self._reset_infos()
+        return self._obs_dicts(flat, self._live, self._live_idx), infos
+
+    def _begin(self, seed: int | None) -> np.ndarray:
+        """Start an episode (``reset`` without its dicts): the flat observations of every slot."""
         if seed is not None:
             self._seeds.reset(seed)
         self._reset_core(self._seeds.next())
@@ -210,8 +217,7 @@ class AgentSimParallelEnv(MessageCalls, ParallelEnv):
             self.render()
         elif self.render_mode == "web":
             self._web_episode()
-        infos = self._reset_infos()
-        return self._obs_dicts(flat, self._live, self._live_idx), infos
+        return flat
 
     def step(self, actions: dict[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
         """Advance one step with an action for every live agent (see the scenario docstring for layouts).
@@ -275,6 +281,23 @@ class AgentSimParallelEnv(MessageCalls, ParallelEnv):
         if self.render_mode == "human":
             self.render()
         return obs, rewards, terms, truncs, infos
+
+    def rollout(
+        self, policy: Any, steps: int, seed: int | None = None, *, on_step: RolloutCallback | None = None
+    ) -> RolloutResult:
+        """Run ``policy`` for up to ``steps`` steps from ``reset(seed=seed)`` on arrays, without per-agent dicts.
+
+        The results (returns, final positions, events) are those of stepping through ``step()`` with the same
+        policy; no frames are rendered. ``policy``: a baseline name registered for the scenario, a trained model
+        folder or ``.zip``, a dict ``Policy`` (the slow path) or an ``ArrayPolicy``; ``on_step(env, steps so far)``
+        runs after every step (True stops). ``agentsim_env.env.rollout`` documents the rest.
+
+        Raises:
+            ValueError: A bad ``policy``, ``steps`` or ``seed`` (the message names it and what is allowed).
+        """
+        cls = type(self)  # a front end that overrides reset or step (recording) is exact only through them
+        through = cls.reset is not AgentSimParallelEnv.reset or cls.step is not AgentSimParallelEnv.step
+        return run_rollout(self, policy, steps, seed, on_step=on_step, through_step=through)
 
     def _reset_core(self, seed: np.random.SeedSequence) -> None:
         """Start the episode of ``seed`` in the world (the distributed env runs it over its shards)."""
