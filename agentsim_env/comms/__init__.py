@@ -1,7 +1,8 @@
 """Communication: message kinds and inboxes (``messages``), the centralised bus (``bus``); the overlay
-flooding lives in ``comms.overlay`` (imported from there, not re-exported here)."""
+flooding lives in ``comms.overlay`` and the split of a bus over parts in ``comms.split`` (imported from there,
+not re-exported here)."""
 
-from agentsim_env.comms.bus import BUS_KINDS, ChannelConfig, DeliveryEvents, MessageBus, MessageLog
+from agentsim_env.comms.bus import BUS_KINDS, ChannelConfig, DeliveryEvents, DueRows, MessageBus, MessageLog
 from agentsim_env.comms.messages import (
     AGENT,
     DROP_BANDWIDTH,
@@ -43,6 +44,7 @@ __all__ = [
     "REASON_NONE",
     "ChannelConfig",
     "DeliveryEvents",
+    "DueRows",
     "Inbox",
     "MessageBus",
     "MessageLog",

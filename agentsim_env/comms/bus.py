@@ -13,8 +13,7 @@ Rules (one line each, the tests check them):
   Offline members are not receivers (nothing is logged for them); an offline unicast receiver is a drop.
 - Range (``max_range``): measured from the sender's position at delivery time, agent senders only; the
   environment and the controller have no position and are never range-limited.
-- Loss: one draw from the bus's generator per (message, receiver) pair, drawn for every expanded pair even
-  when another filter drops it, so the draws do not depend on positions or online masks. No draw at loss 0.
+- Loss: a (message, receiver) pair is lost when its keyed uniform ``u < loss`` (below). No draw at loss 0.
 - Bandwidth: at most ``bandwidth`` accepted messages per agent sender per ``step`` (over all ``send`` calls
   of that step, in call order); the environment, the controller and heartbeat answers are not limited.
 - Drop counters (``Inbox.dropped``): bandwidth drops and lost answers to the controller are charged to the
@@ -24,9 +23,36 @@ Rules (one line each, the tests check them):
   delivery makes the receiver answer automatically with a HEARTBEAT to the controller (target -1), queued
   ``latency`` steps later (with latency 0 it arrives in the same ``deliver`` call), lost with probability
   ``loss`` and collected by ``take_answers`` (the group controller reads them). Answers enter no inbox.
-- Bus messages have ``hops = 0`` (no relaying). Message ids are unique per bus until ``reset``.
+- Bus messages have ``hops = 0`` (no relaying). Message ids are unique per bus until ``reset``; buses that
+  share one world between them (below) number their messages independently, so ids may repeat across them.
 
-Event records and the in-flight queue live in ``comms.events``, the numba kernels in ``comms.bus_kernels``.
+Keyed loss draws: the uniform of a pair is a hash (chained SplitMix64, ``bus_kernels.keyed_draws``) of
+
+    (episode key of the world, created step, sender, seq, kind, receiver)
+
+- episode key: ``rng.integers(2**63)`` from the generator ``reset_world(w, rng)`` receives (a function of the
+  episode seed; ``reset`` / the constructor take one per world the same way);
+- seq: the message's index among the messages its sender created in the same step (a per-slot counter that
+  restarts every step, counting every message created, bandwidth drops included, and the heartbeat answers
+  the slot creates). Sender -1 (environment / controller) rows are numbered per (world, kind, target)
+  instead: the n-th ENV message to slot r in a step has seq n-1 whoever sends the others;
+- sender and receiver: slot indices within their world (``slot % N``; -1 for the environment / controller,
+  and as the receiver of an answer to the controller), so world ``w`` of a batch draws what one world does.
+
+So a pair's fate depends only on what the message is, not on the batch, its order or the process drawing it.
+
+Inbox order: within one delivery call a receiver gets its rows in ``(created, sender, seq, kind)`` order
+(the last one pushed is the newest, inbox row 0). The comms stack pushes the environment's collision notices
+of the step before the bus's deliveries and the overlay's after them.
+
+Split delivery (one world over several buses, each owning some receiver slots): ``take_due`` pops the due
+rows, ``split.route`` says which bus must see each (by the owner of its receiver; GROUP rows go to all), and
+``deliver_rows(rows, ..., mine=...)`` delivers the union of a bus's own and received rows into its own slots
+only. ``deliver`` is ``take_due`` + ``deliver_rows`` over every slot, so both paths run the same code.
+
+Event records, ``DueRows`` and the in-flight queue live in ``comms.events``, sequence numbers in
+``comms.sequence``, input checks in ``comms.checks``, the numba kernels in ``comms.bus_kernels`` and
+``comms.routing``.
 """
 
 from __future__ import annotations
@@ -36,8 +62,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from agentsim_env.comms.bus_kernels import bandwidth_kernel
-from agentsim_env.comms.events import DeliveryEvents, MessageLog, _Queue
+from agentsim_env.comms.bus_kernels import bandwidth_kernel, keyed_draws, rows_in_order
+from agentsim_env.comms.checks import bool_mask, int_vector, validate_send, world_arrays
+from agentsim_env.comms.events import DeliveryEvents, DueRows, MessageLog, _Queue
 from agentsim_env.comms.messages import (
     AGENT,
     DROP_BANDWIDTH,
@@ -47,15 +74,17 @@ from agentsim_env.comms.messages import (
     KIND_NAMES,
     Inbox,
 )
-from agentsim_env.comms.routing import expand, group_members, route
+from agentsim_env.comms.routing import expand, filter_pairs, group_members
+from agentsim_env.comms.sequence import Sequencer, inbox_order
 from agentsim_env.core.validation import coerce_fields
 
-__all__ = ["BUS_KINDS", "ChannelConfig", "DeliveryEvents", "MessageBus", "MessageLog"]
+__all__ = ["BUS_KINDS", "ChannelConfig", "DeliveryEvents", "DueRows", "MessageBus", "MessageLog"]
 
 BUS_KINDS = (AGENT, GROUP, ENV, HEARTBEAT)
 # Read-only inputs of the delivery kernels when a batch has no GROUP message / the channel no loss.
 _NO_SLOTS = np.zeros(0, dtype=np.int64)
 _NO_DRAWS = np.zeros(0)
+_ALL_SEEN = np.zeros(0, dtype=bool)
 _ZERO_HOPS = np.zeros(1, dtype=np.int16)
 
 
@@ -102,13 +131,13 @@ class MessageBus:
         payload_dim: Payload width D.
         channel: The channel model.
         inbox: The inboxes; the overlay pushes its deliveries here too.
-        rngs: Generators of the loss draws, one per world (a world's draws never depend on another's traffic).
+        keys: ``(B,)`` uint64 episode key of each world's loss draws (see the module docstring).
         group: Group array ``(S,)`` used to validate GROUP targets at send time (by reference), or None.
     """
 
     __slots__ = tuple(
-        "n_worlds n_agents payload_dim channel inbox rngs group _world_of _queue _next_id _bw_used _bw_step "
-        "_sent_log _drop_log _ans_slot _ans_step _pushes".split()
+        "n_worlds n_agents payload_dim channel inbox keys group _keyed _world_of _queue _next_id _bw_used _bw_step "
+        "_seq _sent_log _drop_log _ans_slot _ans_step _pushes".split()
     )
 
     def __init__(
@@ -133,8 +162,8 @@ class MessageBus:
             payload_dim: Payload width D (>= 0).
             channel: Channel model.
             inbox_size: Messages kept per slot M (>= 1).
-            rng: Generator for the loss draws (spawned into one per world), one generator per world, or None
-                (each world's generator comes with its ``reset_world``; a loss draw before that raises).
+            rng: Generator of the episode keys (spawned into one per world), one generator per world, or None
+                (each world's key comes with its ``reset_world``; a lossy delivery before that raises).
             group: Optional ``(S,)`` group array (e.g. ``AgentState.group``) to validate GROUP targets.
             age_horizon: Inbox age feature horizon in steps (see ``Inbox``).
             hop_horizon: Inbox hops feature horizon (see ``Inbox``).
@@ -156,6 +185,9 @@ class MessageBus:
         self._world_of = np.arange(s, dtype=np.int64) // self.n_agents
         self._bw_used = np.zeros(s, dtype=np.int64)
         self._bw_step = np.full(s, -1, dtype=np.int64)
+        self._seq = Sequencer(s)
+        self.keys = np.zeros(self.n_worlds, dtype=np.uint64)
+        self._keyed = np.zeros(self.n_worlds, dtype=bool)
         self.reset(rng)
 
     @property
@@ -178,25 +210,29 @@ class MessageBus:
         self.group = g
 
     def reset(self, rng: np.random.Generator | Sequence[np.random.Generator] | None) -> None:
-        """Drop everything in flight, empty the inboxes and logs, and take new loss generators.
+        """Drop everything in flight, empty the inboxes and logs, and take new episode keys.
 
         Args:
             rng: One generator per world, one generator (used as is for a single world, spawned into one
-                child per world otherwise), or None (none until each world's ``reset_world``).
+                child per world otherwise), or None (no key until each world's ``reset_world``). Each
+                world's key is ``rng.integers(2**63)`` of its generator.
         """
-        self.rngs: list[np.random.Generator | None]
+        rngs: list[np.random.Generator]
         if rng is None:
-            self.rngs = [None] * self.n_worlds
+            rngs = []
         elif isinstance(rng, np.random.Generator):
-            self.rngs = [rng] if self.n_worlds == 1 else [*rng.spawn(self.n_worlds)]
+            rngs = [rng] if self.n_worlds == 1 else [*rng.spawn(self.n_worlds)]
         else:
-            rngs: list[np.random.Generator | None] = list(rng)
+            rngs = list(rng)
             if len(rngs) != self.n_worlds or not all(isinstance(r, np.random.Generator) for r in rngs):
                 raise ValueError(f"rng must be a numpy.random.Generator or {self.n_worlds} of them")
-            self.rngs = rngs
+        self._keyed[:] = False
+        for w, r in enumerate(rngs):
+            self._set_key(w, r)
         self.inbox.clear()
         self._bw_used[:] = 0
         self._bw_step[:] = -1
+        self._seq.reset()
         self._queue = _Queue(16, self.payload_dim)
         self._next_id = 0
         self._sent_log: list[MessageLog] = []
@@ -206,32 +242,22 @@ class MessageBus:
         self._pushes: list[tuple[np.ndarray, ...]] = []
 
     def reset_world(self, world: int, rng: np.random.Generator) -> None:
-        """Drop world ``world``'s traffic and draw its losses from ``rng`` from now on (its episode's stream)."""
+        """Drop world ``world``'s traffic and key its loss draws by ``rng.integers(2**63)`` (its episode's key)."""
+        self.drop_world(world)
+        self._set_key(world, rng)
+
+    def _set_key(self, world: int, rng: np.random.Generator) -> None:
         if not isinstance(rng, np.random.Generator):
             raise ValueError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
-        self.drop_world(world)
-        self.rngs[world] = rng
+        self.keys[world] = np.uint64(rng.integers(2**63))
+        self._keyed[world] = True
 
-    def _loss_draws(self, world_of_row: np.ndarray) -> np.ndarray:
-        """One uniform per delivery row, each drawn from its world's generator in row order."""
-        k = world_of_row.shape[0]
-        if self.n_worlds == 1:
-            return np.asarray(self._rng_of(0).random(k))
-        u = np.empty(k)
-        order = np.argsort(world_of_row, kind="stable")
-        counts = np.bincount(world_of_row, minlength=self.n_worlds)
-        start = 0
-        for w in np.flatnonzero(counts).tolist():
-            c = int(counts[w])
-            u[order[start : start + c]] = self._rng_of(w).random(c)
-            start += c
-        return u
-
-    def _rng_of(self, w: int) -> np.random.Generator:
-        rng = self.rngs[w]
-        if rng is None:
-            raise ValueError(f"world {w} has no loss generator: reset it (reset_world) before a lossy delivery")
-        return rng
+    def _row_keys(self, world: np.ndarray) -> np.ndarray:
+        """The episode key of every row's world; ValueError when a world has none yet."""
+        if not self._keyed.all() and not self._keyed[world].all():
+            w = int(world[~self._keyed[world]][0])
+            raise ValueError(f"world {w} has no loss key: reset it (reset_world) before a lossy delivery")
+        return self.keys[world]
 
     def drop_world(self, world: int) -> None:
         """Forget world ``world``'s traffic (messages in flight, answers, inboxes), e.g. when it is reset alone."""
@@ -244,6 +270,7 @@ class MessageBus:
         self.inbox.clear(slots)
         self._bw_used[slots] = 0
         self._bw_step[slots] = -1
+        self._seq.drop_world(world, slots)
 
     def _new_ids(self, k: int) -> np.ndarray:
         ids = np.arange(self._next_id, self._next_id + k, dtype=np.int64)
@@ -285,9 +312,9 @@ class MessageBus:
         if int(step) != step or step < 0:
             raise ValueError(f"step must be an integer >= 0, got {step!r}")
         step = int(step)
-        snd = _int_vector(sender, "sender")
+        snd = int_vector(sender, "sender")
         k = snd.shape[0]
-        tgt = _int_vector(target, "target", k)
+        tgt = int_vector(target, "target", k)
         pay = np.asarray(payload, dtype=np.float32)
         if pay.shape != (k, self.payload_dim):
             raise ValueError(f"payload must have shape ({k}, {self.payload_dim}) (k, D), got {pay.shape}")
@@ -295,7 +322,8 @@ class MessageBus:
         if bad.any():
             i = int(np.flatnonzero(bad)[0])
             raise ValueError(f"payload must be finite: row {i} (sender {snd[i]}) holds NaN/inf")
-        wld = self._validate(kind, snd, tgt, world, group)
+        g = self.group if group is None else np.asarray(group)
+        wld = validate_send(kind, snd, tgt, world, g, self.n_worlds, self.n_agents)
         return self.enqueue(np.full(k, kind, dtype=np.int8), snd, tgt, wld, pay, step)
 
     def enqueue(
@@ -319,21 +347,22 @@ class MessageBus:
             ``(k,)`` bool: accepted (False = dropped for bandwidth, counted and logged).
         """
         k = sender.shape[0]
+        seq = self._seq.number(kind, sender, target, world, step)
         acc = self._bandwidth(sender, step)
         created = np.full(k, step, dtype=np.int64)
         log = MessageLog(self._new_ids(k), kind, sender, target, np.where(kind == GROUP, -1, target), created,
                          created.copy(), np.zeros(k, dtype=np.int8))  # fmt: skip
         self._sent_log.append(log)
         if acc.all():
-            a, pay, wld = log, payload, world
+            a, pay, wld, sq = log, payload, world, seq
         else:
             d = log.take(~acc)
             self._drop_log.append(MessageLog(d.msg, d.kind, d.sender, d.target, d.receiver, d.created, d.step,
                                              np.full(len(d), DROP_BANDWIDTH, dtype=np.int8)))  # fmt: skip
             self.inbox.add_dropped(d.sender)
-            a, pay, wld = log.take(acc), payload[acc], world[acc]
+            a, pay, wld, sq = log.take(acc), payload[acc], world[acc], seq[acc]
         self._queue.append(pay, msg=a.msg, kind=a.kind, sender=a.sender, target=a.target, world=wld,
-                           created=a.created, due=a.created + self.channel.latency)  # fmt: skip
+                           created=a.created, seq=sq, due=a.created + self.channel.latency)  # fmt: skip
         return acc
 
     def send_env(self, receiver: np.ndarray, payload: np.ndarray, step: int) -> np.ndarray:
@@ -347,64 +376,8 @@ class MessageBus:
         Returns:
             ``(k,)`` bool, all True (the environment is not bandwidth-limited).
         """
-        r = _int_vector(receiver, "receiver")
+        r = int_vector(receiver, "receiver")
         return self.send(ENV, np.full(r.shape[0], -1, dtype=np.int64), r, payload, step)
-
-    def _validate(self, kind, snd, tgt, world, group) -> np.ndarray:  # type: ignore[no-untyped-def]
-        # Returns the world of every message; raises ValueError naming the field otherwise.
-        s_n, n, k = self.n_slots, self.n_agents, snd.shape[0]
-        if k and (snd.min() < -1 or snd.max() >= s_n):
-            i = int(np.flatnonzero((snd < -1) | (snd >= s_n))[0])
-            raise ValueError(f"sender must be -1 or a slot in [0, {s_n}), got {snd[i]} at row {i}")
-        if kind == ENV and np.any(snd != -1):
-            raise ValueError(f"sender of ENV messages must be -1 (the environment), got {snd[snd != -1][0]}")
-        agent = snd >= 0
-        wld = np.where(agent, snd // n, -1)
-        if world is not None:
-            w = np.broadcast_to(np.asarray(world, dtype=np.int64), (k,))
-            if np.any((w < 0) | (w >= self.n_worlds)):
-                raise ValueError(f"world must be in [0, {self.n_worlds}), got {w.min()}..{w.max()}")
-            if np.any(agent & (w != wld)):
-                i = int(np.flatnonzero(agent & (w != wld))[0])
-                raise ValueError(f"world {w[i]} does not match the world {wld[i]} of sender agent {snd[i]}")
-            wld = np.where(agent, wld, w)
-        if kind == GROUP:
-            self._check_groups(snd, tgt, wld, agent, group)
-            return wld
-        to_ctrl = agent if kind == HEARTBEAT else np.zeros(k, dtype=bool)
-        if np.any(tgt[to_ctrl] != -1):
-            raise ValueError("target of an agent's HEARTBEAT must be -1 (the controller)")
-        out = ~to_ctrl & ((tgt < 0) | (tgt >= s_n))
-        if out.any():
-            i = int(np.flatnonzero(out)[0])
-            raise ValueError(f"target receiver slot {tgt[i]} out of range [0, {s_n}) (sender {snd[i]})")
-        cross = ~to_ctrl & agent & (tgt // n != wld)
-        if cross.any():
-            i = int(np.flatnonzero(cross)[0])
-            raise ValueError(
-                f"target receiver slot {tgt[i]} (world {tgt[i] // n}) is not in the world {wld[i]} "
-                f"of sender agent {snd[i]}"
-            )
-        return np.where(~to_ctrl & ~agent, tgt // n, wld)
-
-    def _check_groups(self, snd, tgt, wld, agent, group) -> None:  # type: ignore[no-untyped-def]
-        if np.any(~agent & (wld < 0)):
-            raise ValueError(
-                "world is required for GROUP messages from the environment / controller (sender -1)"
-            )
-        g = self.group if group is None else np.asarray(group)
-        if g is None:
-            raise ValueError("group: no group array to validate GROUP targets; bind one or pass group=")
-        if g.shape != (self.n_slots,):
-            raise ValueError(f"group must have shape ({self.n_slots},), got {g.shape}")
-        if tgt.size == 0:
-            return
-        n_g = int(max(g.max(initial=-1), tgt.max())) + 1
-        members = g >= 0
-        known = np.isin(wld * n_g + tgt, self._world_of[members] * n_g + g[members]) & (tgt >= 0)
-        if not known.all():
-            i = int(np.flatnonzero(~known)[0])
-            raise ValueError(f"target: unknown group {tgt[i]} in world {wld[i]} (sender {snd[i]})")
 
     def _bandwidth(self, snd: np.ndarray, step: int) -> np.ndarray:
         acc = np.ones(snd.shape[0], dtype=bool)
@@ -418,6 +391,9 @@ class MessageBus:
     ) -> DeliveryEvents:
         """Deliver every message due at ``step`` (or earlier) and return the step's traffic.
 
+        The same as ``deliver_rows(take_due(step), ...)`` over every slot, repeated while latency-0 heartbeat
+        answers become due in this call.
+
         Args:
             step: Current step.
             pos: Current positions ``(S, 3)`` (range check from the sender's current position).
@@ -429,22 +405,71 @@ class MessageBus:
         Returns:
             The step's events (sent since the previous call, delivered and dropped).
         """
-        s_n = self.n_slots
-        pos = np.ascontiguousarray(pos, dtype=np.float64)
-        online, group = np.ascontiguousarray(online, dtype=bool), np.asarray(group)
-        if pos.shape != (s_n, 3) or online.shape != (s_n,) or group.shape != (s_n,):
-            raise ValueError(f"pos must be ({s_n}, 3), online and group ({s_n},); got {pos.shape}, "
-                             f"{online.shape}, {group.shape}")  # fmt: skip
-        delivered: list[MessageLog] = []
+        step = int(step)
+        pos, online, group = world_arrays(self.n_slots, pos, online, group)
         self._pushes = []
-        while (batch := self._queue.pop_due(int(step))) is not None:
+        rounds = [self._deliver_rows(self.take_due(step), step, pos, online, group, None, _ALL_SEEN)]
+        while len(rows := self.take_due(step)):
             # a second round happens only when latency-0 heartbeat answers became due in this call
-            delivered.append(self._deliver_batch(batch, int(step), pos, online, group))
+            rounds.append(self._deliver_rows(rows, step, pos, online, group, None, _ALL_SEEN))
         if push:
             self.inbox.push_batches(self.take_pushes())
-        sent, dropped = MessageLog.concat(self._sent_log), MessageLog.concat(self._drop_log)
-        self._sent_log, self._drop_log = [], []
-        return DeliveryEvents(int(step), sent, MessageLog.concat(delivered), dropped)
+        if len(rounds) == 1:
+            return rounds[0]
+        return DeliveryEvents(step, *(MessageLog.concat([getattr(r, f) for r in rounds])
+                                      for f in ("sent", "delivered", "dropped")))  # fmt: skip
+
+    def take_due(self, step: int) -> DueRows:
+        """Pop the messages due at ``step`` (or earlier), in queue order; none are delivered yet."""
+        b = self._queue.pop_due(int(step))
+        if b is None:
+            return DueRows.empty(self.payload_dim)
+        return DueRows(b["msg"], b["kind"], b["sender"], b["target"], b["world"], b["created"], b["seq"],
+                       b["payload"])  # fmt: skip
+
+    def deliver_rows(
+        self,
+        rows: DueRows,
+        step: int,
+        pos: np.ndarray,
+        online: np.ndarray,
+        group: np.ndarray,
+        *,
+        mine: np.ndarray | None = None,
+        seen: np.ndarray | None = None,
+        push: bool = True,
+    ) -> DeliveryEvents:
+        """Deliver ``rows`` (from ``take_due`` of this bus or of others) into the inboxes of own receivers.
+
+        A pair (message, receiver) is handled here only when the receiver is own (``mine[r]``), or, for a
+        heartbeat answer to the controller, when its sender is; the other pairs are left to the bus that owns
+        them (no event, no counter). GROUP messages expand over own online members. Answers created by the
+        heartbeats delivered here are queued in this bus (``take_due`` hands them out when due).
+
+        Args:
+            rows: Due messages, any order (delivered in the inbox order of the module docstring).
+            step: Current step.
+            pos: ``(S, 3)`` positions; only own receivers and seen senders are read.
+            online: ``(S,)`` bool; only the values of own slots matter.
+            group: ``(S,)`` group ids; only the values of own slots matter.
+            mine: ``(S,)`` bool own slots, or None for every slot.
+            seen: ``(S,)`` bool senders whose position is known, or None for all; with a range limit an
+                unseen sender is out of range (the caller sees every sender within range of an own receiver).
+            push: Write the deliveries into the inboxes now (False: ``take_pushes`` hands them out).
+
+        Returns:
+            This call's events: the messages sent and dropped since the previous ``deliver`` /
+            ``deliver_rows`` and the pairs delivered and dropped now.
+        """
+        step = int(step)
+        pos, online, group = world_arrays(self.n_slots, pos, online, group)
+        own, known = bool_mask(mine, "mine", self.n_slots), bool_mask(seen, "seen", self.n_slots)
+        n0 = len(self._pushes)
+        ev = self._deliver_rows(rows, step, pos, online, group, own, _ALL_SEEN if known is None else known)
+        if push:
+            new, self._pushes = self._pushes[n0:], self._pushes[:n0]
+            self.inbox.push_batches(new)
+        return ev
 
     def take_pushes(self) -> list[tuple[np.ndarray, ...]]:
         """The deliveries of the latest ``deliver(..., push=False)`` as ``Inbox.push_batches`` batches (once)."""
@@ -463,20 +488,31 @@ class MessageBus:
         self._ans_slot, self._ans_step = [], []
         return out
 
-    def _deliver_batch(self, b, step, pos, online, group) -> MessageLog:  # type: ignore[no-untyped-def]
-        kind, snd, tgt = b["kind"], b["sender"], b["target"]
+    def _deliver_rows(self, rows, step, pos, online, group, mine, seen) -> DeliveryEvents:  # type: ignore[no-untyped-def]
+        if len(rows) > 1 and not rows_in_order(rows.created, rows.sender, rows.seq, rows.kind):
+            rows = rows.take(inbox_order(rows))
+        kind, snd, tgt = rows.kind, rows.sender, rows.target
         kid, offsets, slots = _NO_SLOTS, _NO_SLOTS, _NO_SLOTS
         grp = kind == GROUP
         if grp.any():
             n_g = int(max(group.max(initial=-1), tgt[grp].max())) + 1
-            kid, offsets, slots = group_members(online, group, self._world_of, self.n_worlds, n_g,
-                                                b["world"] * n_g + tgt)  # fmt: skip
+            members = online if mine is None else online & mine
+            kid, offsets, slots = group_members(members, group, self._world_of, self.n_worlds, n_g,
+                                                rows.world * n_g + tgt)  # fmt: skip
         rep, recv = expand(kind, snd, tgt, kid, offsets, slots)
+        if mine is not None and rep.shape[0]:
+            own = mine[np.where(recv >= 0, recv, snd[rep])]  # an answer belongs to the bus owning its sender
+            if not own.all():
+                rep, recv = rep[own], recv[own]
         loss = float(self.channel.loss)
-        u = self._loss_draws(b["world"][rep]) if loss > 0.0 and rep.shape[0] else _NO_DRAWS
+        u = _NO_DRAWS
+        if loss > 0.0 and rep.shape[0]:
+            u = keyed_draws(rep, recv, self._row_keys(rows.world), rows.created, snd, rows.seq, kind,
+                            self.n_agents)  # fmt: skip
         r_max = self.channel.max_range
-        ok, dr, n_hb, n_ans = route(rep, recv, b["msg"], kind, snd, tgt, b["created"], online, pos,
-                                    -1.0 if r_max is None else r_max * r_max, u, loss, self.inbox.dropped)  # fmt: skip
+        ok, dr, n_hb, n_ans = filter_pairs(rep, recv, rows.msg, kind, snd, tgt, rows.created, online, seen, pos,
+                                           -1.0 if r_max is None else r_max * r_max, u, loss,
+                                           self.inbox.dropped)  # fmt: skip
         if dr[0].shape[0]:
             when = np.full(dr[0].shape[0], step, dtype=np.int64)
             self._drop_log.append(MessageLog(dr[0], dr[1], dr[2], dr[3], dr[4], dr[5], when, dr[6]))
@@ -484,32 +520,29 @@ class MessageBus:
         n_ok = d_msg.shape[0]
         if n_ok > n_ans:  # rows with receiver -1 (answers to the controller) are skipped by the push
             hops = np.broadcast_to(_ZERO_HOPS, (n_ok,))  # bus messages travel no hops
-            self._pushes.append((d_rcv, d_kind, d_snd, hops, d_cre, b["payload"], d_row))
+            self._pushes.append((d_rcv, d_kind, d_snd, hops, d_cre, rows.payload, d_row))
         if n_ans:
             ans = d_rcv < 0
             self._ans_slot.append(d_snd[ans])
             self._ans_step.append(np.full(n_ans, step, dtype=np.int64))
         if n_hb:  # each member that got a heartbeat answers the controller through the channel
-            hb = d_rcv[(d_rcv >= 0) & (d_kind == HEARTBEAT)]
-            ids = self._new_ids(n_hb)
-            created = np.full(n_hb, step, dtype=np.int64)
-            minus = np.full(n_hb, -1, dtype=np.int64)
-            self._sent_log.append(MessageLog(ids, np.full(n_hb, HEARTBEAT, dtype=np.int8), hb, minus, minus.copy(),
-                                             created, created.copy(), np.zeros(n_hb, dtype=np.int8)))  # fmt: skip
-            self._queue.append(np.zeros((n_hb, self.payload_dim), dtype=np.float32), msg=ids,
-                               kind=np.full(n_hb, HEARTBEAT, dtype=np.int8), sender=hb, target=minus,
-                               world=self._world_of[hb], created=created, due=created + self.channel.latency)  # fmt: skip
-        return MessageLog(d_msg, d_kind, d_snd, d_tgt, d_rcv, d_cre, np.full(n_ok, step, dtype=np.int64),
-                          np.zeros(n_ok, dtype=np.int8))  # fmt: skip
+            self._answer(d_rcv[(d_rcv >= 0) & (d_kind == HEARTBEAT)], step)
+        sent, dropped = MessageLog.concat(self._sent_log), MessageLog.concat(self._drop_log)
+        self._sent_log, self._drop_log = [], []
+        delivered = MessageLog(d_msg, d_kind, d_snd, d_tgt, d_rcv, d_cre, np.full(n_ok, step, dtype=np.int64),
+                               np.zeros(n_ok, dtype=np.int8))  # fmt: skip
+        return DeliveryEvents(step, sent, delivered, dropped)
 
-
-def _int_vector(x: np.ndarray, name: str, k: int | None = None) -> np.ndarray:
-    """``x`` as a 1-D int64 array (of length ``k`` when given); ValueError naming ``name`` otherwise."""
-    a = np.asarray(x)
-    if a.ndim == 0:
-        a = a.reshape(1)
-    if a.ndim != 1 or not (np.issubdtype(a.dtype, np.integer) or a.size == 0):
-        raise ValueError(f"{name} must be a 1-D integer array, got {a.dtype} with shape {a.shape}")
-    if k is not None and a.shape[0] != k:
-        raise ValueError(f"{name} must have length {k} (one per message), got {a.shape[0]}")
-    return a.astype(np.int64, copy=False)
+    def _answer(self, hb: np.ndarray, step: int) -> None:
+        """Queue the heartbeat answers of slots ``hb`` (created now, numbered after their other messages)."""
+        n_hb = hb.shape[0]
+        ids = self._new_ids(n_hb)
+        created = np.full(n_hb, step, dtype=np.int64)
+        minus = np.full(n_hb, -1, dtype=np.int64)
+        seq = self._seq.slots(hb, step)
+        kind = np.full(n_hb, HEARTBEAT, dtype=np.int8)
+        self._sent_log.append(MessageLog(ids, kind, hb, minus, minus.copy(), created, created.copy(),
+                                         np.zeros(n_hb, dtype=np.int8)))  # fmt: skip
+        self._queue.append(np.zeros((n_hb, self.payload_dim), dtype=np.float32), msg=ids, kind=kind.copy(),
+                           sender=hb, target=minus, world=self._world_of[hb], created=created, seq=seq,
+                           due=created + self.channel.latency)  # fmt: skip

@@ -1,7 +1,8 @@
 """Bus event records and the in-flight queue: what the bus logs and what it holds between send and delivery.
 
 ``MessageLog`` holds message events as column arrays (one row per event); ``DeliveryEvents`` groups one
-step's sent, delivered and dropped logs. ``_Queue`` is the bus's private store of messages in flight.
+step's sent, delivered and dropped logs. ``_Queue`` is the bus's private store of messages in flight and
+``DueRows`` the messages it hands out when they are due (what a bus ships to the bus that owns a receiver).
 
 Queue: growable column arrays; the live region is kept sorted by due step (appends are in step order; an
 out-of-order append triggers one stable sort), so ``deliver`` slices a prefix: cost linear in the messages.
@@ -90,11 +91,62 @@ class DeliveryEvents:
     dropped: MessageLog
 
 
+@dataclass(frozen=True, slots=True)
+class DueRows:
+    """Messages taken from a bus's queue at their due step: one row per message (not yet per receiver).
+
+    The fields ``world`` (its episode key), ``created``, ``sender``, ``seq`` and ``kind`` are what a message's
+    loss draws and inbox order are keyed by (see ``comms.bus``), so any bus delivers a row the same way.
+
+    Attributes:
+        msg: Message id ``(q,)`` int64 (unique within the bus that queued it).
+        kind: Kind code ``(q,)`` int8.
+        sender: Sender slot ``(q,)`` int64 (-1 = environment / controller).
+        target: Receiver slot, group id (GROUP) or -1 (an answer to the controller) ``(q,)`` int64.
+        world: World ``(q,)`` int64.
+        created: Step the message was sent ``(q,)`` int64.
+        seq: Sequence number ``(q,)`` int64 (see ``comms.bus``).
+        payload: ``(q, D)`` float32.
+    """
+
+    msg: np.ndarray
+    kind: np.ndarray
+    sender: np.ndarray
+    target: np.ndarray
+    world: np.ndarray
+    created: np.ndarray
+    seq: np.ndarray
+    payload: np.ndarray
+
+    def __len__(self) -> int:
+        """Number of messages."""
+        return int(self.msg.shape[0])
+
+    @classmethod
+    def empty(cls, payload_dim: int) -> DueRows:
+        """No messages (payload width ``payload_dim``)."""
+        z = np.zeros(0, dtype=np.int64)
+        return cls(z, np.zeros(0, dtype=np.int8), z, z, z, z, z, np.zeros((0, payload_dim), dtype=np.float32))
+
+    def take(self, index: np.ndarray) -> DueRows:
+        """The rows selected by a boolean mask or an index array (fresh arrays)."""
+        return DueRows(*(getattr(self, f.name)[index] for f in fields(self)))
+
+    @classmethod
+    def concat(cls, parts: list[DueRows], payload_dim: int) -> DueRows:
+        """Concatenate row sets in order (``empty(payload_dim)`` when there are none)."""
+        if not parts:
+            return cls.empty(payload_dim)
+        if len(parts) == 1:
+            return parts[0]
+        return cls(*(np.concatenate([getattr(p, f.name) for p in parts]) for f in fields(cls)))
+
+
 class _Queue:
     """Messages in flight as growable columns; the live region ``[head, tail)`` is kept sorted by due step."""
 
     __slots__ = ("cols", "payload", "head", "tail", "last_due", "in_order")
-    NAMES = ("msg", "kind", "sender", "target", "world", "created", "due")
+    NAMES = ("msg", "kind", "sender", "target", "world", "created", "seq", "due")
 
     def __init__(self, cap: int, payload_dim: int) -> None:
         self.cols = {c: np.empty(cap, dtype=np.int8 if c == "kind" else np.int64) for c in self.NAMES}

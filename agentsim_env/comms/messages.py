@@ -6,7 +6,9 @@ into which the bus (``comms.bus``) and the overlay (``comms.overlay``) push what
 
 Inbox layout: per slot the ``M`` newest received messages, **newest first** (row 0 is the newest). A push
 shifts older rows down; a message pushed past row ``M - 1`` is forgotten (it was still *received*, so it is
-counted in ``received``). ``dropped`` counts messages lost on the way: those addressed to the slot (receiver
+counted in ``received``). Within one step a slot receives the environment's collision notices first, then the
+bus's deliveries in ``(created, sender, seq, kind)`` order (``comms.bus``), then the overlay's: the last of them
+is row 0. ``dropped`` counts messages lost on the way: those addressed to the slot (receiver
 offline, out of range, lost) and the slot's own messages refused for bandwidth or lost on the way to the
 group controller (see ``comms.bus``).
 

@@ -7,8 +7,8 @@ the channel filters and the event columns, each a linear pass (numba).
   runs of one list (a counting sort when the key space is small, a stable argsort otherwise).
 - ``expand``: one pair per unicast; one pair per online member of the target group for a GROUP message,
   the sender excluded; in queue order, then slot order.
-- ``route``: the drop reason of each pair (offline receiver, range from the sender's current position, loss
-  from pre-drawn uniforms), the drop counters, and the delivered / dropped event columns (fresh arrays).
+- ``filter_pairs``: the drop reason of each pair (offline receiver, range from the sender's current position
+  (a sender the caller has not seen is out of range), loss from pre-drawn uniforms), the drop counters, and the delivered / dropped event columns (fresh arrays).
 """
 
 from __future__ import annotations
@@ -100,11 +100,12 @@ def expand(kind, snd, tgt, kid, offsets, slots):  # type: ignore[no-untyped-def]
 
 
 @nb.njit(cache=True)
-def route(rep, recv, msg, kind, snd, tgt, created, online, pos, r_max2, u, loss, dropped):  # type: ignore[no-untyped-def]
+def filter_pairs(rep, recv, msg, kind, snd, tgt, created, online, seen, pos, r_max2, u, loss, dropped):  # type: ignore[no-untyped-def]
     """Filter the pairs and build the event columns.
 
     Drop reasons in priority order: receiver offline, beyond ``r_max2`` (squared metres, < 0 = no limit; agent
-    senders only), lost (``u[p] < loss``; ``u`` is empty when ``loss`` is 0). A receiver ``-1`` is the
+    senders only; a sender with ``seen[s]`` False counts as beyond it, ``seen`` empty = every sender seen), lost
+    (``u[p] < loss``; ``u`` is empty when ``loss`` is 0). A receiver ``-1`` is the
     controller (a heartbeat answer): never offline or out of range. Each drop adds one to ``dropped`` of the
     receiver (of the sender for an answer to the controller).
 
@@ -123,6 +124,8 @@ def route(rep, recv, msg, kind, snd, tgt, created, online, pos, r_max2, u, loss,
         if r >= 0:
             if not online[r]:
                 why = DROP_OFFLINE
+            elif r_max2 >= 0.0 and s >= 0 and seen.shape[0] > 0 and not seen[s]:
+                why = DROP_RANGE  # the caller does not know where the sender is: it is not in range
             elif r_max2 >= 0.0 and s >= 0:
                 d0 = pos[s, 0] - pos[r, 0]
                 d1 = pos[s, 1] - pos[r, 1]
