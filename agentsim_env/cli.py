@@ -264,7 +264,7 @@ def _rollout_row(env: Any, policy: Any, seed: int, bar: Any, check: Callable[[],
     """One episode through ``env.rollout`` (arrays, no per-step dicts): a row of the run's summary table."""
 
     def on_step(env: Any, step: int) -> None:
-        if bar is not None:
+        if bar is not None and step:  # step 0: the reset
             bar.update(1)
         if check is not None:  # a stop asked for by SIGTERM or Ctrl-C ends the run here, between steps
             check()

@@ -227,3 +227,52 @@ def test_run_prints_steps_per_second(tmp_path: Path, capsys: pytest.CaptureFixtu
                  "max_steps=10"]) == 0  # fmt: skip
     out = capsys.readouterr().out
     assert "| env-steps/s |" in out and "| agent-steps/s |" in out, out
+
+
+def _old_fly_mission(env: Any, policy: Any, seed: int) -> dict[str, float]:
+    """``fly_mission`` as it stepped through ``step()`` with dicts: what the rollout path must equal."""
+    from agentsim_env.evaluation import mission
+
+    cfg = env.scenario.config
+    obs, _ = env.reset(seed=seed)
+    policy.reset(seed)
+    log = mission.MissionLog(env)
+    ps = env.world.payloads.objects
+    steps, work_done = 0, False
+    while env.agents and not work_done:
+        obs, *_ = env.step(policy.act({a: obs[a] for a in env.agents}))
+        log.update(env)
+        steps += 1
+        work_done = ps.n_falling == 0 and mission._work_done(policy)
+    mine = ps.get("world") == 0
+    landed = int(np.count_nonzero(ps.get("landed") & mine))
+    needed = env.scenario.zones.n_sensors
+    energy = float(env.world.state.energy[: log.n].sum())
+    values = (
+        float(work_done or steps < env.scenario.max_steps), steps, steps * float(cfg.dt), energy,
+        energy / (cfg.n_uavs * cfg.battery_j), log.path, needed, cfg.n_uavs * cfg.payload,
+        int(np.count_nonzero(mine)), landed, min(landed / needed, 1.0), log.sent, log.dropped,
+        int(np.count_nonzero(log.near)), log.collisions,
+    )  # fmt: skip
+    return {k: float(v) for k, v in zip(mission.MISSION_KEYS, values, strict=True)}
+
+
+def test_evaluate_flies_missions_through_rollout(monkeypatch: pytest.MonkeyPatch) -> None:
+    from agentsim_env.env.parallel_env import AgentSimParallelEnv
+    from agentsim_env.evaluation.mission import fly_mission
+
+    config = {"zones": "tiny", "n_uavs": 2, "payload": 10, "max_steps": 1500}
+    env = agentsim_env.make("uav_release", **config)
+    want = _old_fly_mission(env, make_policy("uav_release", env, "B2_rings"), 3)
+    calls = []
+    real = AgentSimParallelEnv.rollout
+
+    def spy(self: Any, *args: Any, **kwargs: Any) -> Any:
+        calls.append(args)
+        return real(self, *args, **kwargs)
+
+    monkeypatch.setattr(AgentSimParallelEnv, "rollout", spy)
+    env = agentsim_env.make("uav_release", **config)
+    got = fly_mission(env, make_policy("uav_release", env, "B2_rings"), 3)
+    assert calls, "fly_mission did not run through env.rollout"
+    assert got == want

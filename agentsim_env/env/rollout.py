@@ -32,7 +32,8 @@ POLICY_BUILDER = "agentsim_env.policies.arrays:build_policy"
 #: The counters of :attr:`RolloutResult.events`.
 EVENT_KEYS = ("collisions", "offline", "delivered", "dropped")
 
-#: ``on_step(env, step)``: called after every step of a rollout (``step`` counts from 1); True stops the rollout.
+#: ``on_step(env, step)``: called after the reset (``step`` 0) and after every step (``step`` counts from 1);
+#: True after a step stops the rollout there.
 RolloutCallback = Callable[[Any, int], bool | None]
 
 
@@ -205,7 +206,8 @@ def run_rollout(
         policy: An :class:`ArrayPolicy`, a baseline name, a trained model folder or a dict ``Policy``.
         steps: Steps to run, >= 1 (fewer when every agent ends first).
         seed: Reset seed (None: a fresh episode, as ``reset()`` starts one); also given to ``policy.reset``.
-        on_step: Called with ``(env, steps so far)`` after every step; returning True ends the rollout there.
+        on_step: Called with ``(env, 0)`` after the reset and ``(env, steps so far)`` after every step; True
+            after a step ends the rollout there.
         through_step: Run through ``env.reset`` and ``env.step`` with dicts (same results, slow): for a front
             end that overrides them (a recording one), where only they do everything.
 
@@ -241,6 +243,10 @@ def _array_loop(
     act_parts = env._act_parts
     live = env._live_idx.copy()
     acting = env._acting.copy()
+    # a dict policy may read env.agents (the uav_release strategies do): keep it current, as step() does
+    track = isinstance(policy, DictRows)
+    if on_step is not None:
+        on_step(env, 0)
     returns = np.zeros(n_slots, dtype=np.float64)
     events = dict.fromkeys(EVENT_KEYS, 0)
     sums: dict[str, float] = {}
@@ -273,6 +279,8 @@ def _array_loop(
         if gone.any():
             acting &= ~gone
             live = live[acting[live]]
+            if track:
+                env._set_agents([env.possible_agents[i] for i in live.tolist()], live)
         if on_step is not None and on_step(env, taken):
             break
     # leave the env where step() would have left it: the live agents, the flags of the ended ones
@@ -312,6 +320,8 @@ def _dict_loop(
     sums: dict[str, float] = {}
     taken = agent_steps = 0
     keys = env._obs_keys
+    if on_step is not None:
+        on_step(env, 0)
     while taken < steps and env._live:
         live = list(env._live)
         slots = np.array([index[a] for a in live], dtype=np.int64)

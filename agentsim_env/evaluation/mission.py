@@ -99,16 +99,20 @@ def fly_mission(env: Any, policy: Any, seed: int) -> dict[str, float]:
         The ``MISSION_KEYS`` values (floats); the env's payload set then holds the released sensors.
     """
     cfg = env.scenario.config
-    obs, _ = env.reset(seed=seed)
-    policy.reset(seed)
-    log = MissionLog(env)
-    ps = env.world.payloads.objects
-    steps, work_done = 0, False
-    while env.agents and not work_done:
-        obs, *_ = env.step(policy.act({a: obs[a] for a in env.agents}))
-        log.update(env)
-        steps += 1
-        work_done = ps.n_falling == 0 and _work_done(policy)
+    state: dict[str, Any] = {}
+
+    def on_step(env: Any, step: int) -> bool:
+        if step == 0:  # right after the reset: the start positions
+            state["log"], state["ps"] = MissionLog(env), env.world.payloads.objects
+            return False
+        state["log"].update(env)
+        return bool(state["ps"].n_falling == 0 and _work_done(policy))
+
+    # through env.rollout: the strategies still act on dicts (they plan over the whole fleet), but the env steps
+    # on arrays; the episode ends by max_steps at the latest
+    res = env.rollout(policy, env.scenario.max_steps, seed=seed, on_step=on_step)
+    log, ps, steps = state["log"], state["ps"], res.steps
+    work_done = bool(ps.n_falling == 0 and _work_done(policy)) if steps else False
     mine = ps.get("world") == 0
     landed = int(np.count_nonzero(ps.get("landed") & mine))
     needed = env.scenario.zones.n_sensors
