@@ -276,3 +276,20 @@ def test_evaluate_flies_missions_through_rollout(monkeypatch: pytest.MonkeyPatch
     got = fly_mission(env, make_policy("uav_release", env, "B2_rings"), 3)
     assert calls, "fly_mission did not run through env.rollout"
     assert got == want
+
+
+def test_a_recorded_env_rolls_out_through_its_step(tmp_path: Path) -> None:
+    from agentsim_env.recorder import record
+    from agentsim_env.recorder.read import Store
+
+    config = {"n_agents": 4, "max_steps": 12}
+    want = agentsim_env.make("navigation", **config).rollout("go_to_goal", 12, seed=2)
+    env = record(agentsim_env.make("navigation", **config), tmp_path / "r.db")
+    got = env.rollout("go_to_goal", 12, seed=2)
+    env.close()
+    np.testing.assert_array_equal(got.returns, want.returns)
+    np.testing.assert_array_equal(got.final_pos, want.final_pos)
+    assert got.events == want.events and got.steps == want.steps
+    with Store(tmp_path / "r.db") as store:
+        steps = store.steps().index.get_level_values("step")
+        assert steps.nunique() == want.steps + 1  # every step written, the reset's included
