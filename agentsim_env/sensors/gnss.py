@@ -16,9 +16,10 @@ new noise (no bias or random walk). Offline slots read zeros.
 The noise is keyed, not streamed: the error of agent i of world w on axis a is
 ``core.keyed.keyed_normal(episode key of w, tick, i, a)``, where the episode key is one 64-bit word drawn from the
 generator the world's reset hands the sensor, and tick is the world tick the reading describes (``ctx.tick + 1``
-inside a step, ``ctx.tick`` when a reset or ``World.refresh`` re-reads the state). A reading therefore depends on
-neither the other worlds of a batch nor the other slots a process holds (a shard draws exactly the numbers one
-process draws for its slots), and reading the same state twice gives the same noise.
+inside a step; ``ctx.tick`` when a reset or ``World.refresh`` re-reads the state, i.e. when ``ctx.fresh`` names
+the worlds). A reading therefore depends on neither the other worlds of a batch nor the other slots a process
+holds (a shard draws exactly the numbers one process draws for its slots), and reading the same state twice gives
+the same noise.
 """
 
 from __future__ import annotations
@@ -95,9 +96,9 @@ class GnssSensor:
         st = ctx.state
         n = self.n_agents
         reading = self._reading.copy()
-        # Inside a step the earlier stages left their outputs in the context and the reading describes the state
-        # after the step; a context without them comes from World.refresh, which re-reads the current state.
-        tick = ctx.tick + 1 if ctx.outputs else ctx.tick
+        # A context naming fresh worlds re-reads the current state (a reset or World.refresh); without it the
+        # reading is a step's and describes the state after the step.
+        tick = ctx.tick if ctx.fresh is not None else ctx.tick + 1
         worlds = np.arange(len(self._keys)) if ctx.fresh is None else np.asarray(ctx.fresh, dtype=np.int64)
         missing = worlds[~self._keyed[worlds]]
         if missing.size:

@@ -253,7 +253,8 @@ class World:
         if self.physics is not None:
             self.physics.sync(st, self.scene)  # a reset's new scene: rebuild now rather than inside a step
         ctx = self.context()
-        ctx.fresh = None if worlds is None else np.asarray(worlds, dtype=np.int64)
+        # every refreshed world is named: a sensor tells a re-read (fresh set) from a step's reading (fresh None)
+        ctx.fresh = np.arange(self.n_worlds) if worlds is None else np.asarray(worlds, dtype=np.int64)
         self._sense(ctx)
 
     def apply_comm(self, comm: np.ndarray, acting: np.ndarray) -> None:
