@@ -293,3 +293,25 @@ def test_a_recorded_env_rolls_out_through_its_step(tmp_path: Path) -> None:
     with Store(tmp_path / "r.db") as store:
         steps = store.steps().index.get_level_values("step")
         assert steps.nunique() == want.steps + 1  # every step written, the reset's included
+
+
+@pytest.mark.parametrize("env_keys", [{"obs_format": "flat", "action_format": "flat"}, {"ended_agents": "stay"}])
+def test_rollout_is_the_same_in_every_env_format(env_keys: dict[str, Any]) -> None:
+    config = WORLDS["navigation"]
+    want = agentsim_env.make("navigation", **config).rollout("go_to_goal", 10_000, seed=6)
+    env = agentsim_env.make("navigation", **config, **env_keys)
+    got = env.rollout("go_to_goal", 10_000, seed=6)
+    np.testing.assert_array_equal(got.returns, want.returns)
+    np.testing.assert_array_equal(got.final_pos, want.final_pos)
+    assert got.events == want.events and got.steps == want.steps and env.agents == []
+
+
+def test_a_stay_env_after_a_partial_rollout_lists_what_step_lists() -> None:
+    config = {**WORLDS["navigation"], "ended_agents": "stay"}
+    stepped = agentsim_env.make("navigation", **config)
+    want = step_loop(stepped, make_policy("navigation", stepped, "go_to_goal"), 45, seed=6)
+    env = agentsim_env.make("navigation", **config)
+    env.rollout("go_to_goal", 45, seed=6)
+    assert env.agents == want["agents"] == list(env.possible_agents)
+    assert (env._terminated == stepped._terminated).all() and env._terminated.any()
+    np.testing.assert_array_equal(env._live_idx, stepped._live_idx)
