@@ -236,23 +236,31 @@ def test_loss_draw_does_not_depend_on_other_messages() -> None:
 
 def test_keyed_draws_are_a_function_of_the_pair() -> None:
     rng = np.random.default_rng(1)
-    q = 1000
-    key = rng.integers(0, 2**63, q).astype(np.uint64)
-    created, snd, seq = rng.integers(0, 100, q), rng.integers(-1, 50, q), rng.integers(0, 4, q)
-    kind, recv = rng.integers(1, 6, q).astype(np.int8), rng.integers(-1, 50, q)
+    q, n = 1000, 50
+    keys = rng.integers(0, 2**63, 3).astype(np.uint64)
+    world, created = rng.integers(0, 3, q), rng.integers(0, 100, q)
+    snd = np.where(rng.random(q) < 0.1, -1, world * n + rng.integers(0, n, q))
+    recv = np.where(rng.random(q) < 0.1, -1, world * n + rng.integers(0, n, q))
+    seq, kind = rng.integers(0, 4, q), rng.integers(1, 6, q).astype(np.int8)
     rep = np.arange(q)
-    u = keyed_draws(rep, recv, key, created, snd, seq, kind, 1000)
-    perm = rng.permutation(q)
-    np.testing.assert_array_equal(keyed_draws(rep, recv[perm], key[perm], created[perm], snd[perm], seq[perm],
-                                              kind[perm], 1000), u[perm])  # fmt: skip
+
+    def draw(**change: np.ndarray) -> np.ndarray:
+        a = {"recv": recv, "keys": keys, "world": world, "created": created, "snd": snd, "seq": seq, "kind": kind}
+        a.update(change)
+        return keyed_draws(rep, a["recv"], a["keys"], a["world"], n, a["created"], a["snd"], a["seq"], a["kind"])
+
+    u = draw()
+    perm = rng.permutation(q)  # a pair's value does not depend on its place in the batch
+    np.testing.assert_array_equal(keyed_draws(perm, recv[perm], keys, world, n, created, snd, seq, kind), u[perm])
     assert ((u >= 0) & (u < 1)).all() and abs(u.mean() - 0.5) < 0.03
-    # every field of the key matters
-    for field in ("key", "created", "snd", "seq", "kind", "recv"):
-        args = {"key": key, "created": created, "snd": snd, "seq": seq, "kind": kind, "recv": recv}
-        args[field] = args[field] + args[field].dtype.type(1)
-        v = keyed_draws(rep, args["recv"], args["key"], args["created"], args["snd"], args["seq"], args["kind"],
-                        1000)
-        assert (v != u).mean() > 0.99, field
+    # the world's place in the batch does not matter (slots are indices within the world), its key does
+    shifted = draw(world=world + 1, keys=np.concatenate([[np.uint64(7)], keys]),
+                   snd=np.where(snd >= 0, snd + n, -1), recv=np.where(recv >= 0, recv + n, -1))  # fmt: skip
+    np.testing.assert_array_equal(shifted, u)
+    for name, changed in (("keys", keys + np.uint64(1)), ("created", created + 1), ("seq", seq + 1),
+                          ("kind", (kind + 1).astype(np.int8)), ("snd", np.where(snd >= 0, snd ^ 1, 0)),
+                          ("recv", np.where(recv >= 0, recv ^ 1, 0))):  # fmt: skip
+        assert (draw(**{name: changed}) != u).mean() > 0.99, name
 
 
 def test_episode_key_comes_from_the_reset_generator() -> None:

@@ -26,7 +26,7 @@ Rules (one line each, the tests check them):
 - Bus messages have ``hops = 0`` (no relaying). Message ids are unique per bus until ``reset``; buses that
   share one world between them (below) number their messages independently, so ids may repeat across them.
 
-Keyed loss draws: the uniform of a pair is a hash (chained SplitMix64, ``bus_kernels.keyed_draws``) of
+Keyed loss draws: the uniform of a pair is a hash (two chained SplitMix64 rounds, ``bus_kernels.keyed_draws``) of
 
     (episode key of the world, created step, sender, seq, kind, receiver)
 
@@ -62,7 +62,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from agentsim_env.comms.bus_kernels import bandwidth_kernel, keyed_draws, rows_in_order
+from agentsim_env.comms.bus_kernels import bandwidth_kernel, keyed_draws
 from agentsim_env.comms.checks import bool_mask, int_vector, validate_send, world_arrays
 from agentsim_env.comms.events import DeliveryEvents, DueRows, MessageLog, _Queue
 from agentsim_env.comms.messages import (
@@ -252,12 +252,11 @@ class MessageBus:
         self.keys[world] = np.uint64(rng.integers(2**63))
         self._keyed[world] = True
 
-    def _row_keys(self, world: np.ndarray) -> np.ndarray:
-        """The episode key of every row's world; ValueError when a world has none yet."""
+    def _check_keys(self, world: np.ndarray) -> None:
+        """ValueError when a row's world has no episode key yet."""
         if not self._keyed.all() and not self._keyed[world].all():
             w = int(world[~self._keyed[world]][0])
             raise ValueError(f"world {w} has no loss key: reset it (reset_world) before a lossy delivery")
-        return self.keys[world]
 
     def drop_world(self, world: int) -> None:
         """Forget world ``world``'s traffic (messages in flight, answers, inboxes), e.g. when it is reset alone."""
@@ -489,8 +488,7 @@ class MessageBus:
         return out
 
     def _deliver_rows(self, rows, step, pos, online, group, mine, seen) -> DeliveryEvents:  # type: ignore[no-untyped-def]
-        if len(rows) > 1 and not rows_in_order(rows.created, rows.sender, rows.seq, rows.kind):
-            rows = rows.take(inbox_order(rows))
+        order = inbox_order(rows, self.n_slots)  # the pairs come out in it; the rows stay where they are
         kind, snd, tgt = rows.kind, rows.sender, rows.target
         kid, offsets, slots = _NO_SLOTS, _NO_SLOTS, _NO_SLOTS
         grp = kind == GROUP
@@ -499,7 +497,7 @@ class MessageBus:
             members = online if mine is None else online & mine
             kid, offsets, slots = group_members(members, group, self._world_of, self.n_worlds, n_g,
                                                 rows.world * n_g + tgt)  # fmt: skip
-        rep, recv = expand(kind, snd, tgt, kid, offsets, slots)
+        rep, recv = expand(kind, snd, tgt, kid, offsets, slots, order)
         if mine is not None and rep.shape[0]:
             own = mine[np.where(recv >= 0, recv, snd[rep])]  # an answer belongs to the bus owning its sender
             if not own.all():
@@ -507,8 +505,8 @@ class MessageBus:
         loss = float(self.channel.loss)
         u = _NO_DRAWS
         if loss > 0.0 and rep.shape[0]:
-            u = keyed_draws(rep, recv, self._row_keys(rows.world), rows.created, snd, rows.seq, kind,
-                            self.n_agents)  # fmt: skip
+            self._check_keys(rows.world)
+            u = keyed_draws(rep, recv, self.keys, rows.world, self.n_agents, rows.created, snd, rows.seq, kind)
         r_max = self.channel.max_range
         ok, dr, n_hb, n_ans = filter_pairs(rep, recv, rows.msg, kind, snd, tgt, rows.created, online, seen, pos,
                                            -1.0 if r_max is None else r_max * r_max, u, loss,

@@ -59,7 +59,7 @@ _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
 _M1 = np.uint64(0xBF58476D1CE4E5B9)
 _M2 = np.uint64(0x94D049BB133111EB)
 _S30, _S27, _S31, _S11 = np.uint64(30), np.uint64(27), np.uint64(31), np.uint64(11)
-_ONE = np.uint64(1)
+_S32, _S8 = np.uint64(32), np.uint64(8)
 _TO_UNIT = 1.0 / 9007199254740992.0  # 2**-53: the top 53 bits of a hash as a float64 in [0, 1)
 
 
@@ -71,40 +71,42 @@ def _mix(z):  # type: ignore[no-untyped-def]
 
 
 @nb.njit(cache=True)
-def keyed_draws(rep, recv, key, created, snd, seq, kind, n_agents):  # type: ignore[no-untyped-def]
+def keyed_draws(rep, recv, keys, world, n_agents, created, snd, seq, kind):  # type: ignore[no-untyped-def]
     """One uniform in [0, 1) per (message row, receiver) pair, a pure function of what the pair is.
 
-    Pair ``p`` hashes ``(key[rep[p]], created, sender, seq, kind)`` of its message row and its receiver
-    ``recv[p]`` through chained SplitMix64 rounds (each field is added to the running hash, which is then
-    mixed), so the value depends on nothing else: not on the batch, its order or the process drawing it.
-    Slots enter as their index within their world (``slot % n_agents``; -1 stays -1), so world ``w`` of a
-    batch draws what a single world of the same episode key draws.
+    Two chained SplitMix64 rounds: ``h0 = mix(keys[world] + (created + 1) * golden)``, then
+    ``mix((h0 ^ (sender + 1) << 32 | (receiver + 1)) + (seq << 8 | kind) * M2)`` with sender and receiver as
+    indices within the world (-1 stays -1). The value depends on nothing else: not on the batch, its order,
+    the world's position in a batch or the process drawing it.
 
     Args:
         rep: ``(m,)`` int64 message row of each pair.
-        recv: ``(m,)`` int64 receiver of each pair (-1: the controller).
-        key: ``(q,)`` uint64 episode key of each message row's world.
+        recv: ``(m,)`` int64 receiver slot of each pair (-1: the controller).
+        keys: ``(B,)`` uint64 episode key of each world.
+        world: ``(q,)`` int64 world of each message row.
+        n_agents: Agents per world N (slot ``s`` of world ``w`` is index ``s - w * N`` within it).
         created: ``(q,)`` int64 step each message was created.
         snd: ``(q,)`` int64 sender slots (-1: environment / controller).
         seq: ``(q,)`` int64 sequence numbers (see ``comms.bus``).
         kind: ``(q,)`` int8 kinds.
-        n_agents: Agents per world N.
 
     Returns:
         ``(m,)`` float64 in [0, 1).
     """
     m = rep.shape[0]
     out = np.empty(m)
+    last_w, last_c, h0 = -1, -1, _GOLDEN
     for p in range(m):
         k = rep[p]
-        s = snd[k] % n_agents if snd[k] >= 0 else -1
-        r = recv[p] % n_agents if recv[p] >= 0 else -1
-        h = _mix(key[k] + _GOLDEN)
-        h = _mix(h + np.uint64(created[k]) * _GOLDEN)
-        h = _mix(h + np.uint64(s + 1))
-        h = _mix(h + np.uint64(seq[k]))
-        h = _mix(h + np.uint64(kind[k]))
-        h = _mix(h + np.uint64(r + 1) + _ONE)
+        w = world[k]
+        if w != last_w or created[k] != last_c:  # the first round depends on (world, created) only: reuse it
+            last_w, last_c = w, created[k]
+            h0 = _mix(keys[w] + np.uint64(last_c + 1) * _GOLDEN)
+        base = w * n_agents
+        s = snd[k] - base if snd[k] >= 0 else -1
+        r = recv[p] - base if recv[p] >= 0 else -1
+        pair = (np.uint64(s + 1) << _S32) | np.uint64(r + 1)
+        h = _mix((h0 ^ pair) + ((np.uint64(seq[k]) << _S8) | np.uint64(kind[k])) * _M2)
         out[p] = np.float64(h >> _S11) * _TO_UNIT
     return out
 
@@ -113,16 +115,44 @@ def keyed_draws(rep, recv, key, created, snd, seq, kind, n_agents):  # type: ign
 def rows_in_order(created, snd, seq, kind):  # type: ignore[no-untyped-def]
     """Whether message rows are sorted by ``(created, sender, seq, kind)`` (the inbox order of ``comms.bus``)."""
     for i in range(1, created.shape[0]):
-        j = i - 1
-        if created[i] != created[j]:
-            if created[i] < created[j]:
-                return False
-        elif snd[i] != snd[j]:
-            if snd[i] < snd[j]:
-                return False
-        elif seq[i] != seq[j]:
-            if seq[i] < seq[j]:
-                return False
-        elif kind[i] < kind[j]:
+        if _before(created, snd, seq, kind, i, i - 1):
             return False
     return True
+
+
+@nb.njit(cache=True, inline="always")
+def _before(created, snd, seq, kind, i, j):  # type: ignore[no-untyped-def]
+    # whether row i comes strictly before row j in (created, sender, seq, kind) order
+    if created[i] != created[j]:
+        return created[i] < created[j]
+    if snd[i] != snd[j]:
+        return snd[i] < snd[j]
+    if seq[i] != seq[j]:
+        return seq[i] < seq[j]
+    return kind[i] < kind[j]
+
+
+@nb.njit(cache=True)
+def sender_order(created, snd, seq, kind, n_slots):  # type: ignore[no-untyped-def]
+    """Stable counting sort of message rows by sender (-1 first), O(rows + slots).
+
+    Returns:
+        ``(order, ok)``: ``ok`` says whether ``order`` is the full ``(created, sender, seq, kind)`` order, i.e.
+        all rows share one created step and each sender's rows already came in ``(seq, kind)`` order (the
+        queue appends a sender's messages in creation order, so they do unless the controller's are mixed).
+    """
+    q = snd.shape[0]
+    start = np.zeros(n_slots + 2, dtype=np.int64)
+    for i in range(q):
+        start[snd[i] + 2] += 1
+    for b in range(n_slots + 1):
+        start[b + 1] += start[b]
+    order = np.empty(q, dtype=np.int64)
+    for i in range(q):
+        b = snd[i] + 1
+        order[start[b]] = i
+        start[b] += 1
+    for j in range(1, q):
+        if created[order[j]] != created[order[0]] or _before(created, snd, seq, kind, order[j], order[j - 1]):
+            return order, False
+    return order, True

@@ -6,7 +6,7 @@ the channel filters and the event columns, each a linear pass (numba).
 - ``group_members``: the online members of every (world, group) addressed, slot order within a group, as
   runs of one list (a counting sort when the key space is small, a stable argsort otherwise).
 - ``expand``: one pair per unicast; one pair per online member of the target group for a GROUP message,
-  the sender excluded; in queue order, then slot order.
+  the sender excluded; in the given message order (the inbox order), then slot order.
 - ``filter_pairs``: the drop reason of each pair (offline receiver, range from the sender's current position
   (a sender the caller has not seen is out of range), loss from pre-drawn uniforms), the drop counters, and the delivered / dropped event columns (fresh arrays).
 """
@@ -70,8 +70,11 @@ def group_members(
 
 
 @nb.njit(cache=True)
-def expand(kind, snd, tgt, kid, offsets, slots):  # type: ignore[no-untyped-def]
-    """(message row, receiver) pairs of a batch: GROUP messages fan out to their members, sender excluded."""
+def expand(kind, snd, tgt, kid, offsets, slots, order):  # type: ignore[no-untyped-def]
+    """(message row, receiver) pairs of a batch: GROUP messages fan out to their members, sender excluded.
+
+    Messages are taken in ``order`` (row indices; empty = row order), members in slot order.
+    """
     q = kind.shape[0]
     total = 0
     for k in range(q):
@@ -84,7 +87,8 @@ def expand(kind, snd, tgt, kid, offsets, slots):  # type: ignore[no-untyped-def]
     rep = np.empty(total, dtype=np.int64)
     recv = np.empty(total, dtype=np.int64)
     n = 0
-    for k in range(q):
+    for i in range(q):
+        k = order[i] if order.shape[0] else i
         if kind[k] == GROUP:
             if kid[k] >= 0:
                 for p in range(offsets[kid[k]], offsets[kid[k] + 1]):

@@ -10,13 +10,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from agentsim_env.comms.bus_kernels import sequence_kernel
+from agentsim_env.comms.bus_kernels import rows_in_order, sender_order, sequence_kernel
 from agentsim_env.comms.events import DueRows
 
 __all__ = ["Sequencer", "inbox_order"]
 
 # Code of an environment / controller counter: (world * _CTL_KINDS + kind) << _CTL_SHIFT | target.
 _CTL_KINDS, _CTL_SHIFT = 8, 36
+_IDENTITY = np.zeros(0, dtype=np.int64)
 
 
 class Sequencer:
@@ -94,10 +95,20 @@ class Sequencer:
         return seq
 
 
-def inbox_order(rows: DueRows) -> np.ndarray:
-    """Stable order of ``rows`` by ``(created, sender, seq, kind)``: the order their receivers get them."""
+def inbox_order(rows: DueRows, n_slots: int) -> np.ndarray:
+    """Row indices of ``rows`` in ``(created, sender, seq, kind)`` order (empty: already in that order).
+
+    Args:
+        rows: Due messages.
+        n_slots: Slots S (senders are below it).
+    """
     c, s, q, k = rows.created, rows.sender, rows.seq, rows.kind
+    if len(rows) < 2 or rows_in_order(c, s, q, k):
+        return _IDENTITY
+    if n_slots + 2 <= 8 * len(rows) + 4096:  # a dense sender range: one counting sort, linear
+        order, ok = sender_order(c, s, q, k, n_slots)
+        if ok:
+            return order
     if c.min() == c.max() and s.max() < 2**35 and q.max() < 2**24:
-        # one created step (the usual case): one int64 key, and timsort merges the queue's sorted runs
         return np.argsort((((s + 1) << 24 | q) << 3) | k.astype(np.int64), kind="stable")
     return np.lexsort((k, q, s, c))
