@@ -260,10 +260,14 @@ class _AgentSteps:
             self.inner(env, infos)
 
 
-def _rollout_row(env: Any, policy: Any, seed: int, bar: Any, check: Callable[[], None] | None) -> tuple:
+def _rollout_row(
+    env: Any, policy: Any, seed: int, recorder: Any, bar: Any, check: Callable[[], None] | None
+) -> tuple:
     """One episode through ``env.rollout`` (arrays, no per-step dicts): a row of the run's summary table."""
 
-    def on_step(env: Any, step: int) -> None:
+    def on_step(env: Any, step: int, view: Any) -> None:
+        if recorder is not None:  # the trajectory PNG's positions and outcomes, from the step's arrays
+            recorder.on_rollout(env, step, view)
         if bar is not None and step:  # step 0: the reset
             bar.update(1)
         if check is not None:  # a stop asked for by SIGTERM or Ctrl-C ends the run here, between steps
@@ -367,8 +371,10 @@ def _run(args: argparse.Namespace, config: dict[str, Any], policy_name: str) -> 
         with LiveStop() as live:  # SIGTERM and Ctrl-C end the run between two steps (a second one at once)
             for k in episodes:
                 recorder = TrajectoryRecorder() if k == 0 and args.out else None
-                if recorder is None and not args.render and not store:  # nothing needs per-step dicts
-                    rows.append(_rollout_row(env, policy, args.seed + k, bar, live.check))
+                if not args.render and not store:  # nothing needs per-step dicts
+                    rows.append(_rollout_row(env, policy, args.seed + k, recorder, bar, live.check))
+                    if recorder is not None:
+                        traj = recorder.result(env)
                     continue
                 counted = _AgentSteps(_observers(recorder, bar, live.check))
                 t0 = time.perf_counter()

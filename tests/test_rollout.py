@@ -315,3 +315,23 @@ def test_a_stay_env_after_a_partial_rollout_lists_what_step_lists() -> None:
     assert env.agents == want["agents"] == list(env.possible_agents)
     assert (env._terminated == stepped._terminated).all() and env._terminated.any()
     np.testing.assert_array_equal(env._live_idx, stepped._live_idx)
+
+
+@pytest.mark.parametrize("scenario", ["navigation", "rendezvous"])
+def test_trajectories_recorded_on_arrays_equal_the_dict_loop(scenario: str) -> None:
+    from agentsim_env.policies.rollout import run_episode
+    from agentsim_env.render.trajectories import TrajectoryRecorder
+
+    config = {**WORLDS[scenario], "max_steps": 80}
+    env = agentsim_env.make(scenario, **config)
+    by_dicts = TrajectoryRecorder()
+    run_episode(env, make_policy(scenario, env, None), 4, on_step=by_dicts)
+    want = by_dicts.result(env)
+    env = agentsim_env.make(scenario, **config)
+    on_arrays = TrajectoryRecorder()
+    env.rollout(make_policy(scenario, env, None), config["max_steps"], seed=4, on_step=on_arrays.on_rollout)
+    got = on_arrays.result(env)
+    np.testing.assert_array_equal(got.xy, want.xy)
+    np.testing.assert_array_equal(got.last, want.last)
+    assert got.outcome == want.outcome and got.steps == want.steps
+    assert len(set(want.outcome)) > 1  # the comparison covers more than one outcome

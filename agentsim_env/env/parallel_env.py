@@ -289,8 +289,8 @@ class AgentSimParallelEnv(MessageCalls, ParallelEnv):
 
         The results (returns, final positions, events) are those of stepping through ``step()`` with the same
         policy; no frames are rendered. ``policy``: a baseline name registered for the scenario, a trained model
-        folder or ``.zip``, a dict ``Policy`` (the slow path) or an ``ArrayPolicy``; ``on_step(env, steps so far)``
-        runs after the reset (0) and every step (True stops). ``agentsim_env.env.rollout`` documents the rest.
+        folder or ``.zip``, a dict ``Policy`` (the slow path) or an ``ArrayPolicy``; ``on_step(env, steps so far,
+        view)`` runs after the reset (0) and every step (True stops). ``agentsim_env.env.rollout`` has the rest.
 
         Raises:
             ValueError: A bad ``policy``, ``steps`` or ``seed`` (the message names it and what is allowed).

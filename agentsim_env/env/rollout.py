@@ -32,9 +32,26 @@ POLICY_BUILDER = "agentsim_env.policies.arrays:build_policy"
 #: The counters of :attr:`RolloutResult.events`.
 EVENT_KEYS = ("collisions", "offline", "delivered", "dropped")
 
-#: ``on_step(env, step)``: called after the reset (``step`` 0) and after every step (``step`` counts from 1);
-#: True after a step stops the rollout there.
-RolloutCallback = Callable[[Any, int], bool | None]
+
+
+@dataclass(frozen=True)
+class StepView:
+    """One step of a rollout as arrays over slots, for an ``on_step`` observer (read it, do not keep it).
+
+    Attributes:
+        acted: ``(S,)`` bool, the slots that acted in the step (the agents ``step()`` would have given infos).
+        live: ``(S,)`` bool, the slots still live after it (``env.agents`` in ``step()``'s bookkeeping).
+        info: The scenario's info arrays ``(S,)`` of the step (``step()``'s per-agent infos, as arrays).
+    """
+
+    acted: np.ndarray
+    live: np.ndarray
+    info: dict[str, np.ndarray]
+
+
+#: ``on_step(env, step, view)``: called after the reset (``step`` 0, ``view`` None) and after every step (``step``
+#: counts from 1, ``view`` a :class:`StepView`); True after a step stops the rollout there.
+RolloutCallback = Callable[[Any, int, "StepView | None"], bool | None]
 
 
 @runtime_checkable
@@ -206,8 +223,8 @@ def run_rollout(
         policy: An :class:`ArrayPolicy`, a baseline name, a trained model folder or a dict ``Policy``.
         steps: Steps to run, >= 1 (fewer when every agent ends first).
         seed: Reset seed (None: a fresh episode, as ``reset()`` starts one); also given to ``policy.reset``.
-        on_step: Called with ``(env, 0)`` after the reset and ``(env, steps so far)`` after every step; True
-            after a step ends the rollout there.
+        on_step: Called with ``(env, 0, None)`` after the reset and ``(env, steps so far, StepView)`` after
+            every step; True after a step ends the rollout there.
         through_step: Run through ``env.reset`` and ``env.step`` with dicts (same results, slow): for a front
             end that overrides them (a recording one), where only they do everything.
 
@@ -246,7 +263,7 @@ def _array_loop(
     # a dict policy may read env.agents (the uav_release strategies do): keep it current, as step() does
     track = isinstance(policy, DictRows)
     if on_step is not None:
-        on_step(env, 0)
+        on_step(env, 0, None)
     returns = np.zeros(n_slots, dtype=np.float64)
     events = dict.fromkeys(EVENT_KEYS, 0)
     sums: dict[str, float] = {}
@@ -276,12 +293,13 @@ def _array_loop(
         ended_t |= terminated
         ended_u |= truncated
         gone = terminated | truncated
+        acted = acting.copy() if on_step is not None else acting
         if gone.any():
             acting &= ~gone
             live = live[acting[live]]
             if track:
                 env._set_agents([env.possible_agents[i] for i in live.tolist()], live)
-        if on_step is not None and on_step(env, taken):
+        if on_step is not None and on_step(env, taken, StepView(acted, acting.copy(), res.info)):
             break
     # leave the env where step() would have left it: the live agents, the flags of the ended ones
     names = env.possible_agents
@@ -320,8 +338,9 @@ def _dict_loop(
     sums: dict[str, float] = {}
     taken = agent_steps = 0
     keys = env._obs_keys
+    n_slots = env.world.state.n_slots
     if on_step is not None:
-        on_step(env, 0)
+        on_step(env, 0, None)
     while taken < steps and env._live:
         live = list(env._live)
         slots = np.array([index[a] for a in live], dtype=np.int64)
@@ -343,9 +362,25 @@ def _dict_loop(
             for k, v in info.items():
                 if isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, (bool, np.bool_)):
                     sums[k] = sums.get(k, 0.0) + float(v)
-        if on_step is not None and on_step(env, taken):
+        if on_step is not None and on_step(env, taken, _view(env, slots, infos, n_slots)):
             break
     return _result(env, taken, returns, events, sums, agent_steps, t0)
+
+
+def _view(env: Any, slots: np.ndarray, infos: dict[str, dict[str, Any]], n_slots: int) -> StepView:
+    """The :class:`StepView` of a step taken through ``step()`` (from its infos dicts)."""
+    acted = np.zeros(n_slots, dtype=bool)
+    acted[slots] = True
+    live = np.zeros(n_slots, dtype=bool)
+    live[env._live_idx] = True
+    index = env._index
+    info: dict[str, np.ndarray] = {}
+    for a, values in infos.items():
+        for k, v in values.items():
+            if k not in info:
+                info[k] = np.zeros(n_slots, dtype=np.asarray(v).dtype)
+            info[k][index[a]] = v
+    return StepView(acted, live, info)
 
 
 def _part(env: Any, flat_row: np.ndarray, key: str) -> np.ndarray:

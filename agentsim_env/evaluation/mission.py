@@ -101,7 +101,7 @@ def fly_mission(env: Any, policy: Any, seed: int) -> dict[str, float]:
     cfg = env.scenario.config
     state: dict[str, Any] = {}
 
-    def on_step(env: Any, step: int) -> bool:
+    def on_step(env: Any, step: int, view: Any) -> bool:
         if step == 0:  # right after the reset: the start positions
             state["log"], state["ps"] = MissionLog(env), env.world.payloads.objects
             return False

@@ -1,6 +1,7 @@
 """Trajectory figures of one episode: the map, obstacles, scenario markers and every agent's path.
 
-:class:`TrajectoryRecorder` is an observer for ``agentsim_env.policies.rollout.run_episode(on_step=...)``: it
+:class:`TrajectoryRecorder` is an observer for ``agentsim_env.policies.rollout.run_episode(on_step=...)`` (and,
+through its ``on_rollout``, for ``env.rollout(..., on_step=...)``): it
 keeps the positions of world 0's agents after the reset and after every step, and what happened to each agent
 (arrived, collided, went offline, still flying). :func:`plot_trajectories` draws the result with matplotlib
 (headless, no pyplot state): map bounds, obstacles (boxes and cylinders, shaded by height), the scenario's
@@ -102,6 +103,34 @@ class TrajectoryRecorder:
                 self._arrived[i] = True
             if info.get("collided"):
                 self._collided[i] = True
+
+    def on_rollout(self, env: Any, step: int, view: Any) -> None:
+        """The same record from ``env.rollout(..., on_step=recorder.on_rollout)``, on arrays (no infos dicts).
+
+        Args:
+            env: The env.
+            step: Steps so far (0: right after the reset, a new episode).
+            view: The step's ``StepView`` (``acted`` and ``live`` masks, ``info`` arrays over slots); None at 0.
+        """
+        st = env.world.state
+        slots = st.slots_of_world(0)
+        if view is None:
+            self._agents = list(env.possible_agents)
+            n = len(self._agents)
+            self._xy, self._live = [], []
+            self._arrived, self._collided = np.zeros(n, dtype=bool), np.zeros(n, dtype=bool)
+            self._group = np.array(st.group[slots], dtype=np.int64)
+            live = np.ones(n, dtype=bool)
+        else:
+            live = np.asarray(view.live[slots], dtype=bool)
+            acted = np.asarray(view.acted[slots], dtype=bool)
+            for k in ARRIVAL_KEYS:
+                if k in view.info:
+                    self._arrived |= acted & (np.asarray(view.info[k])[slots] != 0)
+            if "collided" in view.info:
+                self._collided |= acted & (np.asarray(view.info["collided"])[slots] != 0)
+        self._xy.append(np.array(st.pos[slots, :2], dtype=float))
+        self._live.append(live)
 
     def result(self, env: Any) -> Trajectories:
         """The recorded episode, with the map, obstacles and markers of ``env`` as they are now (its end)."""
