@@ -33,7 +33,6 @@ POLICY_BUILDER = "agentsim_env.policies.arrays:build_policy"
 EVENT_KEYS = ("collisions", "offline", "delivered", "dropped")
 
 
-
 @dataclass(frozen=True)
 class StepView:
     """One step of a rollout as arrays over slots, for an ``on_step`` observer (read it, do not keep it).
@@ -51,7 +50,7 @@ class StepView:
 
 #: ``on_step(env, step, view)``: called after the reset (``step`` 0, ``view`` None) and after every step (``step``
 #: counts from 1, ``view`` a :class:`StepView`); True after a step stops the rollout there.
-RolloutCallback = Callable[[Any, int, "StepView | None"], bool | None]
+RolloutCallback = Callable[[Any, int, StepView | None], bool | None]
 
 
 @runtime_checkable
