@@ -9,6 +9,13 @@ as is one whose process died, and one whose code raised (its actor is killed: it
 When this process has already called ``ray.init`` (a test's cluster, a trainer's), the shards join that cluster
 and ``ray_address`` is not used.
 
+Placement: on a cluster given by address the shards are spread over its nodes. When nodes offer the custom
+resources ``agentsim_node_0``, ``agentsim_node_1``, ... (``ray start --resources '{"agentsim_node_<i>": 1}'``),
+shard k runs on the node of ``agentsim_node_<k mod n>`` (n: the alive nodes offering one), asked as a soft node
+affinity so that a shard started anew after its node died lands on a node still alive; without such nodes Ray's
+``"SPREAD"`` strategy places them. ``node_of(k)`` names the node, and each shard's address (``env.shards``) ends
+with ``on node <first 12 hex digits of the node id>``. The local cluster keeps Ray's default placement.
+
 The local cluster listens on loopback only (``start_local_cluster``): Ray binds its gRPC servers (gcs_server,
 the raylet's two ports, the driver's and every worker's) to 127.0.0.1 only when the node's address is literally
 127.0.0.1, else to every interface, and its runtime-env agent to the node's address. ``ray.init`` replaces a
@@ -32,7 +39,8 @@ from typing import Any
 
 from agentsim_env.distributed.backends import Failure, raised
 from agentsim_env.distributed.partition import Strips
-from agentsim_env.distributed.shard import Packed, Shard
+from agentsim_env.distributed.shard import Packed
+from agentsim_env.distributed.shard import Shard as _Shard
 
 INSTALL_HINT = "shards need Ray: pip install 'agentsim-env[ray]' (or pip install 'ray>=2.40')"
 STARTUP_TIMEOUT_S = 300.0
@@ -40,6 +48,9 @@ STARTUP_TIMEOUT_S = 300.0
 _ADDRESS = re.compile(r"^(auto|local|(ray://)?[A-Za-z0-9_.\-]+:\d{1,5})$")
 _users = 0  # envs using the local cluster this process started
 LOOPBACK = "127.0.0.1"
+NODE_RESOURCE = "agentsim_node_"
+"""Prefix of the custom resource by which a node offers itself for shard placement (``agentsim_node_<i>``)."""
+_NODE_RESOURCE = re.compile(rf"^{NODE_RESOURCE}(\d+)$")
 log = logging.getLogger("agentsim_env.distributed")
 
 
@@ -140,6 +151,101 @@ def start_local_cluster(ray: Any, num_cpus: int) -> str:
     return address
 
 
+def connect_driver(ray: Any, address: str) -> None:
+    """``ray.init`` this process as a driver of the cluster at ``address``, checked reachable first.
+
+    A cluster on loopback (``127.0.0.1:port``, ``localhost:port``) is joined on loopback: Ray would otherwise
+    rewrite the address to the machine's outward one, where nothing of that cluster listens.
+
+    Raises:
+        ConnectionError: Naming ``ray_address`` and why it cannot be reached.
+    """
+    check_reachable(address)
+    host = address.removeprefix("ray://").rsplit(":", 1)[0]
+    local = _loopback_node_address() if is_loopback(host) else contextlib.nullcontext()
+    try:
+        with local:
+            ray.init(address=address, logging_level="ERROR", log_to_driver=False)
+    except Exception as e:  # ray raises ConnectionError, RuntimeError or its own kinds here
+        raise ConnectionError(f"cannot reach the Ray cluster at ray_address={address!r}: "
+                              f"{type(e).__name__}: {e}") from e  # fmt: skip
+
+
+def pinned_nodes(ray: Any) -> list[str]:
+    """Ids of the alive nodes offering ``agentsim_node_<i>``, ordered by i (empty when none does)."""
+    found = []
+    for node in ray.nodes():
+        if not node.get("Alive"):
+            continue
+        for resource in node.get("Resources", {}):
+            m = _NODE_RESOURCE.match(resource)
+            if m:
+                found.append((int(m.group(1)), str(node["NodeID"])))
+                break
+    return [node_id for _, node_id in sorted(found)]
+
+
+class OnNode:
+    """Mixed into an actor class: ``node()`` answers the id of the Ray node the actor runs on."""
+
+    def node(self) -> str:
+        """The id (hex) of the Ray node this actor runs on."""
+        return str(import_ray().get_runtime_context().get_node_id())
+
+
+class Placement:
+    """Where shard actors start on a cluster, and which node each one runs on (see the module docstring).
+
+    Args:
+        ray: The ``ray`` module (connected).
+        spread: Place the shards on different nodes; ``False`` keeps Ray's default placement.
+    """
+
+    def __init__(self, ray: Any, spread: bool) -> None:
+        self._ray = ray
+        self.spread = bool(spread)
+        self._nodes: dict[int, Any] = {}  # shard -> the reference of its answer to ``node()``
+        self._avoid: set[str] = set()  # nodes where a shard died or went silent
+
+    def start(self, k: int, remote_cls: Any, *args: Any) -> Any:
+        """Start shard ``k`` as ``remote_cls.remote(*args)`` (an ``OnNode`` actor class) where it belongs."""
+        if not self.spread:
+            actor = remote_cls.remote(*args)
+        else:
+            # read at every start, minus the nodes where a shard failed: Ray marks a node dead only after it
+            # misses its health checks (about 15 s here), and an actor sent there meanwhile dies with it
+            nodes = [n for n in pinned_nodes(self._ray) if n not in self._avoid]
+            strategy: Any = "SPREAD"
+            if nodes:
+                from ray.util.scheduling_strategies import NodeAffinitySchedulingStrategy
+
+                strategy = NodeAffinitySchedulingStrategy(nodes[k % len(nodes)], soft=True)
+            actor = remote_cls.options(scheduling_strategy=strategy).remote(*args)
+        self._nodes[k] = actor.node.remote()  # answered before the shard's first call
+        return actor
+
+    def node_of(self, k: int, timeout_s: float = STARTUP_TIMEOUT_S) -> str:
+        """The id (hex) of the Ray node shard ``k`` runs on (or last ran on); ``""`` when it never said."""
+        try:
+            return str(self._ray.get(self._nodes[k], timeout=timeout_s))
+        except Exception:  # it died (or is still starting after timeout_s): unknown
+            return ""
+
+    def failed(self, k: int) -> None:
+        """Shard ``k`` died or went silent: later starts avoid its node (when it is known)."""
+        node = self.node_of(k, timeout_s=0.0)
+        if node:
+            self._avoid.add(node)
+
+
+class Shard(OnNode, _Shard):
+    """A shard as a Ray actor: the same shard, whose address also names the Ray node it runs on."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.address = f"{self.address} on node {self.node()[:12]}"
+
+
 class RayShards:
     """K shard actors on a Ray cluster (see the module docstring).
 
@@ -149,10 +255,18 @@ class RayShards:
         strips: The partition.
         n_shards: Number of shards K.
         address: Cluster address, or ``None`` for a local cluster on 127.0.0.1.
+        spread: Place the shards on different nodes (see the module docstring); ``None``: when ``address``
+            is given.
     """
 
     def __init__(
-        self, name: str, config: dict[str, Any], strips: Strips, n_shards: int, address: str | None
+        self,
+        name: str,
+        config: dict[str, Any],
+        strips: Strips,
+        n_shards: int,
+        address: str | None,
+        spread: bool | None = None,
     ) -> None:
         global _users
         ray = import_ray()
@@ -167,24 +281,24 @@ class RayShards:
                 self._own = True
                 _users += 1
             else:
-                check_reachable(address)
-                try:
-                    ray.init(address=address, logging_level="ERROR", log_to_driver=False)
-                except Exception as e:  # ray raises ConnectionError, RuntimeError or its own kinds here
-                    raise ConnectionError(f"cannot reach the Ray cluster at ray_address={address!r}: "
-                                          f"{type(e).__name__}: {e}") from e  # fmt: skip
+                connect_driver(ray, address)
         elif _users:
             self._own = True
             _users += 1
         # a shard is one process running single-threaded kernels: one CPU of the cluster each
         self._cls = ray.remote(num_cpus=1 if address is not None else 0, max_restarts=0)(Shard)
         self._args = (name, config, strips)
+        self.placement = Placement(ray, address is not None if spread is None else bool(spread))
         self.actors: dict[int, Any] = {k: self._start(k) for k in range(self.n_shards)}
         self.address = address or "local cluster on 127.0.0.1"
 
     def _start(self, k: int) -> Any:
         name, config, strips = self._args
-        return self._cls.remote(k, name, config, strips)
+        return self.placement.start(k, self._cls, k, name, config, strips)
+
+    def node_of(self, k: int) -> str:
+        """The id (hex) of the Ray node shard ``k`` runs on (or last ran on); ``""`` when it never said."""
+        return self.placement.node_of(k)
 
     def call(
         self, method: str, calls: dict[int, tuple[Any, ...]], timeout_s: float
@@ -202,11 +316,13 @@ class RayShards:
         for k, ref in refs.items():
             if ref in late_set:
                 ray.kill(self.actors[k], no_restart=True)
+                self.placement.failed(k)
                 out[k] = Failure(f"missed the {timeout_s:g} s deadline of {method}")
                 continue
             try:
                 out[k] = ray.get(ref)
             except ray.exceptions.RayActorError as e:
+                self.placement.failed(k)
                 out[k] = Failure(f"died: {type(e).__name__}")
             except ray.exceptions.RayTaskError as e:
                 self.kill(k)
@@ -260,12 +376,7 @@ def join_cluster(ray: Any, address: str | None, n_shards: int) -> bool:
             start_local_cluster(ray, num_cpus=max(os.cpu_count() or 1, n_shards))
             _users += 1
             return True
-        check_reachable(address)
-        try:
-            ray.init(address=address, logging_level="ERROR", log_to_driver=False)
-        except Exception as e:  # ray raises ConnectionError, RuntimeError or its own kinds here
-            raise ConnectionError(f"cannot reach the Ray cluster at ray_address={address!r}: "
-                                  f"{type(e).__name__}: {e}") from e  # fmt: skip
+        connect_driver(ray, address)
         return False
     if _users:
         _users += 1
