@@ -52,6 +52,9 @@ def live_steps(env: Any, steps: int, rng: np.random.Generator) -> list[tuple]:
 def run(env: Any, steps: int, seed: int = 3, hook: Any = None) -> Trace:
     """Reset with ``seed`` and step with seeded random actions; ``hook(env, t)`` runs before step ``t``."""
     tr = Trace()
+    co = getattr(env, "coordinator", None)
+    if co is not None and hasattr(co, "gather_events"):
+        co.gather_events = True  # the message deliveries of every step, as one process reports them
     env.reset(seed=seed)
     rng = np.random.default_rng(seed + 1)
     for t in range(steps):

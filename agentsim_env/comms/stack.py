@@ -30,6 +30,7 @@ row each, kind ENV), so the data store records every message an agent receives.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Protocol
 
 import numba as nb
 import numpy as np
@@ -223,6 +224,14 @@ _NO_LINKS = (np.zeros(0, dtype=np.int64),) * 3
 _NO_ROWS = np.zeros(0, dtype=np.int64)  # push_rows: delivery j takes payload row j
 
 
+class BusRouter(Protocol):
+    """Delivers a shard's due bus messages together with the other shards' (``MessageBus.deliver``'s contract)."""
+
+    def deliver(self, bus: MessageBus, step: int, pos: np.ndarray, online: np.ndarray,
+                group: np.ndarray) -> DeliveryEvents:  # fmt: skip
+        """Deliver the messages due at ``step`` into the own slots (pushes left to ``bus.take_pushes``)."""
+
+
 class CommsStack:
     """Bus and overlay of B worlds (the comms subsystem), reading the state's group array.
 
@@ -251,6 +260,8 @@ class CommsStack:
         self._inbox_out = np.zeros((s, cfg.inbox_size, cfg.features), dtype=np.float32)
         self._notices: list[MessageLog] = []  # collision notices pushed this step, reported by ``deliver``
         self.events = CommsEvents(None, None, self.sent.copy())
+        self.router: BusRouter | None = None
+        """A shard's bus delivery (``distributed.worker``): its due messages bridged with the other shards."""
 
     @property
     def pairs(self) -> tuple[np.ndarray, ...]:
@@ -413,7 +424,10 @@ class CommsStack:
         ``pairs`` is the step's neighbour grid or its pairs (see ``update_graph``).
         """
         self.update_graph(pairs, pos, online, world)
-        bus_ev = self.bus.deliver(step, pos, online, group, push=False)
+        if self.router is None:
+            bus_ev = self.bus.deliver(step, pos, online, group, push=False)
+        else:
+            bus_ev = self.router.deliver(self.bus, step, pos, online, group)
         if self._notices:  # the collision notices already in the inboxes: sent and delivered this step
             env = MessageLog.concat(self._notices)
             self._notices = []

@@ -10,7 +10,12 @@ phase      each shard posts                                             each sha
            and the agents that crossed into another shard's strip       shards within its halo) and the
            (their whole per-slot rows)                                  agents handed over to it
 ``offline``its agents near an edge that went offline this step          every such slot (its ghosts among
-           (collisions, heartbeat timeouts)                             them leave its world)
+           (collisions, heartbeat timeouts), and the overlay frontier   them leave its world), and the
+           entries its agents near an edge hold                         frontier entries of its ghosts
+``bus``    the due bus messages whose receivers are not its own (all    the rows for its own receivers
+           GROUP rows)                                                  (routed by the owner of each slot)
+``want``   the senders in its inboxes it cannot see (beyond its halo)   the own slots others asked for
+``have``   the positions of the slots it was asked for                  every answer (it keeps its own)
 ``groups`` the scenario's per-group partial sums over its own agents    the sums over every shard
 ========== ============================================================ ====================================
 
@@ -53,8 +58,14 @@ class Bridge:
         strips: The partition (its ``owner`` changes when a shard goes offline).
     """
 
-    def __init__(self, strips: Strips) -> None:
+    def __init__(self, strips: Strips, n_slots: int = 0) -> None:
         self.strips = strips
+        self.slot_owner = np.full(int(n_slots), -1, dtype=np.int64)
+        """``(S,)`` the shard owning each slot (set at reset, updated by every hand-over)."""
+
+    def set_slot_owner(self, owner: np.ndarray) -> None:
+        """The shard owning each slot (at the start of an episode)."""
+        self.slot_owner = np.asarray(owner, dtype=np.int64).copy()
 
     def set_owner(self, owner: np.ndarray) -> None:
         """The shard owning each strip from now on."""
@@ -69,9 +80,17 @@ class Bridge:
         if phase == "motion":
             return self._motion(posts)
         if phase == "offline":
-            slots = np.concatenate([p["slots"] for p in posts.values()]) if posts else _EMPTY
-            out = {"slots": np.unique(slots)}
-            return dict.fromkeys(posts, out)
+            return self._offline(posts)
+        if phase == "bus":
+            return self._bus(posts)
+        if phase == "want":  # each shard gets the slots of its own whose positions others asked for
+            want = np.unique(np.concatenate([p["slots"] for p in posts.values()])) if posts else _EMPTY
+            owner = self.slot_owner[want] if self.slot_owner.size else np.full(want.size, -1)
+            return {k: {"slots": want[owner == k]} for k in posts}
+        if phase == "have":  # every answer to every shard (each keeps what it asked for)
+            got = concat_rows([{"slots": p["slots"], "pos": p["pos"]} for p in posts.values()])
+            got = got or {"slots": _EMPTY, "pos": np.zeros((0, 3))}
+            return dict.fromkeys(posts, got)
         if phase == "groups":
             return dict.fromkeys(posts, _sum_partials(list(posts.values())))
         raise ValueError(f"unknown exchange phase {phase!r}")
@@ -90,7 +109,42 @@ class Bridge:
                 ghosts = {"slots": _EMPTY, "x": np.zeros(0), "pos": np.zeros((0, 3))}
             arrivals = take_rows(leave, dest == k) if leave is not None else None
             out[k] = {"ghosts": ghosts, "arrivals": arrivals}
+            floods = [p["leave_floods"] for p in posts.values() if p.get("leave_floods") is not None]
+            if floods and leave is not None:
+                out[k]["floods"] = _entries_for(floods, leave["slots"][dest == k])
+        if leave is not None and self.slot_owner.size:
+            self.slot_owner[leave["slots"]] = dest
         return out
+
+    def _offline(self, posts: dict[int, Packed]) -> dict[int, Packed]:
+        slots = np.concatenate([p["slots"] for p in posts.values()]) if posts else _EMPTY
+        gone = np.unique(slots)
+        fronts = [(p["front"], p["front_x"]) for p in posts.values() if p.get("front") is not None]
+        out: dict[int, Packed] = {}
+        for k in posts:
+            out[k] = {"slots": gone}
+            if fronts:
+                got = []
+                for entries, x in fronts:
+                    sel = self.strips.ghosts(x, np.arange(x.size), k)
+                    if sel.size:
+                        got.append(_take_entries(entries, sel))
+                out[k]["front"] = got
+        return out
+
+    def _bus(self, posts: dict[int, Packed]) -> dict[int, Packed]:
+        from agentsim_env.comms.split import route
+
+        parts: dict[int, list[Any]] = {k: [] for k in posts}
+        n = max(posts) + 1 if posts else 0
+        for src, p in posts.items():
+            rows = p["rows"]
+            if rows is None or not len(rows):
+                continue
+            for k, got in route(rows, self.slot_owner, max(n, self.strips.n_strips)).items():
+                if k != src and k in parts and len(got):
+                    parts[k].append(got)
+        return {k: {"rows": got} for k, got in parts.items()}
 
 
 def _sum_partials(parts: list[Packed]) -> Packed:
@@ -99,3 +153,18 @@ def _sum_partials(parts: list[Packed]) -> Packed:
     if not got:
         return {}
     return {key: np.sum([p[key] for p in got], axis=0) for key in got[0]}
+
+
+def _take_entries(entries: Any, sel: np.ndarray) -> Any:
+    """The flood entries (``distributed.floods.FloodEntries``) at positions ``sel``."""
+    return type(entries)(*(getattr(entries, f)[sel] for f in entries.__dataclass_fields__))
+
+
+def _entries_for(parts: list[Any], slots: np.ndarray) -> list[Any]:
+    """The handed-over flood entries whose slot is among ``slots``."""
+    out = []
+    for e in parts:
+        sel = np.flatnonzero(np.isin(e.slot, slots))
+        if sel.size:
+            out.append(_take_entries(e, sel))
+    return out

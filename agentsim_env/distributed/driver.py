@@ -21,6 +21,9 @@ from typing import Any
 
 import numpy as np
 
+from agentsim_env.comms.events import DeliveryEvents, MessageLog
+from agentsim_env.comms.overlay import Deliveries
+from agentsim_env.comms.stack import CommsEvents
 from agentsim_env.core.collisions import CollisionEvents
 from agentsim_env.distributed.backends import Failure
 from agentsim_env.distributed.bridge import Packed
@@ -60,6 +63,8 @@ class Driver:
         self.obs: np.ndarray | None = None
         self.kinematics = True
         """Gather every own agent's position each step into ``world`` (the mirror); off for rollouts."""
+        self.gather_events = False
+        """Gather the step's message deliveries into ``world.last_events`` (also whenever hooks are attached)."""
 
     # ------------------------------------------------------------------ faults
     @property
@@ -151,6 +156,7 @@ class Driver:
         replies = self._call("reset", {k: (seed, self.strips.owner, True, self.kinematics)
                                        for k in range(len(self.shards))})  # fmt: skip
         self._take(replies, obs=True)
+        self.backend.set_slot_owner(self.owner)
         if not self.alive.all():  # a shard that failed its reset loses its agents at once
             self.lost = np.flatnonzero(world.state.online & (self.owner < 0))
             world.set_offline(self.lost)
@@ -169,8 +175,9 @@ class Driver:
         s = st.n_slots
         self.lost = _NONE
         tr = self.traffic = Traffic()
+        events_wanted = self.gather_events or bool(world.hooks)
         control: Packed = {"ended": self._ended, "objects": self._objects, "owner": self.strips.owner,
-                           "obs": True, "kinematics": self.kinematics}  # fmt: skip
+                           "obs": True, "kinematics": self.kinematics, "events": events_wanted}  # fmt: skip
         calls: dict[int, tuple[Any, ...]] = {}
         for k in range(len(self.shards)):
             slots = np.flatnonzero(acting & (self.owner == k))
@@ -209,12 +216,27 @@ class Driver:
         world.step_count += 1
         ev = StepEvents(events, _NONE)
         ev.lost = lost
+        if events_wanted and world.comms is not None:
+            ev.comms = _merge_comms(list(replies.values()), int(world.tick) - 1)
         res = StepResult(rewards, terminated, info)
         world.last_events = ev
         if world.hooks:
             ev.scores = StepScores(acting, rewards, terminated, info)
             world.run_hooks(ev)
         return res, terminated
+
+
+def _merge_comms(replies: list[Packed], step: int) -> CommsEvents:
+    """The shards' message events of one step as one process's (bus logs and overlay deliveries)."""
+    def logs(key: str) -> MessageLog:
+        return MessageLog.concat([r[key] for r in replies if key in r])
+
+    bus = DeliveryEvents(step, logs("bus.sent"), logs("bus.delivered"), logs("bus.dropped"))
+    got = [r["overlay"] for r in replies if "overlay" in r]
+    ov = Deliveries(*(np.concatenate([getattr(d, f) for d in got]) for f in
+                      ("receiver", "flood", "origin", "hops", "created", "payload")))  # fmt: skip
+    sent = np.sum([r["sent"] for r in replies if "sent" in r], axis=0)
+    return CommsEvents(bus, ov, sent)
 
 
 def _obs_dim(scenario: Scenario) -> int:

@@ -77,7 +77,7 @@ def steps_itself(scenario: Scenario, world: Any) -> bool:
     """
     import os
 
-    return world.comms is None and os.environ.get("AGENTSIM_SELF_STEPPING") == "1"
+    return os.environ.get("AGENTSIM_SELF_STEPPING") == "1"
 
 
 def build_coordinator(
@@ -87,7 +87,7 @@ def build_coordinator(
     strips = Strips.build(world.config.bounds, int(shards), halo_width(world))
     name, config = scenario.name, _config_fields(scenario)
     if steps_itself(scenario, world):
-        bridge = Bridge(Strips(strips.edges.copy(), strips.halo, strips.owner.copy()))
+        bridge = Bridge(Strips(strips.edges.copy(), strips.halo, strips.owner.copy()), world.state.n_slots)
         if backend == "local":
             from agentsim_env.distributed.pool import LocalPool
 

@@ -116,6 +116,11 @@ class LocalExchange:
         with self._cond:
             self._b.bridge.set_owner(owner)
 
+    def set_slot_owner(self, owner: Any) -> None:
+        """The shard owning each slot (at the start of an episode)."""
+        with self._cond:
+            self._b.bridge.set_slot_owner(owner)
+
 
 class ExchangeActor:
     """The barrier as an asyncio Ray actor (wrapped with ``ray.remote`` by ``distributed.ray_backend``).
@@ -162,3 +167,7 @@ class ExchangeActor:
     async def set_owner(self, owner: Any) -> None:
         """As ``LocalExchange.set_owner``."""
         self._b.bridge.set_owner(owner)
+
+    async def set_slot_owner(self, owner: Any) -> None:
+        """As ``LocalExchange.set_slot_owner``."""
+        self._b.bridge.set_slot_owner(owner)

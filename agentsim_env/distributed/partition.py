@@ -26,13 +26,15 @@ def halo_width(world: World) -> float:
 
     The largest of: the proximity range plus the largest body radius (a ray reaches the surface of a body whose
     centre is that far), twice the largest radius plus the collision margin, and with comms the overlay's link
-    range and the "nearest" range. A small relative margin covers rounding.
+    range, the "nearest" range and the bus's range limit. A small relative margin covers rounding.
     """
     st, cfg = world.state, world.config
     r_max = float(st.radius.max()) if st.n_slots else 0.0
     reach = [float(st.sensor_range.max()) + r_max, 2.0 * r_max + float(cfg.collision_margin)]
     if world.comms is not None:
         reach += [float(world.comms.overlay.max_range), float(world.comms.cfg.nearest_range)]
+        if world.comms.cfg.max_range is not None:  # the bus's range check reads the sender's position
+            reach.append(float(world.comms.cfg.max_range))
     return max(reach) * (1.0 + 1e-9) + 1e-6
 
 

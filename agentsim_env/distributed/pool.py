@@ -91,6 +91,10 @@ class LocalPool:
         """The shard owning each strip (for the exchange's routing)."""
         self.exchange.set_owner(owner)
 
+    def set_slot_owner(self, owner: Any) -> None:
+        """The shard owning each slot (for routing bus messages)."""
+        self.exchange.set_slot_owner(owner)
+
     def close(self) -> None:
         """Drop every worker."""
         self.shards = dict.fromkeys(self.shards)

@@ -11,11 +11,11 @@ from __future__ import annotations
 import time
 from typing import Any
 
-from agentsim_env.distributed import ray_backend
 from agentsim_env.distributed.backends import Failure, raised
 from agentsim_env.distributed.bridge import Bridge, Packed
 from agentsim_env.distributed.exchange import ExchangeActor
 from agentsim_env.distributed.partition import Strips
+from agentsim_env.distributed.ray_backend import STARTUP_TIMEOUT_S, import_ray, join_cluster, leave_cluster
 from agentsim_env.distributed.worker import Worker
 
 
@@ -23,7 +23,7 @@ class WorkerActor:
     """A ``Worker`` in a Ray actor, its exchange reached through the exchange actor's handle."""
 
     def __init__(self, index: int, name: str, config: dict[str, Any], strips: Strips, exchange: Any) -> None:
-        ray = ray_backend.import_ray()
+        ray = import_ray()
 
         def swap(key: tuple[int, str], k: int, payload: Packed) -> Packed:
             return ray.get(exchange.swap.remote(key, k, payload))  # type: ignore[no-any-return]
@@ -58,10 +58,10 @@ class RayPool:
     def __init__(
         self, name: str, config: dict[str, Any], strips: Strips, n_shards: int, address: str | None, bridge: Bridge
     ) -> None:
-        ray = ray_backend.import_ray()
+        ray = import_ray()
         self.n_shards = int(n_shards)
         self._ray = ray
-        self._own = ray_backend.join_cluster(ray, address, self.n_shards)
+        self._own = join_cluster(ray, address, self.n_shards)
         self._cls = ray.remote(num_cpus=1 if address is not None else 0, max_restarts=0)(WorkerActor)
         self.exchange = ray.remote(num_cpus=0, max_restarts=0)(ExchangeActor).remote(bridge, self.n_shards)
         self._args = (name, config, strips)
@@ -79,7 +79,7 @@ class RayPool:
         """Run ``method`` on every named worker at once; a reply or a ``Failure`` per worker."""
         ray = self._ray
         if method == "reset":
-            timeout_s = max(timeout_s, ray_backend.STARTUP_TIMEOUT_S)
+            timeout_s = max(timeout_s, STARTUP_TIMEOUT_S)
         refs = {getattr(self.actors[k], method).remote(*args): k for k, args in calls.items()}
         out: dict[int, Packed | Failure] = {}
         pending = list(refs)
@@ -126,6 +126,10 @@ class RayPool:
         """The shard owning each strip (for the exchange's routing)."""
         self._ray.get(self.exchange.set_owner.remote(owner))
 
+    def set_slot_owner(self, owner: Any) -> None:
+        """The shard owning each slot (for routing bus messages)."""
+        self._ray.get(self.exchange.set_slot_owner.remote(owner))
+
     def close(self) -> None:
         """Kill every actor and the exchange; stop the local cluster when no other env uses it."""
         for k in list(self.actors):
@@ -138,5 +142,5 @@ class RayPool:
             self._ray.kill(self.exchange, no_restart=True)
         except Exception:  # already gone
             pass
-        ray_backend.leave_cluster(self._ray, self._own)
+        leave_cluster(self._ray, self._own)
         self._own = False

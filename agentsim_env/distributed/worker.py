@@ -14,7 +14,6 @@ This module imports no Ray: ``distributed.ray_backend`` wraps a ``Worker`` in an
 
 from __future__ import annotations
 
-import dataclasses
 import os
 import socket
 import time
@@ -22,17 +21,21 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from agentsim_env.comms.bus import DeliveryEvents, MessageBus
+from agentsim_env.comms.events import DueRows, MessageLog
+from agentsim_env.comms.messages import GROUP
 from agentsim_env.core.pipeline import StepContext
 from agentsim_env.distributed.bridge import Packed
+from agentsim_env.distributed.floods import FloodEntries
 from agentsim_env.distributed.partition import Strips
-from agentsim_env.motion import MotionState
+from agentsim_env.distributed.shard_overlay import ShardOverlay
 from agentsim_env.scenarios.base import run_step
 from agentsim_env.scenarios.registry import make_scenario
 from agentsim_env.sim import World
+from agentsim_env.sim.slot_rows import slot_arrays
 
-#: AgentState fields that travel with an agent handed over to another shard (the rest is fixed per episode).
-AGENT_FIELDS = ("pos", "vel", "heading", "radius", "sensor_range", "max_speed", "max_accel", "online")
-MOTION_FIELDS = tuple(f.name for f in dataclasses.fields(MotionState))
+#: Per-slot arrays of a shard's world that are the shard's, not the agent's (its masks, its flood table).
+SHARD_PATHS = ("comms.overlay.own", "comms.overlay.part", "comms.router")
 
 
 class Swap(Protocol):
@@ -42,33 +45,24 @@ class Swap(Protocol):
         """Post ``payload`` for barrier ``key`` as shard ``k`` and return shard ``k``'s part."""
 
 
+def _agent_arrays(world: World) -> dict[str, np.ndarray]:
+    return {k: v for k, v in slot_arrays(world).items() if not k.startswith(SHARD_PATHS)}
+
+
 def pack_rows(world: World, slots: np.ndarray) -> Packed:
-    """Every per-slot row of ``slots`` an agent takes with it to another shard."""
-    st, rows = world.state, {"slots": slots}
-    for f in AGENT_FIELDS:
-        rows[f"a.{f}"] = getattr(st, f)[slots]
-    for f in MOTION_FIELDS:
-        rows[f"m.{f}"] = getattr(world.motion, f)[slots]
-    task = world.task
-    if task is not None and dataclasses.is_dataclass(task):
-        for f in dataclasses.fields(task):
-            meta = f.metadata
-            if "shape" in meta and not meta.get("per_world", False):
-                rows[f"t.{f.name}"] = getattr(task, f.name)[slots]
+    """Every per-slot row of ``slots`` an agent takes with it to another shard (``sim.slot_rows``)."""
+    rows: Packed = {k: v[slots] for k, v in _agent_arrays(world).items()}
+    rows["slots"] = slots
     return rows
 
 
 def unpack_rows(world: World, rows: Packed) -> None:
     """Write handed-over rows (``pack_rows``) into ``world``."""
     slots = rows["slots"]
-    st, motion, task = world.state, world.motion, world.task
+    arrays = _agent_arrays(world)
     for key, v in rows.items():
-        if key.startswith("a."):
-            getattr(st, key[2:])[slots] = v
-        elif key.startswith("m."):
-            getattr(motion, key[2:])[slots] = v
-        elif key.startswith("t."):
-            getattr(task, key[2:])[slots] = v
+        if key in arrays:
+            arrays[key][slots] = v
 
 
 class Worker:
@@ -100,6 +94,12 @@ class Worker:
         """Bytes of the agents handed over to this shard in the latest step."""
         self.address = f"{socket.gethostname()}:{os.getpid()}"
         self.world.bridge = self
+        self.overlay: ShardOverlay | None = None
+        comms = self.world.comms
+        if comms is not None:  # the bus is bridged through this worker; floods spread per shard
+            self.overlay = ShardOverlay(comms.overlay, self.own)
+            comms.overlay = self.overlay  # type: ignore[assignment]
+            comms.router = self
 
     # ------------------------------------------------------------------ helpers
     def beat(self, t0: float) -> Packed:
@@ -131,6 +131,7 @@ class Worker:
             out["terminated"] = terminated[slots]
             out["info"] = {k: v[slots] for k, v in res.info.items()}
         if obs:
+            self._sender_positions()
             out["obs"] = self.scenario.flat_observation(self.world)[slots]
         if kin:
             mine = out["own"]
@@ -146,10 +147,16 @@ class Worker:
         x = st.pos[mine, 0]
         leaving = mine[self.strips.owner_of(x) != self.index]
         edge = mine[self._near_edge(x)]
+        if world.groups is not None and leaving.size:
+            world.groups.settle_answers()  # heartbeat answers not yet read go with their agents
         leave = pack_rows(world, leaving)
         leave["x"], leave["acting"] = st.pos[leaving, 0], self.acting[leaving]
         post = {"edge": {"slots": edge, "x": st.pos[edge, 0], "pos": st.pos[edge]}, "leave": leave}
+        if self.overlay is not None and leaving.size:
+            post["leave_floods"] = self.overlay.part.take_leaving(leaving)
         got = self.swap((int(world.tick), "motion"), self.index, post)
+        if self.overlay is not None and got.get("floods"):
+            self.overlay.part.add(FloodEntries.concat(got["floods"], self.overlay.payload_dim))
         self.own[leaving] = False
         self.acting[leaving] = False
         st.online[leaving] = False
@@ -171,11 +178,63 @@ class Worker:
         """Tell the neighbours which own agents near an edge went offline; the ghosts that went offline."""
         st = world.state
         near = went[self.own[went] & self._near_edge(st.pos[went, 0])] if went.size else went
-        got = self.swap((int(world.tick), "offline"), self.index, {"slots": near})
+        post: Packed = {"slots": near}
+        if self.overlay is not None:
+            mine = np.flatnonzero(self.own)
+            front = self.overlay.part.frontier_of(mine[self._near_edge(st.pos[mine, 0])])
+            post["front"], post["front_x"] = front, st.pos[front.slot, 0]
+        got = self.swap((int(world.tick), "offline"), self.index, post)
+        if self.overlay is not None:
+            self.overlay.ghost_frontier = FloodEntries.concat(got.get("front", []), self.overlay.payload_dim)
         gone = got["slots"]
-        gone = gone[self.ghost[gone] & st.online[gone]]
-        self.ghost[gone] = False
-        return gone
+        # they stay ghosts for this step (their positions hold: a message they sent before going offline is
+        # still delivered, as in one process); they only leave the grid
+        return gone[self.ghost[gone] & st.online[gone]]
+
+    def deliver(self, bus: MessageBus, step: int, pos: np.ndarray, online: np.ndarray,
+                group: np.ndarray) -> DeliveryEvents:  # fmt: skip
+        """Stage 7's bus part on a shard: the due messages of every shard for the own receivers.
+
+        Rows for an own receiver (or a heartbeat answer about an own agent) stay here; the others, and every
+        GROUP row (members may live anywhere), go through the exchange to the shard owning their receiver.
+        Heartbeat answers that become due in this call (latency 0) concern own agents: delivered here.
+        """
+        rows = bus.take_due(step)
+        grp = rows.kind == GROUP
+        slot = np.where(grp, 0, np.where(rows.target >= 0, rows.target, rows.sender))
+        here = grp | self.own[slot]
+        got = self.swap((int(self.world.tick), "bus"), self.index, {"rows": rows.take(grp | ~here)})
+        d = bus.payload_dim
+        mine = DueRows.concat([rows.take(here), *got["rows"]], d)
+        seen = self.own | self.ghost
+        rounds = [bus.deliver_rows(mine, step, pos, online, group, mine=self.own, seen=seen, push=False)]
+        while len(again := bus.take_due(step)):
+            rounds.append(bus.deliver_rows(again, step, pos, online, group, mine=self.own, seen=seen, push=False))
+        if len(rounds) == 1:
+            return rounds[0]
+        return DeliveryEvents(int(step), *(MessageLog.concat([getattr(r, f) for r in rounds])
+                                           for f in ("sent", "delivered", "dropped")))  # fmt: skip
+
+    def _sender_positions(self) -> None:
+        """The current positions of the senders in own inboxes that live on other shards beyond the halo.
+
+        An inbox observation locates each message's sender where it is now; a sender far away is known only
+        to its own shard: two exchanges fetch those positions (who wants which, then the answers).
+        """
+        comms, st = self.world.comms, self.world.state
+        if comms is None:
+            return
+        inbox = comms.bus.inbox
+        rows = inbox.valid & self.own[:, None]
+        snd = inbox.sender[rows]
+        snd = np.unique(snd[snd >= 0])
+        want = snd[~(self.own[snd] | self.ghost[snd])]
+        tick = int(self.world.tick)
+        serve = self.swap((tick, "want"), self.index, {"slots": want})["slots"]
+        got = self.swap((tick, "have"), self.index, {"slots": serve, "pos": st.pos[serve]})
+        sl, pos = got["slots"], got["pos"]
+        sel = np.isin(sl, want)
+        st.pos[sl[sel]] = pos[sel]
 
     def combine(self, partials: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         """The per-group sums of every shard."""
@@ -259,5 +318,10 @@ class Worker:
         col = world.last_events.collisions
         out["col.agent"], out["col.other"], out["col.obj"] = col.agent, col.other_agent, col.obj
         out["handed"] = self.handed
+        comms = world.comms
+        if control.get("events") and comms is not None:
+            ce = comms.events
+            out["bus.sent"], out["bus.delivered"], out["bus.dropped"] = ce.bus.sent, ce.bus.delivered, ce.bus.dropped
+            out["overlay"], out["sent"] = ce.overlay, np.where(self.own, ce.sent, 0)
         out["beat"] = self.beat(t0)
         return out

@@ -236,6 +236,16 @@ class GroupController:
             self._answers = (np.concatenate([self._answers[0], answers[0]]),
                              np.concatenate([self._answers[1], answers[1]]))  # fmt: skip
 
+    def settle_answers(self) -> None:
+        """Read the answers handed in since the previous tick into ``last_answer`` now (the tick would).
+
+        The result of the next tick does not change; a shard calls it before handing agents over, so their
+        ``last_answer`` travels with them.
+        """
+        answers, self._answers = self._answers, None
+        if answers is not None and answers[0].size:
+            np.maximum.at(self.last_answer, answers[0], answers[1])
+
     def step(self, ctx: StepContext) -> GroupStepEvents:
         """Stage 6: heartbeat tick; returns the timed-out slots, the slots to ping and the group changes."""
         st = ctx.state
