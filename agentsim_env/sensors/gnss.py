@@ -14,12 +14,12 @@ The horizontal error is Gaussian with ``sigma_h`` per axis, the altimeter's with
 new noise (no bias or random walk). Offline slots read zeros.
 
 The noise is keyed, not streamed: the error of agent i of world w on axis a is
-``core.keyed.keyed_normal(episode key of w, tick, i, a)``, where the episode key is one 64-bit word drawn from the
-generator the world's reset hands the sensor, and tick is the world tick the reading describes (``ctx.tick + 1``
-inside a step; ``ctx.tick`` when a reset or ``World.refresh`` re-reads the state, i.e. when ``ctx.fresh`` names
-the worlds). A reading therefore depends on neither the other worlds of a batch nor the other slots a process
-holds (a shard draws exactly the numbers one process draws for its slots), and reading the same state twice gives
-the same noise.
+``core.keyed.keyed_normal(episode key of w, t, i, a)``, where the episode key is one 64-bit word drawn from the
+generator the world's reset hands the sensor, and t is the episode step the reading describes (world ``w``'s
+``step_count + 1`` inside a step; ``step_count`` when a reset or ``World.refresh`` re-reads the state, i.e. when
+``ctx.fresh`` names the worlds). A reading therefore depends on neither the other worlds of a batch, nor the
+other slots a process holds (a shard draws exactly the numbers one process draws for its slots), nor the steps
+before the episode's reset; reading the same state twice gives the same noise.
 """
 
 from __future__ import annotations
@@ -98,7 +98,7 @@ class GnssSensor:
         reading = self._reading.copy()
         # A context naming fresh worlds re-reads the current state (a reset or World.refresh); without it the
         # reading is a step's and describes the state after the step.
-        tick = ctx.tick if ctx.fresh is not None else ctx.tick + 1
+        when = ctx.step_count if ctx.fresh is not None else ctx.step_count + 1
         worlds = np.arange(len(self._keys)) if ctx.fresh is None else np.asarray(ctx.fresh, dtype=np.int64)
         missing = worlds[~self._keyed[worlds]]
         if missing.size:
@@ -108,7 +108,7 @@ class GnssSensor:
         rows = (worlds[:, None] * n + np.arange(n)).ravel()
         live = rows[st.online[rows]]
         w_of, agent = np.divmod(live, n)
-        noise = keyed_normal(self._keys[w_of][:, None], tick, agent[:, None], np.arange(3))
+        noise = keyed_normal(self._keys[w_of][:, None], when[w_of][:, None], agent[:, None], np.arange(3))
         reading[rows] = np.nan
         reading[live] = st.pos[live] + noise * self._sigma
         self._reading = reading
