@@ -36,6 +36,7 @@ from agentsim_env.core.pipeline import Part
 from agentsim_env.motion import MotionLimits, decode_primitive
 from agentsim_env.motion.actions import decode_velocity_unchecked
 from agentsim_env.scenarios.config import ScenarioConfig
+from agentsim_env.scenarios.rewards import combine_partials
 from agentsim_env.sensors.proximity import ProximityConfig
 from agentsim_env.sim.world import StepEvents, StepScores, World
 
@@ -133,14 +134,42 @@ class Scenario(ABC, Generic[ConfigT]):
         """Start a new episode in world ``w``: place agents, goals, obstacles (draw only from ``rng``)."""
 
     @abstractmethod
-    def score(self, world: World, events: StepEvents, acting: np.ndarray) -> StepResult:
-        """Stage 9: rewards, terminations and infos of every slot after the world stepped."""
+    def score(
+        self, world: World, events: StepEvents, acting: np.ndarray, totals: dict[str, np.ndarray] | None = None
+    ) -> StepResult:
+        """Stage 9: rewards, terminations and infos of every slot after the world stepped.
+
+        ``totals`` are the combined :meth:`group_partials` of every part of the world (``None``: the scenario
+        computes its group terms over every slot itself). A scenario without group terms may ignore it.
+        """
 
     @abstractmethod
     def observe(self, world: World) -> dict[str, np.ndarray]:
         """The scenario's observation parts ``{part: (S, *shape) float32}`` (inside ``obs_bounds``)."""
 
     # -- optional ------------------------------------------------------------------------------------------
+    def group_partials(
+        self, world: World, events: StepEvents, acting: np.ndarray, mine: np.ndarray
+    ) -> dict[str, np.ndarray]:
+        """Stage 9's whole-group inputs summed over the slots in ``mine`` only (no state is changed).
+
+        A process holding part of a world's slots (a shard) computes these over its own slots; adding them up
+        over every part (:func:`combine_partials`) gives the totals :meth:`score` takes. Each value is an integer
+        array indexed ``group * B + world`` (``rewards.group_keys``), of shape ``(B * n_groups,)`` unless a slot
+        of the part has a higher group id (then longer; the combine zero-pads), so the totals do not depend on
+        how the slots were split. Default: ``{}`` (no group terms).
+
+        Args:
+            world: The world, after stages 2-8 of the step.
+            events: The step's events.
+            acting: Slots that acted this step.
+            mine: ``(S,)`` bool, the slots this part sums.
+
+        Returns:
+            Partial sums by name (the scenario's own names), or ``{}``.
+        """
+        return {}
+
     def apply_actions(self, world: World, actions: dict[str, np.ndarray], acting: np.ndarray) -> None:
         """Stage 1: decode the acting slots' ``motion`` actions into motion primitives (validated, clipped)."""
         st = world.state
@@ -411,7 +440,16 @@ def run_step(
     if "comm" in parts:
         world.apply_comm(parts["comm"], acting)
     events = world.step(hooks=False)
-    res = scenario.score(world, events, acting)
+    # 9. the group terms from per-group partial sums: one part holding every slot (a shard holds some of them
+    # and the parts are added up elsewhere; the sums are exact, so both give the same scores)
+    bridge = world.bridge
+    mine = np.ones(world.state.n_slots, dtype=bool) if bridge is None else bridge.own
+    partials = scenario.group_partials(world, events, acting, mine)
+    if partials:
+        totals = combine_partials([partials]) if bridge is None else bridge.combine(partials)
+        res = scenario.score(world, events, acting, totals)
+    else:
+        res = scenario.score(world, events, acting)
     terminated = acting & (res.terminated | ~world.state.online)
     if terminated.any():
         world.set_offline(np.flatnonzero(terminated))

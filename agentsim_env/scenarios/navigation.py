@@ -51,7 +51,7 @@ from agentsim_env.motion import MotionLimits
 from agentsim_env.scenarios.base import Scenario, SlotState, StepResult, slot
 from agentsim_env.scenarios.config import ScenarioConfig
 from agentsim_env.scenarios.placement import jittered_points, obstacle_layout, placement_problem
-from agentsim_env.scenarios.rewards import RewardConfig, compose_rewards
+from agentsim_env.scenarios.rewards import RewardConfig, compose_rewards, task_partials
 from agentsim_env.sensors.gnss import GnssConfig, GnssSensor
 from agentsim_env.sensors.proximity import ProximitySensor
 from agentsim_env.sim import StepEvents, World, WorldConfig
@@ -69,6 +69,24 @@ MAX_OBSTACLES = 1_000_000
 # worlds). They evaluate the same float64 expressions in the same order as the numpy statements they replace
 # (error_model="numpy": x / 0 gives inf like numpy), so observations and rewards are unchanged bit for bit.
 @nb.njit(cache=True, error_model="numpy")
+def _slot_task(goal, pos, prev_dist, acting, online, s, goal_radius, bonus):  # type: ignore[no-untyped-def]
+    # Slot s's distance to its goal, arrival and task value: the one expression both kernels below use.
+    dx, dy, dz = goal[s, 0] - pos[s, 0], goal[s, 1] - pos[s, 1], goal[s, 2] - pos[s, 2]
+    d = np.sqrt(dx * dx + dy * dy + dz * dz)
+    arr = acting[s] and online[s] and d <= goal_radius
+    return d, arr, (prev_dist[s] - d if acting[s] else 0.0) + bonus * (1.0 if arr else 0.0)
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _task_kernel(goal, pos, prev_dist, acting, online, goal_radius, bonus):  # type: ignore[no-untyped-def]
+    # The task values alone, changing no state (the group partial sums read them before the scoring).
+    task = np.empty(pos.shape[0])
+    for s in range(pos.shape[0]):
+        task[s] = _slot_task(goal, pos, prev_dist, acting, online, s, goal_radius, bonus)[2]
+    return task
+
+
+@nb.njit(cache=True, error_model="numpy")
 def _score_kernel(
     goal, pos, vel, prev_dist, arrived_acc, energy, acting, online, went, goal_radius, bonus, dt
 ):  # type: ignore[no-untyped-def]
@@ -79,12 +97,9 @@ def _score_kernel(
     collided = np.zeros(s_n)
     effort = np.empty(s_n)
     for s in range(s_n):
-        dx, dy, dz = goal[s, 0] - pos[s, 0], goal[s, 1] - pos[s, 1], goal[s, 2] - pos[s, 2]
-        d = np.sqrt(dx * dx + dy * dy + dz * dz)
+        d, arr, task[s] = _slot_task(goal, pos, prev_dist, acting, online, s, goal_radius, bonus)
         dist[s] = d
-        arr = acting[s] and online[s] and d <= goal_radius
         arrived[s] = arr
-        task[s] = (prev_dist[s] - d if acting[s] else 0.0) + bonus * (1.0 if arr else 0.0)
         arrived_acc[s] |= arr
         # |v|^2 associated as numpy's einsum does it (x + z first), so energy stays bit-identical
         e = ((vel[s, 0] * vel[s, 0] + vel[s, 2] * vel[s, 2]) + vel[s, 1] * vel[s, 1]) * dt
@@ -273,8 +288,21 @@ class NavigationScenario(Scenario[NavigationConfig]):
                             max_duration=10.0, z_min=b.altitude[0], z_max=b.altitude[1], max_omega=1.0,
                             arrival_radius=self.config.goal_radius / 2)  # fmt: skip
 
-    def score(self, world: World, events: StepEvents, acting: np.ndarray) -> StepResult:
-        """Progress, arrival, collisions and energy -> rewards and terminations."""
+    def group_partials(
+        self, world: World, events: StepEvents, acting: np.ndarray, mine: np.ndarray
+    ) -> dict[str, np.ndarray]:
+        """The group share's fixed-point task sums over the acting slots in ``mine`` (none without a share)."""
+        c, st, t = self.config, world.state, world.task
+        if not c.reward.group_share:
+            return {}
+        task = _task_kernel(t.goal, st.pos, t.prev_dist, acting, st.online, float(c.goal_radius),
+                            float(c.arrival_bonus))  # fmt: skip
+        return task_partials(task, st.group, st.world_id, acting & mine, int(c.n_groups or 1), world.n_worlds)
+
+    def score(
+        self, world: World, events: StepEvents, acting: np.ndarray, totals: dict[str, np.ndarray] | None = None
+    ) -> StepResult:
+        """Progress, arrival, collisions and energy -> rewards and terminations (group share from ``totals``)."""
         c, st, t = self.config, world.state, world.task
         dist, arrived, task, collided, effort = _score_kernel(
             t.goal, st.pos, st.vel, t.prev_dist, t.arrived, st.energy, acting, st.online, events.went_offline,
@@ -283,7 +311,8 @@ class NavigationScenario(Scenario[NavigationConfig]):
         np.copyto(t.prev_dist, dist)  # the state keeps its array (resets write it); dist goes out as info
         rewards = compose_rewards(c.reward, task, group=st.group, world=st.world_id, acting=acting,
                                   n_groups=int(c.n_groups or 1), collided=collided, energy=effort,
-                                  messages_sent=None if world.comms is None else world.comms.sent)  # fmt: skip
+                                  messages_sent=None if world.comms is None else world.comms.sent,
+                                  totals=totals, n_worlds=world.n_worlds)  # fmt: skip
         info = {"arrived": arrived.astype(np.int8), "collided": collided.astype(np.int8), "distance": dist}
         return StepResult(rewards, arrived, info)
 

@@ -56,7 +56,7 @@ import numpy as np
 from agentsim_env.scenarios.base import Scenario, SlotState, StepResult, slot
 from agentsim_env.scenarios.placement import obstacle_layout
 from agentsim_env.scenarios.relay_config import RELAY_COMMS, RelayConfig
-from agentsim_env.scenarios.rewards import compose_rewards
+from agentsim_env.scenarios.rewards import at_keys, compose_rewards, task_partials
 from agentsim_env.sensors.proximity import ProximitySensor
 from agentsim_env.sim import StepEvents, World, WorldConfig
 
@@ -140,20 +140,49 @@ class RelayScenario(Scenario[RelayConfig]):
         if kind.size:
             world.scene.add(kind, centre, half, w)
 
-    def score(self, world: World, events: StepEvents, acting: np.ndarray) -> StepResult:
-        """Progress and arrival of non-scouts, scouts' end, collisions, energy and messages -> rewards."""
+    def _task(self, world: World, acting: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Distance to the target, arrivals and task values of this step (no state changed)."""
         c, st, t = self.config, world.state, world.task
         dist = np.linalg.norm(t.target - st.pos[:, :2], axis=1)
         member = acting & ~t.scout
         arrived = member & st.online & (dist <= c.arrival_radius)
         task = np.where(member, t.prev_dist - dist, 0.0) + c.arrival_bonus * arrived
+        return dist, arrived, task
+
+    def _key(self, world: World) -> np.ndarray:
+        # group-major like rewards.group_keys; a group id outside the configured groups counts in the nearest one
+        st, g_n = world.state, self.config.n_groups
+        return np.clip(st.group, 0, g_n - 1).astype(np.int64) * world.n_worlds + st.world_id
+
+    def group_partials(
+        self, world: World, events: StepEvents, acting: np.ndarray, mine: np.ndarray
+    ) -> dict[str, np.ndarray]:
+        """Per (world, group) over the slots in ``mine``: the members still live after this step (``pending``,
+        for the scouts' end) and, with a group share, the fixed-point task sums."""
+        c, st, t = self.config, world.state, world.task
+        _, arrived, task = self._task(world, acting)
+        pending = ~t.scout & st.online & ~(t.arrived | arrived) & mine
+        size = world.n_worlds * c.n_groups
+        out = {"pending": np.bincount(self._key(world)[pending], minlength=size).astype(np.int64)}
+        if c.reward.group_share:
+            out.update(task_partials(task, st.group, st.world_id, acting & mine, c.n_groups, world.n_worlds))
+        return out
+
+    def score(
+        self, world: World, events: StepEvents, acting: np.ndarray, totals: dict[str, np.ndarray] | None = None
+    ) -> StepResult:
+        """Progress and arrival of non-scouts, scouts' end, collisions, energy and messages -> rewards.
+
+        ``totals``: the combined :meth:`group_partials` (``None``: computed here over every slot).
+        """
+        c, st, t = self.config, world.state, world.task
+        if totals is None:
+            totals = self.group_partials(world, events, acting, np.ones(st.n_slots, dtype=bool))
+        dist, arrived, task = self._task(world, acting)
         np.copyto(t.prev_dist, dist)  # the state keeps its array (resets write it); dist goes out as info
         t.arrived |= arrived
         # a scout is done once no member of its (world, group) is still live
-        key = st.world_id.astype(np.int64) * c.n_groups + np.clip(st.group, 0, c.n_groups - 1)
-        pending = ~t.scout & st.online & ~t.arrived
-        left = np.bincount(key[pending], minlength=st.n_slots)
-        scout_done = acting & t.scout & (left[key] == 0)
+        scout_done = acting & t.scout & (at_keys(totals["pending"], self._key(world)) == 0)
         collided = np.zeros(st.n_slots)
         collided[events.went_offline] = 1.0
         effort = np.einsum("ij,ij->i", st.vel, st.vel) * world.config.dt
@@ -161,7 +190,8 @@ class RelayScenario(Scenario[RelayConfig]):
         assert world.comms is not None
         rewards = compose_rewards(c.reward, task, group=st.group, world=st.world_id, acting=acting,
                                   n_groups=c.n_groups, collided=collided, energy=effort,
-                                  messages_sent=world.comms.sent)  # fmt: skip
+                                  messages_sent=world.comms.sent,
+                                  totals=totals if c.reward.group_share else None, n_worlds=world.n_worlds)  # fmt: skip
         info = {"arrived": arrived.astype(np.int8), "collided": collided.astype(np.int8), "distance": dist,
                 "scout": t.scout.astype(np.int8)}  # fmt: skip
         return StepResult(rewards, arrived | scout_done, info)

@@ -67,7 +67,9 @@ class Rendezvous(Scenario[RendezvousConfig]):
         c = (st.pos.reshape(-1, self.n_agents, 3) * w).sum(1) / np.maximum(w.sum(1), 1.0)
         return np.repeat(c, self.n_agents, axis=0)
 
-    def score(self, world: World, events: StepEvents, acting: np.ndarray) -> StepResult:
+    def score(
+        self, world: World, events: StepEvents, acting: np.ndarray, totals: dict[str, np.ndarray] | None = None
+    ) -> StepResult:
         st, t = world.state, world.task
         dist = np.linalg.norm(st.pos - self._centroid(world), axis=1)
         near = ((dist <= self.config.radius) | ~st.online).reshape(-1, self.n_agents).all(axis=1)

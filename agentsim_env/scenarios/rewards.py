@@ -5,10 +5,15 @@ reward_i = task_weight * task_i
          - collision_penalty * collided_i
          - energy_weight * energy_i
          - message_cost * messages_sent_i
+
+The group means come from exact fixed-point sums (``task_partials``: each task value rounded to a multiple of
+2**-32, |value| <= 2**40), so a group whose members are summed in several parts (``combine_partials``) gets the
+same mean, bit for bit, as one sum over all of them.
 """
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 import numba as nb
@@ -41,47 +46,164 @@ class RewardConfig:
             check_float(f"reward.{name}", getattr(self, name), 0.0)
 
 
+FIXED_POINT_BITS = 32
+"""Fraction bits of the group sums: each task value is rounded to a multiple of 2**-32 before it is summed."""
+MAX_TASK_VALUE = 2.0**40
+"""Largest magnitude of a task value that enters a group sum (about 1.1e12)."""
+
+
+# Group sums in fixed point. A float sum depends on the order of its additions, so a group split over processes
+# (each summing its own members, the parts summed after) would differ from one process in the last bits. Integer
+# sums are associative, so every value v is split exactly into hi = floor(v) (int64) and lo = round((v - hi) *
+# 2**32) (an int64 in [0, 2**32]); the group's hi and lo words are summed separately, and the total is
+# sum(hi) + sum(lo) * 2**-32, whatever the split and the order. The rounding moves a value by at most 2**-33.
+# With |v| <= MAX_TASK_VALUE = 2**40 neither word can overflow for groups of up to 2**22 (hi) and 2**31 (lo)
+# members; a larger finite value is an error that names it. Non-finite values are counted apart (NaN, +inf, -inf),
+# so a group mean over them is what a float sum gives (NaN, or the infinity) and check_finite still names it.
+@nb.njit(cache=True)
+def _partials_kernel(task, key, mask, size, bound):  # type: ignore[no-untyped-def]
+    hi = np.zeros(size, dtype=np.int64)
+    lo = np.zeros(size, dtype=np.int64)
+    cnt = np.zeros(size, dtype=np.int64)
+    bad = np.zeros((3, size), dtype=np.int64)  # NaN, +inf, -inf
+    for s in range(task.shape[0]):
+        if not mask[s]:
+            continue
+        v = task[s]
+        k = key[s]
+        cnt[k] += 1
+        if np.isnan(v):
+            bad[0, k] += 1
+        elif np.isinf(v):
+            bad[1 if v > 0 else 2, k] += 1
+        elif abs(v) > bound:
+            return hi, lo, cnt, bad, s
+        else:
+            f = np.floor(v)
+            hi[k] += np.int64(f)
+            lo[k] += np.int64(np.rint((v - f) * 4294967296.0))
+    return hi, lo, cnt, bad, -1
+
+
+def group_keys(group: np.ndarray, world: np.ndarray, n_worlds: int) -> np.ndarray:
+    """Index ``group * n_worlds + world`` of each slot's (world, group) in the partial arrays (group -1 -> 0).
+
+    Group-major, so a group id beyond the configured groups (``assign_group`` takes ids up to ``n_agents - 1``)
+    only lengthens the arrays: every part indexes a (world, group) the same way whatever its length.
+    """
+    g = np.asarray(group)
+    return np.where(g >= 0, g, 0).astype(np.int64) * int(n_worlds) + np.asarray(world).astype(np.int64)
+
+
+def task_partials(
+    task: np.ndarray, group: np.ndarray, world: np.ndarray, mask: np.ndarray, n_groups: int, n_worlds: int
+) -> dict[str, np.ndarray]:
+    """One part's group sums of the task values over the slots in ``mask``, in fixed point.
+
+    Args:
+        task: Task value per slot ``(S,)``.
+        group: Group id per slot (-1: no group; counted in group 0's sums, its own reward takes its own value).
+        world: World id per slot.
+        mask: The slots this part sums (e.g. acting slots that the part owns).
+        n_groups: Groups per world (the arrays hold at least these).
+        n_worlds: Worlds B.
+
+    Returns:
+        ``{"task_hi", "task_lo", "task_count", "task_nan", "task_pinf", "task_ninf"}`` (the fixed-point words,
+        the members, the non-finite members): int64 arrays ``(B * G,)`` indexed ``group * B + world``
+        (:func:`group_keys`), G = ``n_groups`` or one more than the largest masked group id if that is larger;
+        to add up over parts with :func:`combine_partials`.
+
+    Raises:
+        ValueError: When a masked finite task value is over ``MAX_TASK_VALUE`` in magnitude (naming it).
+    """
+    mask = np.asarray(mask, dtype=np.bool_)
+    key = group_keys(group, world, n_worlds)
+    size = int(n_worlds) * max(int(n_groups), 1)
+    if mask.any():
+        size = max(size, int(key[mask].max()) + 1)
+    task = np.asarray(task, dtype=np.float64)
+    hi, lo, cnt, odd, over = _partials_kernel(task, key, mask, size, MAX_TASK_VALUE)
+    if over >= 0:
+        raise ValueError(f"task value {float(task[over])!r} of slot {over} cannot enter a group sum: group sums "
+                         f"are exact fixed point for |task value| <= 2**40 (~1.1e12)")  # fmt: skip
+    return {"task_hi": hi, "task_lo": lo, "task_count": cnt, "task_nan": odd[0], "task_pinf": odd[1],
+            "task_ninf": odd[2]}  # fmt: skip
+
+
+def combine_partials(parts: Iterable[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
+    """Add up the partial sums of several parts key by key (integer sums: any order gives the same totals).
+
+    Arrays of one key may differ in length (a part with a higher group id has a longer one): the shorter ones
+    count as zero-padded.
+
+    Args:
+        parts: Each part's partials (the same keys in every part).
+
+    Returns:
+        The totals (fresh arrays); ``{}`` for no parts or parts without partials.
+    """
+    out: dict[str, np.ndarray] = {}
+    for p in parts:
+        for k, v in p.items():
+            have = out.get(k)
+            if have is None:
+                out[k] = np.array(v, copy=True)
+                continue
+            if have.shape[0] < v.shape[0]:
+                have = np.concatenate([have, np.zeros(v.shape[0] - have.shape[0], dtype=have.dtype)])
+            have[: v.shape[0]] += v
+            out[k] = have
+    return out
+
+
+def at_keys(total: np.ndarray, key: np.ndarray) -> np.ndarray:
+    """``total[key]`` with keys past the end of ``total`` reading 0 (groups no part had members of)."""
+    if key.size and int(key.max()) >= total.shape[0]:
+        total = np.concatenate([total, np.zeros(int(key.max()) + 1 - total.shape[0], dtype=total.dtype)])
+    return total[key]
+
+
+def group_means(totals: dict[str, np.ndarray]) -> np.ndarray:
+    """Mean task value per (world, group) from combined partials: ``(hi + lo * 2**-32) / max(count, 1)``.
+
+    A group with a NaN member, or with both infinities, has mean NaN; one with one kind of infinity has it.
+    """
+    total = totals["task_hi"].astype(np.float64) + totals["task_lo"].astype(np.float64) * 2.0**-FIXED_POINT_BITS
+    mean = total / np.maximum(totals["task_count"], 1).astype(np.float64)
+    nan, pinf, ninf = totals["task_nan"] > 0, totals["task_pinf"] > 0, totals["task_ninf"] > 0
+    if nan.any() or pinf.any() or ninf.any():
+        mean = np.where(pinf, np.inf, np.where(ninf, -np.inf, mean))
+        mean[nan | (pinf & ninf)] = np.nan
+    return mean
+
+
 def group_mean(
     values: np.ndarray, group: np.ndarray, world: np.ndarray, mask: np.ndarray, n_groups: int
 ) -> np.ndarray:
     """Mean of ``values`` over the masked members of each (world, group), broadcast back to every slot.
 
-    Slots with group -1 (no group) get their own value.
+    Slots with group -1 (no group) get their own value. The sums are the fixed-point ones of
+    :func:`task_partials` (one part over every slot).
     """
-    g = np.where(group >= 0, group, 0).astype(np.int64)
-    key = world.astype(np.int64) * max(n_groups, 1) + g
-    size = int(key.max()) + 1 if key.size else 0
-    w = mask.astype(np.float64)
-    sums = np.bincount(key, weights=values * w, minlength=size)
-    cnt = np.bincount(key, weights=w, minlength=size)
-    mean = sums[key] / np.maximum(cnt[key], 1.0)
-    return np.where(group >= 0, mean, values)
+    if not np.size(values):
+        return np.asarray(values, dtype=np.float64).copy()
+    n_worlds = int(np.max(world)) + 1
+    totals = task_partials(values, group, world, mask, n_groups, n_worlds)
+    mean = at_keys(group_means(totals), group_keys(group, world, n_worlds))
+    return np.where(np.asarray(group) >= 0, mean, values)
 
 
 _NONE = np.zeros(0)  # stands in for an absent term (the kernel never reads it)
+_NONE_KEY = np.zeros(0, dtype=np.int64)
 
 
 @nb.njit(cache=True, error_model="numpy")
-def _compose_kernel(task, group, world, acting, n_groups, collided, energy, sent, w, use):  # type: ignore[no-untyped-def]
-    # One pass for the group sums, one for the terms. The sums run in slot order like np.bincount and the
-    # terms are added in the order of the numpy expression, so the result is bit-identical to it.
+def _compose_kernel(task, group, acting, key, means, collided, energy, sent, w, use):  # type: ignore[no-untyped-def]
+    # The terms are added in the order of the numpy expression, so the result is bit-identical to it.
     tw, gs, cp, ew, mc = w[0], w[1], w[2], w[3], w[4]
     use_group, use_coll, use_energy, use_sent = use
     s_n = task.shape[0]
-    ng = max(n_groups, 1)
-    key = np.empty(s_n, dtype=np.int64)
-    size = 0
-    for s in range(s_n):
-        k = world[s] * ng + (group[s] if group[s] >= 0 else 0)
-        key[s] = k
-        size = max(size, k + 1)
-    sums = np.zeros(size if use_group else 0)
-    cnt = np.zeros(size if use_group else 0)
-    if use_group:
-        for s in range(s_n):
-            m = 1.0 if acting[s] else 0.0
-            sums[key[s]] += task[s] * m
-            cnt[key[s]] += m
     out = np.empty(s_n)
     for s in range(s_n):
         if not acting[s]:
@@ -89,7 +211,7 @@ def _compose_kernel(task, group, world, acting, n_groups, collided, energy, sent
             continue
         r = tw * task[s]
         if use_group:
-            g = sums[key[s]] / max(cnt[key[s]], 1.0) if group[s] >= 0 else task[s]
+            g = means[key[s]] if group[s] >= 0 else task[s]
             r = r + gs * g
         if use_coll:
             r = r - cp * collided[s]
@@ -112,6 +234,8 @@ def compose_rewards(
     collided: np.ndarray | None = None,
     energy: np.ndarray | None = None,
     messages_sent: np.ndarray | None = None,
+    totals: dict[str, np.ndarray] | None = None,
+    n_worlds: int | None = None,
 ) -> np.ndarray:
     """Combine the terms into one reward per slot (zero for slots that were not acting).
 
@@ -128,6 +252,9 @@ def compose_rewards(
         collided: Slots that collided this step.
         energy: Energy spent this step per slot.
         messages_sent: Messages sent this step per slot.
+        totals: The group sums (:func:`task_partials` of every part, combined) when the slots are split over
+            parts; ``None``: summed here over every acting slot.
+        n_worlds: Worlds B, the stride of the group sums (``None``: one more than the largest world id).
 
     Returns:
         Rewards ``(S,)`` as float64 (a fresh array).
@@ -140,12 +267,24 @@ def compose_rewards(
     )
     w = (float(cfg.task_weight), float(cfg.group_share), float(cfg.collision_penalty), float(cfg.energy_weight),
          float(cfg.message_cost))  # fmt: skip
+    task = np.asarray(task, dtype=np.float64)
+    acting = np.asarray(acting, dtype=np.bool_)
+    group = np.asarray(group)
+    key, means = _NONE_KEY, _NONE
+    if use[0]:
+        b = int(np.max(world)) + 1 if n_worlds is None else int(n_worlds)
+        key = group_keys(group, world, b)
+        if totals is None:
+            totals = task_partials(task, group, world, acting, n_groups, b)
+        means = group_means(totals)
+        if int(key.max()) >= means.shape[0]:  # a group no part had acting members of (read by no acting slot)
+            means = np.concatenate([means, np.zeros(int(key.max()) + 1 - means.shape[0])])
     return _compose_kernel(
-        np.asarray(task, dtype=np.float64),
-        np.asarray(group),
-        np.asarray(world),
-        np.asarray(acting, dtype=np.bool_),
-        int(n_groups),
+        task,
+        group,
+        acting,
+        key,
+        means,
         _NONE if collided is None else np.asarray(collided, dtype=np.float64),
         _NONE if energy is None else np.asarray(energy, dtype=np.float64),
         _NONE if messages_sent is None else np.asarray(messages_sent),

@@ -204,7 +204,9 @@ class UavReleaseScenario(Scenario[UavReleaseConfig]):
             t.payload_left[go] -= 1
             t.released[go] = 1
 
-    def score(self, world: World, events: StepEvents, acting: np.ndarray) -> StepResult:
+    def score(
+        self, world: World, events: StepEvents, acting: np.ndarray, totals: dict[str, np.ndarray] | None = None
+    ) -> StepResult:
         """Landings (stage 4's events): coverage, fidelity, miss terms; energy; end of mission bonus."""
         c, st, t = self.config, world.state, world.task
         assert world.payloads is not None and events.payloads is not None
