@@ -1,8 +1,11 @@
-"""One simulation over Ray shard actors on a local cluster bound to 127.0.0.1 (slow: it starts Ray).
+"""One simulation over Ray shard actors on two real Ray nodes on 127.0.0.1 (slow: it starts them).
 
-Equivalence with one process for 1, 2 and 4 shards over 200 steps on every shardable scenario; a shard killed
-mid-episode (``ray.kill``); a shard that sleeps past its deadline; a restart for the next episode; a bad
-address. The same logic in process, faster and in more cases: tests/test_distributed.py.
+The module's envs join the two-node cluster of ``tests.ray_nodes`` (this process is its driver), so shard k runs
+on node ``k mod 2`` and shard traffic crosses nodes. Equivalence with one process for 1, 2 and 4 shards over 200
+steps on every shardable scenario; a shard killed mid-episode (``ray.kill``); a shard that sleeps past its
+deadline; a restart for the next episode; a bad address. The local cluster an env starts itself:
+tests/test_distributed_ray_bind.py; a whole node that dies: tests/test_distributed_ray_nodes.py. The same logic
+in process, faster and in more cases: tests/test_distributed.py.
 """
 
 from __future__ import annotations
@@ -15,11 +18,11 @@ import numpy as np
 import pytest
 
 from agentsim_env.distributed import make as make_sharded
-from agentsim_env.distributed.ray_backend import start_local_cluster
 from agentsim_env.recorder import record
 from agentsim_env.recorder.read import Store
 from agentsim_env.scenarios.registry import list_scenarios, scenario_class
 from tests.distributed_helpers import compare, live_steps, random_actions
+from tests.ray_nodes import TwoNodes, two_nodes  # noqa: F401 - the fixture
 
 pytestmark = pytest.mark.slow
 ray = pytest.importorskip("ray")
@@ -32,11 +35,9 @@ SHARDABLE = {
 
 
 @pytest.fixture(scope="module", autouse=True)
-def local_cluster():  # type: ignore[no-untyped-def]
-    """One local Ray cluster on 127.0.0.1 for the module (each env then joins it instead of starting one)."""
-    start_local_cluster(ray, num_cpus=4)
-    yield
-    ray.shutdown()
+def cluster(two_nodes: TwoNodes) -> TwoNodes:  # noqa: F811
+    """Two Ray nodes on loopback for the module (each env then joins them instead of starting a cluster)."""
+    return two_nodes
 
 
 def test_every_shardable_scenario_is_covered() -> None:
@@ -58,6 +59,7 @@ def test_a_killed_shard_actor_loses_only_its_agents(tmp_path) -> None:  # type: 
     rng = np.random.default_rng(0)
     env.reset(seed=0)
     live_steps(env, 5, rng)
+    assert len({s.address.split(" on node ")[1] for s in inner.shards}) == 2  # one shard on each node
     doomed = {inner.possible_agents[i] for i in np.flatnonzero(inner.coordinator.owner == 0)}
     ray.kill(inner.coordinator.backend.actors[0], no_restart=True)
     _, _, term, _, _ = env.step(random_actions(env, rng))

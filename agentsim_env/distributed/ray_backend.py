@@ -9,7 +9,8 @@ as is one whose process died, and one whose code raised (its actor is killed: it
 When this process has already called ``ray.init`` (a test's cluster, a trainer's), the shards join that cluster
 and ``ray_address`` is not used.
 
-Placement: on a cluster given by address the shards are spread over its nodes. When nodes offer the custom
+Placement: on a cluster given by address, or joined before (``ray.init``), the shards are spread over its nodes
+(not on the local cluster this module starts: one node). When nodes offer the custom
 resources ``agentsim_node_0``, ``agentsim_node_1``, ... (``ray start --resources '{"agentsim_node_<i>": 1}'``),
 shard k runs on the node of ``agentsim_node_<k mod n>`` (n: the alive nodes offering one), asked as a soft node
 affinity so that a shard started anew after its node died lands on a node still alive; without such nodes Ray's
@@ -255,8 +256,8 @@ class RayShards:
         strips: The partition.
         n_shards: Number of shards K.
         address: Cluster address, or ``None`` for a local cluster on 127.0.0.1.
-        spread: Place the shards on different nodes (see the module docstring); ``None``: when ``address``
-            is given.
+        spread: Place the shards on different nodes (see the module docstring); ``None``: unless the cluster is
+            the local one this module started.
     """
 
     def __init__(
@@ -288,7 +289,7 @@ class RayShards:
         # a shard is one process running single-threaded kernels: one CPU of the cluster each
         self._cls = ray.remote(num_cpus=1 if address is not None else 0, max_restarts=0)(Shard)
         self._args = (name, config, strips)
-        self.placement = Placement(ray, address is not None if spread is None else bool(spread))
+        self.placement = Placement(ray, not self._own if spread is None else bool(spread))
         self.actors: dict[int, Any] = {k: self._start(k) for k in range(self.n_shards)}
         self.address = address or "local cluster on 127.0.0.1"
 
