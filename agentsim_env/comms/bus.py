@@ -407,16 +407,13 @@ class MessageBus:
         step = int(step)
         pos, online, group = world_arrays(self.n_slots, pos, online, group)
         self._pushes = []
-        rounds = [self._deliver_rows(self.take_due(step), step, pos, online, group, None, _ALL_SEEN)]
+        delivered = [self._deliver_rows(self.take_due(step), step, pos, online, group, None, _ALL_SEEN)]
         while len(rows := self.take_due(step)):
             # a second round happens only when latency-0 heartbeat answers became due in this call
-            rounds.append(self._deliver_rows(rows, step, pos, online, group, None, _ALL_SEEN))
+            delivered.append(self._deliver_rows(rows, step, pos, online, group, None, _ALL_SEEN))
         if push:
             self.inbox.push_batches(self.take_pushes())
-        if len(rounds) == 1:
-            return rounds[0]
-        return DeliveryEvents(step, *(MessageLog.concat([getattr(r, f) for r in rounds])
-                                      for f in ("sent", "delivered", "dropped")))  # fmt: skip
+        return self._events(step, delivered)
 
     def take_due(self, step: int) -> DueRows:
         """Pop the messages due at ``step`` (or earlier), in queue order; none are delivered yet."""
@@ -464,11 +461,17 @@ class MessageBus:
         pos, online, group = world_arrays(self.n_slots, pos, online, group)
         own, known = bool_mask(mine, "mine", self.n_slots), bool_mask(seen, "seen", self.n_slots)
         n0 = len(self._pushes)
-        ev = self._deliver_rows(rows, step, pos, online, group, own, _ALL_SEEN if known is None else known)
+        delivered = self._deliver_rows(rows, step, pos, online, group, own, _ALL_SEEN if known is None else known)
         if push:
             new, self._pushes = self._pushes[n0:], self._pushes[:n0]
             self.inbox.push_batches(new)
-        return ev
+        return self._events(step, [delivered])
+
+    def _events(self, step: int, delivered: list[MessageLog]) -> DeliveryEvents:
+        """The events of a delivery: the logged sends and drops (taken) and ``delivered``."""
+        sent, dropped = MessageLog.concat(self._sent_log), MessageLog.concat(self._drop_log)
+        self._sent_log, self._drop_log = [], []
+        return DeliveryEvents(step, sent, MessageLog.concat(delivered), dropped)
 
     def take_pushes(self) -> list[tuple[np.ndarray, ...]]:
         """The deliveries of the latest ``deliver(..., push=False)`` as ``Inbox.push_batches`` batches (once)."""
@@ -487,7 +490,7 @@ class MessageBus:
         self._ans_slot, self._ans_step = [], []
         return out
 
-    def _deliver_rows(self, rows, step, pos, online, group, mine, seen) -> DeliveryEvents:  # type: ignore[no-untyped-def]
+    def _deliver_rows(self, rows, step, pos, online, group, mine, seen) -> MessageLog:  # type: ignore[no-untyped-def]
         order = inbox_order(rows, self.n_slots)  # the pairs come out in it; the rows stay where they are
         kind, snd, tgt = rows.kind, rows.sender, rows.target
         kid, offsets, slots = _NO_SLOTS, _NO_SLOTS, _NO_SLOTS
@@ -525,11 +528,8 @@ class MessageBus:
             self._ans_step.append(np.full(n_ans, step, dtype=np.int64))
         if n_hb:  # each member that got a heartbeat answers the controller through the channel
             self._answer(d_rcv[(d_rcv >= 0) & (d_kind == HEARTBEAT)], step)
-        sent, dropped = MessageLog.concat(self._sent_log), MessageLog.concat(self._drop_log)
-        self._sent_log, self._drop_log = [], []
-        delivered = MessageLog(d_msg, d_kind, d_snd, d_tgt, d_rcv, d_cre, np.full(n_ok, step, dtype=np.int64),
-                               np.zeros(n_ok, dtype=np.int8))  # fmt: skip
-        return DeliveryEvents(step, sent, delivered, dropped)
+        return MessageLog(d_msg, d_kind, d_snd, d_tgt, d_rcv, d_cre, np.full(n_ok, step, dtype=np.int64),
+                          np.zeros(n_ok, dtype=np.int8))  # fmt: skip
 
     def _answer(self, hb: np.ndarray, step: int) -> None:
         """Queue the heartbeat answers of slots ``hb`` (created now, numbered after their other messages)."""

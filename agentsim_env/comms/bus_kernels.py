@@ -5,6 +5,8 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from agentsim_env.comms.messages import ENV, GROUP
+
 
 @nb.njit(cache=True)
 def bandwidth_kernel(snd, step, bw, used, stamp, acc):  # type: ignore[no-untyped-def]
@@ -52,6 +54,31 @@ def sequence_kernel(snd, step, used, stamp, seq):  # type: ignore[no-untyped-def
             used[s] = 0
         seq[i] = used[s]
         used[s] += 1
+
+
+@nb.njit(cache=True)
+def control_sequence_kernel(kind, snd, tgt, step, used, stamp, seq):  # type: ignore[no-untyped-def]
+    """Number the environment / controller messages to slots: a counter per (kind, target slot) and step.
+
+    Args:
+        kind: ``(k,)`` int8 kinds.
+        snd: ``(k,)`` int64 senders; only rows with sender -1 and a kind other than GROUP are numbered.
+        tgt: ``(k,)`` int64 target slots.
+        step: Step the messages are created.
+        used: ``(2, S)`` int64 counts, row 0 for ENV, row 1 for HEARTBEAT (updated in place).
+        stamp: ``(2, S)`` int64 step of each count (updated in place).
+        seq: ``(k,)`` int64 output.
+    """
+    for i in range(snd.shape[0]):
+        if snd[i] >= 0 or kind[i] == GROUP:  # agents are numbered per sender, GROUP targets are group ids
+            continue
+        c = 0 if kind[i] == ENV else 1
+        t = tgt[i]
+        if stamp[c, t] != step:
+            stamp[c, t] = step
+            used[c, t] = 0
+        seq[i] = used[c, t]
+        used[c, t] += 1
 
 
 # SplitMix64 (Steele, Lea & Flood 2014): the golden-ratio increment and the finaliser's two multipliers.

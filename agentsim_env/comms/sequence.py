@@ -10,8 +10,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from agentsim_env.comms.bus_kernels import rows_in_order, sender_order, sequence_kernel
+from agentsim_env.comms.bus_kernels import (
+    control_sequence_kernel,
+    rows_in_order,
+    sender_order,
+    sequence_kernel,
+)
 from agentsim_env.comms.events import DueRows
+from agentsim_env.comms.messages import GROUP
 
 __all__ = ["Sequencer", "inbox_order"]
 
@@ -28,17 +34,21 @@ class Sequencer:
         stamp: ``(S,)`` int64 step of each slot's count (-1: none yet).
     """
 
-    __slots__ = ("used", "stamp", "_ctl_step", "_ctl_codes", "_ctl_counts")
+    __slots__ = ("used", "stamp", "_to_slot_used", "_to_slot_stamp", "_ctl_step", "_ctl_codes", "_ctl_counts")
 
     def __init__(self, n_slots: int) -> None:
         """Counters for ``n_slots`` slots, all at zero."""
         self.used = np.zeros(n_slots, dtype=np.int64)
         self.stamp = np.full(n_slots, -1, dtype=np.int64)
+        # environment / controller messages to a slot: one counter per (ENV or HEARTBEAT, target slot)
+        self._to_slot_used = np.zeros((2, n_slots), dtype=np.int64)
+        self._to_slot_stamp = np.full((2, n_slots), -1, dtype=np.int64)
         self.reset()
 
     def reset(self) -> None:
         """Forget every count."""
         self.stamp[:] = -1
+        self._to_slot_stamp[:] = -1
         self._ctl_step = -1
         self._ctl_codes = np.zeros(0, dtype=np.int64)  # sorted codes of the current step's counters
         self._ctl_counts = np.zeros(0, dtype=np.int64)
@@ -46,6 +56,7 @@ class Sequencer:
     def drop_world(self, world: int, slots: np.ndarray) -> None:
         """Forget the counts of world ``world`` (its ``slots`` and its environment / controller counters)."""
         self.stamp[slots] = -1
+        self._to_slot_stamp[:, slots] = -1
         keep = (self._ctl_codes >> _CTL_SHIFT) // _CTL_KINDS != world
         self._ctl_codes, self._ctl_counts = self._ctl_codes[keep], self._ctl_counts[keep]
 
@@ -72,7 +83,11 @@ class Sequencer:
         ctl = snd < 0
         if not ctl.any():
             return seq
-        # environment / controller rows: a counter per (world, kind, target), kept as sorted codes and counts
+        control_sequence_kernel(kind, snd, tgt, step, self._to_slot_used, self._to_slot_stamp, seq)
+        ctl &= kind == GROUP  # controller broadcasts: a counter per (world, group id), few, kept in numpy
+        if not ctl.any():
+            return seq
+        # sorted codes (world, kind, group) and their counts
         if self._ctl_step != step:
             self._ctl_step, self._ctl_codes, self._ctl_counts = step, self._ctl_codes[:0], self._ctl_counts[:0]
         codes = ((wld[ctl] * _CTL_KINDS + kind[ctl].astype(np.int64)) << _CTL_SHIFT) + tgt[ctl]
