@@ -143,8 +143,11 @@ class Driver:
                     r["pos"], r["vel"], r["heading"], r["online"])  # fmt: skip
 
     # ------------------------------------------------------------------ episode
-    def reset(self, seed: np.random.SeedSequence) -> None:
-        """Start the episode of ``seed`` on the mirror and on every shard (offline shards restarted first)."""
+    def reset(self, seed: np.random.SeedSequence, gather: bool = True) -> None:
+        """Start the episode of ``seed`` on the mirror and on every shard (offline shards restarted first).
+
+        ``gather``: bring every agent's observation back (the step API); a rollout keeps them on the shards.
+        """
         self.restart_offline()
         world, sc = self.world, self.scenario
         placement = world.reset_world(0, seed)
@@ -153,13 +156,68 @@ class Driver:
         self.owner[:] = -1
         s = world.state.n_slots
         self.obs = np.zeros((s, _obs_dim(sc)), np.float32)
-        replies = self._call("reset", {k: (seed, self.strips.owner, True, self.kinematics)
+        replies = self._call("reset", {k: (seed, self.strips.owner, gather, self.kinematics and gather)
                                        for k in range(len(self.shards))})  # fmt: skip
-        self._take(replies, obs=True)
+        self._take(replies, obs=gather)
         self.backend.set_slot_owner(self.owner)
         if not self.alive.all():  # a shard that failed its reset loses its agents at once
             self.lost = np.flatnonzero(world.state.online & (self.owner < 0))
             world.set_offline(self.lost)
+
+    def rollout(self, policy: Any, steps: int, seed: np.random.SeedSequence, policy_seed: int | None,
+                done: int, max_steps: int) -> dict[str, Any]:  # fmt: skip
+        """``env.rollout`` over the shards: the policy runs inside them; only counts come back each step.
+
+        Args:
+            policy: A baseline name, a trained model folder or a policy object (built or sent to every shard).
+            steps: Steps to run (fewer when every agent ends first).
+            seed: The episode's seed sequence.
+            policy_seed: The seed given to ``policy.reset``.
+            done: Steps of the episode taken before (0 after the reset).
+            max_steps: The scenario's episode length (the last step truncates).
+
+        Returns:
+            ``steps``, ``agent_steps``, ``events`` (counts), ``returns`` / ``final_pos`` / ``sums`` over every
+            slot, and ``live`` (the slots still live).
+        """
+        from agentsim_env.env.rollout import EVENT_KEYS
+
+        self.reset(seed, gather=False)
+        n = len(self.shards)
+        self._call("begin", {k: (policy, policy_seed) for k in range(n)})
+        live = int((self.owner >= 0).sum())
+        events = np.zeros(len(EVENT_KEYS), dtype=np.int64)
+        taken = agent_steps = 0
+        while taken < steps and live:
+            self.lost = _NONE
+            control: Packed = {"ended": self._ended, "objects": self._objects, "owner": self.strips.owner,
+                               "taken": taken, "over": done + taken + 1 >= max_steps}  # fmt: skip
+            self._objects = []
+            replies = self._call("act", dict.fromkeys(range(n), (control,)))
+            agent_steps += live
+            taken += 1
+            ended = [r["ended"] for r in replies.values()]
+            self._ended = np.union1d(np.concatenate(ended) if ended else _NONE, self.lost)
+            self.owner[self._ended] = -1
+            for k, r in replies.items():
+                events += np.asarray(r["events"], dtype=np.int64)
+                self.traffic.handover += int(r["handed"])
+                self.owner[r["arrived"]] = k
+            events[EVENT_KEYS.index("offline")] += self.lost.size
+            live = sum(int(r["live"]) for r in replies.values())
+            self.world.tick += 1
+            self.world.step_count += 1
+        got = self._call("finish", dict.fromkeys(range(n), ()))
+        finished = list(got.values())
+        returns, pos, sums, alive = _rollout_rows(self.world, finished, self.scenario.info_keys())
+        self.owner[:] = -1
+        self.obs = np.zeros((self.world.state.n_slots, _obs_dim(self.scenario)), np.float32)
+        for k, r in got.items():  # where step() goes on from: the owners, the live agents' observations
+            self.owner[r["own"]] = k
+            self.obs[r["live"]] = r["obs"]
+        self.world.state.pos[:] = pos
+        return {"steps": taken, "agent_steps": agent_steps, "events": dict(zip(EVENT_KEYS, events.tolist())),
+                "returns": returns, "final_pos": pos, "sums": sums, "live": alive}  # fmt: skip
 
     def step(self, parts: dict[str, np.ndarray], acting: np.ndarray) -> tuple[StepResult, np.ndarray]:
         """One step over the shards: each runs it for its own agents; their rows come back.
@@ -224,6 +282,23 @@ class Driver:
             ev.scores = StepScores(acting, rewards, terminated, info)
             world.run_hooks(ev)
         return res, terminated
+
+
+def _rollout_rows(world: World, finished: list[Packed], info_keys: tuple[str, ...]) -> tuple[np.ndarray, ...]:
+    """Every agent's return, final position and info sums from the shards' last rows; the live slots."""
+    s = world.state.n_slots
+    returns = np.zeros(s)
+    pos = np.array(world.state.pos, dtype=np.float64)  # agents of a lost shard: where they were last seen
+    sums = {k: np.zeros(s) for k in info_keys}
+    live = []
+    for r in finished:
+        sl = r["slots"]
+        returns[sl], pos[sl] = r["returns"], r["pos"]
+        for k in info_keys:
+            sums[k][sl] = r["sums"][k]
+        live.append(r["live"])
+    alive = np.sort(np.concatenate(live)) if live else _NONE
+    return returns, pos, sums, alive
 
 
 def _merge_comms(replies: list[Packed], step: int) -> CommsEvents:

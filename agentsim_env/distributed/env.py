@@ -11,6 +11,8 @@ step time; ``env.add_objects`` adds static objects at run time (every shard has 
 from __future__ import annotations
 
 import dataclasses
+import os
+import time
 from typing import Any
 
 import numpy as np
@@ -24,6 +26,7 @@ from agentsim_env.distributed.partition import Strips, halo_width
 from agentsim_env.distributed.shard import Shard
 from agentsim_env.distributed.worker import Worker
 from agentsim_env.env.parallel_env import ENV_KEYS, AgentSimParallelEnv
+from agentsim_env.env.rollout import RolloutResult, build_policy, check_seed, check_steps
 from agentsim_env.env.vector import BatchedEnv
 from agentsim_env.scenarios.base import Scenario
 from agentsim_env.scenarios.registry import list_scenarios, make_scenario, scenario_class
@@ -75,8 +78,6 @@ def steps_itself(scenario: Scenario, world: Any) -> bool:
 
     With comms the coordinator still runs the bus, the overlay's table and the groups (``distributed.coordinator``).
     """
-    import os
-
     return os.environ.get("AGENTSIM_SELF_STEPPING") == "1"
 
 
@@ -163,6 +164,41 @@ class DistributedParallelEnv(AgentSimParallelEnv):
             np.copyto(out, co.obs)
             return out
         return super()._flat_obs(rows, result)
+
+    def rollout(
+        self, policy: Any, steps: int, seed: int | None = None, *, on_step: Any = None
+    ) -> RolloutResult:
+        """``AgentSimParallelEnv.rollout`` with the policy inside the shards (observations stay there).
+
+        Each shard builds the policy (a baseline name or a trained model folder; a policy object is sent as it
+        is) and acts for its own agents; a step answers only counts. The results equal one process's. With an
+        ``on_step`` observer, step hooks (a recorder, the viewer) or a render mode the rollout runs through the
+        step API instead (it gathers every agent's data, as those need).
+        """
+        co = self.coordinator
+        if not isinstance(co, Driver) or on_step is not None or self.world.hooks or self.render_mode or self._stay:
+            return super().rollout(policy, steps, seed, on_step=on_step)
+        steps, pseed = check_steps(steps), check_seed(seed)
+        if isinstance(policy, (str, os.PathLike)):  # a bad name is one error here, not a failure in every shard
+            build_policy(self.scenario.name, _config_fields(self.scenario), policy)
+        if seed is not None:
+            self._seeds.reset(seed)
+        self._guard.enter("rollout")
+        try:
+            t0 = time.perf_counter()
+            out = co.rollout(policy, steps, self._seeds.next(), pseed, 0, self.scenario.max_steps)
+            wall = time.perf_counter() - t0
+            self._steps, self._started = out["steps"], True
+            live = out["live"]
+            self._set_agents([self.possible_agents[i] for i in live.tolist()], live)
+        finally:
+            self._guard.exit()
+        n = len(self.possible_agents)
+        return RolloutResult(
+            steps=out["steps"], returns=out["returns"][:n].copy(), final_pos=out["final_pos"][:n].copy(),
+            events=out["events"], info_sums={k: float(v.sum()) for k, v in out["sums"].items()},
+            agent_steps=out["agent_steps"], wall_s=wall, steps_per_s=out["steps"] / wall if wall > 0 else 0.0,
+        )  # fmt: skip
 
     def close(self) -> None:
         """Stop the shards (and the viewer or window, if any)."""

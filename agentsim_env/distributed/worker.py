@@ -29,11 +29,13 @@ from agentsim_env.distributed.bridge import Packed
 from agentsim_env.distributed.floods import FloodEntries
 from agentsim_env.distributed.partition import Strips
 from agentsim_env.distributed.shard_overlay import ShardOverlay
+from agentsim_env.distributed.shard_rollout import ShardRollout
 from agentsim_env.scenarios.base import run_step
 from agentsim_env.scenarios.registry import make_scenario
 from agentsim_env.sim import World
 from agentsim_env.sim.slot_rows import slot_arrays
 
+_NONE = np.zeros(0, dtype=np.int64)
 #: Per-slot arrays of a shard's world that are the shard's, not the agent's (its masks, its flood table).
 SHARD_PATHS = ("comms.overlay.own", "comms.overlay.part", "comms.router")
 
@@ -88,10 +90,19 @@ class Worker:
         self.delay_s = float(delay_s)
         s = self.world.state.n_slots
         self.own = np.zeros(s, dtype=bool)
+        self.held = np.zeros(s, dtype=bool)
+        """The own agents and those that ended here: the bus delivers (and drops) their messages here."""
         self.ghost = np.zeros(s, dtype=bool)
         self.acting = np.zeros(s, dtype=bool)
         self.handed = 0
         """Bytes of the agents handed over to this shard in the latest step."""
+        self.arrived = _NONE
+        """The slots handed over to this shard in the latest step."""
+        self.config = config
+        self.carry: dict[str, np.ndarray] = {"acting": self.acting}
+        """The worker's own per-slot arrays that travel with a handed-over agent (a rollout adds its sums)."""
+        self.rollout: Any = None
+        """The rollout in progress (``distributed.shard_rollout.ShardRollout``)."""
         self.address = f"{socket.gethostname()}:{os.getpid()}"
         self.world.bridge = self
         self.overlay: ShardOverlay | None = None
@@ -150,7 +161,9 @@ class Worker:
         if world.groups is not None and leaving.size:
             world.groups.settle_answers()  # heartbeat answers not yet read go with their agents
         leave = pack_rows(world, leaving)
-        leave["x"], leave["acting"] = st.pos[leaving, 0], self.acting[leaving]
+        leave["x"] = st.pos[leaving, 0]
+        for name, arr in self.carry.items():
+            leave[f"w.{name}"] = arr[leaving]
         post = {"edge": {"slots": edge, "x": st.pos[edge, 0], "pos": st.pos[edge]}, "leave": leave}
         if self.overlay is not None and leaving.size:
             post["leave_floods"] = self.overlay.part.take_leaving(leaving)
@@ -158,16 +171,20 @@ class Worker:
         if self.overlay is not None and got.get("floods"):
             self.overlay.part.add(FloodEntries.concat(got["floods"], self.overlay.payload_dim))
         self.own[leaving] = False
+        self.held[leaving] = False
         self.acting[leaving] = False
         st.online[leaving] = False
         arrivals = got["arrivals"]
         self.handed = 0
+        self.arrived = _NONE
         if arrivals is not None and arrivals["slots"].size:
-            new = arrivals["slots"]
+            new = self.arrived = arrivals["slots"]
             self.handed = sum(int(v.nbytes) for v in arrivals.values())
             unpack_rows(world, arrivals)
             self.own[new] = True
-            self.acting[new] = arrivals["acting"]
+            self.held[new] = True
+            for name, arr in self.carry.items():
+                arr[new] = arrivals[f"w.{name}"]
         g = got["ghosts"]["slots"]
         self.ghost[:] = False
         self.ghost[g] = True
@@ -202,14 +219,14 @@ class Worker:
         rows = bus.take_due(step)
         grp = rows.kind == GROUP
         slot = np.where(grp, 0, np.where(rows.target >= 0, rows.target, rows.sender))
-        here = grp | self.own[slot]
+        here = grp | self.held[slot]
         got = self.swap((int(self.world.tick), "bus"), self.index, {"rows": rows.take(grp | ~here)})
         d = bus.payload_dim
         mine = DueRows.concat([rows.take(here), *got["rows"]], d)
         seen = self.own | self.ghost
-        rounds = [bus.deliver_rows(mine, step, pos, online, group, mine=self.own, seen=seen, push=False)]
+        rounds = [bus.deliver_rows(mine, step, pos, online, group, mine=self.held, seen=seen, push=False)]
         while len(again := bus.take_due(step)):
-            rounds.append(bus.deliver_rows(again, step, pos, online, group, mine=self.own, seen=seen, push=False))
+            rounds.append(bus.deliver_rows(again, step, pos, online, group, mine=self.held, seen=seen, push=False))
         if len(rounds) == 1:
             return rounds[0]
         return DeliveryEvents(int(step), *(MessageLog.concat([getattr(r, f) for r in rounds])
@@ -261,6 +278,7 @@ class Worker:
         x = st.pos[alive, 0]
         self.own[:] = False
         self.own[alive[self.strips.owner_of(x) == self.index]] = True
+        self.held[:] = self.own
         self.ghost[:] = False
         self.ghost[self.strips.ghosts(x, alive, self.index)] = True
         st.online[:] = self.own | self.ghost
@@ -268,6 +286,49 @@ class Worker:
         world.bridge = self
         self.acting[:] = False
         out = self._rows_out(np.flatnonzero(self.own), None, self.own, obs, kin)
+        out["beat"] = self.beat(t0)
+        return out
+
+    def run(self, slots: np.ndarray, parts: dict[str, np.ndarray], control: Packed) -> tuple[Any, np.ndarray]:
+        """Apply ``control``, then ``run_step`` for the own slots ``slots`` with action parts over every slot.
+
+        Returns:
+            The scenario's result and the terminated mask (``self.acting`` holds the slots that acted and are
+            own after the hand-overs).
+        """
+        world, st = self.world, self.world.state
+        self.strips.owner = np.asarray(control["owner"], dtype=np.int64).copy()
+        for kind, centre, half in control.get("objects", ()):
+            world.scene.add(kind, centre, half, 0)
+        ended = control.get("ended")
+        if ended is not None and ended.size:
+            world.set_offline(ended)
+            self.own[ended] = False
+        st.online[self.ghost] = False  # ghosts come fresh after the motion
+        self.ghost[:] = False
+        self.acting[:] = False
+        self.acting[slots] = True
+        return run_step(self.scenario, world, parts, self.acting)
+
+    # ------------------------------------------------------------------ rollout (distributed.shard_rollout)
+    def begin(self, policy: Any, seed: int | None) -> Packed:
+        """Build the policy for a rollout of the episode just reset."""
+        t0 = time.perf_counter()
+        self.rollout = ShardRollout(self, policy, seed)
+        return {"beat": self.beat(t0)}
+
+    def act(self, control: Packed) -> Packed:
+        """One rollout step: the policy acts for the own live agents; counts back."""
+        t0 = time.perf_counter()
+        self._pause()
+        out = self.rollout.act(control)
+        out["beat"] = self.beat(t0)
+        return out
+
+    def finish(self) -> Packed:
+        """The end of a rollout: the per-agent rows of the own agents (and of those that ended here)."""
+        t0 = time.perf_counter()
+        out = self.rollout.finish()
         out["beat"] = self.beat(t0)
         return out
 
@@ -294,25 +355,14 @@ class Worker:
         """
         t0 = time.perf_counter()
         self._pause()
-        world, st = self.world, self.world.state
-        self.strips.owner = np.asarray(control["owner"], dtype=np.int64).copy()
-        for kind, centre, half in control.get("objects", ()):
-            world.scene.add(kind, centre, half, 0)
-        ended = control.get("ended")
-        if ended is not None and ended.size:
-            world.set_offline(ended)
-            self.own[ended] = False
-        st.online[self.ghost] = False  # ghosts come fresh after the motion
-        self.ghost[:] = False
-        s = st.n_slots
-        self.acting[:] = False
-        self.acting[slots] = True
+        s = self.world.state.n_slots
         full = {}
         for key, rows in parts.items():
             a = np.zeros((s, *rows.shape[1:]), dtype=rows.dtype)
             a[slots] = rows
             full[key] = a
-        res, terminated = run_step(self.scenario, world, full, self.acting)
+        res, terminated = self.run(slots, full, control)
+        world = self.world
         done = np.flatnonzero(self.acting)
         out = self._rows_out(done, res, terminated, bool(control.get("obs", True)), bool(control.get("kinematics")))
         col = world.last_events.collisions

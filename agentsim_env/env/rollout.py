@@ -190,13 +190,15 @@ def build_policy(scenario: str, config: Mapping[str, Any], policy: Any, **kwargs
     return builder(scenario, config, policy, **kwargs)  # type: ignore[no-any-return]
 
 
-def _check_steps(steps: Any) -> int:
+def check_steps(steps: Any) -> int:
+    """``steps`` as an int, or a ValueError naming it (an integer >= 1)."""
     if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 1:
         raise ValueError(f"steps must be an integer >= 1, got {steps!r}")
     return int(steps)
 
 
-def _check_seed(seed: Any) -> int | None:
+def check_seed(seed: Any) -> int | None:
+    """``seed`` as an int or None, or a ValueError naming it (None or an integer >= 0)."""
     if seed is None:
         return None
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
@@ -235,8 +237,8 @@ def run_rollout(
         ValueError: A bad ``policy`` (the registered names are listed), ``steps`` or ``seed``, or a policy that
             returned a NaN, inf or misshapen action part (named).
     """
-    steps = _check_steps(steps)
-    seed = _check_seed(seed)
+    steps = check_steps(steps)
+    seed = check_seed(seed)
     rows = _array_policy(env, policy)
     t0 = time.perf_counter()
     if through_step:
@@ -265,7 +267,7 @@ def _array_loop(
         on_step(env, 0, None)
     returns = np.zeros(n_slots, dtype=np.float64)
     events = dict.fromkeys(EVENT_KEYS, 0)
-    sums: dict[str, float] = {}
+    acc: dict[str, np.ndarray] = {}
     ended_t = np.zeros(n_slots, dtype=bool)
     ended_u = np.zeros(n_slots, dtype=bool)
     taken = agent_steps = 0
@@ -274,7 +276,7 @@ def _array_loop(
         rows = flat[live] if n != n_slots else flat
         obs = {k: rows[:, sl].reshape(n, *shape) for k, (sl, shape) in zip(env._obs_keys, env._obs_cols)}
         acts = policy.act_rows(obs, live, taken)
-        parts = {name: _scatter(name, acts, p, live, n_slots) for name, p in act_parts.items()}
+        parts = {name: scatter_part_checked(name, acts, p, live, n_slots) for name, p in act_parts.items()}
         res, terminated = env._step_core(parts, acting.copy())
         env._steps += 1
         taken += 1
@@ -287,8 +289,10 @@ def _array_loop(
             events[k] += v
         for k, arr in res.info.items():
             a = np.asarray(arr)
-            if a.dtype != bool:
-                sums[k] = sums.get(k, 0.0) + float(a[acting].sum(dtype=np.float64))
+            if a.dtype != bool:  # per agent first, so any split of the agents adds them up the same way
+                if k not in acc:
+                    acc[k] = np.zeros(n_slots, dtype=np.float64)
+                acc[k][acting] += a[acting]
         ended_t |= terminated
         ended_u |= truncated
         gone = terminated | truncated
@@ -308,10 +312,13 @@ def _array_loop(
         env._truncated |= ended_u
         if not live.size:
             env.agents = []
+    sums = {k: float(v.sum()) for k, v in acc.items()}
     return _result(env, taken, returns, events, sums, agent_steps, t0)
 
 
-def _scatter(name: str, acts: Mapping[str, Any], part: Any, live: np.ndarray, n_slots: int) -> np.ndarray:
+def scatter_part_checked(
+    name: str, acts: Mapping[str, Any], part: Any, live: np.ndarray, n_slots: int
+) -> np.ndarray:
     """One action part of the live rows over every slot, clipped to its bounds (``step``'s rule)."""
     if name not in acts:
         raise ValueError(f"the policy returned no action part {name!r} (parts: {sorted(acts)})")
@@ -334,7 +341,7 @@ def _dict_loop(
     index = env._index
     returns = np.zeros(len(env.possible_agents), dtype=np.float64)
     events = dict.fromkeys(EVENT_KEYS, 0)
-    sums: dict[str, float] = {}
+    acc: dict[str, np.ndarray] = {}
     taken = agent_steps = 0
     keys = env._obs_keys
     n_slots = env.world.state.n_slots
@@ -357,12 +364,15 @@ def _dict_loop(
             returns[index[a]] += r
         for k, v in count_events(env.world.last_events).items():
             events[k] += v
-        for info in infos.values():
+        for a, info in infos.items():
             for k, v in info.items():
                 if isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, (bool, np.bool_)):
-                    sums[k] = sums.get(k, 0.0) + float(v)
+                    if k not in acc:
+                        acc[k] = np.zeros(len(env.possible_agents), dtype=np.float64)
+                    acc[k][index[a]] += float(v)
         if on_step is not None and on_step(env, taken, _view(env, slots, infos, n_slots)):
             break
+    sums = {k: float(v.sum()) for k, v in acc.items()}
     return _result(env, taken, returns, events, sums, agent_steps, t0)
 
 

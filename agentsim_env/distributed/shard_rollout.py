@@ -1,0 +1,102 @@
+"""A rollout inside a shard: the policy acts for the shard's own agents on their observation rows.
+
+``env.rollout(policy, steps, seed)`` over shards (``distributed.coordinator``): each worker builds the policy from
+picklable inputs (a baseline name, a trained model folder; ``env.rollout.build_policy``; a policy object is
+sent as it is) and, every step, acts for its own live agents on the observation rows it built at the end of the
+previous step, then runs the step (``Worker.run``). Observations never leave the shard. What an agent
+accumulates (its return, its info sums, whether it is live) is a per-slot array of the worker that travels with
+the agent when it is handed over, so each agent's sums are added in the same order as in one process.
+Each step answers only counts (live agents, events); ``finish`` answers the per-agent rows once.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from agentsim_env.distributed.bridge import Packed
+from agentsim_env.env.rollout import EVENT_KEYS, ArrayPolicy, build_policy, count_events, scatter_part_checked
+
+
+def obs_layout(scenario: Any) -> list[tuple[str, slice, tuple[int, ...]]]:
+    """Each observation part's columns and shape in the flat layout (the front end's order)."""
+    out, start = [], 0
+    for key, part in scenario.obs_parts().items():
+        out.append((key, slice(start, start + part.size), tuple(part.shape)))
+        start += part.size
+    return out
+
+
+class ShardRollout:
+    """The rollout state of one worker (see the module docstring).
+
+    Args:
+        worker: The ``distributed.worker.Worker``.
+        policy: A baseline name, a trained model folder, or a policy object.
+        seed: The rollout's seed (given to ``policy.reset``).
+    """
+
+    def __init__(self, worker: Any, policy: Any, seed: int | None) -> None:
+        self.worker = worker
+        sc = worker.scenario
+        self.policy: ArrayPolicy = (
+            policy if isinstance(policy, ArrayPolicy) else build_policy(sc.name, worker.config, policy)
+        )
+        self.policy.reset(seed)
+        s = worker.world.state.n_slots
+        self.layout = obs_layout(sc)
+        self.act_parts = sc.act_parts()
+        self.info_keys = sc.info_keys()
+        self.live = worker.own & worker.world.state.online
+        self.returns = np.zeros(s, dtype=np.float64)
+        self.sums = {k: np.zeros(s, dtype=np.float64) for k in self.info_keys}
+        self.ended_here = np.zeros(s, dtype=bool)
+        worker.carry.update({"live": self.live, "returns": self.returns, "ended_here": self.ended_here})
+        worker.carry.update({f"sum.{k}": v for k, v in self.sums.items()})
+        self.flat = worker.scenario.flat_observation(worker.world).copy()
+
+    def act(self, control: Packed) -> Packed:
+        """One step: the policy's actions for the own live agents, the step, the sums; counts back."""
+        w = self.worker
+        st = w.world.state
+        s = st.n_slots
+        slots = np.flatnonzero(self.live & w.own)
+        rows = self.flat[slots]
+        n = slots.size
+        obs = {k: rows[:, sl].reshape(n, *shape) for k, sl, shape in self.layout}
+        if n:
+            acts = self.policy.act_rows(obs, slots, int(control["taken"]))
+        else:  # no own agent acts this step: the shard still steps (its neighbours meet it at the exchange)
+            acts = {name: np.zeros((0, *p.shape), np.float32) for name, p in self.act_parts.items()}
+        parts = {name: scatter_part_checked(name, acts, p, slots, s) for name, p in self.act_parts.items()}
+        res, terminated = w.run(slots, parts, control)
+        acting = w.acting
+        over = bool(control["over"])
+        gone = acting & (terminated | over)
+        self.returns[acting] += np.asarray(res.rewards, dtype=np.float64)[acting]
+        for k in self.info_keys:
+            a = np.asarray(res.info[k])
+            if a.dtype != bool:
+                self.sums[k][acting] += a[acting]
+        self.live &= ~gone
+        self.ended_here |= acting & terminated
+        w.own[acting & terminated] = False  # they stay where they stopped (``ended_here``)
+        w._sender_positions()
+        self.flat = w.scenario.flat_observation(w.world).copy()
+        counts = count_events(w.world.last_events)
+        return {"live": int((self.live & w.own).sum()), "events": [counts[k] for k in EVENT_KEYS],
+                "ended": np.flatnonzero(acting & terminated), "handed": w.handed, "arrived": w.arrived}  # fmt: skip
+
+    def finish(self) -> Packed:
+        """The per-agent rows: every slot this shard holds or saw end (returns, info sums, positions, live)."""
+        w = self.worker
+        slots = np.flatnonzero(w.own | self.ended_here)
+        out: Packed = {"slots": slots, "returns": self.returns[slots], "pos": w.world.state.pos[slots],
+                       "live": np.flatnonzero(self.live & w.own)}  # fmt: skip
+        out["sums"] = {k: v[slots] for k, v in self.sums.items()}
+        out["own"] = np.flatnonzero(w.own)
+        out["obs"] = self.flat[out["live"]]  # step() can go on from here
+        for key in ("live", "returns", "ended_here", *(f"sum.{k}" for k in self.info_keys)):
+            w.carry.pop(key, None)
+        return out
