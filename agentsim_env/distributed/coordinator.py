@@ -58,7 +58,8 @@ class ShardInfo:
         alive: Whether it still answers.
         last_answer: ``time.time()`` of its latest heartbeat.
         last_step: The simulation tick of its latest heartbeat.
-        step_s: Compute seconds of its latest step (the three calls together).
+        step_s: Seconds of its latest call (its exchanges included).
+        wait_s: Seconds of that call spent at the exchange (waiting for the others, routing, transfers).
         reason: Why it went offline (empty while alive).
         restarts: How many times it was started anew.
     """
@@ -69,6 +70,7 @@ class ShardInfo:
     last_answer: float = 0.0
     last_step: int = -1
     step_s: float = 0.0
+    wait_s: float = 0.0
     reason: str = ""
     restarts: int = 0
 

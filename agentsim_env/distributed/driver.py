@@ -63,6 +63,8 @@ class Driver:
         self.obs: np.ndarray | None = None
         self.kinematics = True
         """Gather every own agent's position each step into ``world`` (the mirror); off for rollouts."""
+        self.profile: dict[str, Any] = {}
+        """The latest rollout's seconds: ``wall_s`` of its steps, each shard's ``compute_s`` and ``wait_s``."""
         self.gather_events = False
         """Gather the step's message deliveries into ``world.last_events`` (also whenever hooks are attached)."""
 
@@ -102,7 +104,7 @@ class Driver:
                 continue
             beat, info = r["beat"], self.shards[k]
             info.address, info.last_answer, info.last_step = beat["address"], now, beat["step"]
-            info.step_s = beat["compute_s"]
+            info.step_s, info.wait_s = beat["compute_s"], beat.get("wait_s", 0.0)
             out[k] = r
         for k, r in failed:
             self._declare_offline(k, r)
@@ -188,6 +190,8 @@ class Driver:
         live = int((self.owner >= 0).sum())
         events = np.zeros(len(EVENT_KEYS), dtype=np.int64)
         taken = agent_steps = 0
+        self.profile = {"wall_s": 0.0, "compute_s": np.zeros(n), "wait_s": np.zeros(n)}
+        t_start = time.perf_counter()
         while taken < steps and live:
             self.lost = _NONE
             control: Packed = {"ended": self._ended, "objects": self._objects, "owner": self.strips.owner,
@@ -200,6 +204,8 @@ class Driver:
             self._ended = np.union1d(np.concatenate(ended) if ended else _NONE, self.lost)
             self.owner[self._ended] = -1
             for k, r in replies.items():
+                self.profile["compute_s"][k] += r["beat"]["compute_s"]
+                self.profile["wait_s"][k] += r["beat"]["wait_s"]
                 events += np.asarray(r["events"], dtype=np.int64)
                 self.traffic.handover += int(r["handed"])
                 self.owner[r["arrived"]] = k
@@ -207,6 +213,7 @@ class Driver:
             live = sum(int(r["live"]) for r in replies.values())
             self.world.tick += 1
             self.world.step_count += 1
+        self.profile["wall_s"] = time.perf_counter() - t_start
         got = self._call("finish", dict.fromkeys(range(n), ()))
         finished = list(got.values())
         returns, pos, sums, alive = _rollout_rows(self.world, finished, self.scenario.info_keys())

@@ -431,7 +431,7 @@ class PartFloods:
                 f"spreads, got {start.shape} and {end.shape}"
             )
         add_start, add_len, add_v = self._adds()
-        relayed = np.unique(self._fr_row)
+        relayed = np.flatnonzero(np.bincount(self._fr_row, minlength=n))  # sorted distinct rows
         pool, rd_start, rd_len, out_v, out_f, out_h, row_h, edges, self._token = hop_kernel(
             start, end, indices, own, e_row[order], e_slot[order], e_own[order], e_hops[order], self._rd_start,
             self._rd_len, self._pool, add_start, add_len, add_v, self._stamp, self._token,
@@ -447,7 +447,7 @@ class PartFloods:
         fr_row, fr_slot = out_f[goes], out_v[goes]
         keys = self.keys()
         self._stats = PartHopStats(self._started, len(out), int(edges) - len(out), keys[relayed],
-                                   keys[np.unique(fr_row)])  # fmt: skip
+                                   keys[np.flatnonzero(np.bincount(fr_row, minlength=n))])  # fmt: skip
         self._started = 0
         # forget the floods that cannot spread any more, or that no own slot read
         has_fr = np.zeros(n, dtype=bool)

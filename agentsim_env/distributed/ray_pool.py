@@ -38,6 +38,18 @@ class WorkerActor:
         """``Worker.step``."""
         return self.worker.step(*args)
 
+    def begin(self, *args: Any) -> Packed:
+        """``Worker.begin``."""
+        return self.worker.begin(*args)
+
+    def act(self, *args: Any) -> Packed:
+        """``Worker.act``."""
+        return self.worker.act(*args)
+
+    def finish(self) -> Packed:
+        """``Worker.finish``."""
+        return self.worker.finish()
+
     def set_delay(self, delay_s: float) -> None:
         """``Worker.set_delay``."""
         self.worker.set_delay(delay_s)

@@ -54,7 +54,8 @@ class ShardRollout:
         self.ended_here = np.zeros(s, dtype=bool)
         worker.carry.update({"live": self.live, "returns": self.returns, "ended_here": self.ended_here})
         worker.carry.update({f"sum.{k}": v for k, v in self.sums.items()})
-        self.flat = worker.scenario.flat_observation(worker.world).copy()
+        self.slots = np.flatnonzero(self.live & worker.own)
+        self.flat = worker.flat_rows(self.slots)
 
     def act(self, control: Packed) -> Packed:
         """One step: the policy's actions for the own live agents, the step, the sums; counts back."""
@@ -62,7 +63,7 @@ class ShardRollout:
         st = w.world.state
         s = st.n_slots
         slots = np.flatnonzero(self.live & w.own)
-        rows = self.flat[slots]
+        rows = self.flat if np.array_equal(slots, self.slots) else self.flat[np.searchsorted(self.slots, slots)]
         n = slots.size
         obs = {k: rows[:, sl].reshape(n, *shape) for k, sl, shape in self.layout}
         if n:
@@ -83,7 +84,8 @@ class ShardRollout:
         self.ended_here |= acting & terminated
         w.own[acting & terminated] = False  # they stay where they stopped (``ended_here``)
         w._sender_positions()
-        self.flat = w.scenario.flat_observation(w.world).copy()
+        self.slots = np.flatnonzero(self.live & w.own)
+        self.flat = w.flat_rows(self.slots)
         counts = count_events(w.world.last_events)
         return {"live": int((self.live & w.own).sum()), "events": [counts[k] for k in EVENT_KEYS],
                 "ended": np.flatnonzero(acting & terminated), "handed": w.handed, "arrived": w.arrived}  # fmt: skip
@@ -96,7 +98,7 @@ class ShardRollout:
                        "live": np.flatnonzero(self.live & w.own)}  # fmt: skip
         out["sums"] = {k: v[slots] for k, v in self.sums.items()}
         out["own"] = np.flatnonzero(w.own)
-        out["obs"] = self.flat[out["live"]]  # step() can go on from here
+        out["obs"] = self.flat  # of ``live``: step() can go on from here
         for key in ("live", "returns", "ended_here", *(f"sum.{k}" for k in self.info_keys)):
             w.carry.pop(key, None)
         return out

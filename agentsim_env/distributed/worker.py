@@ -30,7 +30,7 @@ from agentsim_env.distributed.floods import FloodEntries
 from agentsim_env.distributed.partition import Strips
 from agentsim_env.distributed.shard_overlay import ShardOverlay
 from agentsim_env.distributed.shard_rollout import ShardRollout
-from agentsim_env.scenarios.base import run_step
+from agentsim_env.scenarios.base import flat_parts, run_step
 from agentsim_env.scenarios.registry import make_scenario
 from agentsim_env.sim import World
 from agentsim_env.sim.slot_rows import slot_arrays
@@ -86,7 +86,9 @@ class Worker:
         self.scenario = make_scenario(name, **config)
         self.world = self.scenario.build(1)
         self.strips = strips
-        self.swap = swap
+        self._swap = swap
+        self.wait_s = 0.0
+        """Seconds spent at the exchange in the current call (waiting for the others, routing, transfer)."""
         self.delay_s = float(delay_s)
         s = self.world.state.n_slots
         self.own = np.zeros(s, dtype=bool)
@@ -113,10 +115,19 @@ class Worker:
             comms.router = self
 
     # ------------------------------------------------------------------ helpers
+    def swap(self, key: tuple[int, str], k: int, payload: Packed) -> Packed:
+        """The exchange (timed: ``wait_s``)."""
+        t0 = time.perf_counter()
+        try:
+            return self._swap(key, k, payload)
+        finally:
+            self.wait_s += time.perf_counter() - t0
+
     def beat(self, t0: float) -> Packed:
-        """The heartbeat every reply carries."""
+        """The heartbeat every reply carries (``compute_s`` is the call's time, ``wait_s`` its exchanges')."""
+        wait, self.wait_s = self.wait_s, 0.0
         return {"shard": self.index, "address": self.address, "step": int(self.world.tick),
-                "compute_s": time.perf_counter() - t0}  # fmt: skip
+                "compute_s": time.perf_counter() - t0, "wait_s": wait}  # fmt: skip
 
     def set_delay(self, delay_s: float) -> None:
         """Test hook: sleep ``delay_s`` seconds in every later call (0: none)."""
@@ -143,7 +154,7 @@ class Worker:
             out["info"] = {k: v[slots] for k, v in res.info.items()}
         if obs:
             self._sender_positions()
-            out["obs"] = self.scenario.flat_observation(self.world)[slots]
+            out["obs"] = self.flat_rows(slots)
         if kin:
             mine = out["own"]
             out["pos"], out["vel"], out["heading"] = st.pos[mine], st.vel[mine], st.heading[mine]
@@ -232,6 +243,16 @@ class Worker:
         return DeliveryEvents(int(step), *(MessageLog.concat([getattr(r, f) for r in rounds])
                                            for f in ("sent", "delivered", "dropped")))  # fmt: skip
 
+    def flat_rows(self, slots: np.ndarray) -> np.ndarray:
+        """The flat observation rows of ``slots`` (only those rows are assembled from the parts)."""
+        sc, world = self.scenario, self.world
+        if world.comms is None and not any(x.obs_part is not None for x in world.sensors):
+            return sc.flat_observation(world)[slots]  # one kernel writes every row: cheaper than gathering
+        parts = sc.observation(world)
+        if not slots.size:
+            return np.zeros((0, sum(p.size for p in sc.obs_parts().values())), dtype=np.float32)
+        return flat_parts({k: v[slots] for k, v in parts.items()}, slots.size)
+
     def _sender_positions(self) -> None:
         """The current positions of the senders in own inboxes that live on other shards beyond the halo.
 
@@ -242,15 +263,16 @@ class Worker:
         if comms is None:
             return
         inbox = comms.bus.inbox
-        rows = inbox.valid & self.own[:, None]
-        snd = inbox.sender[rows]
-        snd = np.unique(snd[snd >= 0])
-        want = snd[~(self.own[snd] | self.ghost[snd])]
+        snd = inbox.sender[inbox.valid & self.own[:, None]]
+        need = np.zeros(st.n_slots, dtype=bool)  # a mask, not np.unique: linear in the inbox rows
+        need[snd[snd >= 0]] = True
+        need &= ~(self.own | self.ghost)
+        want = np.flatnonzero(need)
         tick = int(self.world.tick)
         serve = self.swap((tick, "want"), self.index, {"slots": want})["slots"]
         got = self.swap((tick, "have"), self.index, {"slots": serve, "pos": st.pos[serve]})
         sl, pos = got["slots"], got["pos"]
-        sel = np.isin(sl, want)
+        sel = need[sl]
         st.pos[sl[sel]] = pos[sel]
 
     def combine(self, partials: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
