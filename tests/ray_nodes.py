@@ -10,9 +10,10 @@ Every port stays on 127.0.0.1: each node gets ``--node-ip-address 127.0.0.1`` an
 every server Ray would otherwise open on a fixed port (the dashboard's, the client server's, the agents'),
 and ``ray start`` runs with Ray's loopback-to-outward-address rewrite of the node address turned off (Ray 2.60
 replaces a literal 127.0.0.1 by the machine's outward address, and then binds every gRPC server to every
-interface; see ``agentsim_env.distributed.ray_backend``). Token authentication is off (``RAY_AUTH_MODE``), as
-for the local cluster ``ray.init`` starts: it would turn itself on when ``~/.ray/auth_token`` exists and the
-test driver would then need the token.
+interface; see ``agentsim_env.distributed.ray_backend``). Token authentication follows this process
+(``RAY_AUTH_MODE``): off, as for a driver that joins by address, unless a local cluster started here before
+turned it on (Ray does when ``~/.ray/auth_token`` exists; the nodes then read that token too). With one side on
+and the other off, every actor dies at creation.
 
 Node ``i`` offers the custom resource ``agentsim_node_<i>``, which pins shard ``k`` to node ``k mod 2``.
 """
@@ -202,7 +203,10 @@ class TwoNodes:
 
 def _start_node(index: int, args: list[str], temp_dir: Path) -> RayNode:
     log = temp_dir / f"node{index}.log"
-    env = dict(os.environ, RAY_AUTH_MODE="disabled")
+    env = dict(os.environ)
+    # the driver's mode, else off: a local cluster started earlier in this process (ray.init) switched it to
+    # token when ~/.ray/auth_token exists, and the nodes then read the same token file
+    env.setdefault("RAY_AUTH_MODE", "disabled")
     resources = json.dumps({f"{NODE_RESOURCE}{index}": 8})
     argv = [sys.executable, "-c", _RAY_START, "start", "--block", "--node-ip-address", "127.0.0.1",
             "--num-cpus", "2", "--resources", resources, "--disable-usage-stats", "--temp-dir", str(temp_dir),

@@ -141,7 +141,6 @@ def test_a_fresh_process_joins_the_loopback_cluster_by_address(two_nodes: TwoNod
             "env.reset(seed=0)\n"
             "print(len(live_steps(env, 2, np.random.default_rng(0))), sorted(s.alive for s in env.shards))\n"
             "env.close()\n")  # fmt: skip
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=150,
-                         env=dict(os.environ, RAY_AUTH_MODE="disabled"))  # fmt: skip
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=150)
     assert out.returncode == 0, out.stderr[-3000:]
     assert out.stdout.strip().splitlines()[-1] == "2 [True, True]", out.stdout
