@@ -261,7 +261,7 @@ class CommsStack:
         self._notices: list[MessageLog] = []  # collision notices pushed this step, reported by ``deliver``
         self.events = CommsEvents(None, None, self.sent.copy())
         self.router: BusRouter | None = None
-        """A shard's bus delivery (``distributed.worker``): its due messages bridged with the other shards."""
+        """A shard's bus delivery (``distributed.shard``): its due messages bridged with the other shards."""
 
     @property
     def pairs(self) -> tuple[np.ndarray, ...]:

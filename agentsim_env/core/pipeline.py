@@ -111,7 +111,7 @@ class Sensor(Subsystem, Protocol):
 
 @runtime_checkable
 class StepBridge(Protocol):
-    """The exchanges of a world that steps part of a larger one (a shard; ``distributed.worker``).
+    """The exchanges of a world that steps part of a larger one (a shard; ``distributed.shard``).
 
     ``World.step`` calls it between stages; a world stepped on its own has none (``world.bridge is None``).
     """

@@ -1,10 +1,11 @@
 """One simulation over several processes or machines: spatial shards on Ray (the only Ray importer).
 
 ``make(name, shards=K, ray_address=None, **config)`` returns the scenario's PettingZoo ``ParallelEnv`` with its
-steps run over K shards (``DistributedBatchedEnv`` is the array front end). The map is cut into strips; each
-shard runs the spatial stages (motion, collisions, proximity scan, comms range graph) for the agents of its
-strips with the ghosts of its halo; a coordinator runs the rest (bus, overlay, groups, scoring) over the gathered
-arrays, so results do not depend on the split. See docs/distributed.md.
+steps run over K shards (``DistributedBatchedEnv`` is the array front end); ``env.rollout(policy, steps)`` runs
+the policy inside the shards. The map is cut into strips; each shard runs the whole step pipeline for the agents
+of its strips, with the ghosts of its halo, and meets the others at a few exchanges routed by the coordinator
+(hand-overs and ghosts, bus messages across shards, per-group sums), so results do not depend on the split.
+See docs/distributed.md.
 """
 
 from agentsim_env.distributed.coordinator import Coordinator, ShardInfo

@@ -1,21 +1,26 @@
-"""How the coordinator reaches its shards: in process (``LocalShards``) or as Ray actors (``ray_backend``).
+"""How the coordinator reaches its shards: in this process (``LocalShards``, a thread each) or on Ray (``ray_backend``).
 
-A backend runs one method on several shards at once and answers, per shard, either the shard's packed reply
-or a :class:`Failure` (the shard died, missed the deadline, or raised). It never raises for a shard that failed:
-the coordinator declares that shard offline and goes on. An exception raised by the shard's own code counts as a
-failure too: the shard's state is unknown after it (a persistent fault would break every later call), so the
-shard is dropped like a dead one and started anew at the next ``reset``; the exception travels in the
-``Failure`` (the coordinator logs its traceback, and chains it when no shard is left).
+A backend runs one method on several shards at once. The shards meet each other at the exchange during the
+call (``distributed.exchange``), so the calls run concurrently, and a shard that fails must leave the exchange at
+once (else the others wait for it at the next barrier): the backend drops a failed shard from the exchange as
+soon as it sees the failure, and answers, per shard, its reply or a :class:`Failure` (the shard died, missed
+the deadline, or raised). It never raises for a shard that failed: the coordinator declares that shard offline
+and goes on. An exception raised by the shard's own code counts as a failure too: the shard's state is unknown
+after it, so it is dropped like a dead one and started anew at the next ``reset``; the exception travels in
+the ``Failure`` (the coordinator logs its traceback, and chains it when no shard is left).
 """
 
 from __future__ import annotations
 
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import Any
 
-from agentsim_env.distributed.shard import Packed, Shard
+from agentsim_env.distributed.bridge import Bridge, Packed
+from agentsim_env.distributed.exchange import LocalExchange
+from agentsim_env.distributed.shard import Shard
 
 
 @dataclass(frozen=True, slots=True)
@@ -36,77 +41,68 @@ def raised(error: BaseException) -> Failure:
     return Failure(f"raised {type(error).__name__}: {error}", error)
 
 
-class Backend(Protocol):
-    """The calls a coordinator makes on its shards."""
-
-    n_shards: int
-    address: str  # where the shards run, for messages ("local", a cluster address)
-
-    def call(
-        self, method: str, calls: dict[int, tuple[Any, ...]], timeout_s: float
-    ) -> dict[int, Packed | Failure]:
-        """Run ``method(*args)`` on every shard named in ``calls``; wait at most ``timeout_s`` for all."""
-
-    def restart(self, index: int) -> None:
-        """Start shard ``index`` anew (its previous process is gone or abandoned)."""
-
-    def kill(self, index: int) -> None:
-        """Stop shard ``index`` at once (tests: a machine that dies)."""
-
-    def close(self) -> None:
-        """Stop every shard."""
+ShardFactory = Callable[[int, Any], Shard]
+"""Builds shard ``k`` given the exchange's ``swap``."""
 
 
 class LocalShards:
-    """Shards in this process, called one after another (debugging, tests, machines without Ray).
-
-    Deadlines are checked after the fact (a call cannot be interrupted): a shard whose call took longer than
-    the deadline is declared offline all the same, and its answer thrown away. A shard whose call raised is
-    dropped (see the module docstring).
+    """Shards in this process, each call on its own thread (debugging, tests, machines without Ray).
 
     Args:
-        factory: Builds shard ``k``.
+        factory: Builds shard ``k`` (given its index and the swap function).
         n_shards: Number of shards K.
+        bridge: The coordinator's routing.
     """
 
-    def __init__(self, factory: Callable[[int], Shard], n_shards: int) -> None:
+    def __init__(self, factory: ShardFactory, n_shards: int, bridge: Bridge) -> None:
         self.n_shards = int(n_shards)
+        self.exchange = LocalExchange(bridge, self.n_shards)
         self._factory = factory
-        self.shards: dict[int, Shard | None] = {k: factory(k) for k in range(self.n_shards)}
+        self.shards: dict[int, Shard | None] = {k: factory(k, self.exchange.swap) for k in range(self.n_shards)}
         self.address = "local"
 
-    def call(
-        self, method: str, calls: dict[int, tuple[Any, ...]], timeout_s: float
-    ) -> dict[int, Packed | Failure]:
-        """Run ``method`` on each named shard in turn (see :class:`Backend`)."""
+    def call(self, method: str, calls: dict[int, tuple[Any, ...]], timeout_s: float) -> dict[int, Packed | Failure]:
+        """Run ``method`` on each named shard at once; a reply or a ``Failure`` per shard."""
         out: dict[int, Packed | Failure] = {}
+        threads: dict[int, threading.Thread] = {}
+
+        def run(k: int, shard: Shard, args: tuple[Any, ...]) -> None:
+            try:
+                out[k] = getattr(shard, method)(*args)
+            except BaseException as e:  # noqa: BLE001 - the shard's state is unknown now: drop it
+                self.shards[k] = None
+                self.exchange.drop(k)
+                out[k] = raised(e)
+
         for k, args in calls.items():
             shard = self.shards.get(k)
             if shard is None:
                 out[k] = Failure("died: the shard was stopped")
+                self.exchange.drop(k)
                 continue
-            t0 = time.perf_counter()
-            try:
-                reply = getattr(shard, method)(*args)
-            except Exception as e:  # the shard's state is unknown now: drop it until a restart
-                self.shards[k] = None
-                out[k] = raised(e)
-                continue
-            took = time.perf_counter() - t0
-            if took > timeout_s:
-                self.shards[k] = None  # its answer came too late: it is offline until a restart
-                out[k] = Failure(f"missed the {timeout_s:g} s deadline of {method} (took {took:.2f} s)")
-            else:
-                out[k] = reply
+            threads[k] = threading.Thread(target=run, args=(k, shard, args), daemon=True)
+        for t in threads.values():
+            t.start()
+        late = _wait_all(threads, timeout_s, self.exchange.waiting)
+        for k in late:  # dropped (the thread finishes on its own; its answer is thrown away)
+            self.shards[k] = None
+            self.exchange.drop(k)
+        for k, t in threads.items():
+            if k not in late:
+                t.join(timeout_s)  # they were waiting for the late ones at the exchange: they finish now
+        for k in late:
+            out[k] = Failure(f"missed the {timeout_s:g} s deadline of {method}")
         return out
 
     def restart(self, index: int) -> None:
         """Build shard ``index`` anew."""
-        self.shards[index] = self._factory(index)
+        self.shards[index] = self._factory(index, self.exchange.swap)
+        self.exchange.revive(index)
 
     def kill(self, index: int) -> None:
         """Drop shard ``index`` (its next call answers a failure)."""
         self.shards[index] = None
+        self.exchange.drop(index)
 
     def set_delay(self, index: int, delay_s: float) -> None:
         """Test hook: shard ``index`` sleeps ``delay_s`` in every call."""
@@ -114,6 +110,29 @@ class LocalShards:
         if shard is not None:
             shard.set_delay(delay_s)
 
+    def set_owner(self, owner: Any) -> None:
+        """The shard owning each strip (for the exchange's routing)."""
+        self.exchange.set_owner(owner)
+
+    def set_slot_owner(self, owner: Any) -> None:
+        """The shard owning each slot (for routing bus messages)."""
+        self.exchange.set_slot_owner(owner)
+
     def close(self) -> None:
         """Drop every shard."""
         self.shards = dict.fromkeys(self.shards)
+
+
+def _wait_all(threads: dict[int, threading.Thread], timeout_s: float, waiting: Callable[[], set[int]]) -> list[int]:
+    """Wait until every thread ended or the deadline passed; the late shards (those not waiting at the exchange).
+
+    A shard waiting at the exchange when the deadline passes waits for a late one: it is not late itself.
+    """
+    deadline = time.perf_counter() + timeout_s
+    for t in threads.values():
+        t.join(max(0.0, deadline - time.perf_counter()))
+    alive = {k for k, t in threads.items() if t.is_alive()}
+    if not alive:
+        return []
+    late = alive - waiting()
+    return sorted(late or alive)  # all of them waiting: none can go on, so all are late

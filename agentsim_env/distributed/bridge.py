@@ -1,6 +1,6 @@
 """What the coordinator does during a step of shards that step themselves: it only routes.
 
-Each shard runs the step pipeline for its own agents (``distributed.worker``). At a few points of the step it
+Each shard runs the step pipeline for its own agents (``distributed.shard``). At a few points of the step it
 needs something from the others; it posts what it has and waits for what is routed to it (an **exchange**):
 
 ========== ============================================================ ====================================

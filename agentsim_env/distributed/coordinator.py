@@ -1,28 +1,16 @@
-"""The coordinator: steps the shards in lock step and runs the non-spatial stages over the gathered arrays.
+"""The coordinator of shards that step themselves: it hands out actions, keeps the clock and the heartbeats.
 
-It holds a whole-map ``World`` of the scenario (the "mirror"): the kinematics the shards send back each step,
-the static scene, and everything that is not spatial: stage 1's comm part, the groups stage (heartbeats), the
-bus and the overlay (the bridged bus: one bus for every shard's agents), the non-spatial sensors, and stage 9
-(rewards, terminations, observations), all with the single-process code. So results do not depend on the split:
-the spatial stages are exact on a shard whose halo holds everything its agents interact with, and every random
-draw (placement, bus losses, sensor noise) is made once, here or identically everywhere, never per shard.
+Each shard (``distributed.shard``) runs the whole step for its own agents and meets the others at the exchange
+(``distributed.exchange``, routed by ``distributed.bridge``). The driver does not order stages: a step is one
+``step`` call per live shard, waited for with a deadline. What it keeps: which shard owns which slot (from the
+replies, for splitting the caller's actions), each shard's heartbeat, the strips of a shard that went offline,
+and the rows the caller asked for (rewards, terminations, infos, observations; kinematics into ``world``, the
+mirror the step hooks, ``render`` and ``state()`` read).
 
-One step (see ``distributed.shard`` for the shard's side):
-
-1. ``move`` on every shard; the kinematics go into the mirror; agents that crossed a strip edge are routed to
-   their new shard; each shard's ghosts are the agents of other shards within its halo (from the mirror).
-2. ``collide``: handed-over agents and ghosts in, collisions of own agents out (a contact across an edge is
-   found by both shards, each reporting its own agent: it is counted once per agent, as in one process). The
-   groups stage (heartbeat timeouts) runs here.
-3. ``sense`` with every slot that went offline and the overlay frontier each shard can walk; the nearest
-   neighbours and the hop's deliveries come back for the comms stage (which runs here), and the proximity rows
-   for the observations. When collisions take nobody offline, calls 2 and 3 go as one (``collide_sense``).
-
-Faults: every reply carries a heartbeat (shard, address, step, compute time) kept in ``shards``; a shard that
-dies, misses the deadline or raises is declared offline at once: its agents go offline (they report
-``terminations`` once), its strips pass to the nearest live shard, the rest goes on. ``reset`` restarts offline
-shards. When no shard is left, the call raises a ``RuntimeError`` naming every shard's reason (chained to the
-exception a shard raised, if any).
+Faults: a shard that dies, misses the deadline or raises is offline at once (the pool drops it from the
+exchange, so the others finish their step): its agents report ``terminations`` once, its strips pass to the
+nearest live shard, the rest goes on; ``reset`` restarts it. With no shard left the call raises a
+``RuntimeError`` naming every shard's reason (chained to the exception a shard raised, if any).
 """
 
 from __future__ import annotations
@@ -34,14 +22,14 @@ from typing import Any
 
 import numpy as np
 
+from agentsim_env.comms.events import DeliveryEvents, MessageLog
+from agentsim_env.comms.overlay import Deliveries
+from agentsim_env.comms.stack import CommsEvents
 from agentsim_env.core.collisions import CollisionEvents
-from agentsim_env.distributed.backends import Backend, Failure
-from agentsim_env.distributed.flooding import ShardedOverlay
-from agentsim_env.distributed.graph import GatheredGraph
+from agentsim_env.distributed.backends import Failure
+from agentsim_env.distributed.bridge import Packed
 from agentsim_env.distributed.partition import Strips
-from agentsim_env.distributed.shard import Packed
 from agentsim_env.scenarios.base import Scenario, StepResult, StepScores
-from agentsim_env.sensors.proximity import ProximitySensor, ScanResult
 from agentsim_env.sim import StepEvents, World
 
 log = logging.getLogger("agentsim_env.distributed")
@@ -104,43 +92,36 @@ def nbytes(obj: Any) -> int:
 
 
 class Coordinator:
-    """Steps K shards in lock step over one world (see the module docstring).
+    """Steps K self-stepping shards over one world (see the module docstring).
 
     Args:
-        scenario: The scenario (its config validated, its shardability checked by the caller).
-        world: The coordinator's mirror world (``scenario.build(1)``).
+        scenario: The scenario (validated config, shardable).
+        world: The mirror world (``scenario.build(1)``): kinematics when asked, the scene, the clock.
         strips: The partition.
-        backend: The shards.
+        pool: The workers (``pool.LocalPool`` or ``ray_pool.RayPool``).
         timeout_s: Deadline of every call, in seconds.
     """
 
-    def __init__(
-        self, scenario: Scenario, world: World, strips: Strips, backend: Backend, timeout_s: float
-    ) -> None:
+    def __init__(self, scenario: Scenario, world: World, strips: Strips, pool: Any, timeout_s: float) -> None:
         self.scenario = scenario
         self.world = world
         self.strips = strips
-        self.backend = backend
+        self.backend = pool
         self.timeout_s = float(timeout_s)
-        self.shards = [ShardInfo(k) for k in range(backend.n_shards)]
+        self.shards = [ShardInfo(k) for k in range(pool.n_shards)]
         s = world.state.n_slots
         self.owner = np.full(s, -1, dtype=np.int64)
-        self.graph: GatheredGraph | None = None
-        if world.comms is not None:
-            self.graph = GatheredGraph(s, world.comms.cfg.nearest_range)
-            world.comms.graph = self.graph  # type: ignore[assignment]
-            world.comms.overlay = ShardedOverlay.like(world.comms.overlay)
-            self._range0 = world.comms.overlay.link_range.copy()
-        # collisions that take nobody offline let the groups stage run first and calls 2 and 3 go as one
-        self._fused = not (world.config.collisions and world.config.collision_ends_agent)
-        self._spatial = [x for x in world.sensors if isinstance(x, ProximitySensor)]
-        self._others = [x for x in world.sensors if not isinstance(x, ProximitySensor)]
-        n_rays = {x.name: x.n_rays for x in self._spatial}
-        world.readings.update({name: ScanResult.empty(s, k) for name, k in n_rays.items()})
         self._ended = _NONE
         self._objects: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
         self.lost = _NONE
         self.traffic = Traffic()
+        self.obs: np.ndarray | None = None
+        self.kinematics = True
+        """Gather every own agent's position each step into ``world`` (the mirror); off for rollouts."""
+        self.profile: dict[str, Any] = {}
+        """The latest rollout's seconds: ``wall_s`` of its steps, each shard's ``compute_s`` and ``wait_s``."""
+        self.gather_events = False
+        """Gather the step's message deliveries into ``world.last_events`` (also whenever hooks are attached)."""
 
     # ------------------------------------------------------------------ faults
     @property
@@ -162,26 +143,26 @@ class Coordinator:
             raise RuntimeError(f"every shard is offline ({reasons}): the simulation cannot go on (reset() restarts "
                                f"them)") from failure.error  # fmt: skip
         self.strips.reassign(k, self.alive)
-        # a shard that raised: its traceback goes with the warning (a bug shows where it is)
+        self.backend.set_owner(self.strips.owner)
         log.warning("shard %d (%s) is offline: %s; its %d agents terminate, the simulation goes on",
                     k, info.address, failure.reason, slots.size, exc_info=failure.error)  # fmt: skip
 
     def _call(self, method: str, calls: dict[int, tuple[Any, ...]]) -> dict[int, Packed]:
-        """Run ``method`` on the live shards; declare the ones that fail offline; the answers of the others."""
         calls = {k: a for k, a in calls.items() if self.shards[k].alive}
         replies = self.backend.call(method, calls, self.timeout_s)
         out: dict[int, Packed] = {}
         now = time.time()
+        failed = []
         for k, r in replies.items():
             if isinstance(r, Failure):
-                self._declare_offline(k, r)
+                failed.append((k, r))
                 continue
             beat, info = r["beat"], self.shards[k]
             info.address, info.last_answer, info.last_step = beat["address"], now, beat["step"]
-            info.step_s = (
-                beat["compute_s"] if method in ("move", "reset") else info.step_s + beat["compute_s"]
-            )
+            info.step_s, info.wait_s = beat["compute_s"], beat.get("wait_s", 0.0)
             out[k] = r
+        for k, r in failed:
+            self._declare_offline(k, r)
         return out
 
     def restart_offline(self) -> None:
@@ -193,8 +174,22 @@ class Coordinator:
                 info.restarts += 1
                 log.info("shard %d restarted", info.index)
         self.strips.owner = np.arange(self.strips.n_strips, dtype=np.int64)
+        self.backend.set_owner(self.strips.owner)
 
-    # ------------------------------------------------------------------ scene
+    def call_owner(self, slot: int, method: str, *args: Any) -> Packed:
+        """Run ``method`` on the shard owning ``slot`` now (the code API: messages, group changes).
+
+        Raises:
+            ValueError: When the slot's shard is offline (its agents ended).
+        """
+        k = int(self.owner[int(slot)])
+        if k < 0:
+            raise ValueError(f"agent slot {slot} is not live on any shard")
+        got = self._call(method, {k: args})
+        if k not in got:
+            raise ValueError(f"the shard of agent slot {slot} went offline: {self.shards[k].reason}")
+        return got[k]
+
     def add_objects(self, kind: np.ndarray, centre: np.ndarray, half: np.ndarray) -> None:
         """Add static objects to the world now; every shard gets them before the next step's motion."""
         self.world.scene.add(kind, centre, half, 0)
@@ -203,195 +198,208 @@ class Coordinator:
         self._objects.append((sc.kind[-k:].copy(), sc.centre[-k:].copy(), sc.half[-k:].copy()))
 
     # ------------------------------------------------------------------ gathering
-    def _take_rows(self, replies: dict[int, Packed]) -> None:
-        """The proximity rows and the range-graph rows of every reply into the mirror."""
-        world = self.world
-        if self.graph is not None:
-            self.graph.clear()
+    def _take(self, replies: dict[int, Packed], obs: bool) -> None:
+        st = self.world.state
+        for k, r in replies.items():
+            self.owner[r["own"]] = k
+        if obs:
+            out = self.obs
+            assert out is not None
+            for r in replies.values():
+                out[r["slots"]] = r["obs"]
         for r in replies.values():
-            slots = r["slots"]
-            for sensor in self._spatial:
-                scan = world.readings[sensor.name]
-                scan.distance[slots] = r[f"{sensor.name}.distance"]
-                scan.hit_kind[slots] = r[f"{sensor.name}.hit_kind"]
-                if f"{sensor.name}.hit_id" in r:
-                    scan.hit_id[slots] = r[f"{sensor.name}.hit_id"]
-            if self.graph is not None:
-                self.graph.put(slots, r["nearest"])
-        if self.graph is not None and any("ov.slot" in r for r in replies.values()):
-            got = [r for r in replies.values() if "ov.slot" in r]
-            overlay: ShardedOverlay = world.comms.overlay  # type: ignore[union-attr, assignment]
-            overlay.put(np.concatenate([r["ov.slot"] for r in got]), np.concatenate([r["ov.flood"] for r in got]),
-                        sum(int(r["ov.links"]) for r in got))  # fmt: skip
-
-    def _sense_others(self, fresh: bool) -> None:
-        ctx = self.world.context()
-        if fresh:
-            ctx.fresh = np.zeros(1, dtype=np.int64)
-        for sensor in self._others:
-            self.world.readings[sensor.name] = sensor.step(ctx)
-
-    def _hop_for(self, k: int, ghosts: np.ndarray) -> Packed | None:
-        """What shard ``k`` needs for this step's overlay hop (``None`` when no flood spreads)."""
-        comms = self.world.comms
-        if comms is None or not comms.overlay.frontier_size:
-            return None
-        overlay: ShardedOverlay = comms.overlay  # type: ignore[assignment]
-        active, fr_f, fr_u, new = overlay.hop_plan()
-        mine = self.owner[fr_u] == k
-        if ghosts.size:
-            mine |= np.isin(fr_u, ghosts)
-        return {
-            "active": active,
-            "started": fr_f[new],
-            "origin": fr_u[new],
-            "fr_f": fr_f[mine],
-            "fr_u": fr_u[mine],
-        }
-
-    def _link_range(self) -> np.ndarray | None:
-        comms = self.world.comms
-        if comms is None:
-            return None
-        rng = comms.overlay.link_range
-        if rng.max(initial=0.0) > self.strips.halo:
-            raise ValueError(f"the overlay range {rng.max():g} m is wider than the shards' halo of "
-                             f"{self.strips.halo:g} m: set the range before make(), or use one shard")  # fmt: skip
-        return None if np.array_equal(rng, self._range0) else rng.copy()
+            if "pos" in r:
+                mine = r["own"]
+                st.pos[mine], st.vel[mine], st.heading[mine], st.online[mine] = (
+                    r["pos"], r["vel"], r["heading"], r["online"])  # fmt: skip
 
     # ------------------------------------------------------------------ episode
-    def reset(self, seed: np.random.SeedSequence) -> None:
-        """Start the episode of ``seed`` on the mirror and on every shard (offline shards are restarted first)."""
+    def reset(self, seed: np.random.SeedSequence, gather: bool = True) -> None:
+        """Start the episode of ``seed`` on the mirror and on every shard (offline shards restarted first).
+
+        ``gather``: bring every agent's observation back (the step API); a rollout keeps them on the shards.
+        """
         self.restart_offline()
         world, sc = self.world, self.scenario
         placement = world.reset_world(0, seed)
         sc.reset_world(world, 0, placement)
         self._ended, self._objects, self.lost = _NONE, [], _NONE
         self.owner[:] = -1
-        replies = self._call("reset", {k: (seed, self.strips.owner) for k in range(len(self.shards))})
-        for k, r in replies.items():
-            self.owner[r["slots"]] = k
+        s = world.state.n_slots
+        self.obs = np.zeros((s, _obs_dim(sc)), np.float32)
+        replies = self._call("reset", {k: (seed, self.strips.owner, gather, self.kinematics and gather,
+                                           int(world.tick)) for k in range(len(self.shards))})  # fmt: skip
+        self._take(replies, obs=gather)
+        self.backend.set_slot_owner(self.owner)
         if not self.alive.all():  # a shard that failed its reset loses its agents at once
             self.lost = np.flatnonzero(world.state.online & (self.owner < 0))
             world.set_offline(self.lost)
-        self._take_rows(replies)
-        self._sense_others(fresh=True)
 
-    # ------------------------------------------------------------------ step
+    def rollout(self, policy: Any, steps: int, seed: np.random.SeedSequence, policy_seed: int | None,
+                done: int, max_steps: int) -> dict[str, Any]:  # fmt: skip
+        """``env.rollout`` over the shards: the policy runs inside them; only counts come back each step.
+
+        Args:
+            policy: A baseline name, a trained model folder or a policy object (built or sent to every shard).
+            steps: Steps to run (fewer when every agent ends first).
+            seed: The episode's seed sequence.
+            policy_seed: The seed given to ``policy.reset``.
+            done: Steps of the episode taken before (0 after the reset).
+            max_steps: The scenario's episode length (the last step truncates).
+
+        Returns:
+            ``steps``, ``agent_steps``, ``events`` (counts), ``returns`` / ``final_pos`` / ``sums`` over every
+            slot, and ``live`` (the slots still live).
+        """
+        from agentsim_env.env.rollout import EVENT_KEYS
+
+        self.reset(seed, gather=False)
+        n = len(self.shards)
+        self._call("begin", {k: (policy, policy_seed) for k in range(n)})
+        live = int((self.owner >= 0).sum())
+        events = np.zeros(len(EVENT_KEYS), dtype=np.int64)
+        taken = agent_steps = 0
+        self.profile = {"wall_s": 0.0, "compute_s": np.zeros(n), "wait_s": np.zeros(n)}
+        t_start = time.perf_counter()
+        while taken < steps and live:
+            self.lost = _NONE
+            control: Packed = {"ended": self._ended, "objects": self._objects, "owner": self.strips.owner,
+                               "taken": taken, "over": done + taken + 1 >= max_steps}  # fmt: skip
+            self._objects = []
+            replies = self._call("act", dict.fromkeys(range(n), (control,)))
+            agent_steps += live
+            taken += 1
+            ended = [r["ended"] for r in replies.values()]
+            self._ended = np.union1d(np.concatenate(ended) if ended else _NONE, self.lost)
+            self.owner[self._ended] = -1
+            for k, r in replies.items():
+                self.profile["compute_s"][k] += r["beat"]["compute_s"]
+                self.profile["wait_s"][k] += r["beat"]["wait_s"]
+                events += np.asarray(r["events"], dtype=np.int64)
+                self.traffic.handover += int(r["handed"])
+                self.owner[r["arrived"]] = k
+            events[EVENT_KEYS.index("offline")] += self.lost.size
+            live = sum(int(r["live"]) for r in replies.values())
+            self.world.tick += 1
+            self.world.step_count += 1
+        self.profile["wall_s"] = time.perf_counter() - t_start
+        got = self._call("finish", dict.fromkeys(range(n), ()))
+        finished = list(got.values())
+        returns, pos, sums, alive = _rollout_rows(self.world, finished, self.scenario.info_keys())
+        self.owner[:] = -1
+        self.obs = np.zeros((self.world.state.n_slots, _obs_dim(self.scenario)), np.float32)
+        for k, r in got.items():  # where step() goes on from: the owners, the live agents' observations
+            self.owner[r["own"]] = k
+            self.obs[r["live"]] = r["obs"]
+        self.world.state.pos[:] = pos
+        return {"steps": taken, "agent_steps": agent_steps, "events": dict(zip(EVENT_KEYS, events.tolist())),
+                "returns": returns, "final_pos": pos, "sums": sums, "live": alive}  # fmt: skip
+
     def step(self, parts: dict[str, np.ndarray], acting: np.ndarray) -> tuple[StepResult, np.ndarray]:
-        """Stages 1-10 of one step over the shards (the distributed ``run_step``).
+        """One step over the shards: each runs it for its own agents; their rows come back.
 
         Args:
             parts: Validated action parts ``(S, size)`` of every slot.
             acting: ``(S,)`` the live slots.
 
         Returns:
-            The scenario's result and the slots that terminated (those of an offline shard included).
+            The step's result over every slot and the slots that terminated (those of an offline shard too).
         """
-        world, sc, st = self.world, self.scenario, self.world.state
+        world, st = self.world, self.world.state
+        s = st.n_slots
         self.lost = _NONE
         tr = self.traffic = Traffic()
-        link_range = self._link_range()
-        if "comm" in parts:  # 1. the comm part: one bus for every shard (nearest from the shards' graphs)
-            world.apply_comm(parts["comm"], acting)
-        motion = {k: v for k, v in parts.items() if k != "comm"}
+        events_wanted = self.gather_events or bool(world.hooks)
+        control: Packed = {"ended": self._ended, "objects": self._objects, "owner": self.strips.owner,
+                           "obs": True, "kinematics": self.kinematics, "events": events_wanted}  # fmt: skip
         calls: dict[int, tuple[Any, ...]] = {}
         for k in range(len(self.shards)):
             slots = np.flatnonzero(acting & (self.owner == k))
-            calls[k] = (slots, {p: v[slots] for p, v in motion.items()}, self._ended, self._objects,
-                        self.strips.owner)  # fmt: skip
+            calls[k] = (slots, {p: v[slots] for p, v in parts.items()}, control)
             tr.actions += nbytes(calls[k][:2])
-            tr.other += nbytes(calls[k][2:])
         self._objects = []
-        moved = self._call("move", calls)  # 2-4 on the shards
-        for r in moved.values():
+        replies = self._call("step", calls)
+        rewards = np.zeros(s)
+        terminated = np.zeros(s, dtype=bool)
+        info: dict[str, np.ndarray] = {}
+        keys = self.scenario.info_keys()
+        for r in replies.values():
             sl = r["slots"]
-            st.pos[sl], st.vel[sl], st.heading[sl] = r["pos"], r["vel"], r["heading"]
-            tr.kinematics += nbytes([sl, r["pos"], r["vel"], r["heading"]])
-        live = np.flatnonzero(self.owner >= 0)
-        x = st.pos[live, 0]
-        self.owner[live] = self.strips.owner_of(x)
-        arrivals = _route_arrivals(list(moved.values()), self.owner)
-        calls = {}
-        ghost_of: dict[int, np.ndarray] = {}
-        for k in range(len(self.shards)):
-            g = ghost_of[k] = self.strips.ghosts(x, live, k)
-            calls[k] = (arrivals.get(k), g, st.pos[g])
-            tr.handover += nbytes(calls[k][0]) if calls[k][0] is not None else 0
-            tr.halo += nbytes(calls[k][1:])
-        ctx = world.context()
-        hit_ids = bool(world.hooks)  # the viewer and the recorder may read them; the observations do not
-        if self._fused:  # collisions take nobody offline: the groups stage first, then one call
-            timed_out, group_events = world.run_groups(ctx)  # 6 here
-            offline = np.union1d(timed_out, self.lost)
-            for k in range(len(self.shards)):
-                sense = (offline, self._hop_for(k, ghost_of[k]), link_range, hit_ids)
-                tr.other += nbytes(sense)
-                calls[k] = (*calls[k], *sense)
-            # 5 and 8 (with the range graph and the overlay hop) on the shards
-            sensed = hit = self._call("collide_sense", calls)
-            events = _merge_collisions(list(hit.values()))
-            ctx.collisions = events
-            went = _NONE
-        else:
-            hit = self._call("collide", calls)  # 5 on the shards
-            events = _merge_collisions(list(hit.values()))
-            ctx.collisions = events
-            went = np.unique(events.agent) if len(events) else _NONE
-            if went.size:
-                world.set_offline(went)
-            timed_out, group_events = world.run_groups(ctx)  # 6 here
-            offline = np.union1d(np.union1d(went, timed_out), self.lost)
-            calls = {
-                k: (offline, self._hop_for(k, ghost_of[k]), link_range, hit_ids)
-                for k in range(len(self.shards))
-            }
-            tr.other += sum(nbytes(c) for c in calls.values())
-            sensed = self._call("sense", calls)  # 8 (and the range graph, the overlay hop) on the shards
-        tr.readings += sum(nbytes(r) for r in sensed.values())
-        self._take_rows(sensed)
-        # drop the replies now: Ray frees their shared memory while the comms stage runs, not while the front end
-        # allocates the observations (measured: fewer page-fault stalls there)
-        del moved, hit, sensed, calls, arrivals
-        comm_events = world.run_comms(ctx)  # 7 here
-        self._sense_others(fresh=False)
-        ev = StepEvents(events, went, timed_out, comm_events, group_events, None, world.readings)
-        ev.lost = self.lost
-        world.end_step(ev, hooks=False)
-        res = sc.score(world, ev, acting)  # 9
-        terminated = acting & (res.terminated | ~st.online)
+            rewards[sl] = r["rewards"]
+            terminated[sl] = r["terminated"]
+            for key in keys:
+                v = r["info"][key]
+                if key not in info:
+                    info[key] = np.zeros(s, dtype=v.dtype)
+                info[key][sl] = v
+            tr.readings += nbytes(r)
+            tr.handover += int(r["handed"])
+        for key in keys:
+            info.setdefault(key, np.zeros(s))
+        self._take(replies, obs=True)
+        lost = self.lost
+        if lost.size:  # agents of a shard that went offline: they terminate now, with their last observation
+            terminated[lost[acting[lost]]] = True
+        col = [r for r in replies.values() if r["col.agent"].size]
+        events = _merge_collisions(col)
         ended = np.flatnonzero(terminated)
         world.set_offline(ended)
         self.owner[ended] = -1
-        self._ended = ended
-        if world.hooks:  # 10
-            ev.scores = StepScores(acting, res.rewards, terminated, res.info)
+        self._ended = np.union1d(ended, lost)
+        world.tick += 1
+        world.step_count += 1
+        ev = StepEvents(events, _NONE)
+        ev.lost = lost
+        if events_wanted and world.comms is not None:
+            ev.comms = _merge_comms(list(replies.values()), int(world.tick) - 1)
+        res = StepResult(rewards, terminated, info)
+        world.last_events = ev
+        if world.hooks:
+            ev.scores = StepScores(acting, rewards, terminated, info)
             world.run_hooks(ev)
         return res, terminated
 
 
-def _route_arrivals(replies: list[Packed], owner: np.ndarray) -> dict[int, Packed]:
-    """The agents handed over by every shard, with their rows and reads, grouped by their new shard."""
-    parts: dict[int, list[Packed]] = {}
-    for r in replies:
-        out = r["out"]
-        if not out.size:
-            continue
-        dest, rdest = owner[out], owner[r["r.slot"]]
-        for d in np.unique(dest).tolist():
-            sel, rsel = dest == d, rdest == d
-            pack = {k: v[sel] for k, v in r.items() if k[:2] in ("a.", "m.")}
-            pack.update({"out": out[sel], "r.flood": r["r.flood"][rsel], "r.slot": r["r.slot"][rsel]})
-            parts.setdefault(int(d), []).append(pack)
-    return {d: {key: np.concatenate([g[key] for g in got]) for key in got[0]} for d, got in parts.items()}
+def _rollout_rows(world: World, finished: list[Packed], info_keys: tuple[str, ...]) -> tuple[np.ndarray, ...]:
+    """Every agent's return, final position and info sums from the shards' last rows; the live slots."""
+    s = world.state.n_slots
+    returns = np.zeros(s)
+    pos = np.array(world.state.pos, dtype=np.float64)  # agents of a lost shard: where they were last seen
+    sums = {k: np.zeros(s) for k in info_keys}
+    live = []
+    for r in finished:
+        sl = r["slots"]
+        returns[sl], pos[sl] = r["returns"], r["pos"]
+        for k in info_keys:
+            sums[k][sl] = r["sums"][k]
+        live.append(r["live"])
+    alive = np.sort(np.concatenate(live)) if live else _NONE
+    return returns, pos, sums, alive
+
+
+def _merge_comms(replies: list[Packed], step: int) -> CommsEvents:
+    """The shards' message events of one step as one process's (bus logs and overlay deliveries)."""
+    def logs(key: str) -> MessageLog:
+        return MessageLog.concat([r[key] for r in replies if key in r])
+
+    bus = DeliveryEvents(step, logs("bus.sent"), logs("bus.delivered"), logs("bus.dropped"))
+    got = [r["overlay"] for r in replies if "overlay" in r]
+    ov = Deliveries(*(np.concatenate([getattr(d, f) for d in got]) for f in
+                      ("receiver", "flood", "origin", "hops", "created", "payload")))  # fmt: skip
+    sent = np.sum([r["sent"] for r in replies if "sent" in r], axis=0)
+    return CommsEvents(bus, ov, sent)
+
+
+def _obs_dim(scenario: Scenario) -> int:
+    return int(sum(p.size for p in scenario.obs_parts().values()))
 
 
 def _merge_collisions(replies: list[Packed]) -> CollisionEvents:
     """Every shard's collisions of its own agents, in slot order of the hit agent (the single-process order)."""
     if not replies:
         return CollisionEvents.empty()
-    agent = np.concatenate([r["agent"] for r in replies])
-    other = np.concatenate([r["other_agent"] for r in replies])
-    obj = np.concatenate([r["obj"] for r in replies])
+    agent = np.concatenate([r["col.agent"] for r in replies])
+    other = np.concatenate([r["col.other"] for r in replies])
+    obj = np.concatenate([r["col.obj"] for r in replies])
     order = np.argsort(agent, kind="stable")
     return CollisionEvents(agent[order], other[order], obj[order])

@@ -18,13 +18,10 @@ from typing import Any
 import numpy as np
 
 from agentsim_env.core.validation import check_choice, check_float, check_int
-from agentsim_env.distributed.backends import Backend, LocalShards
 from agentsim_env.distributed.bridge import Bridge
 from agentsim_env.distributed.coordinator import Coordinator, ShardInfo
-from agentsim_env.distributed.driver import Driver
 from agentsim_env.distributed.partition import Strips, halo_width
 from agentsim_env.distributed.shard import Shard
-from agentsim_env.distributed.worker import Worker
 from agentsim_env.env.parallel_env import ENV_KEYS, AgentSimParallelEnv
 from agentsim_env.env.rollout import RolloutResult, build_policy, check_seed, check_steps
 from agentsim_env.env.vector import BatchedEnv
@@ -73,40 +70,25 @@ def check_options(shards: Any, backend: Any, ray_address: Any, timeout_s: Any) -
         check_address(ray_address)
 
 
-def steps_itself(scenario: Scenario, world: Any) -> bool:
-    """Whether the shards of ``world`` step themselves (``distributed.worker``): every config without comms.
-
-    With comms the coordinator still runs the bus, the overlay's table and the groups (``distributed.coordinator``).
-    """
-    return os.environ.get("AGENTSIM_SELF_STEPPING") == "1"
-
-
 def build_coordinator(
     scenario: Scenario, world: Any, shards: int, backend: str, ray_address: str | None, timeout_s: float
-) -> Coordinator | Driver:
+) -> Coordinator:
     """Start the shards of ``world`` (the mirror of a front end); the options were checked (``check_options``)."""
     strips = Strips.build(world.config.bounds, int(shards), halo_width(world))
     name, config = scenario.name, _config_fields(scenario)
-    if steps_itself(scenario, world):
-        bridge = Bridge(Strips(strips.edges.copy(), strips.halo, strips.owner.copy()), world.state.n_slots)
-        if backend == "local":
-            from agentsim_env.distributed.pool import LocalPool
 
-            def factory(k: int, swap: Any) -> Worker:
-                return Worker(k, name, config, Strips(strips.edges.copy(), strips.halo, strips.owner.copy()), swap)
+    def copy() -> Strips:  # the coordinator, the exchange and every shard each keep their own
+        return Strips(strips.edges.copy(), strips.halo, strips.owner.copy())
 
-            pool: Any = LocalPool(factory, int(shards), bridge)
-        else:
-            from agentsim_env.distributed.ray_pool import RayPool
-
-            pool = RayPool(name, config, strips, int(shards), ray_address, bridge)
-        return Driver(scenario, world, strips, pool, timeout_s)
+    bridge = Bridge(copy(), world.state.n_slots)
     if backend == "local":
-        be: Backend = LocalShards(lambda k: Shard(k, name, config, strips), int(shards))
+        from agentsim_env.distributed.backends import LocalShards
+
+        be: Any = LocalShards(lambda k, swap: Shard(k, name, config, copy(), swap), int(shards), bridge)
     else:
         from agentsim_env.distributed.ray_backend import RayShards
 
-        be = RayShards(name, config, strips, int(shards), ray_address)
+        be = RayShards(name, config, copy(), int(shards), ray_address, bridge)
     return Coordinator(scenario, world, strips, be, timeout_s)
 
 
@@ -158,12 +140,43 @@ class DistributedParallelEnv(AgentSimParallelEnv):
 
     def _flat_obs(self, rows: np.ndarray, result: Any = None) -> np.ndarray:
         co = self.coordinator
-        if isinstance(co, Driver):  # the observations were built on the shards
+        if isinstance(co, Coordinator):  # the observations were built on the shards
             assert co.obs is not None
             out = self._obs_out.get()
             np.copyto(out, co.obs)
             return out
         return super()._flat_obs(rows, result)
+
+    def send_message(
+        self, sender: str, payload: Any, *, to: str | None = None, group: int | None = None
+    ) -> bool:
+        """``AgentSimParallelEnv.send_message``: checked here, sent on the sender's shard (its bus, its bandwidth)."""
+        co = self.coordinator
+        with self._guard.hold("send_message"):
+            comms = self._comms()
+            s = self._live_slot(sender, "sender")
+            if (to is None) == (group is None):
+                raise ValueError("give exactly one of to= (an agent id) or group= (a group id)")
+            pay = np.asarray(payload, dtype=np.float64).reshape(1, -1)
+            d = comms.cfg.payload_dim
+            if pay.shape[1] != d:
+                raise ValueError(f"payload must have {d} values (comms.payload_dim), got {pay.shape[1]}")
+            if not np.isfinite(pay).all():
+                raise ValueError(f"payload must be finite, got {pay.ravel().tolist()}")
+            if group is None:
+                target, to_group = self._live_slot(str(to), "receiver"), False
+            else:
+                known = np.unique(self.world.state.group[self.world.state.group >= 0]).tolist()
+                if group not in known:
+                    raise ValueError(f"group: unknown group {group!r}; groups are {known}")
+                target, to_group = int(group), True
+            return bool(co.call_owner(s, "send", s, target, pay[0], to_group)["accepted"])
+
+    def assign_group(self, agent: str, group: int) -> None:
+        """``AgentSimParallelEnv.assign_group``: on the agent's shard (its heartbeats), and in the mirror."""
+        super().assign_group(agent, group)  # checks, and the mirror's group array for render() and state()
+        slot = self._index[agent]
+        self.coordinator.call_owner(slot, "assign_group", slot, int(group))
 
     def rollout(
         self, policy: Any, steps: int, seed: int | None = None, *, on_step: Any = None
@@ -176,7 +189,7 @@ class DistributedParallelEnv(AgentSimParallelEnv):
         step API instead (it gathers every agent's data, as those need).
         """
         co = self.coordinator
-        if not isinstance(co, Driver) or on_step is not None or self.world.hooks or self.render_mode or self._stay:
+        if not isinstance(co, Coordinator) or on_step is not None or self.world.hooks or self.render_mode or self._stay:
             return super().rollout(policy, steps, seed, on_step=on_step)
         steps, pseed = check_steps(steps), check_seed(seed)
         if isinstance(policy, (str, os.PathLike)):  # a bad name is one error here, not a failure in every shard
@@ -252,7 +265,7 @@ class DistributedBatchedEnv(BatchedEnv):
         self, rows: np.ndarray | None = None, step: int = 0, result: Any = None, out: np.ndarray | None = None
     ) -> np.ndarray:
         co = self.coordinator
-        if isinstance(co, Driver):  # the observations were built on the shards
+        if isinstance(co, Coordinator):  # the observations were built on the shards
             assert co.obs is not None
             flat = co.obs.copy() if out is None else np.copyto(out, co.obs) or out
             return flat.reshape(self.n_worlds, self.n_agents, self.obs_dim)

@@ -31,9 +31,11 @@ class _Barriers:
         self.posts: dict[Key, dict[int, Packed]] = {}
         self.results: dict[Key, dict[int, Packed]] = {}
         self.taken: dict[Key, set[int]] = {}
+        self.waiting: set[int] = set()  # shards inside ``swap`` now (posted, not yet answered)
 
     def post(self, key: Key, k: int, payload: Packed) -> None:
         self.posts.setdefault(key, {})[k] = payload
+        self.waiting.add(k)
 
     def complete(self) -> list[Key]:
         """Route every barrier whose live shards have all posted; the keys completed now."""
@@ -48,6 +50,7 @@ class _Barriers:
         return done
 
     def take(self, key: Key, k: int) -> Packed:
+        self.waiting.discard(k)
         out = self.results[key].get(k, {})
         taken = self.taken[key]
         taken.add(k)
@@ -95,9 +98,15 @@ class LocalExchange:
             if self._b.complete():
                 self._cond.notify_all()
             if not self._cond.wait_for(lambda: key in self._b.results, timeout=self.wait_s):
+                self._b.waiting.discard(k)
                 raise TimeoutError(f"exchange {key[1]!r} of step {key[0]}: the other shards did not post within "
                                    f"{self.wait_s:g} s")  # fmt: skip
             return self._b.take(key, k)
+
+    def waiting(self) -> set[int]:
+        """The shards waiting at a barrier now (not late themselves: they wait for the others)."""
+        with self._cond:
+            return set(self._b.waiting)
 
     def drop(self, k: int) -> None:
         """Shard ``k`` is offline: barriers no longer wait for it."""
@@ -150,9 +159,14 @@ class ExchangeActor:
             try:
                 await asyncio.wait_for(event.wait(), timeout=self.wait_s)
             except asyncio.TimeoutError:
+                self._b.waiting.discard(k)
                 raise TimeoutError(f"exchange {key[1]!r} of step {key[0]}: the other shards did not post within "
                                    f"{self.wait_s:g} s") from None  # fmt: skip
         return self._b.take(key, k)
+
+    async def waiting(self) -> set[int]:
+        """As ``LocalExchange.waiting``."""
+        return set(self._b.waiting)
 
     async def drop(self, k: int) -> None:
         """As ``LocalExchange.drop``."""

@@ -1,10 +1,13 @@
 """Shards as Ray actors: the only module of the project that imports Ray (the ``ray`` extra).
 
-``RayShards`` starts one actor per shard on a Ray cluster: a local one bound to 127.0.0.1 when no address is
-given (started here, stopped when the last env using it closes), or the cluster at ``ray_address``. A call
-runs on every shard at once; ``ray.wait`` bounds it by the deadline, so a step never hangs on a dead or slow
-machine: a shard that misses it is killed and reported as a :class:`~agentsim_env.distributed.backends.Failure`,
-as is one whose process died, and one whose code raised (its actor is killed: its state is unknown after it).
+``RayShards`` starts one actor per shard on a Ray cluster (a local one bound to 127.0.0.1 when no address is
+given, started here, stopped when the last env using it closes; or the cluster at ``ray_address``) and the
+exchange the shards meet at during a step (``distributed.exchange.ExchangeActor``, an asyncio actor using no CPU,
+next to the driver). A call runs on every shard at once; ``ray.wait`` bounds it by the deadline, so a step never
+hangs on a dead or slow machine: a shard that misses it is killed and reported as a
+:class:`~agentsim_env.distributed.backends.Failure`, as is one whose process died, and one whose code raised (its
+actor is killed: its state is unknown after it); each is dropped from the exchange at once, so the others finish
+their step.
 
 When this process has already called ``ray.init`` (a test's cluster, a trainer's), the shards join that cluster
 and ``ray_address`` is not used.
@@ -35,13 +38,15 @@ import logging
 import os
 import re
 import socket
+import time
 from collections.abc import Iterator
 from typing import Any
 
 from agentsim_env.distributed.backends import Failure, raised
+from agentsim_env.distributed.bridge import Bridge, Packed
+from agentsim_env.distributed.exchange import ExchangeActor
 from agentsim_env.distributed.partition import Strips
-from agentsim_env.distributed.shard import Packed
-from agentsim_env.distributed.shard import Shard as _Shard
+from agentsim_env.distributed.shard import Shard
 
 INSTALL_HINT = "shards need Ray: pip install 'agentsim-env[ray]' (or pip install 'ray>=2.40')"
 STARTUP_TIMEOUT_S = 300.0
@@ -239,126 +244,6 @@ class Placement:
             self._avoid.add(node)
 
 
-class Shard(OnNode, _Shard):
-    """A shard as a Ray actor: the same shard, whose address also names the Ray node it runs on."""
-
-    def __init__(self, *args: Any, **kwargs: Any) -> None:
-        super().__init__(*args, **kwargs)
-        self.address = f"{self.address} on node {self.node()[:12]}"
-
-
-class RayShards:
-    """K shard actors on a Ray cluster (see the module docstring).
-
-    Args:
-        name: Scenario name.
-        config: The scenario's config fields.
-        strips: The partition.
-        n_shards: Number of shards K.
-        address: Cluster address, or ``None`` for a local cluster on 127.0.0.1.
-        spread: Place the shards on different nodes (see the module docstring); ``None``: unless the cluster is
-            the local one this module started.
-    """
-
-    def __init__(
-        self,
-        name: str,
-        config: dict[str, Any],
-        strips: Strips,
-        n_shards: int,
-        address: str | None,
-        spread: bool | None = None,
-    ) -> None:
-        global _users
-        ray = import_ray()
-        self.n_shards = int(n_shards)
-        self._ray = ray
-        self._own = False
-        if address is not None:
-            address = check_address(address)
-        if not ray.is_initialized():
-            if address is None:
-                start_local_cluster(ray, num_cpus=max(os.cpu_count() or 1, self.n_shards))
-                self._own = True
-                _users += 1
-            else:
-                connect_driver(ray, address)
-        elif _users:
-            self._own = True
-            _users += 1
-        # a shard is one process running single-threaded kernels: one CPU of the cluster each
-        self._cls = ray.remote(num_cpus=1 if address is not None else 0, max_restarts=0)(Shard)
-        self._args = (name, config, strips)
-        self.placement = Placement(ray, not self._own if spread is None else bool(spread))
-        self.actors: dict[int, Any] = {k: self._start(k) for k in range(self.n_shards)}
-        self.address = address or "local cluster on 127.0.0.1"
-
-    def _start(self, k: int) -> Any:
-        name, config, strips = self._args
-        return self.placement.start(k, self._cls, k, name, config, strips)
-
-    def node_of(self, k: int) -> str:
-        """The id (hex) of the Ray node shard ``k`` runs on (or last ran on); ``""`` when it never said."""
-        return self.placement.node_of(k)
-
-    def call(
-        self, method: str, calls: dict[int, tuple[Any, ...]], timeout_s: float
-    ) -> dict[int, Packed | Failure]:
-        """Run ``method`` on every named shard at once; ``Failure`` for the dead and the late."""
-        ray = self._ray
-        if method == "reset":
-            timeout_s = max(timeout_s, STARTUP_TIMEOUT_S)
-        refs = {k: getattr(self.actors[k], method).remote(*args) for k, args in calls.items()}
-        if not refs:
-            return {}
-        _, late = ray.wait(list(refs.values()), num_returns=len(refs), timeout=timeout_s)
-        late_set = set(late)
-        out: dict[int, Packed | Failure] = {}
-        for k, ref in refs.items():
-            if ref in late_set:
-                ray.kill(self.actors[k], no_restart=True)
-                self.placement.failed(k)
-                out[k] = Failure(f"missed the {timeout_s:g} s deadline of {method}")
-                continue
-            try:
-                out[k] = ray.get(ref)
-            except ray.exceptions.RayActorError as e:
-                self.placement.failed(k)
-                out[k] = Failure(f"died: {type(e).__name__}")
-            except ray.exceptions.RayTaskError as e:
-                self.kill(k)
-                out[k] = raised(e.cause if isinstance(e.cause, BaseException) else e)
-        return out
-
-    def restart(self, index: int) -> None:
-        """A new actor for shard ``index`` (the old one is killed if it still runs)."""
-        self.kill(index)
-        self.actors[index] = self._start(index)
-
-    def kill(self, index: int) -> None:
-        """Kill shard ``index``'s actor at once (its process stops)."""
-        try:
-            self._ray.kill(self.actors[index], no_restart=True)
-        except Exception:  # already gone
-            pass
-
-    def set_delay(self, index: int, delay_s: float) -> None:
-        """Test hook: shard ``index`` sleeps ``delay_s`` in every call."""
-        self._ray.get(self.actors[index].set_delay.remote(delay_s))
-
-    def close(self) -> None:
-        """Kill every actor; stop the local cluster when no other env uses it."""
-        global _users
-        for k in list(self.actors):
-            self.kill(k)
-        self.actors = {}
-        if self._own:
-            self._own = False
-            _users -= 1
-            if _users == 0 and self._ray.is_initialized():
-                self._ray.shutdown()
-
-
 def join_cluster(ray: Any, address: str | None, n_shards: int) -> bool:
     """Join the Ray cluster at ``address``, or start a local one on 127.0.0.1 (``None``), unless joined already.
 
@@ -392,3 +277,192 @@ def leave_cluster(ray: Any, user: bool) -> None:
         _users -= 1
         if _users == 0 and ray.is_initialized():
             ray.shutdown()
+
+
+class ShardActor(OnNode):
+    """A ``Shard`` in a Ray actor, its exchange reached through the exchange actor's handle; its address also
+    names the Ray node it runs on."""
+
+    def __init__(self, index: int, name: str, config: dict[str, Any], strips: Strips, exchange: Any) -> None:
+        ray = import_ray()
+
+        def swap(key: tuple[int, str], k: int, payload: Packed) -> Packed:
+            return ray.get(exchange.swap.remote(key, k, payload))  # type: ignore[no-any-return]
+
+        self.worker = Shard(index, name, config, strips, swap)
+        self.worker.address = f"{self.worker.address} on node {self.node()[:12]}"
+
+    def reset(self, *args: Any) -> Packed:
+        """``Shard.reset``."""
+        return self.worker.reset(*args)
+
+    def step(self, *args: Any) -> Packed:
+        """``Shard.step``."""
+        return self.worker.step(*args)
+
+    def begin(self, *args: Any) -> Packed:
+        """``Shard.begin``."""
+        return self.worker.begin(*args)
+
+    def act(self, *args: Any) -> Packed:
+        """``Shard.act``."""
+        return self.worker.act(*args)
+
+    def finish(self) -> Packed:
+        """``Shard.finish``."""
+        return self.worker.finish()
+
+    def send(self, *args: Any) -> Packed:
+        """``Shard.send``."""
+        return self.worker.send(*args)
+
+    def assign_group(self, *args: Any) -> Packed:
+        """``Shard.assign_group``."""
+        return self.worker.assign_group(*args)
+
+    def set_delay(self, delay_s: float) -> None:
+        """``Shard.set_delay``."""
+        self.worker.set_delay(delay_s)
+
+
+class RayShards:
+    """K worker actors and their exchange on a Ray cluster.
+
+    Args:
+        name: Scenario name.
+        config: The scenario's config fields.
+        strips: The partition.
+        n_shards: Number of workers K.
+        address: Cluster address, or ``None`` for a local cluster on 127.0.0.1.
+        bridge: The routing the exchange runs.
+        spread: Place the workers on different nodes (``ray_backend.Placement``); ``None``: unless the cluster
+            is the local one this process started.
+    """
+
+    def __init__(
+        self, name: str, config: dict[str, Any], strips: Strips, n_shards: int, address: str | None, bridge: Bridge,
+        spread: bool | None = None,
+    ) -> None:  # fmt: skip
+        ray = import_ray()
+        self.n_shards = int(n_shards)
+        self._ray = ray
+        self._own = join_cluster(ray, address, self.n_shards)
+        self._cls = ray.remote(num_cpus=1 if address is not None else 0, max_restarts=0)(ShardActor)
+        from ray.util.scheduling_strategies import NodeAffinitySchedulingStrategy
+
+        here = NodeAffinitySchedulingStrategy(ray.get_runtime_context().get_node_id(), soft=False)
+        self.exchange = ray.remote(num_cpus=0, max_restarts=0)(ExchangeActor).options(
+            scheduling_strategy=here).remote(bridge, self.n_shards)  # next to the driver  # fmt: skip
+        self.placement = Placement(ray, not self._own if spread is None else bool(spread))
+        self._args = (name, config, strips)
+        self.actors: dict[int, Any] = {k: self._start(k) for k in range(self.n_shards)}
+        self.address = address or "local cluster on 127.0.0.1"
+
+    def _start(self, k: int) -> Any:
+        name, config, strips = self._args
+        return self.placement.start(k, self._cls, k, name, config, strips, self.exchange)
+
+    def node_of(self, k: int) -> str:
+        """The id (hex) of the Ray node worker ``k`` runs on (or last ran on); ``""`` when it never said."""
+        return self.placement.node_of(k)
+
+    def _drop(self, k: int) -> None:
+        self._ray.get(self.exchange.drop.remote(k))
+
+    def call(self, method: str, calls: dict[int, tuple[Any, ...]], timeout_s: float) -> dict[int, Packed | Failure]:
+        """Run ``method`` on every named worker at once; a reply or a ``Failure`` per worker."""
+        ray = self._ray
+        if method == "reset":
+            timeout_s = max(timeout_s, STARTUP_TIMEOUT_S)
+        refs = {getattr(self.actors[k], method).remote(*args): k for k, args in calls.items()}
+        out: dict[int, Packed | Failure] = {}
+        pending = list(refs)
+        deadline = time.monotonic() + timeout_s
+        while pending:
+            ready, pending = ray.wait(pending, num_returns=1, timeout=max(0.0, deadline - time.monotonic()))
+            if not ready:
+                break
+            for ref in ready:
+                k = refs[ref]
+                try:
+                    out[k] = ray.get(ref)
+                except ray.exceptions.RayActorError as e:
+                    out[k] = Failure(f"died: {type(e).__name__}")
+                    self.placement.failed(k)
+                    self._drop(k)
+                except ray.exceptions.RayTaskError as e:
+                    self.kill(k)
+                    out[k] = raised(e.cause if isinstance(e.cause, BaseException) else e)
+        if pending:  # late: the ones not waiting at the exchange are killed and dropped; the others then finish
+            waiting = ray.get(self.exchange.waiting.remote())
+            late = [ref for ref in pending if refs[ref] not in waiting] or pending
+            for ref in late:
+                k = refs[ref]
+                self.placement.failed(k)
+                self.kill(k)
+                out[k] = Failure(f"missed the {timeout_s:g} s deadline of {method}")
+            rest = [ref for ref in pending if ref not in late]
+            if rest:
+                out.update(self.call_rest(rest, refs, timeout_s))
+        return out
+
+    def call_rest(self, pending: list[Any], refs: dict[Any, int], timeout_s: float) -> dict[int, Packed | Failure]:
+        """The answers of the calls that waited at the exchange for a late shard (one more deadline)."""
+        ray, out = self._ray, {}
+        done, late = ray.wait(pending, num_returns=len(pending), timeout=timeout_s)
+        for ref in done:
+            k = refs[ref]
+            try:
+                out[k] = ray.get(ref)
+            except ray.exceptions.RayActorError as e:
+                out[k] = Failure(f"died: {type(e).__name__}")
+                self._drop(k)
+            except ray.exceptions.RayTaskError as e:
+                self.kill(k)
+                out[k] = raised(e.cause if isinstance(e.cause, BaseException) else e)
+        for ref in late:
+            k = refs[ref]
+            self.kill(k)
+            out[k] = Failure(f"missed the {timeout_s:g} s deadline")
+        return out
+
+    def restart(self, index: int) -> None:
+        """A new actor for worker ``index`` (the old one is killed if it still runs)."""
+        self.kill(index)
+        self.actors[index] = self._start(index)
+        self._ray.get(self.exchange.revive.remote(index))
+
+    def kill(self, index: int) -> None:
+        """Kill worker ``index``'s actor at once and drop it from the exchange."""
+        try:
+            self._ray.kill(self.actors[index], no_restart=True)
+        except Exception:  # already gone
+            pass
+        self._drop(index)
+
+    def set_delay(self, index: int, delay_s: float) -> None:
+        """Test hook: worker ``index`` sleeps ``delay_s`` in every call."""
+        self._ray.get(self.actors[index].set_delay.remote(delay_s))
+
+    def set_owner(self, owner: Any) -> None:
+        """The shard owning each strip (for the exchange's routing)."""
+        self._ray.get(self.exchange.set_owner.remote(owner))
+
+    def set_slot_owner(self, owner: Any) -> None:
+        """The shard owning each slot (for routing bus messages)."""
+        self._ray.get(self.exchange.set_slot_owner.remote(owner))
+
+    def close(self) -> None:
+        """Kill every actor and the exchange; stop the local cluster when no other env uses it."""
+        for k in list(self.actors):
+            try:
+                self._ray.kill(self.actors[k], no_restart=True)
+            except Exception:  # already gone
+                pass
+        self.actors = {}
+        try:
+            self._ray.kill(self.exchange, no_restart=True)
+        except Exception:  # already gone
+            pass
+        leave_cluster(self._ray, self._own)
+        self._own = False

@@ -1,25 +1,15 @@
-"""One shard of a distributed simulation: the agents of some strips of the map, plus the ghosts around them.
+"""A shard that steps itself: the whole step pipeline for the agents it owns, with ghosts from its neighbours.
 
-A shard holds a whole ``World`` of the scenario (full-length slot arrays, so a slot keeps its index everywhere)
-and a replica of the static scene, but only its **own** agents and its **ghosts** (copies of the agents of other
-shards within its halo, see ``distributed.partition``) are online in it: the spatial stages (motion, collisions,
-the proximity scan, the comms range graph) therefore work on its part of the map only. Every other stage
-(stage 1's comm part, groups, the bus and overlay deliveries, non-spatial sensors, scoring, observations) runs on
-the coordinator, over the gathered arrays, with the single-process code.
+A ``Shard`` holds a whole-map ``World`` of the scenario (full-length slot arrays, so a slot keeps its index
+everywhere) and a replica of the static scene; its own agents and its ghosts are online in it. One step is one
+call, ``step``: the scenario's ``run_step`` (stage 1 for the own agents that act, ``World.step``, the scoring),
+the same code as one process, with the world's ``bridge`` set to the worker, so ``World.step`` exchanges with
+the other shards through the coordinator's ``distributed.exchange`` at two points (after the motion: hand-overs
+and ghosts; after the groups stage: the ghosts that went offline) and the scoring a third time (the per-group
+sums). What it returns is what the caller asked for: the own agents' rows of rewards, terminations and infos,
+their observations (``obs=True``) and their kinematics (``kinematics=True``, for a mirror of the world).
 
-A step is three calls, each answered with packed arrays and a heartbeat (``distributed.coordinator``):
-
-1. ``move``: stage 1 (motion part) and stages 2-4 for the own agents; returns their new kinematics and the
-   agents that crossed into another shard's strip (handed over with their whole motion state).
-2. ``collide``: takes in the agents handed over to it and the step's ghosts, then runs stage 5; returns the
-   collisions of its own agents.
-3. ``sense``: takes the slots that went offline anywhere (collisions, heartbeat timeouts), then the range graph
-   (each own agent's nearest neighbour), one overlay hop into the own agents and stage 8's proximity scan.
-
-(``collide_sense`` is calls 2 and 3 in one, for collisions that take nobody offline.)
-
-This module imports no Ray: ``distributed.ray_backend`` wraps a ``Shard`` in an actor; the local backend calls
-it in process.
+This module imports no Ray: ``distributed.ray_backend`` wraps a ``Shard`` in an actor.
 """
 
 from __future__ import annotations
@@ -27,286 +17,405 @@ from __future__ import annotations
 import os
 import socket
 import time
-from dataclasses import fields
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
+from agentsim_env.comms.bus import DeliveryEvents, MessageBus
+from agentsim_env.comms.events import DueRows, MessageLog
+from agentsim_env.comms.messages import GROUP
 from agentsim_env.core.pipeline import StepContext
-from agentsim_env.distributed.flooding import ShardReaders
+from agentsim_env.distributed.bridge import Packed
+from agentsim_env.distributed.floods import FloodEntries
 from agentsim_env.distributed.partition import Strips
-from agentsim_env.motion import MotionState
+from agentsim_env.distributed.shard_overlay import ShardOverlay
+from agentsim_env.distributed.shard_rollout import ShardRollout
+from agentsim_env.scenarios.base import flat_parts, run_step
 from agentsim_env.scenarios.registry import make_scenario
-from agentsim_env.sensors.proximity import ProximitySensor
+from agentsim_env.sim import World
+from agentsim_env.sim.slot_rows import slot_arrays
 
-#: AgentState fields that travel with an agent handed over to another shard (the rest is fixed per episode).
-AGENT_FIELDS = ("pos", "vel", "heading", "radius", "sensor_range", "max_speed", "max_accel")
-MOTION_FIELDS = tuple(f.name for f in fields(MotionState))
+_NONE = np.zeros(0, dtype=np.int64)
+#: Per-slot arrays of a shard's world that are the shard's, not the agent's (its masks, its flood table).
+SHARD_PATHS = ("comms.overlay.own", "comms.overlay.part", "comms.router")
 
-Packed = dict[str, Any]
-"""A message between coordinator and shards: names to numpy arrays (and a few scalars)."""
+
+class Swap(Protocol):
+    """The exchange as a shard sees it: post, wait, get its part."""
+
+    def __call__(self, key: tuple[int, str], k: int, payload: Packed) -> Packed:
+        """Post ``payload`` for barrier ``key`` as shard ``k`` and return shard ``k``'s part."""
+
+
+def _agent_arrays(world: World) -> dict[str, np.ndarray]:
+    return {k: v for k, v in slot_arrays(world).items() if not k.startswith(SHARD_PATHS)}
+
+
+def pack_rows(world: World, slots: np.ndarray) -> Packed:
+    """Every per-slot row of ``slots`` an agent takes with it to another shard (``sim.slot_rows``)."""
+    rows: Packed = {k: v[slots] for k, v in _agent_arrays(world).items()}
+    rows["slots"] = slots
+    return rows
+
+
+def unpack_rows(world: World, rows: Packed) -> None:
+    """Write handed-over rows (``pack_rows``) into ``world``."""
+    slots = rows["slots"]
+    arrays = _agent_arrays(world)
+    for key, v in rows.items():
+        if key in arrays:
+            arrays[key][slots] = v
 
 
 class Shard:
-    """The own agents of some strips and their ghosts, in a whole-map ``World`` of the scenario.
+    """The own agents of some strips and their ghosts, stepping themselves (see the module docstring).
 
     Args:
         index: This shard's index k.
         name: Registered scenario name.
         config: The scenario's config fields (as given to ``make``).
         strips: The partition (strip edges, halo and the strips' owners).
+        swap: The exchange.
         delay_s: Test hook: sleep this long in every call (a slow machine).
     """
 
     def __init__(
-        self, index: int, name: str, config: dict[str, Any], strips: Strips, delay_s: float = 0.0
+        self, index: int, name: str, config: dict[str, Any], strips: Strips, swap: Swap, delay_s: float = 0.0
     ) -> None:
         self.index = int(index)
         self.scenario = make_scenario(name, **config)
         self.world = self.scenario.build(1)
         self.strips = strips
+        self._swap = swap
+        self.wait_s = 0.0
+        """Seconds spent at the exchange in the current call (waiting for the others, routing, transfer)."""
         self.delay_s = float(delay_s)
         s = self.world.state.n_slots
         self.own = np.zeros(s, dtype=bool)
+        self.held = np.zeros(s, dtype=bool)
+        """The own agents and those that ended here: the bus delivers (and drops) their messages here."""
         self.ghost = np.zeros(s, dtype=bool)
+        self.acting = np.zeros(s, dtype=bool)
+        self.handed = 0
+        """Bytes of the agents handed over to this shard in the latest step."""
+        self.arrived = _NONE
+        """The slots handed over to this shard in the latest step."""
+        self.config = config
+        self.carry: dict[str, np.ndarray] = {"acting": self.acting}
+        """The worker's own per-slot arrays that travel with a handed-over agent (a rollout adds its sums)."""
+        self.rollout: Any = None
+        """The rollout in progress (``distributed.shard_rollout.ShardRollout``)."""
         self.address = f"{socket.gethostname()}:{os.getpid()}"
-        self._ctx: StepContext | None = None
-        self._scan = [x for x in self.world.sensors if isinstance(x, ProximitySensor)]
-        self.readers = ShardReaders(s)
+        self.world.bridge = self
+        self.overlay: ShardOverlay | None = None
+        comms = self.world.comms
+        if comms is not None:  # the bus is bridged through this worker; floods spread per shard
+            self.overlay = ShardOverlay(comms.overlay, self.own)
+            comms.overlay = self.overlay  # type: ignore[assignment]
+            comms.router = self
 
     # ------------------------------------------------------------------ helpers
-    def _beat(self, t0: float) -> Packed:
-        return {"shard": self.index, "address": self.address, "step": int(self.world.tick),
-                "compute_s": time.perf_counter() - t0}  # fmt: skip
+    def swap(self, key: tuple[int, str], k: int, payload: Packed) -> Packed:
+        """The exchange (timed: ``wait_s``)."""
+        t0 = time.perf_counter()
+        try:
+            return self._swap(key, k, payload)
+        finally:
+            self.wait_s += time.perf_counter() - t0
 
-    def _pause(self) -> None:
-        if self.delay_s > 0:
-            time.sleep(self.delay_s)
+    def beat(self, t0: float) -> Packed:
+        """The heartbeat every reply carries (``compute_s`` is the call's time, ``wait_s`` its exchanges')."""
+        wait, self.wait_s = self.wait_s, 0.0
+        return {"shard": self.index, "address": self.address, "step": int(self.world.tick),
+                "compute_s": time.perf_counter() - t0, "wait_s": wait}  # fmt: skip
 
     def set_delay(self, delay_s: float) -> None:
         """Test hook: sleep ``delay_s`` seconds in every later call (0: none)."""
         self.delay_s = float(delay_s)
 
-    def _set_online(self) -> None:
-        st = self.world.state
-        st.online[:] = False
-        st.online[self.own | self.ghost] = True
+    def _pause(self) -> None:
+        if self.delay_s > 0:
+            time.sleep(self.delay_s)
 
-    def _sense(
-        self, ctx: StepContext, ov: Packed | None, link_range: np.ndarray | None, hit_ids: bool = True
-    ) -> Packed:
-        """Range graph, one overlay hop into the own agents and the proximity scan; the own agents' rows."""
-        world, st = self.world, self.world.state
-        mine = np.flatnonzero(self.own)
-        out: Packed = {"slots": mine}
-        if world.comms is not None:
-            comms = world.comms
-            if link_range is not None:
-                comms.overlay.set_range(link_range)
-            walk = ov is not None and ov["fr_u"].size > 0
-            comms.graph.set_grid(ctx.grid, st.pos, st.online, st.world_id, comms.overlay.link_range, walk)
-            out["nearest"] = comms.graph.nearest()[mine].copy()
-            if ov is not None:
-                s = st.n_slots
-                links = comms.graph.links(comms.overlay.link_range) if walk else (
-                    np.zeros(s, np.int64), np.zeros(s, np.int64), np.zeros(0, np.int64))  # fmt: skip
-                v, f, e = self.readers.hop(links, self.own, ov["active"], ov["started"], ov["origin"], ov["fr_f"],
-                                           ov["fr_u"])  # fmt: skip
-                out["ov.slot"], out["ov.flood"], out["ov.links"] = v, f, e
-        readings = {}
-        for sensor in self._scan:
-            readings[sensor.name] = sensor.step(ctx)
-        world.readings.update(readings)
-        for name, scan in readings.items():
-            out[f"{name}.distance"] = scan.distance[mine]
-            out[f"{name}.hit_kind"] = scan.hit_kind[mine]
-            if hit_ids:
-                out[f"{name}.hit_id"] = scan.hit_id[mine]
+    def _near_edge(self, x: np.ndarray) -> np.ndarray:
+        """Which of these x coordinates (of own agents) lie within a halo of their strip's inner edges."""
+        st = self.strips
+        r = st.strip_of(x)
+        left = (x - st.edges[r] <= st.halo) & (r > 0)
+        right = (st.edges[r + 1] - x <= st.halo) & (r < st.n_strips - 1)
+        return left | right
+
+    def _rows_out(self, slots: np.ndarray, res: Any, terminated: np.ndarray, obs: bool, kin: bool) -> Packed:
+        st = self.world.state
+        out: Packed = {"slots": slots, "own": np.flatnonzero(self.own)}
+        if res is not None:
+            out["rewards"] = np.asarray(res.rewards, dtype=np.float64)[slots]
+            out["terminated"] = terminated[slots]
+            out["info"] = {k: v[slots] for k, v in res.info.items()}
+        if obs:
+            self._sender_positions()
+            out["obs"] = self.flat_rows(slots)
+        if kin:
+            mine = out["own"]
+            out["pos"], out["vel"], out["heading"] = st.pos[mine], st.vel[mine], st.heading[mine]
+            out["online"] = st.online[mine]
         return out
 
-    # ------------------------------------------------------------------ episode
-    def reset(self, seed: np.random.SeedSequence, owner: np.ndarray) -> Packed:
-        """Start the episode of ``seed`` exactly as a single process does, then keep this shard's part online.
+    # ------------------------------------------------------------------ the bridge (World.step calls these)
+    def after_motion(self, world: World, ctx: StepContext) -> None:
+        """Hand over the own agents that left this shard's strips; take in arrivals and this step's ghosts."""
+        st = world.state
+        mine = np.flatnonzero(self.own & st.online)
+        x = st.pos[mine, 0]
+        leaving = mine[self.strips.owner_of(x) != self.index]
+        edge = mine[self._near_edge(x)]
+        if world.groups is not None and leaving.size:
+            world.groups.settle_answers()  # heartbeat answers not yet read go with their agents
+        leave = pack_rows(world, leaving)
+        leave["x"] = st.pos[leaving, 0]
+        for name, arr in self.carry.items():
+            leave[f"w.{name}"] = arr[leaving]
+        post = {"edge": {"slots": edge, "x": st.pos[edge, 0], "pos": st.pos[edge]}, "leave": leave}
+        if self.overlay is not None and leaving.size:
+            post["leave_floods"] = self.overlay.part.take_leaving(leaving)
+        got = self.swap((int(world.tick), "motion"), self.index, post)
+        if self.overlay is not None and got.get("floods"):
+            self.overlay.part.add(FloodEntries.concat(got["floods"], self.overlay.payload_dim))
+        self.own[leaving] = False
+        self.held[leaving] = False
+        self.acting[leaving] = False
+        st.online[leaving] = False
+        arrivals = got["arrivals"]
+        self.handed = 0
+        self.arrived = _NONE
+        if arrivals is not None and arrivals["slots"].size:
+            new = self.arrived = arrivals["slots"]
+            self.handed = sum(int(v.nbytes) for v in arrivals.values())
+            unpack_rows(world, arrivals)
+            self.own[new] = True
+            self.held[new] = True
+            for name, arr in self.carry.items():
+                arr[new] = arrivals[f"w.{name}"]
+        g = got["ghosts"]["slots"]
+        self.ghost[:] = False
+        self.ghost[g] = True
+        st.pos[g] = got["ghosts"]["pos"]
+        st.online[g] = True
 
-        Args:
-            seed: The episode's seed sequence (the same on every shard and on the coordinator).
-            owner: ``(K,)`` the shard owning each strip.
+    def after_offline(self, world: World, ctx: StepContext, went: np.ndarray) -> np.ndarray:
+        """Tell the neighbours which own agents near an edge went offline; the ghosts that went offline."""
+        st = world.state
+        near = went[self.own[went] & self._near_edge(st.pos[went, 0])] if went.size else went
+        post: Packed = {"slots": near}
+        if self.overlay is not None:
+            mine = np.flatnonzero(self.own)
+            front = self.overlay.part.frontier_of(mine[self._near_edge(st.pos[mine, 0])])
+            post["front"], post["front_x"] = front, st.pos[front.slot, 0]
+        got = self.swap((int(world.tick), "offline"), self.index, post)
+        if self.overlay is not None:
+            self.overlay.ghost_frontier = FloodEntries.concat(got.get("front", []), self.overlay.payload_dim)
+        gone = got["slots"]
+        # they stay ghosts for this step (their positions hold: a message they sent before going offline is
+        # still delivered, as in one process); they only leave the grid
+        return gone[self.ghost[gone] & st.online[gone]]
+
+    def deliver(self, bus: MessageBus, step: int, pos: np.ndarray, online: np.ndarray,
+                group: np.ndarray) -> DeliveryEvents:  # fmt: skip
+        """Stage 7's bus part on a shard: the due messages of every shard for the own receivers.
+
+        Rows for an own receiver (or a heartbeat answer about an own agent) stay here; the others, and every
+        GROUP row (members may live anywhere), go through the exchange to the shard owning their receiver.
+        Heartbeat answers that become due in this call (latency 0) concern own agents: delivered here.
+        """
+        rows = bus.take_due(step)
+        grp = rows.kind == GROUP
+        slot = np.where(grp, 0, np.where(rows.target >= 0, rows.target, rows.sender))
+        here = grp | self.held[slot]
+        got = self.swap((int(self.world.tick), "bus"), self.index, {"rows": rows.take(grp | ~here)})
+        d = bus.payload_dim
+        mine = DueRows.concat([rows.take(here), *got["rows"]], d)
+        seen = self.own | self.ghost
+        rounds = [bus.deliver_rows(mine, step, pos, online, group, mine=self.held, seen=seen, push=False)]
+        while len(again := bus.take_due(step)):
+            rounds.append(bus.deliver_rows(again, step, pos, online, group, mine=self.held, seen=seen, push=False))
+        if len(rounds) == 1:
+            return rounds[0]
+        return DeliveryEvents(int(step), *(MessageLog.concat([getattr(r, f) for r in rounds])
+                                           for f in ("sent", "delivered", "dropped")))  # fmt: skip
+
+    def flat_rows(self, slots: np.ndarray) -> np.ndarray:
+        """The flat observation rows of ``slots`` (only those rows are assembled from the parts)."""
+        sc, world = self.scenario, self.world
+        if world.comms is None and not any(x.obs_part is not None for x in world.sensors):
+            return sc.flat_observation(world)[slots]  # one kernel writes every row: cheaper than gathering
+        parts = sc.observation(world)
+        if not slots.size:
+            return np.zeros((0, sum(p.size for p in sc.obs_parts().values())), dtype=np.float32)
+        return flat_parts({k: v[slots] for k, v in parts.items()}, slots.size)
+
+    def _sender_positions(self) -> None:
+        """The current positions of the senders in own inboxes that live on other shards beyond the halo.
+
+        An inbox observation locates each message's sender where it is now; a sender far away is known only
+        to its own shard: two exchanges fetch those positions (who wants which, then the answers).
+        """
+        comms, st = self.world.comms, self.world.state
+        if comms is None:
+            return
+        inbox = comms.bus.inbox
+        snd = inbox.sender[inbox.valid & self.own[:, None]]
+        need = np.zeros(st.n_slots, dtype=bool)  # a mask, not np.unique: linear in the inbox rows
+        need[snd[snd >= 0]] = True
+        need &= ~(self.own | self.ghost)
+        want = np.flatnonzero(need)
+        tick = int(self.world.tick)
+        serve = self.swap((tick, "want"), self.index, {"slots": want})["slots"]
+        got = self.swap((tick, "have"), self.index, {"slots": serve, "pos": st.pos[serve]})
+        sl, pos = got["slots"], got["pos"]
+        sel = need[sl]
+        st.pos[sl[sel]] = pos[sel]
+
+    def combine(self, partials: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """The per-group sums of every shard."""
+        return self.swap((int(self.world.tick), "groups"), self.index, partials)
+
+    # ------------------------------------------------------------------ episode
+    def reset(self, seed: np.random.SeedSequence, owner: np.ndarray, obs: bool = True, kin: bool = False,
+              tick: int | None = None) -> Packed:  # fmt: skip
+        """Start the episode of ``seed`` exactly as one process does, then keep this shard's agents online.
+
+        Every shard replays the placement, so every shard knows every agent's start: the ghosts need no
+        exchange here.
 
         Returns:
-            The own slots with their range-graph and proximity rows, and a heartbeat.
+            The own slots with their observation rows (``obs``) and kinematics (``kin``), and a heartbeat.
         """
         t0 = time.perf_counter()
         self._pause()
         world, st = self.world, self.world.state
+        self.strips.owner = np.asarray(owner, dtype=np.int64).copy()
+        if tick is not None:  # the coordinator's clock: a shard started anew keeps step with the others
+            world.tick = int(tick)
+        world.bridge = None  # the reset's sensing runs on the whole, identical world first
         placement = world.reset_world(0, seed)
         self.scenario.reset_world(world, 0, placement)
-        self.readers.reset()
-        self.strips.owner = np.asarray(owner, dtype=np.int64).copy()
-        alive = st.online.copy()
-        slots = np.flatnonzero(alive)
-        x = st.pos[slots, 0]
+        alive = np.flatnonzero(st.online)
+        x = st.pos[alive, 0]
         self.own[:] = False
-        self.own[slots[self.strips.owner_of(x) == self.index]] = True
+        self.own[alive[self.strips.owner_of(x) == self.index]] = True
+        self.held[:] = self.own
         self.ghost[:] = False
-        self.ghost[self.strips.ghosts(x, slots, self.index)] = True
-        self._set_online()
-        if world.physics is not None:
-            world.physics.sync(st, world.scene)
-        ctx = world.context()
-        world.regrid(ctx)
-        out = self._sense(ctx, None, None)
-        out["beat"] = self._beat(t0)
+        self.ghost[self.strips.ghosts(x, alive, self.index)] = True
+        st.online[:] = self.own | self.ghost
+        world.refresh([0])
+        world.bridge = self
+        self.acting[:] = False
+        out = self._rows_out(np.flatnonzero(self.own), None, self.own, obs, kin)
+        out["beat"] = self.beat(t0)
         return out
 
-    # ------------------------------------------------------------------ step, call 1
-    def move(
+    def run(self, slots: np.ndarray, parts: dict[str, np.ndarray], control: Packed) -> tuple[Any, np.ndarray]:
+        """Apply ``control``, then ``run_step`` for the own slots ``slots`` with action parts over every slot.
+
+        Returns:
+            The scenario's result and the terminated mask (``self.acting`` holds the slots that acted and are
+            own after the hand-overs).
+        """
+        world, st = self.world, self.world.state
+        self.strips.owner = np.asarray(control["owner"], dtype=np.int64).copy()
+        for kind, centre, half in control.get("objects", ()):
+            world.scene.add(kind, centre, half, 0)
+        ended = control.get("ended")
+        if ended is not None and ended.size:
+            world.set_offline(ended)
+            self.own[ended] = False
+        st.online[self.ghost] = False  # ghosts come fresh after the motion
+        self.ghost[:] = False
+        self.acting[:] = False
+        self.acting[slots] = True
+        return run_step(self.scenario, world, parts, self.acting)
+
+    # ------------------------------------------------------------------ code API (messages, groups)
+    def send(self, sender: int, target: int, payload: np.ndarray, to_group: bool) -> Packed:
+        """A bus message from code by the own agent ``sender`` (``env.send_message``): whether it was accepted."""
+        t0 = time.perf_counter()
+        comms, tick = self.world.comms, int(self.world.tick)
+        assert comms is not None
+        if to_group:
+            ok = comms.to_group(int(sender), int(target), payload, tick)
+        else:
+            ok = comms.unicast(int(sender), int(target), payload, tick)
+        return {"accepted": bool(ok), "beat": self.beat(t0)}
+
+    def assign_group(self, slot: int, group: int) -> Packed:
+        """Move the own agent ``slot`` to ``group`` (``env.assign_group``)."""
+        t0 = time.perf_counter()
+        assert self.world.groups is not None
+        self.world.groups.assign(np.array([int(slot)]), int(group), self.world.tick)
+        return {"beat": self.beat(t0)}
+
+    # ------------------------------------------------------------------ rollout (distributed.shard_rollout)
+    def begin(self, policy: Any, seed: int | None) -> Packed:
+        """Build the policy for a rollout of the episode just reset."""
+        t0 = time.perf_counter()
+        self.rollout = ShardRollout(self, policy, seed)
+        return {"beat": self.beat(t0)}
+
+    def act(self, control: Packed) -> Packed:
+        """One rollout step: the policy acts for the own live agents; counts back."""
+        t0 = time.perf_counter()
+        self._pause()
+        out = self.rollout.act(control)
+        out["beat"] = self.beat(t0)
+        return out
+
+    def finish(self) -> Packed:
+        """The end of a rollout: the per-agent rows of the own agents (and of those that ended here)."""
+        t0 = time.perf_counter()
+        out = self.rollout.finish()
+        out["beat"] = self.beat(t0)
+        return out
+
+    # ------------------------------------------------------------------ step
+    def step(
         self,
         slots: np.ndarray,
         parts: dict[str, np.ndarray],
-        offline: np.ndarray,
-        objects: list[tuple[np.ndarray, np.ndarray, np.ndarray]],
-        owner: np.ndarray,
+        control: Packed,
     ) -> Packed:
-        """Stage 1 (motion part) and stages 2-4 for the own agents.
+        """One whole step of the own agents (see the module docstring).
 
         Args:
             slots: The own slots that act this step (sorted).
-            parts: Their action parts other than ``comm`` (rows in the order of ``slots``).
-            offline: Slots that ended at the previous step (they leave the shard).
-            objects: Static objects added since the previous step, ``(kind, centre, half)`` each.
-            owner: ``(K,)`` the shard owning each strip (changes when a shard went offline).
+            parts: Their validated action parts (rows in the order of ``slots``).
+            control: ``ended`` (slots that ended at the previous step anywhere, or were lost with a shard),
+                ``objects`` (static objects added since the previous step, ``(kind, centre, half)`` each),
+                ``owner`` (``(K,)`` the shard owning each strip), ``obs`` / ``kinematics`` (what to send back).
 
         Returns:
-            ``slots`` / ``pos`` / ``vel`` / ``heading`` of every own agent after the motion, the agents handed
-            over (``out`` slots with their ``AGENT_FIELDS`` and ``MOTION_FIELDS`` rows) and a heartbeat.
+            The rows of the slots that acted and are own after the hand-overs (``slots``, ``rewards``,
+            ``terminated``, ``info``, ``obs``), every own slot (``own``, with kinematics when asked), the
+            collisions of own agents and a heartbeat.
         """
         t0 = time.perf_counter()
         self._pause()
-        world, st, sc = self.world, self.world.state, self.scenario
-        self.strips.owner = np.asarray(owner, dtype=np.int64).copy()
-        for kind, centre, half in objects:
-            world.scene.add(kind, centre, half, 0)
-        if offline.size:
-            self.own[offline] = False
-            world.set_offline(offline)
-        self.ghost[:] = False  # ghosts come fresh with every step's second call
-        self._set_online()
-        s = st.n_slots
-        acting = np.zeros(s, dtype=bool)
-        acting[slots] = True
+        s = self.world.state.n_slots
         full = {}
-        for k, rows in parts.items():
-            a = np.zeros((s, rows.shape[1]), dtype=rows.dtype)
+        for key, rows in parts.items():
+            a = np.zeros((s, *rows.shape[1:]), dtype=rows.dtype)
             a[slots] = rows
-            full[k] = a
-        sc.apply_actions(world, full, acting)
-        ctx = world.context()
-        self._ctx = ctx
-        world.run_motion(ctx)
-        mine = np.flatnonzero(self.own)
-        out: Packed = {"slots": mine, "pos": st.pos[mine], "vel": st.vel[mine], "heading": st.heading[mine]}
-        leave = mine[self.strips.owner_of(st.pos[mine, 0]) != self.index]
-        out["out"] = leave
-        for f in AGENT_FIELDS:
-            out[f"a.{f}"] = getattr(st, f)[leave]
-        for f in MOTION_FIELDS:
-            out[f"m.{f}"] = getattr(world.motion, f)[leave]
-        if (
-            leave.size
-        ):  # their reads of the floods go with them (a scan of the reader lists: only when needed)
-            gone = np.zeros(s, dtype=bool)
-            gone[leave] = True
-            out["r.flood"], out["r.slot"] = self.readers.take_leaving(gone)
-        else:
-            out["r.flood"] = out["r.slot"] = np.zeros(0, dtype=np.int64)
-        self.own[leave] = False
-        st.online[leave] = False
-        out["beat"] = self._beat(t0)
-        return out
-
-    # ------------------------------------------------------------------ step, call 2
-    def collide(self, arrivals: Packed | None, ghost_slots: np.ndarray, ghost_pos: np.ndarray) -> Packed:
-        """Take in the agents handed over and the step's ghosts, then stage 5 for the own agents.
-
-        Args:
-            arrivals: Agents handed over to this shard (``out`` slots and their rows, as ``move`` packs them),
-                or ``None``.
-            ghost_slots: Slots of the ghosts (agents of other shards within the halo).
-            ghost_pos: Their positions after this step's motion.
-
-        Returns:
-            The collision events whose hit agent is one of the own agents, and a heartbeat.
-        """
-        t0 = time.perf_counter()
-        self._pause()
-        world, st = self.world, self.world.state
-        if arrivals is not None and arrivals["out"].size:
-            new = arrivals["out"]
-            for f in AGENT_FIELDS:
-                getattr(st, f)[new] = arrivals[f"a.{f}"]
-            for f in MOTION_FIELDS:
-                getattr(world.motion, f)[new] = arrivals[f"m.{f}"]
-            self.own[new] = True
-            self.readers.add(arrivals["r.flood"], arrivals["r.slot"])
-        self.ghost[:] = False
-        self.ghost[ghost_slots] = True
-        st.pos[ghost_slots] = ghost_pos
-        self._set_online()
-        ctx = self._ctx
-        assert ctx is not None, "move() must come first"
-        events, _ = world.run_collisions(ctx)
-        keep = self.own[events.agent]
-        return {"agent": events.agent[keep], "other_agent": events.other_agent[keep], "obj": events.obj[keep],
-                "beat": self._beat(t0)}  # fmt: skip
-
-    # ------------------------------------------------------------------ step, call 3
-    def sense(
-        self, offline: np.ndarray, ov: Packed | None, link_range: np.ndarray | None, hit_ids: bool = True
-    ) -> Packed:
-        """Take the slots that went offline this step anywhere, then the range graph, the hop and the scan.
-
-        Args:
-            offline: Slots taken offline this step (collisions found by any shard, heartbeat timeouts).
-            ov: The overlay's hop (``None`` when no flood spreads): ``active`` floods, the ``started`` ones and
-                their ``origin``, and the frontier entries this shard can walk (``fr_f``, ``fr_u``).
-            link_range: The overlay's per-slot range when it is no longer uniform, else ``None``.
-            hit_ids: Send the scan's hit ids too (the observations do not read them; the viewer does).
-
-        Returns:
-            The own slots with their nearest neighbour, the hop's deliveries to own slots (``ov.slot``,
-            ``ov.flood``) and links walked (``ov.links``), the scan rows, and a heartbeat.
-        """
-        t0 = time.perf_counter()
-        self._pause()
+            full[key] = a
+        res, terminated = self.run(slots, full, control)
         world = self.world
-        ctx = self._ctx
-        assert ctx is not None, "move() must come first"
-        if offline.size:
-            world.set_offline(offline)
-            self.ghost[offline] = False
-            world.regrid(ctx)
-        out = self._sense(ctx, ov, link_range, hit_ids)
-        world.step_count += 1
-        world.tick += 1
-        self._ctx = None
-        out["beat"] = self._beat(t0)
-        return out
-
-    # ------------------------------------------------------------------ step, calls 2 and 3 in one
-    def collide_sense(
-        self,
-        arrivals: Packed | None,
-        ghost_slots: np.ndarray,
-        ghost_pos: np.ndarray,
-        offline: np.ndarray,
-        ov: Packed | None,
-        link_range: np.ndarray | None,
-        hit_ids: bool = True,
-    ) -> Packed:
-        """``collide`` then ``sense`` in one call, when collisions take no agent offline (the coordinator then
-        knows every slot that goes offline before the collisions: the heartbeat timeouts)."""
-        t0 = time.perf_counter()
-        out = self.collide(arrivals, ghost_slots, ghost_pos)
-        out.update(self.sense(offline, ov, link_range, hit_ids))
-        out["beat"]["compute_s"] = time.perf_counter() - t0
+        done = np.flatnonzero(self.acting)
+        out = self._rows_out(done, res, terminated, bool(control.get("obs", True)), bool(control.get("kinematics")))
+        col = world.last_events.collisions
+        out["col.agent"], out["col.other"], out["col.obj"] = col.agent, col.other_agent, col.obj
+        out["handed"] = self.handed
+        comms = world.comms
+        if control.get("events") and comms is not None:
+            ce = comms.events
+            out["bus.sent"], out["bus.delivered"], out["bus.dropped"] = ce.bus.sent, ce.bus.delivered, ce.bus.dropped
+            out["overlay"], out["sent"] = ce.overlay, np.where(self.own, ce.sent, 0)
+        out["beat"] = self.beat(t0)
         return out

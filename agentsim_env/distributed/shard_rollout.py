@@ -1,10 +1,10 @@
 """A rollout inside a shard: the policy acts for the shard's own agents on their observation rows.
 
-``env.rollout(policy, steps, seed)`` over shards (``distributed.coordinator``): each worker builds the policy from
+``env.rollout(policy, steps, seed)`` over shards (``distributed.coordinator``): each shard builds the policy from
 picklable inputs (a baseline name, a trained model folder; ``env.rollout.build_policy``; a policy object is
 sent as it is) and, every step, acts for its own live agents on the observation rows it built at the end of the
-previous step, then runs the step (``Worker.run``). Observations never leave the shard. What an agent
-accumulates (its return, its info sums, whether it is live) is a per-slot array of the worker that travels with
+previous step, then runs the step (``Shard.run``). Observations never leave the shard. What an agent
+accumulates (its return, its info sums, whether it is live) is a per-slot array of the shard that travels with
 the agent when it is handed over, so each agent's sums are added in the same order as in one process.
 Each step answers only counts (live agents, events); ``finish`` answers the per-agent rows once.
 """
@@ -29,10 +29,10 @@ def obs_layout(scenario: Any) -> list[tuple[str, slice, tuple[int, ...]]]:
 
 
 class ShardRollout:
-    """The rollout state of one worker (see the module docstring).
+    """The rollout state of one shard (see the module docstring).
 
     Args:
-        worker: The ``distributed.worker.Worker``.
+        worker: The ``distributed.shard.Shard``.
         policy: A baseline name, a trained model folder, or a policy object.
         seed: The rollout's seed (given to ``policy.reset``).
     """

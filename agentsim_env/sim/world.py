@@ -161,7 +161,7 @@ class World:
         self._box: tuple[Any, np.ndarray, np.ndarray] = (None, _NONE, _NONE)  # config, low and high corners
         self.threads = RowThreads(1)
         self.bridge: StepBridge | None = None
-        """The exchanges of a shard (``distributed.worker``); ``None`` when this world is the whole world."""
+        """The exchanges of a shard (``distributed.shard``); ``None`` when this world is the whole world."""
 
     def set_num_threads(self, num_threads: int) -> None:
         """Threads for the per-slot kernels of every stage that has them, 1..256 (results do not change).
