@@ -46,7 +46,7 @@ from agentsim_env.distributed.backends import Failure, raised
 from agentsim_env.distributed.bridge import Bridge, Packed
 from agentsim_env.distributed.exchange import ExchangeActor
 from agentsim_env.distributed.partition import Strips
-from agentsim_env.distributed.shard import Shard
+from agentsim_env.distributed.shard import Shard as _Shard
 
 INSTALL_HINT = "shards need Ray: pip install 'agentsim-env[ray]' (or pip install 'ray>=2.40')"
 STARTUP_TIMEOUT_S = 300.0
@@ -279,7 +279,7 @@ def leave_cluster(ray: Any, user: bool) -> None:
             ray.shutdown()
 
 
-class ShardActor(OnNode):
+class Shard(OnNode):
     """A ``Shard`` in a Ray actor, its exchange reached through the exchange actor's handle; its address also
     names the Ray node it runs on."""
 
@@ -289,7 +289,7 @@ class ShardActor(OnNode):
         def swap(key: tuple[int, str], k: int, payload: Packed) -> Packed:
             return ray.get(exchange.swap.remote(key, k, payload))  # type: ignore[no-any-return]
 
-        self.worker = Shard(index, name, config, strips, swap)
+        self.worker = _Shard(index, name, config, strips, swap)
         self.worker.address = f"{self.worker.address} on node {self.node()[:12]}"
 
     def reset(self, *args: Any) -> Packed:
@@ -347,7 +347,7 @@ class RayShards:
         self.n_shards = int(n_shards)
         self._ray = ray
         self._own = join_cluster(ray, address, self.n_shards)
-        self._cls = ray.remote(num_cpus=1 if address is not None else 0, max_restarts=0)(ShardActor)
+        self._cls = ray.remote(num_cpus=1 if address is not None else 0, max_restarts=0)(Shard)
         from ray.util.scheduling_strategies import NodeAffinitySchedulingStrategy
 
         here = NodeAffinitySchedulingStrategy(ray.get_runtime_context().get_node_id(), soft=False)
