@@ -1,28 +1,26 @@
-"""One world over shards: step time, the coordinator's share, and the bytes that cross between processes.
+"""One world over shards that step themselves: speed-up over one process, the coordinator's share, the bytes.
 
 ``navigation`` with the full-stack comms config of ``bench_comms`` (collisions off, so the population stays
-constant), stepped through the array front end with one world: ``BatchedEnv`` (one process) next to
-``DistributedBatchedEnv`` (K shards as Ray actors on a local cluster, or in this process with
-``backend="local"``). Two kinds of traffic: "full" (every agent sends one message every step, a quarter of them
-overlay floods with hop limit 2, as in ``bench_comms``) and "silent" (comms on, nobody sends: channel "none").
+constant), "full" traffic (every agent sends one message every step, a quarter of them overlay floods with hop
+limit 2, as in ``bench_comms``). The actions come from a fixed cycle of ``bench_comms`` action arrays, played by a
+row policy (``Cycle``): the same actions in every system, so the results can be compared.
 
-Three tables:
+Tables:
 
-a. 100,000 agents, one world: median wall time per step, env-steps/s, the speed-up of 2 Ray shards over one
-   process (same traffic), the shards' compute time (their heartbeats' ``step_s``), the rest ("coordinator +
-   transfer": step time minus the slowest shard's compute: the coordinator's serial stages, serialisation,
-   Ray's calls) and the bytes per step. Each system is built, stepped (1 warm-up step, then the timed steps)
-   and closed before the next (a 100k world exists three times with 2 shards: the mirror and one per shard).
-b. The coordinator's overhead at small sizes (silent traffic): one process, 1 shard in this process, 1 shard
-   on Ray, 2 shards on Ray; wall ms per step, interleaved rounds (``common.measure_interleaved``; wall time,
-   since a Ray shard's work is not in this process's CPU time).
-c. Bytes per step against the number of agents near the strip edge (2 shards, ``backend="local"``: the bytes do
-   not depend on the backend): the halo (ghosts) grows with the map side, i.e. with sqrt(N) at fixed density,
-   not with N.
+a. 100,000 and 200,000 agents: one process vs 2 shards on Ray (a local cluster on 127.0.0.1), through
+   ``env.rollout`` (the policy runs inside the shards, only counts come back) and through the step API (the array
+   front end ``BatchedEnv`` / ``DistributedBatchedEnv``, which gathers every agent's observation). Wall ms per step,
+   env-steps/s, the speed-up, each shard's busy time (its call minus its waits at the exchange), the exchange
+   (waits, routing, transfers), the coordinator's share of the step (the step's wall time outside the slowest
+   shard's call: the coordinator's own work and the calls' overhead) and the bytes per step between processes
+   (between shards through the exchange; coordinator calls apart). The rollout rows also say whether the results
+   (returns, final positions, events) equal one process's.
+b. Bytes per step against the number of agents near the strip edge (2 shards, ``backend="local"``: the bytes do
+   not depend on the backend): the halo grows with the map side, i.e. with sqrt(N) at fixed density.
+c. On paper: 1,000,000 agents on 16 machines, from the measurements of table a (assumptions printed).
 
 Timing is wall time (the shards run in other processes); on a shared machine the numbers move with its load.
-Ray is started once for the whole run (a local cluster on 127.0.0.1) and stopped at the end; without Ray the
-Ray rows are skipped.
+Ray is started once for the whole run and stopped at the end; without Ray the Ray rows are skipped.
 
 Run: ``python benchmarks/bench_distributed.py [--quick]``.
 """
@@ -38,7 +36,7 @@ from pathlib import Path
 from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import fmt_num, machine_description, markdown_table, measure_interleaved  # noqa: E402, I001
+from common import fmt_num, machine_description, markdown_table  # noqa: E402, I001
 
 import numpy as np  # noqa: E402  (after common: it pins the thread pools before numpy loads)
 
@@ -47,7 +45,7 @@ import bench_comms as bc  # noqa: E402
 SHARD_TIMEOUT_S = (
     120.0  # per call: a loaded shared machine must not declare a slow shard offline mid-benchmark
 )
-GHOST_BYTES = 32  # a ghost: its int64 slot id and its 3 float64 coordinates
+GHOST_BYTES = 80  # a ghost: its int64 slot id, x and 3 float64 coordinates, posted by its shard and routed on
 TRAFFIC = ("full", "silent")
 
 
@@ -88,8 +86,37 @@ def start_ray() -> Any:
     return ray
 
 
-def build(n: int, shards: int | None, backend: str = "ray") -> Any:
-    """One process (``shards=None``) or ``shards`` shards on ``backend``; reset with seed 0."""
+class Cycle:
+    """A row policy that plays a fixed cycle of action arrays ``(n, act_dim)``: row ``slot`` of array ``step``."""
+
+    def __init__(self, acts: list[np.ndarray], parts: dict[str, Any]) -> None:
+        self.acts = [np.asarray(a).reshape(a.shape[-2], a.shape[-1]) for a in acts]
+        self.parts = [(k, p.size, tuple(p.shape)) for k, p in parts.items()]
+
+    def reset(self, seed: int | None = None) -> None:
+        """Nothing to reset: the cycle depends on the step only."""
+
+    def act_rows(self, obs: dict[str, np.ndarray], slots: np.ndarray, step: int) -> dict[str, np.ndarray]:
+        """The rows ``slots`` of the cycle's array for ``step``, split into the action parts."""
+        a = self.acts[step % len(self.acts)][slots]
+        out, c = {}, 0
+        for key, size, shape in self.parts:
+            out[key] = a[:, c : c + size].reshape(len(slots), *shape)
+            c += size
+        return out
+
+
+def build(n: int, shards: int | None, backend: str = "ray", api: str = "step") -> Any:
+    """One process (``shards=None``) or ``shards`` shards on ``backend``, as the ParallelEnv (``api="rollout"``)
+    or the array front end (``api="step"``, reset with seed 0)."""
+    if api == "rollout":
+        if shards is None:
+            import agentsim_env
+
+            return agentsim_env.make("navigation", **config(n))
+        from agentsim_env.distributed import make
+
+        return make("navigation", shards=shards, backend=backend, timeout_s=SHARD_TIMEOUT_S, **config(n))
     if shards is None:
         from agentsim_env.env.vector import BatchedEnv
 
@@ -112,116 +139,113 @@ def close(env: Any) -> None:
     gc.collect()
 
 
-def run_blocks(env: Any, acts: list[np.ndarray], warmup: int, steps: int) -> dict[str, float]:
-    """Step ``env`` ``warmup`` times untimed, then ``steps`` times timed; medians over the timed steps.
+def _shard_times(env: Any, steps: int) -> dict[str, float]:
+    """Per step: the slowest shard's call, its busy part (without exchange waits), the mean exchange wait."""
+    prof = env.coordinator.profile
+    call = np.asarray(prof["compute_s"]) / steps * 1e3
+    wait = np.asarray(prof["wait_s"]) / steps * 1e3
+    return {"max_call_ms": float(call.max()), "busy_ms": float((call - wait).max()), "wait_ms": float(wait.mean())}
 
-    Returns:
-        ``step_ms``; for a sharded env also ``shard_ms`` (mean over shards of their compute), ``max_shard_ms``,
-        ``coord_ms`` (step minus the slowest shard), ``bytes`` (total) and ``border_bytes`` (halo + handover).
-    """
-    for i in range(warmup):
-        env.step(acts[i % bc.CYCLE])
-    rec: dict[str, list[float]] = {k: [] for k in ("step_ms", "shard_ms", "max_shard_ms", "coord_ms", "bytes",
-                                                   "border_bytes")}  # fmt: skip
-    co = getattr(env, "coordinator", None)
-    for i in range(warmup, warmup + steps):
+
+def run_rollout(n: int, shards: int | None, traffic: str, steps: int, backend: str = "ray") -> dict[str, Any]:
+    """``env.rollout`` of the action cycle for ``steps`` steps (after a 2-step warm-up rollout); wall per step."""
+    env = build(n, shards, backend, api="rollout")
+    policy = Cycle(actions(n, traffic), env.scenario.act_parts())
+    env.rollout(policy, 2, seed=0)
+    t0 = time.perf_counter()
+    res = env.rollout(policy, steps, seed=0)
+    wall = time.perf_counter() - t0
+    out: dict[str, Any] = {"result": res}
+    if shards is None:
+        out["step_ms"] = wall / steps * 1e3  # the reset included, as for the shards
+    else:
+        prof = env.coordinator.profile
+        out["step_ms"] = prof["wall_s"] / steps * 1e3
+        out.update(_shard_times(env, steps))
+        out["coord_ms"] = out["step_ms"] - out["max_call_ms"]
+        tr = env.coordinator.traffic
+        out["bytes"], out["calls_bytes"] = tr.between_shards, tr.actions + tr.replies
+    close(env)
+    return out
+
+
+def run_steps(n: int, shards: int | None, traffic: str, steps: int, backend: str = "ray") -> dict[str, Any]:
+    """The step API: 1 warm-up step, then ``steps`` timed steps; medians."""
+    env = build(n, shards, backend, api="step")
+    acts = actions(n, traffic)
+    env.step(acts[0])
+    rec: dict[str, list[float]] = {k: [] for k in ("step_ms", "max_call_ms", "busy_ms", "wait_ms", "bytes",
+                                                   "calls_bytes")}  # fmt: skip
+    for i in range(1, steps + 1):
         t0 = time.perf_counter()
         env.step(acts[i % bc.CYCLE])
-        ms = (time.perf_counter() - t0) * 1e3
-        rec["step_ms"].append(ms)
-        if co is not None:
-            comp = [s.step_s * 1e3 for s in env.shards if s.alive]
-            rec["shard_ms"].append(float(np.mean(comp)))
-            rec["max_shard_ms"].append(max(comp))
-            rec["coord_ms"].append(ms - max(comp))
-            rec["bytes"].append(co.traffic.total)
-            rec["border_bytes"].append(co.traffic.halo + co.traffic.handover)
-    return {k: float(np.median(v)) for k, v in rec.items() if v}
+        rec["step_ms"].append((time.perf_counter() - t0) * 1e3)
+        if shards is not None:
+            live = [s for s in env.shards if s.alive]
+            rec["max_call_ms"].append(max(s.step_s for s in live) * 1e3)
+            rec["busy_ms"].append(max((s.step_s - s.wait_s) for s in live) * 1e3)
+            rec["wait_ms"].append(float(np.mean([s.wait_s for s in live])) * 1e3)
+            tr = env.coordinator.traffic
+            rec["bytes"].append(tr.between_shards)
+            rec["calls_bytes"].append(tr.actions + tr.replies)
+    out = {k: float(np.median(v)) for k, v in rec.items() if v}
+    if shards is not None:
+        out["coord_ms"] = out["step_ms"] - out["max_call_ms"]
+    close(env)
+    return out
 
 
-def one_world_table(n: int, warmup: int, steps: int, ray: Any) -> tuple[str, str]:
-    """Table a and the note under it (why the speed-up target is met or not)."""
-    systems: list[tuple[str, int | None]] = [("one process", None)]
-    if ray is not None:
-        systems.append(("2 shards (Ray)", 2))
-    res: dict[tuple[str, str], dict[str, float]] = {}
-    for traffic in TRAFFIC:
-        acts = actions(n, traffic)
-        for label, shards in systems:
-            env = build(n, shards)
-            res[traffic, label] = run_blocks(env, acts, warmup, steps)
-            close(env)
-    rows = []
-    for traffic in TRAFFIC:
-        base = res[traffic, "one process"]["step_ms"]
-        for label, shards in systems:
-            r = res[traffic, label]
-            sharded = shards is not None
-            rows.append([traffic, label, fmt_num(r["step_ms"]), fmt_num(1e3 / r["step_ms"]),
-                         f"{base / r['step_ms']:.2f}",
-                         fmt_num(r["shard_ms"]) if sharded else "-", fmt_num(r["coord_ms"]) if sharded else "-",
-                         _bytes(r["bytes"]) if sharded else "-",
-                         _bytes(r["border_bytes"]) if sharded else "-"])  # fmt: skip
-    table = markdown_table(["traffic", "system", "step ms", "env-steps/s", "speed-up", "shard compute ms",
-                            "coordinator + transfer ms", "bytes/step", "halo + handover bytes/step"], rows)  # fmt: skip
-    if ray is None:
-        return table, "Ray is not installed: the 2-shard rows are skipped (pip install 'agentsim-env[ray]')."
-    notes = []
-    for traffic in TRAFFIC:
-        one, two = res[traffic, "one process"], res[traffic, "2 shards (Ray)"]
-        speed = one["step_ms"] / two["step_ms"]
-        need = one["step_ms"] / 1.6
-        co, slow = two["coord_ms"], two["max_shard_ms"]
-        why = (
-            f"the coordinator's serial share alone (bus, overlay, inboxes, observations of all {n:,} agents, "
-            f"plus the transfers) is {co:.0f} ms of the {two['step_ms']:.0f} ms step"
-        )
-        if co >= need:
-            why += f", over the {need:.0f} ms that 1.6x allows, whatever the shards do"
-        else:
-            why += (
-                f"; with the slowest shard's {slow:.0f} ms on top it does not fit in the {need:.0f} ms that 1.6x "
-                f"allows"
-            )
-        why += f"; with this serial share no number of shards beats {one['step_ms'] / max(co, 1e-9):.2f}x"
-        if speed >= 1.6:
-            why = f"the slowest shard computes {slow:.0f} ms and the coordinator + transfers take {co:.0f} ms"
-        notes.append(
-            f"{traffic} traffic: {speed:.2f}x vs one process ({one['step_ms']:.0f} ms), target 1.6x "
-            f"{'met' if speed >= 1.6 else 'not met'}: {why} (the shards compute {two['shard_ms']:.0f} ms each on "
-            f"average)."
-        )
-    cores = os.cpu_count() or 1
-    if cores < 3:
-        notes.append(f"This machine has {cores} logical CPUs for the coordinator and 2 shards (and anything else "
-                     f"running): the shards do not always get a core each.")  # fmt: skip
-    return table, "\n".join(f"Note: {x}" for x in notes)
+def same_result(a: Any, b: Any) -> bool:
+    """Whether two rollouts ended with the same returns, final positions and events."""
+    return bool(np.array_equal(a.returns, b.returns) and np.array_equal(a.final_pos, b.final_pos)
+                and a.events == b.events and a.steps == b.steps)  # fmt: skip
 
 
-def overhead_table(sizes: list[int], rounds: int, block_s: float, ray: Any) -> str:
-    """Table b: wall ms per step of one process and of 1-2 shards, silent traffic, interleaved rounds."""
-    rows = []
+def speed_table(sizes: list[int], steps: int, ray: Any) -> tuple[str, dict[tuple[int, str, str], dict[str, Any]]]:
+    """Table a and its measurements by (agents, API, system)."""
+    res: dict[tuple[int, str, str], dict[str, Any]] = {}
     for n in sizes:
-        acts = actions(n, "silent")
-        systems: dict[str, tuple[int | None, str]] = {
-            "one process": (None, "ray"),
-            "1 shard, local": (1, "local"),
-        }
-        if ray is not None:
-            systems.update({"1 shard, Ray": (1, "ray"), "2 shards, Ray": (2, "ray")})
-        envs = {name: build(n, k, be) for name, (k, be) in systems.items()}
-        cases = {name: bc._cycling(env, acts, n) for name, env in envs.items()}
-        try:
-            stats = measure_interleaved(cases, rounds=rounds, block_s=block_s, warmup=2, max_block_steps=500)
-        finally:
-            for env in envs.values():
-                close(env)
-        base = stats["one process"].wall_step_s * 1e3
-        for name in systems:
-            ms = stats[name].wall_step_s * 1e3
-            rows.append([fmt_num(n), name, fmt_num(ms), "-" if name == "one process" else fmt_num(ms - base),
-                         f"{ms / base:.2f}"])  # fmt: skip
-    return markdown_table(["agents", "system", "ms/step", "overhead ms/step", "vs one process"], rows)
+        for api, run in (("rollout", run_rollout), ("step API", run_steps)):
+            res[n, api, "one process"] = run(n, None, "full", steps)
+            if ray is not None:
+                res[n, api, "2 shards (Ray)"] = run(n, 2, "full", steps)
+    rows = []
+    for (n, api, system), r in res.items():
+        base = res[n, api, "one process"]
+        sharded = system != "one process"
+        same = "-"
+        if api == "rollout" and sharded:
+            same = "yes" if same_result(base["result"], r["result"]) else "NO"
+        rows.append([fmt_num(n), api, system, fmt_num(r["step_ms"]), fmt_num(1e3 / r["step_ms"]),
+                     f"{base['step_ms'] / r['step_ms']:.2f}",
+                     fmt_num(r["busy_ms"]) if sharded else "-", fmt_num(r["wait_ms"]) if sharded else "-",
+                     f"{100 * r['coord_ms'] / r['step_ms']:.1f} %" if sharded else "-",
+                     _bytes(r["bytes"]) if sharded else "-", _bytes(r["calls_bytes"]) if sharded else "-",
+                     same])  # fmt: skip
+    table = markdown_table(["agents", "API", "system", "ms/step", "env-steps/s", "speed-up", "slowest shard busy ms",
+                            "exchange ms", "coordinator share", "bytes/step between shards",
+                            "bytes/step coordinator calls", "same results"], rows)  # fmt: skip
+    return table, res
+
+
+def paper_table(res: dict[tuple[int, str, str], dict[str, Any]], n_ref: int) -> str:
+    """Table c: 1,000,000 agents on 16 machines from the rollout measurements at ``n_ref`` agents."""
+    one = res[n_ref, "rollout", "one process"]
+    two = res[n_ref, "rollout", "2 shards (Ray)"]
+    per_agent_busy = two["busy_ms"] / (n_ref / 2)  # ms per own agent of a shard, as measured (2 shards, 2 cores)
+    one_ms = one["step_ms"] * 1_000_000 / n_ref  # one process scales linearly with N
+    k = 16
+    busy = per_agent_busy * 1_000_000 / k * 1.08  # + 8 % ghosts at 16 strips of a 1,000,000-agent map
+    rounds = 7  # exchange phases per step
+    edge_bytes = two["bytes"] / 1  # one strip edge at n_ref agents
+    side_ratio = np.sqrt(1_000_000 / n_ref) / (k / 2)  # an edge of the 16-strip map vs the measured one
+    link_ms = edge_bytes * side_ratio * 2 / 1.25e9 * 1e3  # both neighbours' edges, 10 Gb/s
+    coord = two["coord_ms"] * k / 2  # the coordinator's calls grow with the number of shards
+    step = busy + rounds * 1.0 + link_ms + coord
+    rows = [[fmt_num(1_000_000), str(k), fmt_num(one_ms), fmt_num(busy), fmt_num(rounds * 1.0), fmt_num(link_ms),
+             fmt_num(coord), fmt_num(step), f"{one_ms / step:.1f}x"]]  # fmt: skip
+    return markdown_table(["agents", "machines", "one process ms", "shard busy ms", "exchange round trips ms",
+                           "halo + bus link ms", "coordinator ms", "step ms", "vs one process"], rows)  # fmt: skip
 
 
 def border_bytes(
@@ -245,7 +269,7 @@ def border_bytes(
             tr = env.coordinator.traffic
             got["halo"].append(tr.halo)
             got["handover"].append(tr.handover)
-            got["total"].append(tr.total)
+            got["total"].append(tr.between_shards)
         side, halo = float(env.scenario.config.side), float(env.coordinator.strips.halo)
         close(env)
         row: dict[str, float] = {"n": n, "side": side, "halo_m": halo}
@@ -266,36 +290,38 @@ def border_table(rows: list[dict[str, float]]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Print the three tables."""
+    """Print the tables."""
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--quick", action="store_true", help="small sizes and few steps (smoke test)")
     args = p.parse_args(argv)
     q = args.quick
-    n_big, steps = (10_000, 4) if q else (100_000, 8)
-    small = [100, 1000] if q else [100, 1000, 10_000]
+    sizes, steps = ([10_000], 4) if q else ([100_000, 200_000], 8)
     border = [2000, 10_000] if q else [10_000, 40_000, 100_000]
-    print(f"# One world over shards\n\nMachine: {machine_description()}\n")
+    print(f"# One world over shards that step themselves\n\nMachine: {machine_description()}\n")
     ray = start_ray()
     if ray is None:
         print("Ray is not installed: the Ray rows are skipped (pip install 'agentsim-env[ray]').\n")
     try:
-        print(f"## {n_big:,} agents, one world (1 warm-up step, median of {steps} timed steps, wall time)\n")
-        table, note = one_world_table(n_big, 1, steps, ray)
+        print(f"## Speed-up over one process (full traffic; rollout: {steps} steps after a 2-step warm-up, reset "
+              f"included; step API: median of {steps} steps)\n")  # fmt: skip
+        table, res = speed_table(sizes, steps, ray)
         print(table)
-        print(f"\n{note}\n")
-        print(
-            "## Coordinator overhead at small sizes (silent traffic: comms on, nobody sends; wall ms per step)\n"
-        )
-        print(overhead_table(small, rounds=2 if q else 5, block_s=0.05 if q else 0.3, ray=ray))
-        print(f"\n## Bytes per step vs agents near the strip edge (2 shards, local backend, full traffic, "
-              f"mean of {2 if q else 3} steps)\n")  # fmt: skip
+        if ray is not None:
+            print("\n## On paper: 1,000,000 agents on 16 machines\n")
+            print(paper_table(res, sizes[0]))
+            print(f"\nAssumptions: one shard per machine, each at the busy time per own agent measured above "
+                  f"({sizes[0]:,} agents, 2 shards), +8 % ghosts (16 strips of a 1,000,000-agent map at the same "
+                  f"density); 7 exchange phases a step at ~1 ms each (a Ray round trip); the bytes between "
+                  f"neighbouring shards scale with the strip edge (sqrt(N) / K per edge) over 10 Gb/s links; the "
+                  f"coordinator's share grows linearly with the number of shards (one call each); one process at "
+                  f"the measured time per agent.")  # fmt: skip
+        print(f"\n## Bytes per step vs agents near the strip edge (2 shards, local backend, full traffic, step "
+              f"API, mean of {2 if q else 3} steps)\n")  # fmt: skip
         rows = border_bytes(border, 2 if q else 3)
         print(border_table(rows))
-        print(f"\nGhosts = halo bytes / {GHOST_BYTES} (each ghost is sent as an int64 slot id and 3 float64 "
-              f"coordinates). Expected ghosts = 2 x halo ({rows[0]['halo_m']:.0f} m) x agents / map side: the agents "
-              f"within a halo of the one strip edge at uniform density. The map side grows as sqrt(agents) (fixed "
-              f"area per agent), so the halo grows as sqrt(agents): halo bytes per agent fall, halo bytes per "
-              f"sqrt(agent) stay flat.")  # fmt: skip
+        print(f"\nGhosts = halo bytes / {GHOST_BYTES}. Expected ghosts = 2 x halo ({rows[0]['halo_m']:.0f} m) x "
+              f"agents / map side: the agents within a halo of the strip edge at uniform density. The map side "
+              f"grows as sqrt(agents) (fixed area per agent), so the halo grows as sqrt(agents).")  # fmt: skip
     finally:
         if ray is not None and ray.is_initialized():
             ray.shutdown()

@@ -375,3 +375,41 @@ def test_sb3_trains_over_shards_as_over_one_process() -> None:
         runs.append([p.detach().numpy().copy() for p in model.policy.parameters()])
         venv.close()
     assert all(np.array_equal(a, b) for a, b in zip(runs[0], runs[1], strict=True))
+
+
+ROLLOUTS = [
+    ("navigation", "go_to_goal", {"n_agents": 300, "comms": COMMS}),
+    ("navigation", "random", {"n_agents": 200, "action_mode": "primitive", "comms": {"max_range": 40.0}}),
+    ("relay", "flood", {"n_groups": 4, "group_size": 6}),
+]
+
+
+@pytest.mark.parametrize("shards", [1, 2, 4])
+@pytest.mark.parametrize(("name", "policy", "config"), ROLLOUTS, ids=[f"{n}-{p}" for n, p, _ in ROLLOUTS])
+def test_a_rollout_inside_the_shards_equals_one_process(name: str, policy: str, config: dict, shards: int) -> None:
+    ref = agentsim_env.make(name, **config).rollout(policy, 120, seed=5)
+    env = make_sharded(name, shards=shards, backend="local", **config)
+    try:
+        got = env.rollout(policy, 120, seed=5)
+        assert got.steps == ref.steps and got.events == ref.events and got.info_sums == ref.info_sums
+        assert np.array_equal(got.returns, ref.returns) and np.array_equal(got.final_pos, ref.final_pos)
+        if config.get("comms") and name == "navigation" and policy != "random":
+            assert ref.events["delivered"] > 0
+        # the coordinator got counts, not observations: a heartbeat and a few counts per shard, far less than one
+        # float per agent a step (an observation is hundreds)
+        assert env.coordinator.traffic.replies < 100 * shards + 4 * env.scenario.n_agents
+        # step() goes on from where the rollout left the agents
+        live = list(env.agents)
+        assert live and set(env.step(random_actions(env, np.random.default_rng(1)))[1]) == set(live)
+    finally:
+        env.close()
+
+
+def test_a_bad_rollout_policy_is_one_error_before_the_shards_run() -> None:
+    env = make_sharded("navigation", shards=2, backend="local", n_agents=40)
+    with pytest.raises(ValueError, match="go_to_goal"):
+        env.rollout("no_such_policy", 5)
+    with pytest.raises(ValueError, match="steps"):
+        env.rollout("go_to_goal", 0)
+    assert all(s.alive for s in env.shards)
+    env.close()

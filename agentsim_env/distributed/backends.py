@@ -118,6 +118,10 @@ class LocalShards:
         """The shard owning each slot (for routing bus messages)."""
         self.exchange.set_slot_owner(owner)
 
+    def exchange_bytes(self) -> dict[str, int]:
+        """The bytes the exchange routed since the previous call, by phase."""
+        return self.exchange.take_bytes()
+
     def close(self) -> None:
         """Drop every shard."""
         self.shards = dict.fromkeys(self.shards)

@@ -51,6 +51,20 @@ def take_rows(rows: Packed, sel: np.ndarray) -> Packed:
     return {key: v[sel] for key, v in rows.items()}
 
 
+def nbytes(obj: Any) -> int:
+    """Bytes of the numpy arrays inside ``obj`` (dicts, lists, tuples, dataclasses; other values count 8)."""
+    if isinstance(obj, np.ndarray):
+        return int(obj.nbytes)
+    if isinstance(obj, dict):
+        return sum(nbytes(v) for v in obj.values())
+    if isinstance(obj, (list, tuple)):
+        return sum(nbytes(v) for v in obj)
+    fields = getattr(obj, "__dataclass_fields__", None)
+    if fields is not None:
+        return sum(nbytes(getattr(obj, f)) for f in fields)
+    return 8
+
+
 class Bridge:
     """The coordinator's routing between shards (see the module docstring).
 
@@ -61,6 +75,9 @@ class Bridge:
     def __init__(self, strips: Strips, n_slots: int = 0) -> None:
         self.strips = strips
         self.slot_owner = np.full(int(n_slots), -1, dtype=np.int64)
+        self.bytes: dict[str, int] = {}
+        """Bytes posted and routed back since the last ``take_bytes``, by phase (``halo`` and ``handover`` for
+        the motion phase)."""
         """``(S,)`` the shard owning each slot (set at reset, updated by every hand-over)."""
 
     def set_slot_owner(self, owner: np.ndarray) -> None:
@@ -71,8 +88,30 @@ class Bridge:
         """The shard owning each strip from now on."""
         self.strips.owner = np.asarray(owner, dtype=np.int64).copy()
 
+    def take_bytes(self) -> dict[str, int]:
+        """The byte counts by phase since the previous call (then zeroed)."""
+        out, self.bytes = self.bytes, {}
+        return out
+
     def route(self, phase: str, posts: dict[int, Packed]) -> dict[int, Packed]:
-        """What each shard that posted gets back in ``phase``.
+        """What each shard that posted gets back in ``phase`` (its bytes counted in ``bytes``)."""
+        out = self._route(phase, posts)
+        if phase == "motion":
+            for p in posts.values():
+                self._count("halo", nbytes(p["edge"]))
+                self._count("handover", nbytes(p["leave"]) + nbytes(p.get("leave_floods")))
+            for o in out.values():
+                self._count("halo", nbytes(o["ghosts"]))
+                self._count("handover", nbytes(o["arrivals"]) + nbytes(o.get("floods")))
+        else:
+            self._count(phase, nbytes(list(posts.values())) + nbytes(list(out.values())))
+        return out
+
+    def _count(self, phase: str, n: int) -> None:
+        self.bytes[phase] = self.bytes.get(phase, 0) + int(n)
+
+    def _route(self, phase: str, posts: dict[int, Packed]) -> dict[int, Packed]:
+        """The routing itself (see ``route``).
 
         Raises:
             ValueError: For an unknown phase.

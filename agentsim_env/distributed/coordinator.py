@@ -27,7 +27,7 @@ from agentsim_env.comms.overlay import Deliveries
 from agentsim_env.comms.stack import CommsEvents
 from agentsim_env.core.collisions import CollisionEvents
 from agentsim_env.distributed.backends import Failure
-from agentsim_env.distributed.bridge import Packed
+from agentsim_env.distributed.bridge import Packed, nbytes
 from agentsim_env.distributed.partition import Strips
 from agentsim_env.scenarios.base import Scenario, StepResult, StepScores
 from agentsim_env.sim import StepEvents, World
@@ -65,30 +65,39 @@ class ShardInfo:
 
 @dataclass(slots=True)
 class Traffic:
-    """Bytes that crossed between coordinator and shards in the latest step, by kind."""
+    """Bytes that crossed between processes in the latest step (or, after a rollout, per step of it), by kind.
+
+    ``actions`` and ``replies`` travel between the coordinator and the shards; the others between the shards,
+    through the exchange: ``halo`` (ghost positions), ``handover`` (the agents that changed shards, with all their
+    per-slot rows), ``offline`` (ghosts that went offline, the overlay's ghost frontier), ``bus`` (messages whose
+    receiver lives on another shard), ``positions`` (far inbox senders), ``groups`` (per-group sums).
+    """
 
     actions: int = 0
-    kinematics: int = 0
-    handover: int = 0
+    replies: int = 0
     halo: int = 0
-    readings: int = 0
-    other: int = 0
+    handover: int = 0
+    offline: int = 0
+    bus: int = 0
+    positions: int = 0
+    groups: int = 0
 
     @property
     def total(self) -> int:
         """Every byte of the step."""
-        return self.actions + self.kinematics + self.handover + self.halo + self.readings + self.other
+        return sum(getattr(self, f) for f in self.__slots__)  # type: ignore[attr-defined]
 
+    @property
+    def between_shards(self) -> int:
+        """The bytes of the exchanges (what crosses between machines besides the coordinator's calls)."""
+        return self.total - self.actions - self.replies
 
-def nbytes(obj: Any) -> int:
-    """Bytes of the numpy arrays inside ``obj`` (dicts, lists, tuples; other values count 8)."""
-    if isinstance(obj, np.ndarray):
-        return int(obj.nbytes)
-    if isinstance(obj, dict):
-        return sum(nbytes(v) for v in obj.values())
-    if isinstance(obj, (list, tuple)):
-        return sum(nbytes(v) for v in obj)
-    return 8
+    def add_exchange(self, counts: dict[str, int], scale: float = 1.0) -> None:
+        """Add the exchange's byte counts by phase (``Bridge.take_bytes``), times ``scale``."""
+        for phase, field_name in (("halo", "halo"), ("handover", "handover"), ("offline", "offline"),
+                                  ("bus", "bus"), ("want", "positions"), ("have", "positions"),
+                                  ("groups", "groups")):  # fmt: skip
+            setattr(self, field_name, getattr(self, field_name) + int(counts.get(phase, 0) * scale))
 
 
 class Coordinator:
@@ -260,6 +269,8 @@ class Coordinator:
         events = np.zeros(len(EVENT_KEYS), dtype=np.int64)
         taken = agent_steps = 0
         self.profile = {"wall_s": 0.0, "compute_s": np.zeros(n), "wait_s": np.zeros(n)}
+        tr = self.traffic = Traffic()
+        self.backend.exchange_bytes()  # the reset's are not the steps'
         t_start = time.perf_counter()
         while taken < steps and live:
             self.lost = _NONE
@@ -267,6 +278,7 @@ class Coordinator:
                                "taken": taken, "over": done + taken + 1 >= max_steps}  # fmt: skip
             self._objects = []
             replies = self._call("act", dict.fromkeys(range(n), (control,)))
+            tr.actions += nbytes(control)
             agent_steps += live
             taken += 1
             ended = [r["ended"] for r in replies.values()]
@@ -276,13 +288,17 @@ class Coordinator:
                 self.profile["compute_s"][k] += r["beat"]["compute_s"]
                 self.profile["wait_s"][k] += r["beat"]["wait_s"]
                 events += np.asarray(r["events"], dtype=np.int64)
-                self.traffic.handover += int(r["handed"])
+                tr.replies += nbytes(r)
                 self.owner[r["arrived"]] = k
             events[EVENT_KEYS.index("offline")] += self.lost.size
             live = sum(int(r["live"]) for r in replies.values())
             self.world.tick += 1
             self.world.step_count += 1
         self.profile["wall_s"] = time.perf_counter() - t_start
+        if taken:  # per step
+            tr.add_exchange(self.backend.exchange_bytes())
+            for f in tr.__slots__:  # type: ignore[attr-defined]
+                setattr(tr, f, int(getattr(tr, f) / taken))
         got = self._call("finish", dict.fromkeys(range(n), ()))
         finished = list(got.values())
         returns, pos, sums, alive = _rollout_rows(self.world, finished, self.scenario.info_keys())
@@ -332,11 +348,11 @@ class Coordinator:
                 if key not in info:
                     info[key] = np.zeros(s, dtype=v.dtype)
                 info[key][sl] = v
-            tr.readings += nbytes(r)
-            tr.handover += int(r["handed"])
+            tr.replies += nbytes(r)
         for key in keys:
             info.setdefault(key, np.zeros(s))
         self._take(replies, obs=True)
+        tr.add_exchange(self.backend.exchange_bytes())
         lost = self.lost
         if lost.size:  # agents of a shard that went offline: they terminate now, with their last observation
             terminated[lost[acting[lost]]] = True

@@ -130,6 +130,11 @@ class LocalExchange:
         with self._cond:
             self._b.bridge.set_slot_owner(owner)
 
+    def take_bytes(self) -> dict[str, int]:
+        """The bytes routed since the previous call, by phase (``Bridge.take_bytes``)."""
+        with self._cond:
+            return self._b.bridge.take_bytes()
+
 
 class ExchangeActor:
     """The barrier as an asyncio Ray actor (wrapped with ``ray.remote`` by ``distributed.ray_backend``).
@@ -185,3 +190,7 @@ class ExchangeActor:
     async def set_slot_owner(self, owner: Any) -> None:
         """As ``LocalExchange.set_slot_owner``."""
         self._b.bridge.set_slot_owner(owner)
+
+    async def take_bytes(self) -> dict[str, int]:
+        """As ``LocalExchange.take_bytes``."""
+        return self._b.bridge.take_bytes()

@@ -15,9 +15,9 @@ and ``ray_address`` is not used.
 Placement: on a cluster given by address, or joined before (``ray.init``), the shards are spread over its nodes
 (not on the local cluster this module starts: one node). When nodes offer the custom
 resources ``agentsim_node_0``, ``agentsim_node_1``, ... (``ray start --resources '{"agentsim_node_<i>": 1}'``),
-shard k runs on the node of ``agentsim_node_<k mod n>`` (n: the alive nodes offering one), asked as a soft node
-affinity so that a shard started anew after its node died lands on a node still alive; without such nodes Ray's
-``"SPREAD"`` strategy places them. ``node_of(k)`` names the node, and each shard's address (``env.shards``) ends
+shard k runs on the node of ``agentsim_node_<k mod n>`` (n: the alive nodes offering one, less those where a
+shard of this env died or went silent, so that a shard started anew after its node died lands on a node still
+alive), asked as a node affinity; without such nodes Ray's ``"SPREAD"`` strategy places them. ``node_of(k)`` names the node, and each shard's address (``env.shards``) ends
 with ``on node <first 12 hex digits of the node id>``. The local cluster keeps Ray's default placement.
 
 The local cluster listens on loopback only (``start_local_cluster``): Ray binds its gRPC servers (gcs_server,
@@ -225,7 +225,8 @@ class Placement:
             if nodes:
                 from ray.util.scheduling_strategies import NodeAffinitySchedulingStrategy
 
-                strategy = NodeAffinitySchedulingStrategy(nodes[k % len(nodes)], soft=True)
+                # hard: Ray 2.60 let a soft affinity fall back to another node although the target was alive
+                strategy = NodeAffinitySchedulingStrategy(nodes[k % len(nodes)], soft=False)
             actor = remote_cls.options(scheduling_strategy=strategy).remote(*args)
         self._nodes[k] = actor.node.remote()  # answered before the shard's first call
         return actor
@@ -451,6 +452,10 @@ class RayShards:
     def set_slot_owner(self, owner: Any) -> None:
         """The shard owning each slot (for routing bus messages)."""
         self._ray.get(self.exchange.set_slot_owner.remote(owner))
+
+    def exchange_bytes(self) -> dict[str, int]:
+        """The bytes the exchange routed since the previous call, by phase."""
+        return dict(self._ray.get(self.exchange.take_bytes.remote()))
 
     def close(self) -> None:
         """Kill every actor and the exchange; stop the local cluster when no other env uses it."""

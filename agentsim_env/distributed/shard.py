@@ -96,8 +96,6 @@ class Shard:
         """The own agents and those that ended here: the bus delivers (and drops) their messages here."""
         self.ghost = np.zeros(s, dtype=bool)
         self.acting = np.zeros(s, dtype=bool)
-        self.handed = 0
-        """Bytes of the agents handed over to this shard in the latest step."""
         self.arrived = _NONE
         """The slots handed over to this shard in the latest step."""
         self.config = config
@@ -186,11 +184,9 @@ class Shard:
         self.acting[leaving] = False
         st.online[leaving] = False
         arrivals = got["arrivals"]
-        self.handed = 0
         self.arrived = _NONE
         if arrivals is not None and arrivals["slots"].size:
             new = self.arrived = arrivals["slots"]
-            self.handed = sum(int(v.nbytes) for v in arrivals.values())
             unpack_rows(world, arrivals)
             self.own[new] = True
             self.held[new] = True
@@ -411,7 +407,6 @@ class Shard:
         out = self._rows_out(done, res, terminated, bool(control.get("obs", True)), bool(control.get("kinematics")))
         col = world.last_events.collisions
         out["col.agent"], out["col.other"], out["col.obj"] = col.agent, col.other_agent, col.obj
-        out["handed"] = self.handed
         comms = world.comms
         if control.get("events") and comms is not None:
             ce = comms.events

@@ -88,7 +88,7 @@ class ShardRollout:
         self.flat = w.flat_rows(self.slots)
         counts = count_events(w.world.last_events)
         return {"live": int((self.live & w.own).sum()), "events": [counts[k] for k in EVENT_KEYS],
-                "ended": np.flatnonzero(acting & terminated), "handed": w.handed, "arrived": w.arrived}  # fmt: skip
+                "ended": np.flatnonzero(acting & terminated), "arrived": w.arrived}  # fmt: skip
 
     def finish(self) -> Packed:
         """The per-agent rows: every slot this shard holds or saw end (returns, info sums, positions, live)."""
