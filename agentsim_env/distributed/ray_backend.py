@@ -13,12 +13,13 @@ When this process has already called ``ray.init`` (a test's cluster, a trainer's
 and ``ray_address`` is not used.
 
 Placement: on a cluster given by address, or joined before (``ray.init``), the shards are spread over its nodes
-(not on the local cluster this module starts: one node). When nodes offer the custom
-resources ``agentsim_node_0``, ``agentsim_node_1``, ... (``ray start --resources '{"agentsim_node_<i>": 1}'``),
-shard k runs on the node of ``agentsim_node_<k mod n>`` (n: the alive nodes offering one, less those where a
-shard of this env died or went silent, so that a shard started anew after its node died lands on a node still
-alive), asked as a node affinity; without such nodes Ray's ``"SPREAD"`` strategy places them. ``node_of(k)`` names the node, and each shard's address (``env.shards``) ends
-with ``on node <first 12 hex digits of the node id>``. The local cluster keeps Ray's default placement.
+(not on the local cluster this module starts: one node). When nodes offer the custom resources
+``agentsim_node_0``, ``agentsim_node_1``, ... (``ray start --resources '{"agentsim_node_<i>": 1}'``), shard k runs
+on the node of ``agentsim_node_<k mod n>`` (n: the alive nodes offering one, less those where a shard of this env
+died or went silent, so that a shard started anew after its node died lands on a node still alive), asked as a
+node affinity; without such nodes Ray's ``"SPREAD"`` strategy places them. ``node_of(k)`` names the node, and
+each shard's address (``env.shards``) ends with ``on node <first 12 hex digits of the node id>``. The local
+cluster keeps Ray's default placement.
 
 The local cluster listens on loopback only (``start_local_cluster``): Ray binds its gRPC servers (gcs_server,
 the raylet's two ports, the driver's and every worker's) to 127.0.0.1 only when the node's address is literally
