@@ -30,7 +30,7 @@ from agentsim_env.distributed.floods import FloodEntries
 from agentsim_env.distributed.partition import Strips
 from agentsim_env.distributed.shard_overlay import ShardOverlay
 from agentsim_env.distributed.shard_rollout import ShardRollout
-from agentsim_env.scenarios.base import flat_parts, run_step
+from agentsim_env.scenarios.base import run_step
 from agentsim_env.scenarios.registry import make_scenario
 from agentsim_env.sim import World
 from agentsim_env.sim.slot_rows import slot_arrays
@@ -245,9 +245,15 @@ class Shard:
         if world.comms is None and not any(x.obs_part is not None for x in world.sensors):
             return sc.flat_observation(world)[slots]  # one kernel writes every row: cheaper than gathering
         parts = sc.observation(world)
-        if not slots.size:
-            return np.zeros((0, sum(p.size for p in sc.obs_parts().values())), dtype=np.float32)
-        return flat_parts({k: v[slots] for k, v in parts.items()}, slots.size)
+        s = world.state.n_slots
+        cols = [v.reshape(s, -1) for v in parts.values()]
+        out = np.empty((slots.size, sum(c.shape[1] for c in cols)), dtype=np.float32)
+        at = 0
+        for c in cols:  # each part's rows straight into their columns (no per-part copies to concatenate)
+            w = c.shape[1]
+            out[:, at : at + w] = c.take(slots, axis=0)
+            at += w
+        return out
 
     def _sender_positions(self) -> None:
         """The current positions of the senders in own inboxes that live on other shards beyond the halo.
