@@ -413,3 +413,19 @@ def test_a_bad_rollout_policy_is_one_error_before_the_shards_run() -> None:
         env.rollout("go_to_goal", 0)
     assert all(s.alive for s in env.shards)
     env.close()
+
+
+def test_a_rollout_observer_over_shards_sees_what_it_sees_in_one_process() -> None:
+    from agentsim_env.render.trajectories import TrajectoryRecorder
+
+    got = []
+    for env in (agentsim_env.make("navigation", n_agents=300, comms={}),
+                make_sharded("navigation", shards=2, backend="local", n_agents=300, comms={})):  # fmt: skip
+        rec = TrajectoryRecorder()
+        res = env.rollout("go_to_goal", 60, seed=3, on_step=rec.on_rollout)
+        got.append((res, rec.result(env)))
+        env.close()
+    (a, ta), (b, tb) = got
+    assert np.array_equal(a.returns, b.returns) and a.events == b.events and a.events["collisions"] > 0
+    assert np.array_equal(np.asarray(ta.xy), np.asarray(tb.xy))  # every agent's position at every step
+    assert np.array_equal(ta.last, tb.last) and list(ta.outcome) == list(tb.outcome)

@@ -245,7 +245,7 @@ class Coordinator:
             world.set_offline(self.lost)
 
     def rollout(self, policy: Any, steps: int, seed: np.random.SeedSequence, policy_seed: int | None,
-                done: int, max_steps: int) -> dict[str, Any]:  # fmt: skip
+                done: int, max_steps: int, on_step: Any = None) -> dict[str, Any]:  # fmt: skip
         """``env.rollout`` over the shards: the policy runs inside them; only counts come back each step.
 
         Args:
@@ -255,6 +255,8 @@ class Coordinator:
             policy_seed: The seed given to ``policy.reset``.
             done: Steps of the episode taken before (0 after the reset).
             max_steps: The scenario's episode length (the last step truncates).
+            on_step: ``on_step(taken, acted, live, info)`` after every step, with masks and info arrays over
+                every slot (the shards then send the acting agents' rows, positions into the mirror); True stops.
 
         Returns:
             ``steps``, ``agent_steps``, ``events`` (counts), ``returns`` / ``final_pos`` / ``sums`` over every
@@ -265,6 +267,8 @@ class Coordinator:
         self.reset(seed, gather=False)
         n = len(self.shards)
         self._call("begin", {k: (policy, policy_seed) for k in range(n)})
+        if on_step is not None:
+            on_step(0, None, None, None)
         live = int((self.owner >= 0).sum())
         events = np.zeros(len(EVENT_KEYS), dtype=np.int64)
         taken = agent_steps = 0
@@ -275,7 +279,8 @@ class Coordinator:
         while taken < steps and live:
             self.lost = _NONE
             control: Packed = {"ended": self._ended, "objects": self._objects, "owner": self.strips.owner,
-                               "taken": taken, "over": done + taken + 1 >= max_steps}  # fmt: skip
+                               "taken": taken, "over": done + taken + 1 >= max_steps,
+                               "gather": on_step is not None}  # fmt: skip
             self._objects = []
             replies = self._call("act", dict.fromkeys(range(n), (control,)))
             tr.actions += nbytes(control)
@@ -294,6 +299,8 @@ class Coordinator:
             live = sum(int(r["live"]) for r in replies.values())
             self.world.tick += 1
             self.world.step_count += 1
+            if on_step is not None and on_step(taken, *self._step_view(replies)):
+                break
         self.profile["wall_s"] = time.perf_counter() - t_start
         if taken:  # per step
             tr.add_exchange(self.backend.exchange_bytes())
@@ -310,6 +317,22 @@ class Coordinator:
         self.world.state.pos[:] = pos
         return {"steps": taken, "agent_steps": agent_steps, "events": dict(zip(EVENT_KEYS, events.tolist())),
                 "returns": returns, "final_pos": pos, "sums": sums, "live": alive}  # fmt: skip
+
+    def _step_view(self, replies: dict[int, Packed]) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
+        """A rollout step's masks and info arrays over every slot, positions into the mirror."""
+        st = self.world.state
+        s = st.n_slots
+        acted, still = np.zeros(s, dtype=bool), np.zeros(s, dtype=bool)
+        info: dict[str, np.ndarray] = {}
+        for r in replies.values():
+            sl = r["acted"]
+            acted[sl], still[sl], st.pos[sl] = True, r["still"], r["pos"]
+            for k, v in r["info"].items():
+                if k not in info:
+                    info[k] = np.zeros(s, dtype=v.dtype)
+                info[k][sl] = v
+        st.online[acted & ~still] = False
+        return acted, still, info
 
     def step(self, parts: dict[str, np.ndarray], acting: np.ndarray) -> tuple[StepResult, np.ndarray]:
         """One step over the shards: each runs it for its own agents; their rows come back.

@@ -23,7 +23,7 @@ from agentsim_env.distributed.coordinator import Coordinator, ShardInfo
 from agentsim_env.distributed.partition import Strips, halo_width
 from agentsim_env.distributed.shard import Shard
 from agentsim_env.env.parallel_env import ENV_KEYS, AgentSimParallelEnv
-from agentsim_env.env.rollout import RolloutResult, build_policy, check_seed, check_steps
+from agentsim_env.env.rollout import RolloutResult, StepView, build_policy, check_seed, check_steps
 from agentsim_env.env.vector import BatchedEnv
 from agentsim_env.scenarios.base import Scenario
 from agentsim_env.scenarios.registry import list_scenarios, make_scenario, scenario_class
@@ -185,11 +185,12 @@ class DistributedParallelEnv(AgentSimParallelEnv):
 
         Each shard builds the policy (a baseline name or a trained model folder; a policy object is sent as it
         is) and acts for its own agents; a step answers only counts. The results equal one process's. With an
-        ``on_step`` observer, step hooks (a recorder, the viewer) or a render mode the rollout runs through the
-        step API instead (it gathers every agent's data, as those need).
+        ``on_step`` observer the shards also send the acting agents' positions and infos each step (what the
+        observer reads: ``env.world``'s positions and the ``StepView``); with step hooks (a recorder, the viewer),
+        a render mode or ``ended_agents="stay"`` the rollout runs through the step API (every agent's data).
         """
         co = self.coordinator
-        if not isinstance(co, Coordinator) or on_step is not None or self.world.hooks or self.render_mode or self._stay:
+        if self.world.hooks or self.render_mode or self._stay:
             return super().rollout(policy, steps, seed, on_step=on_step)
         steps, pseed = check_steps(steps), check_seed(seed)
         if isinstance(policy, (str, os.PathLike)):  # a bad name is one error here, not a failure in every shard
@@ -199,7 +200,15 @@ class DistributedParallelEnv(AgentSimParallelEnv):
         self._guard.enter("rollout")
         try:
             t0 = time.perf_counter()
-            out = co.rollout(policy, steps, self._seeds.next(), pseed, 0, self.scenario.max_steps)
+            watch = None
+            if on_step is not None:  # the observer reads the masks, infos and env.world's positions of each step
+
+                def watch(taken: int, acted: Any, live: Any, info: Any) -> bool:
+                    if acted is None:  # right after the reset
+                        return bool(on_step(self, 0, None))
+                    return bool(on_step(self, taken, StepView(acted, live, info)))
+
+            out = co.rollout(policy, steps, self._seeds.next(), pseed, 0, self.scenario.max_steps, watch)
             wall = time.perf_counter() - t0
             self._steps, self._started = out["steps"], True
             live = out["live"]

@@ -87,8 +87,14 @@ class ShardRollout:
         self.slots = np.flatnonzero(self.live & w.own)
         self.flat = w.flat_rows(self.slots)
         counts = count_events(w.world.last_events)
-        return {"live": int((self.live & w.own).sum()), "events": [counts[k] for k in EVENT_KEYS],
-                "ended": np.flatnonzero(acting & terminated), "arrived": w.arrived}  # fmt: skip
+        out: Packed = {"live": int((self.live & w.own).sum()), "events": [counts[k] for k in EVENT_KEYS],
+                       "ended": np.flatnonzero(acting & terminated), "arrived": w.arrived}  # fmt: skip
+        if control.get("gather"):  # an observer of the steps: the acting agents' rows (no observations)
+            done = np.flatnonzero(acting)
+            out["acted"], out["still"] = done, self.live[done]
+            out["info"] = {k: np.asarray(v)[done] for k, v in res.info.items()}
+            out["pos"] = st.pos[done]
+        return out
 
     def finish(self) -> Packed:
         """The per-agent rows: every slot this shard holds or saw end (returns, info sums, positions, live)."""
