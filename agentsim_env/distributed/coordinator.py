@@ -399,7 +399,9 @@ class Coordinator:
         return res, terminated
 
 
-def _rollout_rows(world: World, finished: list[Packed], info_keys: tuple[str, ...]) -> tuple[np.ndarray, ...]:
+def _rollout_rows(
+    world: World, finished: list[Packed], info_keys: tuple[str, ...]
+) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray], np.ndarray]:
     """Every agent's return, final position and info sums from the shards' last rows; the live slots."""
     s = world.state.n_slots
     returns = np.zeros(s)

@@ -276,7 +276,11 @@ class DistributedBatchedEnv(BatchedEnv):
         co = self.coordinator
         if isinstance(co, Coordinator):  # the observations were built on the shards
             assert co.obs is not None
-            flat = co.obs.copy() if out is None else np.copyto(out, co.obs) or out
+            if out is None:
+                flat = co.obs.copy()
+            else:
+                np.copyto(out, co.obs)
+                flat = out
             return flat.reshape(self.n_worlds, self.n_agents, self.obs_dim)
         return super()._flat_obs(rows, step, result, out)
 

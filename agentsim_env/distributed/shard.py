@@ -173,7 +173,7 @@ class Shard:
         leave["x"] = st.pos[leaving, 0]
         for name, arr in self.carry.items():
             leave[f"w.{name}"] = arr[leaving]
-        post = {"edge": {"slots": edge, "x": st.pos[edge, 0], "pos": st.pos[edge]}, "leave": leave}
+        post: dict[str, Any] = {"edge": {"slots": edge, "x": st.pos[edge, 0], "pos": st.pos[edge]}, "leave": leave}
         if self.overlay is not None and leaving.size:
             post["leave_floods"] = self.overlay.part.take_leaving(leaving)
         got = self.swap((int(world.tick), "motion"), self.index, post)
@@ -414,8 +414,9 @@ class Shard:
         col = world.last_events.collisions
         out["col.agent"], out["col.other"], out["col.obj"] = col.agent, col.other_agent, col.obj
         comms = world.comms
-        if control.get("events") and comms is not None:
+        if control.get("events") and comms is not None and comms.events.bus is not None:
             ce = comms.events
+            assert ce.bus is not None
             out["bus.sent"], out["bus.delivered"], out["bus.dropped"] = ce.bus.sent, ce.bus.delivered, ce.bus.dropped
             out["overlay"], out["sent"] = ce.overlay, np.where(self.own, ce.sent, 0)
         out["beat"] = self.beat(t0)
