@@ -300,3 +300,68 @@ def test_a_world_of_a_batch_loses_what_a_single_world_loses() -> None:
 
     one = fates(1, 0)
     assert one and one == fates(3, 1) == fates(2, 1)
+
+
+# ------------------------------------------------------------------------- episodes started at any tick
+def _episode_losses(start: int) -> list[tuple[int, ...]]:
+    """Dropped (kind, sender, receiver, created - start, reason) of one fixed episode whose first tick is ``start``."""
+    b, n = 2, 6
+    bus = _bus(b, n, ChannelConfig(latency=1, loss=0.5), 11)
+    s = b * n
+    pos, on, grp = np.zeros((s, 3)), np.ones(s, dtype=bool), np.zeros(s, dtype=np.int32)
+    out = []
+    # sent between the reset and the first step: created at the start tick, keyed as the episode's step 0
+    bus.send(AGENT, np.arange(s), (np.arange(s) + 1) % n + (np.arange(s) // n) * n, np.zeros((s, 2)), start)
+    for t in range(start, start + 6):
+        bus.set_starts(np.full(b, start))
+        snd = np.repeat(np.arange(s), 2)
+        bus.send(AGENT, snd, (snd + np.tile([1, 2], s)) % n + (snd // n) * n, np.zeros((2 * s, 2)), t)
+        bus.send(GROUP, np.array([0, n]), np.array([0, 0]), np.zeros((2, 2)), t, group=grp)
+        bus.send(HEARTBEAT, np.full(s, -1), np.arange(s), np.zeros((s, 2)), t)
+        bus.send_env(np.arange(s), np.zeros((s, 2)), t)
+        d = bus.deliver(t, pos, on, grp).dropped
+        out += zip(d.kind.tolist(), d.sender.tolist(), d.receiver.tolist(), (d.created - start).tolist(),
+                   d.reason.tolist())  # fmt: skip
+    return sorted(out)
+
+
+def test_an_episode_loses_the_same_messages_whatever_tick_it_starts_at() -> None:
+    at0 = _episode_losses(0)
+    assert len(at0) > 20  # lossy enough to tell two draws apart
+    assert _episode_losses(37) == at0 == _episode_losses(5)
+
+
+def test_set_starts_checks_its_input() -> None:
+    bus = _bus(2, 4, ChannelConfig(loss=0.5), 0)
+    with pytest.raises(ValueError, match="starts must be"):
+        bus.set_starts(np.zeros(3, dtype=np.int64))
+    with pytest.raises(ValueError, match="starts must be"):
+        bus.set_starts(np.array([0.5, 1.0]))
+
+
+def test_a_reset_world_keys_its_losses_from_its_own_first_step() -> None:
+    """A world reset after other steps loses what the same episode loses in a fresh world (comms stack)."""
+    import agentsim_env
+
+    cfg = {"n_agents": 8, "comms": {"heartbeat_period": 2, "heartbeat_timeout": 50, "loss": 0.5, "latency": 1}}
+
+    def losses(warm: int) -> list[tuple[int, ...]]:
+        env = agentsim_env.make("navigation", **cfg)
+        env.reset(seed=3)
+        zero = {a: {k: np.zeros(sp.shape) for k, sp in env.action_space(a).items()} for a in env.agents}
+        for _ in range(warm):
+            env.step({a: zero[a] for a in env.agents})
+        env.reset(seed=9)
+        world = env.world
+        start = world.tick
+        out = []
+        for _ in range(8):
+            env.step({a: zero[a] for a in env.agents})
+            d = world.comms.events.bus.dropped
+            out += zip(d.kind.tolist(), d.sender.tolist(), d.receiver.tolist(), (d.created - start).tolist(),
+                       d.reason.tolist())  # fmt: skip
+        return sorted(out)
+
+    fresh = losses(0)
+    assert len(fresh) > 5
+    assert losses(37) == fresh

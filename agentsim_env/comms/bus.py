@@ -28,10 +28,14 @@ Rules (one line each, the tests check them):
 
 Keyed loss draws: the uniform of a pair is a hash (two chained SplitMix64 rounds, ``bus_kernels.keyed_draws``) of
 
-    (episode key of the world, created step, sender, seq, kind, receiver)
+    (episode key of the world, created step within the episode, sender, seq, kind, receiver)
 
 - episode key: ``rng.integers(2**63)`` from the generator ``reset_world(w, rng)`` receives (a function of the
   episode seed; ``reset`` / the constructor take one per world the same way);
+- created step within the episode: ``created - starts[world]``, where ``starts`` (``set_starts``, 0 until set)
+  is the step at which each world's episode began. Steps are a global tick that no reset rewinds, so without
+  it the same episode started at another tick would lose other messages; the comms stack sets it before each
+  delivery (a message sent between a reset and the first step is the episode's step 0);
 - seq: the message's index among the messages its sender created in the same step (a per-slot counter that
   restarts every step, counting every message created, bandwidth drops included, and the heartbeat answers
   the slot creates). Sender -1 (environment / controller) rows are numbered per (world, kind, target)
@@ -132,11 +136,13 @@ class MessageBus:
         channel: The channel model.
         inbox: The inboxes; the overlay pushes its deliveries here too.
         keys: ``(B,)`` uint64 episode key of each world's loss draws (see the module docstring).
+        starts: ``(B,)`` int64 step at which each world's episode began (``set_starts``); loss draws are keyed
+            by the created step minus it.
         group: Group array ``(S,)`` used to validate GROUP targets at send time (by reference), or None.
     """
 
     __slots__ = tuple(
-        "n_worlds n_agents payload_dim channel inbox keys group _keyed _world_of _queue _next_id _bw_used _bw_step "
+        "n_worlds n_agents payload_dim channel inbox keys starts group _keyed _world_of _queue _next_id _bw_used _bw_step "
         "_seq _sent_log _drop_log _ans_slot _ans_step _pushes".split()
     )
 
@@ -188,6 +194,7 @@ class MessageBus:
         self._seq = Sequencer(s)
         self.keys = np.zeros(self.n_worlds, dtype=np.uint64)
         self._keyed = np.zeros(self.n_worlds, dtype=bool)
+        self.starts = np.zeros(self.n_worlds, dtype=np.int64)
         self.reset(rng)
 
     @property
@@ -240,6 +247,17 @@ class MessageBus:
         self._ans_slot: list[np.ndarray] = []
         self._ans_step: list[np.ndarray] = []
         self._pushes: list[tuple[np.ndarray, ...]] = []
+
+    def set_starts(self, starts: np.ndarray) -> None:
+        """Set the step at which each world's current episode began (loss draws key ``created - starts[w]``).
+
+        Args:
+            starts: ``(B,)`` integer steps, e.g. ``tick - step_count`` of the step being delivered.
+        """
+        a = np.asarray(starts)
+        if a.shape != (self.n_worlds,) or not np.issubdtype(a.dtype, np.integer):
+            raise ValueError(f"starts must be an integer array of shape ({self.n_worlds},), got {a.dtype} {a.shape}")
+        self.starts[:] = a
 
     def reset_world(self, world: int, rng: np.random.Generator) -> None:
         """Drop world ``world``'s traffic and key its loss draws by ``rng.integers(2**63)`` (its episode's key)."""
@@ -509,7 +527,8 @@ class MessageBus:
         u = _NO_DRAWS
         if loss > 0.0 and rep.shape[0]:
             self._check_keys(rows.world)
-            u = keyed_draws(rep, recv, self.keys, rows.world, self.n_agents, rows.created, snd, rows.seq, kind)
+            when = rows.created - self.starts[rows.world]  # the step within the world's episode
+            u = keyed_draws(rep, recv, self.keys, rows.world, self.n_agents, when, snd, rows.seq, kind)
         r_max = self.channel.max_range
         ok, dr, n_hb, n_ans = filter_pairs(rep, recv, rows.msg, kind, snd, tgt, rows.created, online, seen, pos,
                                            -1.0 if r_max is None else r_max * r_max, u, loss,

@@ -112,7 +112,8 @@ def keyed_draws(rep, recv, keys, world, n_agents, created, snd, seq, kind):  # t
         keys: ``(B,)`` uint64 episode key of each world.
         world: ``(q,)`` int64 world of each message row.
         n_agents: Agents per world N (slot ``s`` of world ``w`` is index ``s - w * N`` within it).
-        created: ``(q,)`` int64 step each message was created.
+        created: ``(q,)`` int64 step each message was created, counted from its world's episode start (the
+            bus passes ``created - starts[world]``, so an episode draws the same whatever tick it began at).
         snd: ``(q,)`` int64 sender slots (-1: environment / controller).
         seq: ``(q,)`` int64 sequence numbers (see ``comms.bus``).
         kind: ``(q,)`` int8 kinds.

@@ -384,6 +384,9 @@ class CommsStack:
             k = ping.size
             self.bus.send(HEARTBEAT, np.full(k, -1, dtype=np.int64), ping,
                           np.zeros((k, self.cfg.payload_dim), dtype=np.float32), tick)  # fmt: skip
+        # the tick each world's episode began: loss draws are keyed by the step within the episode, so a world
+        # reset at any tick loses what the same episode loses in a fresh run
+        self.bus.set_starts(tick - ctx.step_count)
         return self.deliver(tick, st.pos, st.online, st.group, st.world_id, ctx.grid)
 
     def on_collisions(self, step: int, agent: np.ndarray, other_agent: np.ndarray, obj: np.ndarray) -> None:
