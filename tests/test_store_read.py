@@ -466,3 +466,24 @@ def test_read_while_recording(tmp_path: Path) -> None:
     with open_store(path) as store:
         assert store.runs().loc[1, "status"] == "complete"
         assert store.steps().index.get_level_values("step").max() == 4
+
+
+def test_events_of_one_step_come_in_index_order_keeping_each_agents_recording_order(tmp_path: Path) -> None:
+    """A step's events are recorded by stage (collisions, then timeouts, then group changes), not by agent; the
+    frame follows its index and keeps each agent's events in the order they were recorded."""
+    from tests.store_helpers import small_store
+
+    path = small_store(tmp_path / "run.db")
+    con = sqlite3.connect(path)
+    con.execute("DELETE FROM events")
+    rows = [("collision", 2, 1, None, None), ("collision", 1, 2, None, None), ("offline", 0, None, None, None),
+            ("group", 2, None, 0, 1)]  # fmt: skip
+    con.executemany("INSERT INTO events (run, episode, world, step, event, agent, other_agent, object, old, new) "
+                    "VALUES (1, 0, 0, 3, ?, ?, ?, -1, ?, ?)", rows)  # fmt: skip
+    con.commit()
+    con.close()
+    with open_store(path) as store:
+        ev = store.events()
+    assert ev.index.is_monotonic_increasing
+    assert list(zip(ev.index.get_level_values("agent"), ev["event"])) == [
+        (0, "offline"), (1, "collision"), (2, "collision"), (2, "group")]

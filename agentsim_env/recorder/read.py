@@ -64,7 +64,9 @@ _ORDER: dict[str, str] = {
     "episodes": "run, episode, world",
     "steps": "run, episode, step, world, agent",
     "messages": "run, episode, step, world, rowid",  # recording order within a step: sent, delivered, ...
-    "events": "run, episode, step, world, rowid",
+    # a step's events are recorded by stage (collisions, timeouts, groups...), not by agent: follow the index,
+    # each agent's own events in recording order
+    "events": "run, episode, step, world, agent, rowid",
     "sensors": "run, episode, world, sensor",
     "observations": "run, episode, step, world, agent",
 }
