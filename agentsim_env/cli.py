@@ -372,7 +372,9 @@ def _run(args: argparse.Namespace, config: dict[str, Any], policy_name: str) -> 
             for k in episodes:
                 recorder = TrajectoryRecorder() if k == 0 and args.out else None
                 if not args.render and not store:  # nothing needs per-step dicts
-                    rows.append(_rollout_row(env, policy, args.seed + k, recorder, bar, live.check))
+                    # over shards each shard builds the policy by its name (no object crosses to them)
+                    who = policy_name if getattr(args, "shards", None) is not None else policy
+                    rows.append(_rollout_row(env, who, args.seed + k, recorder, bar, live.check))
                     if recorder is not None:
                         traj = recorder.result(env)
                     continue

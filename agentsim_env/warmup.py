@@ -55,7 +55,7 @@ class Variant:
 VARIANTS: dict[str, list[Variant]] = {
     "navigation": [Variant({"comms": {}}), Variant({"physics": "pymunk", "collisions": False}, needs="pymunk")],
     # direct, flooded and relayed messages (forwarded once the scout has seen its target), for inbox_pair_forms
-    "relay": [Variant({"max_steps": 60})],
+    "relay": [Variant({"max_steps": 60}), Variant({"max_steps": 30, "comms": {"loss": 0.1}})],  # lossy: keyed draws
 }
 #: Scenarios that run over shards (``agentsim run --shards``), with config keys over the warm-up config: relay
 #: long enough for floods to cross from one shard to the other.
@@ -84,6 +84,9 @@ def _play(name: str, env: Any, every: bool) -> None:
     try:
         for policy in list(BASELINES.get(name, {}))[: None if every else 1]:
             run_episode(env, make_policy(name, env, policy), 0)
+            # the array path of agentsim run (over shards: the policy inside them), without and with an observer
+            env.rollout(policy, env.scenario.max_steps, seed=0)
+            env.rollout(policy, env.scenario.max_steps, seed=0, on_step=lambda *args: None)
         _random_episode(env)
     finally:
         env.close()
@@ -148,7 +151,18 @@ def _sharded(name: str) -> None:
         env = make_distributed(name, shards=2, backend="local", **_config(name, SHARDED[name]))
         if store:
             env.coordinator.backend = _StoreTransport(env.coordinator.backend)
+            for shard in env.coordinator.backend.inner.shards.values():  # and the exchange between shards
+                shard._swap = _stored_swap(shard._swap)
         _play(name, env, every=False)
+
+
+def _stored_swap(swap: Callable[..., Any]) -> Callable[..., Any]:
+    """A shard's exchange whose posts and parts travel as through Ray (``_through_store``)."""
+
+    def stored(key: Any, k: int, payload: Any) -> Any:
+        return _through_store(swap(key, k, _through_store(payload)))
+
+    return stored
 
 
 def _importable(module: str | None) -> bool:

@@ -429,3 +429,15 @@ def test_a_rollout_observer_over_shards_sees_what_it_sees_in_one_process() -> No
     assert np.array_equal(a.returns, b.returns) and a.events == b.events and a.events["collisions"] > 0
     assert np.array_equal(np.asarray(ta.xy), np.asarray(tb.xy))  # every agent's position at every step
     assert np.array_equal(ta.last, tb.last) and list(ta.outcome) == list(tb.outcome)
+
+
+def test_a_policy_object_is_copied_to_every_shard() -> None:
+    from agentsim_env.policies.registry import make_policy
+
+    cfg = {"n_groups": 4, "group_size": 6}
+    ref = agentsim_env.make("relay", **cfg).rollout("flood", 80, seed=2)
+    env = make_sharded("relay", shards=2, backend="local", **cfg)
+    policy = make_policy("relay", env, "flood")
+    got = env.rollout(policy, 80, seed=2)  # each shard acts with its own copy (its state apart from the other's)
+    env.close()
+    assert np.array_equal(got.returns, ref.returns) and got.events == ref.events

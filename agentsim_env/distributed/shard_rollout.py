@@ -11,6 +11,8 @@ Each step answers only counts (live agents, events); ``finish`` answers the per-
 
 from __future__ import annotations
 
+import copy
+import os
 from typing import Any
 
 import numpy as np
@@ -40,9 +42,11 @@ class ShardRollout:
     def __init__(self, worker: Any, policy: Any, seed: int | None) -> None:
         self.worker = worker
         sc = worker.scenario
-        self.policy: ArrayPolicy = (
-            policy if isinstance(policy, ArrayPolicy) else build_policy(sc.name, worker.config, policy)
-        )
+        if isinstance(policy, (str, os.PathLike)):
+            self.policy: ArrayPolicy = build_policy(sc.name, worker.config, policy)
+        else:  # an object: this shard's own copy (writable arrays, state apart from the other shards')
+            own = copy.deepcopy(policy)
+            self.policy = own if isinstance(own, ArrayPolicy) else build_policy(sc.name, worker.config, own)
         self.policy.reset(seed)
         s = worker.world.state.n_slots
         self.layout = obs_layout(sc)

@@ -304,8 +304,10 @@ class NavigationScenario(Scenario[NavigationConfig]):
     ) -> StepResult:
         """Progress, arrival, collisions and energy -> rewards and terminations (group share from ``totals``)."""
         c, st, t = self.config, world.state, world.task
+        went = events.went_offline  # always writable: one kernel signature whether or not anyone went offline
+        went = went if went.flags.writeable else went.copy()
         dist, arrived, task, collided, effort = _score_kernel(
-            t.goal, st.pos, st.vel, t.prev_dist, t.arrived, st.energy, acting, st.online, events.went_offline,
+            t.goal, st.pos, st.vel, t.prev_dist, t.arrived, st.energy, acting, st.online, went,
             float(c.goal_radius), float(c.arrival_bonus), float(world.config.dt),
         )  # fmt: skip
         np.copyto(t.prev_dist, dist)  # the state keeps its array (resets write it); dist goes out as info
