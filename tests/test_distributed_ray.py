@@ -53,6 +53,21 @@ def test_ray_shards_equal_one_process_over_200_steps(name: str, shards: int) -> 
         assert got.handovers > 0
 
 
+@pytest.mark.parametrize(("name", "policy"), [("navigation", "go_to_goal"), ("relay", "flood")])
+def test_a_rollout_inside_ray_shards_on_two_nodes_equals_one_process(name: str, policy: str) -> None:
+    import agentsim_env
+
+    ref = agentsim_env.make(name, **SHARDABLE[name]).rollout(policy, 150, seed=4)
+    env = make_sharded(name, shards=2, **SHARDABLE[name])
+    try:
+        got = env.rollout(policy, 150, seed=4)
+        assert len({s.address.split(" on node ")[1] for s in env.shards}) == 2  # traffic crosses nodes
+    finally:
+        env.close()
+    assert got.steps == ref.steps and got.events == ref.events and got.info_sums == ref.info_sums
+    assert np.array_equal(got.returns, ref.returns) and np.array_equal(got.final_pos, ref.final_pos)
+
+
 def test_a_killed_shard_actor_loses_only_its_agents(tmp_path) -> None:  # type: ignore[no-untyped-def]
     env = record(make_sharded("navigation", shards=2, n_agents=200, collisions=False), tmp_path / "run.db")
     inner = env.env
