@@ -131,7 +131,9 @@ class Bridge:
             got = got or {"slots": _EMPTY, "pos": np.zeros((0, 3))}
             return dict.fromkeys(posts, got)
         if phase == "groups":
-            return dict.fromkeys(posts, _sum_partials(list(posts.values())))
+            from agentsim_env.scenarios.rewards import combine_partials
+
+            return dict.fromkeys(posts, combine_partials(list(posts.values())))
         raise ValueError(f"unknown exchange phase {phase!r}")
 
     def _motion(self, posts: dict[int, Packed]) -> dict[int, Packed]:
@@ -184,14 +186,6 @@ class Bridge:
                 if k != src and k in parts and len(got):
                     parts[k].append(got)
         return {k: {"rows": got} for k, got in parts.items()}
-
-
-def _sum_partials(parts: list[Packed]) -> Packed:
-    """Element-wise sums of the shards' partial arrays (integers: exact in any order)."""
-    got = [p for p in parts if p]
-    if not got:
-        return {}
-    return {key: np.sum([p[key] for p in got], axis=0) for key in got[0]}
 
 
 def _take_entries(entries: Any, sel: np.ndarray) -> Any:

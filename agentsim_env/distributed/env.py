@@ -151,26 +151,9 @@ class DistributedParallelEnv(AgentSimParallelEnv):
         self, sender: str, payload: Any, *, to: str | None = None, group: int | None = None
     ) -> bool:
         """``AgentSimParallelEnv.send_message``: checked here, sent on the sender's shard (its bus, its bandwidth)."""
-        co = self.coordinator
         with self._guard.hold("send_message"):
-            comms = self._comms()
-            s = self._live_slot(sender, "sender")
-            if (to is None) == (group is None):
-                raise ValueError("give exactly one of to= (an agent id) or group= (a group id)")
-            pay = np.asarray(payload, dtype=np.float64).reshape(1, -1)
-            d = comms.cfg.payload_dim
-            if pay.shape[1] != d:
-                raise ValueError(f"payload must have {d} values (comms.payload_dim), got {pay.shape[1]}")
-            if not np.isfinite(pay).all():
-                raise ValueError(f"payload must be finite, got {pay.ravel().tolist()}")
-            if group is None:
-                target, to_group = self._live_slot(str(to), "receiver"), False
-            else:
-                known = np.unique(self.world.state.group[self.world.state.group >= 0]).tolist()
-                if group not in known:
-                    raise ValueError(f"group: unknown group {group!r}; groups are {known}")
-                target, to_group = int(group), True
-            return bool(co.call_owner(s, "send", s, target, pay[0], to_group)["accepted"])
+            s, target, to_group, pay = self._message(sender, payload, to, group)
+            return bool(self.coordinator.call_owner(s, "send", s, target, pay, to_group)["accepted"])
 
     def assign_group(self, agent: str, group: int) -> None:
         """``AgentSimParallelEnv.assign_group``: on the agent's shard (its heartbeats), and in the mirror."""

@@ -385,16 +385,7 @@ class RayShards:
             if not ready:
                 break
             for ref in ready:
-                k = refs[ref]
-                try:
-                    out[k] = ray.get(ref)
-                except ray.exceptions.RayActorError as e:
-                    out[k] = Failure(f"died: {type(e).__name__}")
-                    self.placement.failed(k)
-                    self._drop(k)
-                except ray.exceptions.RayTaskError as e:
-                    self.kill(k)
-                    out[k] = raised(e.cause if isinstance(e.cause, BaseException) else e)
+                out[refs[ref]] = self._answer(ref, refs[ref])
         if pending:  # late: the ones not waiting at the exchange are killed and dropped; the others then finish
             waiting = ray.get(self.exchange.waiting.remote())
             late = [ref for ref in pending if refs[ref] not in waiting] or pending
@@ -408,20 +399,25 @@ class RayShards:
                 out.update(self.call_rest(rest, refs, timeout_s))
         return out
 
+    def _answer(self, ref: Any, k: int) -> Packed | Failure:
+        """Worker ``k``'s reply, or its failure (a dead one is dropped, one that raised is killed and dropped)."""
+        ray = self._ray
+        try:
+            return dict(ray.get(ref))
+        except ray.exceptions.RayActorError as e:
+            self.placement.failed(k)
+            self._drop(k)
+            return Failure(f"died: {type(e).__name__}")
+        except ray.exceptions.RayTaskError as e:
+            self.kill(k)
+            return raised(e.cause if isinstance(e.cause, BaseException) else e)
+
     def call_rest(self, pending: list[Any], refs: dict[Any, int], timeout_s: float) -> dict[int, Packed | Failure]:
         """The answers of the calls that waited at the exchange for a late shard (one more deadline)."""
         ray, out = self._ray, {}
         done, late = ray.wait(pending, num_returns=len(pending), timeout=timeout_s)
         for ref in done:
-            k = refs[ref]
-            try:
-                out[k] = ray.get(ref)
-            except ray.exceptions.RayActorError as e:
-                out[k] = Failure(f"died: {type(e).__name__}")
-                self._drop(k)
-            except ray.exceptions.RayTaskError as e:
-                self.kill(k)
-                out[k] = raised(e.cause if isinstance(e.cause, BaseException) else e)
+            out[refs[ref]] = self._answer(ref, refs[ref])
         for ref in late:
             k = refs[ref]
             self.kill(k)

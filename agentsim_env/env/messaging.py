@@ -54,21 +54,35 @@ class MessageCalls:
         """
         with self._guard.hold("send_message"):
             comms = self._comms()
-            s = self._live_slot(sender, "sender")
-            if (to is None) == (group is None):
-                raise ValueError("give exactly one of to= (an agent id) or group= (a group id)")
-            pay = np.asarray(payload, dtype=np.float64).reshape(1, -1)
-            d = comms.cfg.payload_dim
-            if pay.shape[1] != d:
-                raise ValueError(f"payload must have {d} values (comms.payload_dim), got {pay.shape[1]}")
-            if not np.isfinite(pay).all():
-                raise ValueError(f"payload must be finite, got {pay.ravel().tolist()}")
-            if group is None:
-                return bool(comms.unicast(s, self._live_slot(str(to), "receiver"), pay[0], self.world.tick))
-            known = np.unique(self.world.state.group[self.world.state.group >= 0]).tolist()
-            if group not in known:
-                raise ValueError(f"group: unknown group {group!r}; groups are {known}")
-            return bool(comms.to_group(s, int(group), pay[0], self.world.tick))
+            s, target, to_group, pay = self._message(sender, payload, to, group)
+            if to_group:
+                return bool(comms.to_group(s, target, pay, self.world.tick))
+            return bool(comms.unicast(s, target, pay, self.world.tick))
+
+    def _message(
+        self, sender: str, payload: Any, to: str | None, group: int | None
+    ) -> tuple[int, int, bool, np.ndarray]:
+        """A checked code message: sender slot, target (receiver slot or group id), to a group, payload ``(D,)``.
+
+        Raises:
+            ValueError: As ``send_message`` says.
+        """
+        comms = self._comms()
+        s = self._live_slot(sender, "sender")
+        if (to is None) == (group is None):
+            raise ValueError("give exactly one of to= (an agent id) or group= (a group id)")
+        pay = np.asarray(payload, dtype=np.float64).reshape(1, -1)
+        d = comms.cfg.payload_dim
+        if pay.shape[1] != d:
+            raise ValueError(f"payload must have {d} values (comms.payload_dim), got {pay.shape[1]}")
+        if not np.isfinite(pay).all():
+            raise ValueError(f"payload must be finite, got {pay.ravel().tolist()}")
+        if group is None:
+            return s, self._live_slot(str(to), "receiver"), False, pay[0]
+        known = np.unique(self.world.state.group[self.world.state.group >= 0]).tolist()
+        if group not in known:
+            raise ValueError(f"group: unknown group {group!r}; groups are {known}")
+        return s, int(group), True, pay[0]
 
     def assign_group(self, agent: str, group: int) -> None:
         """Move ``agent`` to ``group`` for the rest of the episode (-1: no group); the change is logged as an event.

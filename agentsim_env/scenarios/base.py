@@ -155,7 +155,7 @@ class Scenario(ABC, Generic[ConfigT]):
 
         A process holding part of a world's slots (a shard) computes these over its own slots; adding them up
         over every part (:func:`combine_partials`) gives the totals :meth:`score` takes. Each value is an integer
-        array indexed ``group * B + world`` (``rewards.group_keys``), of shape ``(B * n_groups,)`` unless a slot
+        array (``task_big``, the values past the fixed point's range, is float64) indexed ``group * B + world`` (``rewards.group_keys``), of shape ``(B * n_groups,)`` unless a slot
         of the part has a higher group id (then longer; the combine zero-pads), so the totals do not depend on
         how the slots were split. Default: ``{}`` (no group terms).
 

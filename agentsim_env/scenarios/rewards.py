@@ -8,7 +8,8 @@ reward_i = task_weight * task_i
 
 The group means come from exact fixed-point sums (``task_partials``: each task value rounded to a multiple of
 2**-32, |value| <= 2**40), so a group whose members are summed in several parts (``combine_partials``) gets the
-same mean, bit for bit, as one sum over all of them.
+same mean, bit for bit, as one sum over all of them. A larger value (a config with huge reward weights) is summed
+as a float apart: exact within one process, possibly not in the last bits over shards.
 """
 
 from __future__ import annotations
@@ -114,8 +115,8 @@ def task_partials(
         (:func:`group_keys`), G = ``n_groups`` or one more than the largest masked group id if that is larger;
         to add up over parts with :func:`combine_partials`.
 
-    Raises:
-        ValueError: When a masked finite task value is over ``MAX_TASK_VALUE`` in magnitude (naming it).
+    A finite value over ``MAX_TASK_VALUE`` in magnitude is summed as a float apart (``task_big``): exact within
+    one process, not across parts.
     """
     mask = np.asarray(mask, dtype=np.bool_)
     key = group_keys(group, world, n_worlds)
@@ -123,12 +124,15 @@ def task_partials(
     if mask.any():
         size = max(size, int(key[mask].max()) + 1)
     task = np.asarray(task, dtype=np.float64)
-    hi, lo, cnt, odd, over = _partials_kernel(task, key, mask, size, MAX_TASK_VALUE)
-    if over >= 0:
-        raise ValueError(f"task value {float(task[over])!r} of slot {over} cannot enter a group sum: group sums "
-                         f"are exact fixed point for |task value| <= 2**40 (~1.1e12)")  # fmt: skip
+    # values beyond the fixed point's range (a config with huge reward weights) are summed as floats apart: the
+    # sum is then exact only within one process, which a valid config must still be able to run
+    big = mask & (np.abs(np.nan_to_num(task, nan=0.0, posinf=0.0, neginf=0.0)) > MAX_TASK_VALUE)
+    fixed = np.where(big, 0.0, task) if big.any() else task
+    hi, lo, cnt, odd, over = _partials_kernel(fixed, key, mask, size, MAX_TASK_VALUE)
+    assert over < 0, "the values over the bound were taken out"
+    big_sum = np.bincount(key[big], weights=task[big], minlength=size)[:size] if big.any() else np.zeros(size)
     return {"task_hi": hi, "task_lo": lo, "task_count": cnt, "task_nan": odd[0], "task_pinf": odd[1],
-            "task_ninf": odd[2]}  # fmt: skip
+            "task_ninf": odd[2], "task_big": big_sum}  # fmt: skip
 
 
 def combine_partials(parts: Iterable[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
@@ -170,6 +174,8 @@ def group_means(totals: dict[str, np.ndarray]) -> np.ndarray:
     A group with a NaN member, or with both infinities, has mean NaN; one with one kind of infinity has it.
     """
     total = totals["task_hi"].astype(np.float64) + totals["task_lo"].astype(np.float64) * 2.0**-FIXED_POINT_BITS
+    if "task_big" in totals:
+        total = total + totals["task_big"]
     mean = total / np.maximum(totals["task_count"], 1).astype(np.float64)
     nan, pinf, ninf = totals["task_nan"] > 0, totals["task_pinf"] > 0, totals["task_ninf"] > 0
     if nan.any() or pinf.any() or ninf.any():
