@@ -419,8 +419,8 @@ def test_a_rollout_observer_over_shards_sees_what_it_sees_in_one_process() -> No
     from agentsim_env.render.trajectories import TrajectoryRecorder
 
     got = []
-    for env in (agentsim_env.make("navigation", n_agents=300, comms={}),
-                make_sharded("navigation", shards=2, backend="local", n_agents=300, comms={})):  # fmt: skip
+    kw = {"n_agents": 300, "comms": {}, "max_steps": 60}  # to the episode's end: some agents are truncated
+    for env in (agentsim_env.make("navigation", **kw), make_sharded("navigation", shards=2, backend="local", **kw)):
         rec = TrajectoryRecorder()
         res = env.rollout("go_to_goal", 60, seed=3, on_step=rec.on_rollout)
         got.append((res, rec.result(env)))
@@ -429,6 +429,7 @@ def test_a_rollout_observer_over_shards_sees_what_it_sees_in_one_process() -> No
     assert np.array_equal(a.returns, b.returns) and a.events == b.events and a.events["collisions"] > 0
     assert np.array_equal(np.asarray(ta.xy), np.asarray(tb.xy))  # every agent's position at every step
     assert np.array_equal(ta.last, tb.last) and list(ta.outcome) == list(tb.outcome)
+    assert "active" in list(ta.outcome)  # truncated agents are still flying, not offline
 
 
 def test_a_policy_object_is_copied_to_every_shard() -> None:

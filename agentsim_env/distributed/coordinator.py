@@ -327,11 +327,11 @@ class Coordinator:
         for r in replies.values():
             sl = r["acted"]
             acted[sl], still[sl], st.pos[sl] = True, r["still"], r["pos"]
+            st.online[r["ended"]] = False  # terminated (a truncated agent stays online, as in one process)
             for k, v in r["info"].items():
                 if k not in info:
                     info[k] = np.zeros(s, dtype=v.dtype)
                 info[k][sl] = v
-        st.online[acted & ~still] = False
         return acted, still, info
 
     def step(self, parts: dict[str, np.ndarray], acting: np.ndarray) -> tuple[StepResult, np.ndarray]:
