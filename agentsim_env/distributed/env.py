@@ -2,10 +2,12 @@
 
 ``make(name, shards=K, ray_address=None, **config)`` builds the scenario's env whose steps run over K shard
 processes (Ray actors; ``backend="local"`` keeps them in this process): the API, spaces, agent ids, infos and
-results are those of ``agentsim_env.make``, so training code does not change. ``env.world`` is the
-coordinator's mirror (positions, scene, inboxes, groups), so ``render``, ``state()``, ``send_message``, the
-recorder and the web viewer work as on one process. ``env.shards`` lists each shard's address, last answer and
-step time; ``env.add_objects`` adds static objects at run time (every shard has them before the next step).
+results are those of ``agentsim_env.make``, so training code does not change. ``env.rollout(policy, steps)`` runs
+the policy inside the shards (only counts come back). ``env.world`` is the coordinator's mirror (positions, scene,
+groups; kept current while the step API or a hook needs it), so ``render``, ``state()``, the recorder and the web
+viewer work as on one process; ``send_message`` and ``assign_group`` run on the agent's shard (inboxes and
+heartbeats live there). ``env.shards`` lists each shard's address, last answer and step time; ``env.add_objects``
+adds static objects at run time (every shard has them before the next step).
 """
 
 from __future__ import annotations
