@@ -175,29 +175,42 @@ def _push_kernel(valid, kind, sender, hops, created, payload, received, newest, 
                     payload[s, i, x] = pb[row, x]
 
 
-@nb.njit(cache=True)
-def _observe_kernel(valid, kind, sender, hops, created, payload, pos, step, pos_scale, age_h, hop_h, out):  # type: ignore[no-untyped-def]
-    # Every output value is written once (the buffer may be reused: nothing is assumed zero).
-    n_slots, m = valid.shape
+@nb.njit(cache=True, inline="always")
+def _observe_row(s, r, valid, kind, sender, hops, created, payload, pos, step, pos_scale, age_h, hop_h, out):  # type: ignore[no-untyped-def]
+    # Slot s's inbox into row r of out; every output value is written once (the buffer may be reused).
+    m = valid.shape[1]
     d = payload.shape[2]
     f = out.shape[2]
-    for s in range(n_slots):
-        for i in range(m):
-            if not valid[s, i]:
-                for c in range(f):
-                    out[s, i, c] = 0.0
-                continue
-            out[s, i, 0] = 1.0
-            k = kind[s, i]
-            for c in range(1, 6):  # kinds 1..5 map to columns 1..5
-                out[s, i, c] = 1.0 if c == k else 0.0
-            q = sender[s, i]
-            for a in range(3):
-                out[s, i, 6 + a] = (pos[q, a] - pos[s, a]) / pos_scale if q >= 0 else 0.0
-            out[s, i, 9] = min(max(hops[s, i], 0), hop_h) / hop_h
-            out[s, i, 10] = min(max(step - created[s, i], 0), age_h) / age_h
-            for c in range(d):
-                out[s, i, FEATURES_PER_MESSAGE + c] = payload[s, i, c]
+    for i in range(m):
+        if not valid[s, i]:
+            for c in range(f):
+                out[r, i, c] = 0.0
+            continue
+        out[r, i, 0] = 1.0
+        k = kind[s, i]
+        for c in range(1, 6):  # kinds 1..5 map to columns 1..5
+            out[r, i, c] = 1.0 if c == k else 0.0
+        q = sender[s, i]
+        for a in range(3):
+            out[r, i, 6 + a] = (pos[q, a] - pos[s, a]) / pos_scale if q >= 0 else 0.0
+        out[r, i, 9] = min(max(hops[s, i], 0), hop_h) / hop_h
+        out[r, i, 10] = min(max(step - created[s, i], 0), age_h) / age_h
+        for c in range(d):
+            out[r, i, FEATURES_PER_MESSAGE + c] = payload[s, i, c]
+
+
+@nb.njit(cache=True)
+def _observe_kernel(valid, kind, sender, hops, created, payload, pos, step, pos_scale, age_h, hop_h, out):  # type: ignore[no-untyped-def]
+    for s in range(valid.shape[0]):
+        _observe_row(s, s, valid, kind, sender, hops, created, payload, pos, step, pos_scale, age_h, hop_h, out)
+
+
+@nb.njit(cache=True)
+def _observe_rows_kernel(rows, valid, kind, sender, hops, created, payload, pos, step, pos_scale, age_h, hop_h,  # type: ignore[no-untyped-def]
+                         out):  # fmt: skip
+    for r in range(rows.shape[0]):
+        _observe_row(rows[r], r, valid, kind, sender, hops, created, payload, pos, step, pos_scale, age_h, hop_h,
+                     out)  # fmt: skip
 
 
 class Inbox:
@@ -415,6 +428,16 @@ class Inbox:
             self.hop_horizon,
             out,
         )
+        return out
+
+    def observe_rows(self, pos: np.ndarray, step: int, rows: np.ndarray) -> np.ndarray:
+        """The features of the inboxes of ``rows`` only: ``(len(rows), M, F)`` float32, a fresh array (the rows
+        ``observe`` gives them; a shard observes its own agents only)."""
+        p = np.ascontiguousarray(pos, dtype=np.float64)
+        r = np.ascontiguousarray(rows, dtype=np.int64)
+        out = np.empty((r.shape[0], self.size, self.n_features), dtype=np.float32)
+        _observe_rows_kernel(r, self.valid, self.kind, self.sender, self.hops, self.created, self.payload, p,
+                             int(step), self.pos_scale, self.age_horizon, self.hop_horizon, out)  # fmt: skip
         return out
 
     def clear(self, slots: np.ndarray | None = None) -> None:

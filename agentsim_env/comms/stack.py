@@ -457,8 +457,16 @@ class CommsStack:
         counters are a fresh array.
         """
         inbox = self.bus.inbox.observe(pos, step, out=self._inbox_out)
+        return inbox, self._stats(slice(None))
+
+    def observe_rows(self, pos: np.ndarray, step: int, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``observe`` for the slots ``rows`` only (fresh arrays): what a shard needs for its own agents."""
+        return self.bus.inbox.observe_rows(pos, step, rows), self._stats(rows)
+
+    def _stats(self, rows: slice | np.ndarray) -> np.ndarray:
+        """Received and dropped this step / inbox size, ``(n, 2)`` float32 in [0, 1]."""
         m = float(self.cfg.inbox_size)
-        rec = (self.bus.inbox.received - self._received0) / m
-        drop = (self.bus.inbox.dropped - self._dropped0) / m
-        stats = np.clip(np.column_stack([rec, drop]), 0.0, 1.0).astype(np.float32)
-        return inbox, stats
+        inbox = self.bus.inbox
+        rec = (inbox.received[rows] - self._received0[rows]) / m
+        drop = (inbox.dropped[rows] - self._dropped0[rows]) / m
+        return np.clip(np.column_stack([rec, drop]), 0.0, 1.0).astype(np.float32)

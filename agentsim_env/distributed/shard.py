@@ -240,18 +240,14 @@ class Shard:
                                            for f in ("sent", "delivered", "dropped")))  # fmt: skip
 
     def flat_rows(self, slots: np.ndarray) -> np.ndarray:
-        """The flat observation rows of ``slots`` (only those rows are assembled from the parts)."""
-        sc, world = self.scenario, self.world
-        if world.comms is None and not any(x.obs_part is not None for x in world.sensors):
-            return sc.flat_observation(world)[slots]  # one kernel writes every row: cheaper than gathering
-        parts = sc.observation(world)
-        s = world.state.n_slots
-        cols = [v.reshape(s, -1) for v in parts.values()]
-        out = np.empty((slots.size, sum(c.shape[1] for c in cols)), dtype=np.float32)
+        """The flat observation rows of ``slots``, computed for those rows only (``Scenario.observation_rows``)."""
+        parts = self.scenario.observation_rows(self.world, slots)
+        n = slots.size
+        out = np.empty((n, sum(int(np.prod(v.shape[1:])) for v in parts.values())), dtype=np.float32)
         at = 0
-        for c in cols:  # each part's rows straight into their columns (no per-part copies to concatenate)
-            w = c.shape[1]
-            out[:, at : at + w] = c.take(slots, axis=0)
+        for v in parts.values():  # each part straight into its columns
+            w = int(np.prod(v.shape[1:]))
+            out[:, at : at + w] = v.reshape(n, w)
             at += w
         return out
 

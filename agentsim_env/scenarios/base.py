@@ -329,6 +329,23 @@ class Scenario(ABC, Generic[ConfigT]):
             out["comms"] = stats
         return out
 
+    def observe_rows(self, world: World, slots: np.ndarray) -> dict[str, np.ndarray]:
+        """The scenario's observation parts of ``slots`` only, ``{part: (len(slots), *shape)}`` (the rows
+        :meth:`observe` gives them; a scenario may compute just these rows)."""
+        return {k: v[slots] for k, v in self.observe(world).items()}
+
+    def observation_rows(self, world: World, slots: np.ndarray) -> dict[str, np.ndarray]:
+        """:meth:`observation` for ``slots`` only: what a shard computes for its own agents."""
+        out = self.observe_rows(world, slots)
+        for s in world.sensors:
+            if s.obs_part is not None:
+                out[s.name] = s.observe(world.readings[s.name])[slots]
+        if world.comms is not None:
+            inbox, stats = world.comms.observe_rows(world.state.pos, max(world.tick - 1, 0), slots)
+            out["inbox"] = np.clip(inbox, -1e4, 1e4, out=inbox)
+            out["comms"] = stats
+        return out
+
     def flat_observation(self, world: World, out: np.ndarray | None = None) -> np.ndarray:
         """Every observation part of every slot in the flat layout ``(S, obs_dim)`` float32.
 

@@ -110,28 +110,41 @@ def _score_kernel(
     return dist, arrived, task, collided, effort
 
 
-@nb.njit(cache=True, error_model="numpy", nogil=True)
-def _observe_kernel(r0, r1, pos, vel, heading, goal, distance, hit_kind, side, lo, hi, vmax, out):  # type: ignore[no-untyped-def]
-    # Rows r0..r1-1 of out (S, 8 + 2K + 4) float32: self | lidar (distance, kind / 3 interleaved) | task.
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def _observe_row(s, r, pos, vel, heading, goal, distance, hit_kind, side, lo, hi, vmax, out):  # type: ignore[no-untyped-def]
+    # Slot s into row r of out (., 8 + 2K + 4) float32: self | lidar (distance, kind / 3 interleaved) | task.
     n_k = distance.shape[1]
     diag = side * np.sqrt(2.0)
     t0 = SELF_DIM + 2 * n_k
+    out[r, 0] = min(max(pos[s, 0] / side * 2 - 1, -1.0), 1.0)
+    out[r, 1] = min(max(pos[s, 1] / side * 2 - 1, -1.0), 1.0)
+    out[r, 2] = min(max((pos[s, 2] - lo) / (hi - lo) * 2 - 1, -1.0), 1.0)
+    for a in range(3):
+        out[r, 3 + a] = min(max(vel[s, a] / vmax, -1.0), 1.0)
+    out[r, 6] = min(max(np.cos(heading[s]), -1.0), 1.0)
+    out[r, 7] = min(max(np.sin(heading[s]), -1.0), 1.0)
+    for k in range(n_k):
+        out[r, SELF_DIM + 2 * k] = distance[s, k]
+        out[r, SELF_DIM + 2 * k + 1] = hit_kind[s, k] / 3.0
+    dx, dy, dz = goal[s, 0] - pos[s, 0], goal[s, 1] - pos[s, 1], goal[s, 2] - pos[s, 2]
+    out[r, t0] = min(max(dx / diag, -1.0), 1.0)
+    out[r, t0 + 1] = min(max(dy / diag, -1.0), 1.0)
+    out[r, t0 + 2] = min(max(dz / diag, -1.0), 1.0)
+    out[r, t0 + 3] = min(max(np.sqrt(dx * dx + dy * dy + dz * dz) / diag, -1.0), 1.0)
+
+
+@nb.njit(cache=True, error_model="numpy", nogil=True)
+def _observe_kernel(r0, r1, pos, vel, heading, goal, distance, hit_kind, side, lo, hi, vmax, out):  # type: ignore[no-untyped-def]
+    # Rows r0..r1-1 of out (S, 8 + 2K + 4).
     for s in range(r0, r1):
-        out[s, 0] = min(max(pos[s, 0] / side * 2 - 1, -1.0), 1.0)
-        out[s, 1] = min(max(pos[s, 1] / side * 2 - 1, -1.0), 1.0)
-        out[s, 2] = min(max((pos[s, 2] - lo) / (hi - lo) * 2 - 1, -1.0), 1.0)
-        for a in range(3):
-            out[s, 3 + a] = min(max(vel[s, a] / vmax, -1.0), 1.0)
-        out[s, 6] = min(max(np.cos(heading[s]), -1.0), 1.0)
-        out[s, 7] = min(max(np.sin(heading[s]), -1.0), 1.0)
-        for k in range(n_k):
-            out[s, SELF_DIM + 2 * k] = distance[s, k]
-            out[s, SELF_DIM + 2 * k + 1] = hit_kind[s, k] / 3.0
-        dx, dy, dz = goal[s, 0] - pos[s, 0], goal[s, 1] - pos[s, 1], goal[s, 2] - pos[s, 2]
-        out[s, t0] = min(max(dx / diag, -1.0), 1.0)
-        out[s, t0 + 1] = min(max(dy / diag, -1.0), 1.0)
-        out[s, t0 + 2] = min(max(dz / diag, -1.0), 1.0)
-        out[s, t0 + 3] = min(max(np.sqrt(dx * dx + dy * dy + dz * dz) / diag, -1.0), 1.0)
+        _observe_row(s, s, pos, vel, heading, goal, distance, hit_kind, side, lo, hi, vmax, out)
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _observe_rows_kernel(rows, pos, vel, heading, goal, distance, hit_kind, side, lo, hi, vmax, out):  # type: ignore[no-untyped-def]
+    # Slot rows[r] into row r of out (len(rows), 8 + 2K + 4): a shard's own agents.
+    for r in range(rows.shape[0]):
+        _observe_row(rows[r], r, pos, vel, heading, goal, distance, hit_kind, side, lo, hi, vmax, out)
 
 
 @dataclass(frozen=True)
@@ -330,6 +343,20 @@ class NavigationScenario(Scenario[NavigationConfig]):
             "lidar": out[:, SELF_DIM : SELF_DIM + 2 * k].reshape(-1, k, 2),
             "task": out[:, SELF_DIM + 2 * k :],
         }
+
+    def observe_rows(self, world: World, slots: np.ndarray) -> dict[str, np.ndarray]:
+        """self, lidar and task parts of ``slots`` only (fresh arrays)."""
+        c, st = self.config, world.state
+        scan = world.scan
+        assert scan is not None
+        k = self.lidar.n_rays
+        rows = np.ascontiguousarray(slots, dtype=np.int64)
+        out = np.empty((rows.shape[0], self._obs.shape[1]), dtype=np.float32)
+        lo, hi = float(c.body.altitude[0]), float(c.body.altitude[1])
+        _observe_rows_kernel(rows, st.pos, st.vel, st.heading, world.task.goal, scan.distance, scan.hit_kind,
+                             self._side, lo, hi, float(c.body.max_speed), out)  # fmt: skip
+        return {"self": out[:, :SELF_DIM], "lidar": out[:, SELF_DIM : SELF_DIM + 2 * k].reshape(-1, k, 2),
+                "task": out[:, SELF_DIM + 2 * k :]}  # fmt: skip
 
     def flat_observation(self, world: World, out: np.ndarray | None = None) -> np.ndarray:
         """The flat layout written by the observation kernel straight into ``out`` or a fresh array (when the

@@ -1,0 +1,40 @@
+"""``Scenario.observation_rows`` (what a shard computes for its own agents) gives exactly the rows of
+``Scenario.observation`` (every slot), for every scenario and for the inbox and sensor parts."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import agentsim_env
+
+CASES = [
+    ("navigation", {"n_agents": 60}),
+    ("navigation", {"n_agents": 60, "comms": {"loss": 0.2}, "gnss": {"sigma_h": 1.0}}),
+    ("relay", {"n_groups": 3, "group_size": 4}),
+    ("rendezvous", {}),
+    ("uav_release", {}),
+]
+
+
+@pytest.mark.parametrize(("name", "config"), CASES, ids=[f"{n}-{i}" for i, (n, _) in enumerate(CASES)])
+def test_observation_rows_equal_the_rows_of_every_slot(name: str, config: dict) -> None:
+    env = agentsim_env.make(name, **config)
+    env.reset(seed=3)
+    rng = np.random.default_rng(0)
+    for a in env.agents:
+        env.action_space(a).seed(int(rng.integers(1 << 30)))
+    for _ in range(6):
+        if not env.agents:
+            break
+        env.step({a: env.action_space(a).sample() for a in env.agents})
+    sc, world = env.scenario, env.world
+    full = sc.observation(world)
+    for rows in (np.arange(world.state.n_slots), np.arange(1, world.state.n_slots, 3), np.zeros(0, dtype=np.int64)):
+        part = sc.observation_rows(world, rows)
+        assert list(part) == list(full)  # the flat layout's order
+        for k, v in full.items():
+            assert part[k].shape == (rows.size, *v.shape[1:]), k
+            np.testing.assert_array_equal(part[k], v[rows], err_msg=k)
+    if world.comms is not None:
+        assert world.comms.bus.inbox.valid.any(), "no message arrived: the inbox rows would not be checked"
