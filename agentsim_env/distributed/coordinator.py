@@ -128,7 +128,8 @@ class Coordinator:
         self.kinematics = True
         """Gather every own agent's position each step into ``world`` (the mirror); off for rollouts."""
         self.profile: dict[str, Any] = {}
-        """The latest rollout's seconds: ``wall_s`` of its steps, each shard's ``compute_s`` and ``wait_s``."""
+        """The latest rollout's seconds: ``wall_s`` of its steps, each shard's ``compute_s`` and ``wait_s`` (sums),
+        and per step ``steps``: (the step call's wall time, each shard's call, each shard's exchange time)."""
         self.gather_events = False
         """Gather the step's message deliveries into ``world.last_events`` (also whenever hooks are attached)."""
 
@@ -272,7 +273,7 @@ class Coordinator:
         live = int((self.owner >= 0).sum())
         events = np.zeros(len(EVENT_KEYS), dtype=np.int64)
         taken = agent_steps = 0
-        self.profile = {"wall_s": 0.0, "compute_s": np.zeros(n), "wait_s": np.zeros(n)}
+        self.profile = {"wall_s": 0.0, "compute_s": np.zeros(n), "wait_s": np.zeros(n), "steps": []}
         tr = self.traffic = Traffic()
         self.backend.exchange_bytes()  # the reset's are not the steps'
         t_start = time.perf_counter()
@@ -282,19 +283,24 @@ class Coordinator:
                                "taken": taken, "over": done + taken + 1 >= max_steps,
                                "gather": on_step is not None}  # fmt: skip
             self._objects = []
+            t_step = time.perf_counter()
             replies = self._call("act", dict.fromkeys(range(n), (control,)))
+            wall_step = time.perf_counter() - t_step
             tr.actions += nbytes(control)
             agent_steps += live
             taken += 1
             ended = [r["ended"] for r in replies.values()]
             self._ended = np.union1d(np.concatenate(ended) if ended else _NONE, self.lost)
             self.owner[self._ended] = -1
+            call, wait = np.zeros(n), np.zeros(n)
             for k, r in replies.items():
-                self.profile["compute_s"][k] += r["beat"]["compute_s"]
-                self.profile["wait_s"][k] += r["beat"]["wait_s"]
+                call[k], wait[k] = r["beat"]["compute_s"], r["beat"]["wait_s"]
                 events += np.asarray(r["events"], dtype=np.int64)
                 tr.replies += nbytes(r)
                 self.owner[r["arrived"]] = k
+            self.profile["compute_s"] += call
+            self.profile["wait_s"] += wait
+            self.profile["steps"].append((wall_step, call, wait))
             events[EVENT_KEYS.index("offline")] += self.lost.size
             live = sum(int(r["live"]) for r in replies.values())
             self.world.tick += 1
