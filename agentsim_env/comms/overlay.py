@@ -93,6 +93,32 @@ def _new_scratch(n_slots: int) -> tuple:
     return np.zeros(n_slots, dtype=np.int32), 0, e, e.copy(), e.copy(), np.empty(0, dtype=np.int32)
 
 
+def check_flood_starts(
+    origin: np.ndarray, hop_limit: np.ndarray | int, payload: np.ndarray | None, n_slots: int, payload_dim: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The arguments of a flood start checked and in kernel form: origins ``(k,)`` int64, hop limits ``(k,)``
+    int64, payloads ``(k, D)`` float32 (zeros for ``None``; one ``(D,)`` row for all).
+
+    Raises:
+        ValueError: An origin outside ``[0, n_slots)``, a hop limit < 1, or a payload of another shape.
+    """
+    origin = np.asarray(origin, dtype=np.int64).reshape(-1)
+    k = origin.shape[0]
+    if k and (origin.min() < 0 or origin.max() >= n_slots):
+        raise ValueError(f"origin must be slots in [0, {n_slots}), got {origin.min()}..{origin.max()}")
+    lim = np.broadcast_to(np.asarray(hop_limit, dtype=np.int64), (k,))
+    if k and lim.min() < 1:
+        raise ValueError(f"hop_limit must be >= 1, got min {lim.min()}")
+    if payload is None:
+        return origin, lim, np.zeros((k, payload_dim), dtype=np.float32)
+    pl = np.asarray(payload, dtype=np.float32)
+    if pl.ndim == 1 and pl.shape == (payload_dim,):
+        pl = np.broadcast_to(pl, (k, payload_dim))
+    if pl.shape != (k, payload_dim):
+        raise ValueError(f"payload must have shape ({k}, {payload_dim}), got {pl.shape}")
+    return origin, lim, pl
+
+
 class Overlay:
     """Flooding over the range graph of online agents, one hop per step.
 
@@ -298,23 +324,8 @@ class Overlay:
         Returns:
             The new flood ids ``(k,)`` int64.
         """
-        origin = np.asarray(origin, dtype=np.int64).reshape(-1)
+        origin, lim, pl = check_flood_starts(origin, hop_limit, payload, self.n_slots, self.payload_dim)
         k = origin.shape[0]
-        if k and (origin.min() < 0 or origin.max() >= self.n_slots):
-            raise ValueError(
-                f"origin must be slots in [0, {self.n_slots}), got {origin.min()}..{origin.max()}"
-            )
-        lim = np.broadcast_to(np.asarray(hop_limit, dtype=np.int64), (k,))
-        if k and lim.min() < 1:
-            raise ValueError(f"hop_limit must be >= 1, got min {lim.min()}")
-        if payload is None:
-            pl = np.zeros((k, self.payload_dim), dtype=np.float32)
-        else:
-            pl = np.asarray(payload, dtype=np.float32)
-            if pl.ndim == 1 and pl.shape == (self.payload_dim,):
-                pl = np.broadcast_to(pl, (k, self.payload_dim))
-            if pl.shape != (k, self.payload_dim):
-                raise ValueError(f"payload must have shape ({k}, {self.payload_dim}), got {pl.shape}")
         if k == 0:
             return np.empty(0, dtype=np.int64)
         if self._n_free < k:

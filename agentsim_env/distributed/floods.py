@@ -47,7 +47,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from agentsim_env.comms.overlay import OverlayStats
+from agentsim_env.comms.overlay import OverlayStats, check_flood_starts
 from agentsim_env.distributed.flood_kernels import group_by_rank, hop_kernel, split_reads
 
 _I64 = np.int64
@@ -307,23 +307,8 @@ class PartFloods:
         Returns:
             The new floods' keys ``(k, 3)`` int64 (``created, origin, seq``).
         """
-        origin = np.asarray(origin, dtype=np.int64).reshape(-1)
+        origin, lim, pl = check_flood_starts(origin, hop_limit, payload, self.n_slots, self.payload_dim)
         k = origin.shape[0]
-        if k and (origin.min() < 0 or origin.max() >= self.n_slots):
-            raise ValueError(
-                f"origin must be slots in [0, {self.n_slots}), got {origin.min()}..{origin.max()}"
-            )
-        lim = np.broadcast_to(np.asarray(hop_limit, dtype=np.int64), (k,))
-        if k and lim.min() < 1:
-            raise ValueError(f"hop_limit must be >= 1, got min {lim.min()}")
-        if payload is None:
-            pl = np.zeros((k, self.payload_dim), dtype=np.float32)
-        else:
-            pl = np.asarray(payload, dtype=np.float32)
-            if pl.ndim == 1 and pl.shape == (self.payload_dim,):
-                pl = np.broadcast_to(pl, (k, self.payload_dim))
-            if pl.shape != (k, self.payload_dim):
-                raise ValueError(f"payload must have shape ({k}, {self.payload_dim}), got {pl.shape}")
         if k == 0:
             return _e().reshape(0, 3)
         if self._seq_step != int(step):
