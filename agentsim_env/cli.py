@@ -3,6 +3,7 @@
 Subcommands:
     run        roll out a scenario's scripted baseline (batch, or live with --render), print a summary table,
                draw the first episode's trajectories as PNG (named by scenario, policy, seed and --set values)
+               (``cli_run``)
     scenarios  list the registered scenarios
     evaluate   batch evaluation of the UAV sensor-release strategies (zone files x strategies x seeds):
                sensors.csv, runs.csv, summary.md (ranking) and PNG plots
@@ -19,24 +20,19 @@ any rollout. Help texts that need the registries are built only when shown, so `
 from __future__ import annotations
 
 import argparse
-import hashlib
-import os
 import sys
 import textwrap
-import time
 from collections.abc import Callable
-from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from agentsim_env import _compile_notice
-from agentsim_env.cli_set import canonical, parse_set
+from agentsim_env.cli_kernels import COMPILE_NOTICE, WARM_MARKER, announce_compile, kernels_cold, mark_warm
+from agentsim_env.cli_run import check_record, cmd_run, config_tag
+from agentsim_env.cli_set import parse_set
 from agentsim_env.outdirs import prepare_out, remove_created
 
-#: File in the numba cache directory whose content (versions) says the kernels were compiled and cached.
-WARM_MARKER = ".agentsim-kernels-warm"
-COMPILE_NOTICE = "agentsim: compiling simulation kernels (first run only, ~30 s)..."
+__all__ = ["COMPILE_NOTICE", "WARM_MARKER", "announce_compile", "build_parser", "config_tag", "kernels_cold",
+           "main", "mark_warm", "prepare_out"]  # fmt: skip
+
 SET_HELP = (
     "config values, parsed by each field's type: booleans true/false/1/0/yes/no, integers, numbers, "
     "lists as 12,20 or [12,20], none/null for optional fields, sub-configs as a JSON object or dotted keys "
@@ -134,304 +130,7 @@ examples:
 Run 'agentsim COMMAND --help' for a command's options."""
 
 
-# -------------------------------------------------------------------------------------------- checks
-
-def _check_count(option: str, value: int) -> None:
-    """Raise unless ``value`` is an integer >= 1 (episodes, seeds)."""
-    if value < 1:
-        raise ValueError(f"{option} must be an integer >= 1, got {value}")
-
-
-def config_tag(config: dict[str, Any]) -> str:
-    """``""`` without config values, else ``"_"`` + 6 hex digits of their canonical text (for file names)."""
-    if not config:
-        return ""
-    return "_" + hashlib.sha1(canonical(config).encode()).hexdigest()[:6]
-
-
-# ------------------------------------------------------------------------------------- kernel cache
-def _kernel_cache_dir() -> Path | None:
-    """The directory numba caches the package's kernels in (None: no writable one is known)."""
-    chosen = os.environ.get("NUMBA_CACHE_DIR")
-    if chosen:
-        return Path(chosen)
-    from agentsim_env._numba_cache import PACKAGE_DIR, in_tree_writable
-
-    if in_tree_writable():
-        return Path(PACKAGE_DIR) / "__pycache__"
-    try:
-        from numba.misc.appdirs import AppDirs
-    except ImportError:
-        return None
-    return Path(AppDirs(appname="numba", appauthor=False).user_cache_dir)
-
-
-def _stamp() -> str:
-    """What the warm marker records: the versions that decide whether numba's cache is reused."""
-    from importlib.metadata import PackageNotFoundError, version
-
-    import agentsim_env
-
-    try:
-        numba_version = version("numba")
-    except PackageNotFoundError:
-        numba_version = "?"
-    py = ".".join(map(str, sys.version_info[:2]))
-    return f"agentsim_env {agentsim_env.__version__} numba {numba_version} python {py}\n"
-
-
-def kernels_cold() -> bool:
-    """Whether the numba kernel cache looks cold (no warm marker with the current versions)."""
-    d = _kernel_cache_dir()
-    if d is None:
-        return True
-    try:
-        return (d / WARM_MARKER).read_text(encoding="utf-8") != _stamp()
-    except OSError:
-        return True
-
-
-def announce_compile() -> bool:
-    """Print the one-line compile notice to stderr when the kernel cache is cold; return whether it was."""
-    cold = kernels_cold()
-    if cold and not _compile_notice.quiet():  # AGENTSIM_QUIET_COMPILE=1 silences both notices
-        print(COMPILE_NOTICE, file=sys.stderr, flush=True)
-        _compile_notice.mark_shown()  # the library's own notice (on an actual compilation) would repeat it
-    return cold
-
-
-def mark_warm() -> None:
-    """Record that the kernels are compiled and cached (silently skipped where the cache is not writable)."""
-    d = _kernel_cache_dir()
-    if d is None:
-        return
-    try:
-        d.mkdir(parents=True, exist_ok=True)
-        (d / WARM_MARKER).write_text(_stamp(), encoding="utf-8")
-    except OSError:
-        pass
-
-
 # ------------------------------------------------------------------------------------------ commands
-def _progress(it: Any, total: int, desc: str, enabled: bool) -> Any:
-    if not enabled:
-        return it
-    from tqdm.auto import tqdm
-
-    return tqdm(it, total=total, desc=desc, unit="ep")
-
-
-BIG_WORLD = 10_000
-"""Agents from which ``agentsim run`` shows its progress in steps rather than episodes."""
-
-
-def _step_bar(total: int, desc: str) -> Any:
-    from tqdm.auto import tqdm
-
-    return tqdm(total=total, desc=desc, unit="step")
-
-
-def _observers(recorder: Any, bar: Any, check: Callable[[], None] | None = None) -> Any:
-    """One ``run_episode`` observer: the trajectory recorder, a step bar and a stop check (each may be None)."""
-    if bar is None and check is None:
-        return recorder
-
-    def on_step(env: Any, infos: dict[str, Any]) -> None:
-        if recorder is not None:
-            recorder(env, infos)
-        if bar is not None and int(env.world.step_count[0]):  # not the call right after the reset
-            bar.update(1)
-        if check is not None:  # a live run stops here, between steps, when SIGTERM or Ctrl-C asked it to
-            check()
-
-    return on_step
-
-
-class _AgentSteps:
-    """A ``run_episode`` observer counting agent-steps (the agents that acted in each step), then passing on."""
-
-    def __init__(self, inner: Any) -> None:
-        self.inner = inner
-        self.n = 0
-
-    def __call__(self, env: Any, infos: dict[str, Any]) -> None:
-        self.n += len(infos)
-        if self.inner is not None:
-            self.inner(env, infos)
-
-
-def _rollout_row(
-    env: Any, policy: Any, seed: int, recorder: Any, bar: Any, check: Callable[[], None] | None
-) -> tuple:
-    """One episode through ``env.rollout`` (arrays, no per-step dicts): a row of the run's summary table."""
-
-    def on_step(env: Any, step: int, view: Any) -> None:
-        if recorder is not None:  # the trajectory PNG's positions and outcomes, from the step's arrays
-            recorder.on_rollout(env, step, view)
-        if bar is not None and step:  # step 0: the reset
-            bar.update(1)
-        if check is not None:  # a stop asked for by SIGTERM or Ctrl-C ends the run here, between steps
-            check()
-
-    res = env.rollout(policy, env.scenario.max_steps, seed=seed, on_step=on_step)
-    return (seed, res.steps, float(np.mean(res.returns)), res.info_sums, res.steps_per_s, res.agent_steps_per_s)
-
-
-def _check_record(path: str | None) -> None:
-    """Fail before any rollout when ``--record PATH`` cannot be recorded to (``recorder.schema.check_store_path``)."""
-    if not path:
-        return
-    from agentsim_env.recorder.schema import StoreError, check_store_path
-
-    try:
-        check_store_path(path)
-    except StoreError as exc:
-        raise ValueError(f"--record {exc}") from None
-
-
-def cmd_run(args: argparse.Namespace) -> int:
-    """Roll out the baseline over seeds; print success and return statistics; draw the first episode."""
-    if args.episodes is None:  # a live window plays in real time: one episode unless more are asked for
-        args.episodes = 1 if args.render else 5
-    _check_count("--episodes", args.episodes)
-    if args.seed < 0:
-        raise ValueError(f"--seed must be an integer >= 0, got {args.seed}")
-    if args.fps is not None and args.fps <= 0:
-        raise ValueError(f"--fps must be an integer > 0, got {args.fps}")
-    shards = getattr(args, "shards", None)
-    if shards is not None and shards < 1:
-        raise ValueError(f"--shards must be an integer >= 1, got {shards}")
-    threads = getattr(args, "threads", 1)
-    if threads < 1 or threads > 256:
-        raise ValueError(f"--threads must be an integer in [1, 256], got {threads}")
-    if threads != 1 and shards is not None:
-        raise ValueError("--threads applies to one process; with --shards each shard runs one thread")
-    if getattr(args, "ray_address", None) is not None and shards is None:
-        raise ValueError("--ray-address needs --shards K (the number of shard processes)")
-    from agentsim_env.scenarios.registry import scenario_class
-
-    config = parse_set(scenario_class(args.scenario).config_cls, args.set or [])
-    from agentsim_env.policies.registry import resolve_policy
-
-    policy_name, config = resolve_policy(args.scenario, args.policy, config)
-    if args.render:
-        from agentsim_env.cli_live import check_display
-
-        check_display(args.scenario)
-    _check_record(getattr(args, "record", None))
-    created = prepare_out(args.out) if args.out else []
-    try:
-        return _run(args, config, policy_name)
-    except KeyboardInterrupt:  # before the first step: one line, not a traceback
-        remove_created(created)
-        print("agentsim: stopped by Ctrl-C", file=sys.stderr)
-        return 130
-    except BaseException:
-        remove_created(created)
-        raise
-
-
-def _run(args: argparse.Namespace, config: dict[str, Any], policy_name: str) -> int:
-    import agentsim_env
-    from agentsim_env.policies.registry import make_policy
-    from agentsim_env.policies.rollout import run_episode
-    from agentsim_env.render.trajectories import TrajectoryRecorder, plot_trajectories
-
-    announce_compile()
-    mode = "human" if args.render else None
-    if getattr(args, "shards", None) is not None:
-        from agentsim_env.distributed import make as make_sharded
-
-        env = make_sharded(args.scenario, shards=args.shards, ray_address=args.ray_address, render_mode=mode, **config)
-        print(f"{args.scenario}: {args.shards} shards ({env.coordinator.backend.address}), halo "
-              f"{env.coordinator.strips.halo:.1f} m", flush=True)  # fmt: skip
-    else:
-        env = agentsim_env.make(args.scenario, render_mode=mode, num_threads=getattr(args, "threads", 1), **config)
-    if args.fps is not None:
-        env.metadata["render_fps"] = args.fps  # the live window paces itself with this rate
-    store = getattr(args, "record", None)
-    if store:  # every episode of the rollout, in one run of the store
-        from agentsim_env.recorder import record
-
-        label = f"agentsim run {args.scenario} --policy {policy_name} --seed {args.seed} --episodes {args.episodes}"
-        env = record(env, store, label=label + (" --set " + " ".join(args.set) if args.set else ""))
-        store_run = env.recorder.run
-    policy = make_policy(args.scenario, env, policy_name)
-    rows = []
-    traj = None
-    # large worlds: a bar over steps (an episode of 100,000 agents takes minutes), else over episodes
-    bar = _step_bar(args.episodes * env.scenario.max_steps, args.scenario) if (
-        env.scenario.n_agents >= BIG_WORLD and not args.quiet) else None  # fmt: skip
-    episodes = range(args.episodes) if bar is not None else _progress(range(args.episodes), args.episodes,
-                                                                      args.scenario, not args.quiet)  # fmt: skip
-    from agentsim_env.cli_live import LiveStop, StopRun, as_stop, is_stop, stop_line
-
-    halt: StopRun | None = None
-    try:
-        with LiveStop() as live:  # SIGTERM and Ctrl-C end the run between two steps (a second one at once)
-            for k in episodes:
-                recorder = TrajectoryRecorder() if k == 0 and args.out else None
-                if not args.render and not store:  # nothing needs per-step dicts
-                    # over shards each shard builds the policy by its name (no object crosses to them)
-                    who = policy_name if getattr(args, "shards", None) is not None else policy
-                    rows.append(_rollout_row(env, who, args.seed + k, recorder, bar, live.check))
-                    if recorder is not None:
-                        traj = recorder.result(env)
-                    continue
-                counted = _AgentSteps(_observers(recorder, bar, live.check))
-                t0 = time.perf_counter()
-                ep = run_episode(env, policy, args.seed + k, on_step=counted)
-                wall = time.perf_counter() - t0
-                if recorder is not None:
-                    traj = recorder.result(env)
-                rows.append((ep.seed, ep.steps, float(np.mean(list(ep.returns.values()))), ep.info_sums,
-                             ep.steps / wall, counted.n / wall))  # fmt: skip
-    except BaseException as exc:
-        if store:
-            env.recorder.finish("incomplete")
-        if not is_stop(exc):
-            raise
-        halt = as_stop(exc)  # the window closed, SIGTERM or Ctrl-C: report the episodes that ended
-    if bar is not None:
-        bar.total = bar.n
-        bar.close()
-    mark_warm()
-    n = env.scenario.n_agents
-    keys = sorted({k for r in rows for k in r[3] if k in ("arrived", "collided", "released", "landed")})
-    if rows:  # none when a live run was stopped during its first episode
-        print(f"\n{args.scenario}: {len(rows)} episodes x {n} agents, policy={policy_name}")
-        print("| metric | mean | std |")
-        print("|---|---|---|")
-        print(f"| steps | {np.mean([r[1] for r in rows]):.1f} | {np.std([r[1] for r in rows]):.1f} |")
-        print(f"| mean return | {np.mean([r[2] for r in rows]):.2f} | {np.std([r[2] for r in rows]):.2f} |")
-        for key in keys:
-            frac = np.array([r[3].get(key, 0.0) / n for r in rows])
-            print(f"| {key} per agent | {frac.mean():.3f} | {frac.std():.3f} |")
-        print(f"| env-steps/s | {np.mean([r[4] for r in rows]):.1f} | {np.std([r[4] for r in rows]):.1f} |")
-        print(f"| agent-steps/s | {np.mean([r[5] for r in rows]):.0f} | {np.std([r[5] for r in rows]):.0f} |")
-    if traj is not None:
-        shown = Path(policy_name).name.removesuffix(".zip") or "model"  # a model path: its folder's name
-        # HASH names the --set values only: a trained model's own env config is named by the model's folder
-        from agentsim_env.scenarios.registry import scenario_class
-
-        given = parse_set(scenario_class(args.scenario).config_cls, args.set or [])
-        name = f"{args.scenario}_{shown}_seed{args.seed}{config_tag(given)}.png"
-        title = f"{args.scenario} | policy {policy_name} | seed {args.seed} | {traj.steps} steps"
-        if args.set:
-            title += "\n" + textwrap.shorten(" ".join(args.set), 110, placeholder=" ...")
-        path = plot_trajectories(traj, Path(args.out) / name, title)
-        print(f"trajectories written to {path}")
-    env.close()
-    if store:
-        failed = env.recorder.error
-        stopped = f"; recording stopped early: {failed}" if failed else ""
-        print(f"recorded to {store} (run {store_run}){stopped}")
-    if halt is not None:
-        print(stop_line(halt, len(rows), args.episodes, store, store_run if store else None), file=sys.stderr)
-        return halt.code
-    return 0
-
-
 def cmd_scenarios(args: argparse.Namespace) -> int:
     """Print the registered scenarios with the first line of their documentation."""
     import agentsim_env
@@ -481,7 +180,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     resolve_zones(args.zones)
     resolve_strategies(args.strategies)
     store = getattr(args, "record", None) or None
-    _check_record(store)
+    check_record(store)
     created = prepare_out(args.out)
     try:
         announce_compile()

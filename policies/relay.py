@@ -15,6 +15,7 @@ group code is its own; once known, a target is remembered for the rest of the ep
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from typing import Any
 
 import numpy as np
@@ -47,8 +48,9 @@ def _avoidance(lidar: np.ndarray, heading: np.ndarray, n_azimuth: int, sensor_ra
     return 1.6 * (push + 0.5 * side) / n_azimuth * 4.0
 
 
-class _RelayBase:
-    """What both baselines share: the map scale, agent indices and the Dict-observation plumbing."""
+class _RelayBase(ABC):
+    """What both baselines share: the map scale, agent indices and the Dict-observation plumbing; each baseline
+    gives ``act_rows``."""
 
     def __init__(self, agents: list[str], length: float, width: float, n_groups: int, n_azimuth: int,
                  sensor_range: float, payload_dim: int, parts: ActionParts | None = None) -> None:  # fmt: skip
@@ -82,9 +84,9 @@ class _RelayBase:
         self.step += 1
         return rows_to_dicts(names, out)
 
+    @abstractmethod
     def act_rows(self, obs: dict[str, np.ndarray], slots: np.ndarray, step: int) -> dict[str, np.ndarray]:
         """The action parts of the agents in ``slots`` at ``step`` (rows independent of each other)."""
-        raise NotImplementedError
 
     def _move(self, parts: dict[str, np.ndarray], goal: np.ndarray | None, active: np.ndarray) -> np.ndarray:
         """Velocity actions: toward ``goal`` (absolute x, y) where ``active``, else hover; plus avoidance."""

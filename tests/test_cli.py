@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 import agentsim_env
-from agentsim_env import cli
+from agentsim_env import cli_kernels
 from agentsim_env.cli import COMPILE_NOTICE, WARM_MARKER, config_tag, main, prepare_out
 from agentsim_env.cli_set import parse_set
 from agentsim_env.evaluation import runner
@@ -310,24 +310,24 @@ def test_run_episode_without_observer_is_unchanged() -> None:
 def test_warmup_announces_a_cold_cache_once(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    monkeypatch.setattr(cli, "_kernel_cache_dir", lambda: tmp_path / "cache")
-    assert cli.kernels_cold()
+    monkeypatch.setattr(cli_kernels, "_kernel_cache_dir", lambda: tmp_path / "cache")
+    assert cli_kernels.kernels_cold()
     assert main(["warmup", "--quiet"]) == 0
     captured = capsys.readouterr()
     assert captured.err.strip() == COMPILE_NOTICE and captured.out == ""
-    assert (tmp_path / "cache" / WARM_MARKER).is_file() and not cli.kernels_cold()
+    assert (tmp_path / "cache" / WARM_MARKER).is_file() and not cli_kernels.kernels_cold()
     assert main(["warmup"]) == 0
     captured = capsys.readouterr()
     assert COMPILE_NOTICE not in captured.err
     assert all(name in captured.out for name in agentsim_env.list_scenarios())
     (tmp_path / "cache" / WARM_MARKER).write_text("an older version\n")
-    assert cli.kernels_cold()
+    assert cli_kernels.kernels_cold()
 
 
 def test_run_prints_the_notice_only_when_cold(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    monkeypatch.setattr(cli, "_kernel_cache_dir", lambda: tmp_path / "cache")
+    monkeypatch.setattr(cli_kernels, "_kernel_cache_dir", lambda: tmp_path / "cache")
     argv = ["run", "navigation", "--episodes", "1", *TINY_NAV, "--out", "", "--quiet"]
     assert main(argv) == 0
     assert capsys.readouterr().err.count(COMPILE_NOTICE) == 1

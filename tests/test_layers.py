@@ -37,6 +37,8 @@ LAYERS: dict[str, float] = {
     "cli_view": 7.7,  # the view and zones subcommands of cli; over the recorder, render, policies and cli_set
     "warmup": 7.6,
     "cli_live": 4.5,  # the run's display check and signal handling of cli; over render
+    "cli_kernels": 5.6,  # whether numba's cache is warm, the compile notice; over the package's version
+    "cli_run": 8.5,  # the run subcommand of cli; over policies, render, the recorder, distributed and cli_live
     "gymnasium_envs": 5.6,
     "zoo": 5.6,  # each scenario as a PettingZoo-style module (navigation_v0, ...); over env  # importing it registers the Gymnasium ids; over env  # agentsim warmup's runs; over env, distributed and policies
 }
