@@ -233,7 +233,6 @@ def _old_fly_mission(env: Any, policy: Any, seed: int) -> dict[str, float]:
     """``fly_mission`` as it stepped through ``step()`` with dicts: what the rollout path must equal."""
     from agentsim_env.evaluation import mission
 
-    cfg = env.scenario.config
     obs, _ = env.reset(seed=seed)
     policy.reset(seed)
     log = mission.MissionLog(env)
@@ -244,17 +243,7 @@ def _old_fly_mission(env: Any, policy: Any, seed: int) -> dict[str, float]:
         log.update(env)
         steps += 1
         work_done = ps.n_falling == 0 and mission._work_done(policy)
-    mine = ps.get("world") == 0
-    landed = int(np.count_nonzero(ps.get("landed") & mine))
-    needed = env.scenario.zones.n_sensors
-    energy = float(env.world.state.energy[: log.n].sum())
-    values = (
-        float(work_done or steps < env.scenario.max_steps), steps, steps * float(cfg.dt), energy,
-        energy / (cfg.n_uavs * cfg.battery_j), log.path, needed, cfg.n_uavs * cfg.payload,
-        int(np.count_nonzero(mine)), landed, min(landed / needed, 1.0), log.sent, log.dropped,
-        int(np.count_nonzero(log.near)), log.collisions,
-    )  # fmt: skip
-    return {k: float(v) for k, v in zip(mission.MISSION_KEYS, values, strict=True)}
+    return mission.mission_metrics(env, log, steps, work_done)
 
 
 def test_evaluate_flies_missions_through_rollout(monkeypatch: pytest.MonkeyPatch) -> None:

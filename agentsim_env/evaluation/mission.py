@@ -98,7 +98,6 @@ def fly_mission(env: Any, policy: Any, seed: int) -> dict[str, float]:
     Returns:
         The ``MISSION_KEYS`` values (floats); the env's payload set then holds the released sensors.
     """
-    cfg = env.scenario.config
     state: dict[str, Any] = {}
 
     def on_step(env: Any, step: int, view: Any) -> bool:
@@ -113,6 +112,13 @@ def fly_mission(env: Any, policy: Any, seed: int) -> dict[str, float]:
     res = env.rollout(policy, env.scenario.max_steps, seed=seed, on_step=on_step)
     log, ps, steps = state["log"], state["ps"], res.steps
     work_done = bool(ps.n_falling == 0 and _work_done(policy)) if steps else False
+    return mission_metrics(env, log, steps, work_done)
+
+
+def mission_metrics(env: Any, log: MissionLog, steps: int, work_done: bool) -> dict[str, float]:
+    """The ``MISSION_KEYS`` values of a mission flown for ``steps`` steps (``work_done``: it ended by itself)."""
+    cfg = env.scenario.config
+    ps = env.world.payloads.objects
     mine = ps.get("world") == 0
     landed = int(np.count_nonzero(ps.get("landed") & mine))
     needed = env.scenario.zones.n_sensors
