@@ -169,10 +169,12 @@ class Shard:
         edge = mine[self._near_edge(x)]
         if world.groups is not None and leaving.size:
             world.groups.settle_answers()  # heartbeat answers not yet read go with their agents
-        leave = pack_rows(world, leaving)
+        leave: Packed = {"slots": leaving}
+        if leaving.size:  # the per-slot arrays are looked up only when an agent leaves
+            leave = pack_rows(world, leaving)
+            for name, arr in self.carry.items():
+                leave[f"w.{name}"] = arr[leaving]
         leave["x"] = st.pos[leaving, 0]
-        for name, arr in self.carry.items():
-            leave[f"w.{name}"] = arr[leaving]
         post: dict[str, Any] = {"edge": {"slots": edge, "x": st.pos[edge, 0], "pos": st.pos[edge]}, "leave": leave}
         if self.overlay is not None and leaving.size:
             post["leave_floods"] = self.overlay.part.take_leaving(leaving)
