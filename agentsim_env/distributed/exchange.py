@@ -17,6 +17,7 @@ import threading
 from typing import Any
 
 from agentsim_env.distributed.bridge import Bridge, Packed
+from agentsim_env.distributed.wire import WireServer
 
 Key = tuple[int, str]
 """A barrier's name: the step's tick and the phase."""
@@ -149,6 +150,18 @@ class ExchangeActor:
         self._b = _Barriers(bridge, n_shards)
         self._events: dict[Key, asyncio.Event] = {}
         self.wait_s = float(wait_s)
+        self._wire: WireServer | None = None
+
+    async def serve(self, host: str, token: bytes) -> int:
+        """Serve ``swap`` to the shards over TCP on ``host`` (``distributed.wire``); the port."""
+        if self._wire is None:
+            self._wire = WireServer(self.swap, token, len(self._b.alive))
+            self.port = await self._wire.start(host)
+        return self.port
+
+    async def refused(self) -> int:
+        """Connections the wire server closed unanswered (a bad token, a broken frame)."""
+        return self._wire.refused if self._wire is not None else 0
 
     def _wake(self) -> None:
         for key in self._b.complete():

@@ -77,19 +77,32 @@ def split_reads(rd_start, rd_len, pool, add_start, add_len, add_v, keep):  # typ
 
 
 @nb.njit(cache=True)
+def _room(a, need):  # type: ignore[no-untyped-def]
+    # ``a`` when it holds ``need`` entries, else a larger empty buffer (doubling).
+    if need <= a.shape[0]:
+        return a
+    return np.empty(max(need, 2 * a.shape[0], 64), dtype=a.dtype)
+
+
+@nb.njit(cache=True)
 def hop_kernel(start, end, indices, own, e_row, e_slot, e_own, e_hops, rd_start, rd_len, pool, add_start, add_len,  # type: ignore[no-untyped-def]  # noqa: E501
-               add_v, stamp, token):  # fmt: skip
+               add_v, stamp, token, new_pool, out_v, out_f, out_h):  # fmt: skip
     """One hop of the frontier entries ``(e_row, e_slot)`` (grouped by row, rows in key order) into own slots.
 
     An own slot ``v`` reads row ``f`` when a frontier entry of ``f`` links to it and ``v`` is not among ``f``'s
     own readers (nor read it earlier in this hop). Links walked are counted for own entries only (``e_own``), so
     the parts' counts add up to the single process's.
 
+    ``new_pool``, ``out_v``, ``out_f`` and ``out_h`` are buffers the caller keeps between hops (grown here when
+    too small, returned either way; ``new_pool`` must not be ``pool``). The inner loop has no branch: every
+    neighbour is written at the end of the output and kept only when it is own and fresh (most neighbours of a
+    second hop have read the flood already, so a branch would mispredict often).
+
     Returns:
-        ``(new_pool, new_start, new_len, out_v, out_f, out_h, row_h, edges, token)``: the rebuilt reader lists
-        (only readers still own, the added ones and the new ones), the deliveries (receiver, row, hops) grouped by
-        row in entry order, each processed row's new hop count (-1: not processed), the links walked out of own
-        entries and the last stamp token.
+        ``(new_pool, npool, new_start, new_len, out_v, out_f, out_h, nd, row_h, edges, token)``: the rebuilt
+        reader lists in ``new_pool[:npool]`` (only readers still own, the added ones and the new ones), the
+        deliveries ``out_*[:nd]`` (receiver, row, hops) grouped by row in entry order, each processed row's new
+        hop count (-1: not processed), the links walked out of own entries and the last stamp token.
     """
     n_rows = rd_start.shape[0]
     ne = e_row.shape[0]
@@ -100,10 +113,8 @@ def hop_kernel(start, end, indices, own, e_row, e_slot, e_own, e_hops, rd_start,
     for q in range(ne):
         u = e_slot[q]
         bound += end[u] - start[u]
-    new_pool = np.empty(n_old + bound, dtype=np.int64)
-    out_v = np.empty(bound, dtype=np.int64)
-    out_f = np.empty(bound, dtype=np.int64)
-    out_h = np.empty(bound, dtype=np.int32)
+    new_pool = _room(new_pool, n_old + bound)
+    out_v, out_f, out_h = _room(out_v, bound), _room(out_f, bound), _room(out_h, bound)
     new_start = np.zeros(n_rows, dtype=np.int64)
     new_len = np.zeros(n_rows, dtype=np.int64)
     row_h = np.full(n_rows, -1, dtype=np.int32)
@@ -149,7 +160,7 @@ def hop_kernel(start, end, indices, own, e_row, e_slot, e_own, e_hops, rd_start,
                                   np.int32(-1))  # fmt: skip
             new_start[f] = p0
             new_len[f] = npool - p0
-    return new_pool[:npool], new_start, new_len, out_v[:nd], out_f[:nd], out_h[:nd], row_h, edges, token
+    return new_pool, npool, new_start, new_len, out_v, out_f, out_h, nd, row_h, edges, token
 
 
 @nb.njit(cache=True)

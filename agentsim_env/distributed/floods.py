@@ -196,7 +196,21 @@ class PartFloods:
         self.payload_dim = int(payload_dim)
         self._stamp = np.zeros(self.n_slots, dtype=np.int32)
         self._token = 0
+        # the hop kernel's buffers, kept between hops: (spare pool, out_v, out_f, out_h); ``_pool_buf`` is the
+        # buffer ``_pool`` is a view of (never the spare)
+        self._scratch: tuple[np.ndarray, ...] | None = None
+        self._pool_buf: np.ndarray | None = None
         self.reset()
+
+    def __getstate__(self) -> dict[str, object]:
+        """The state without the hop kernel's buffers (new ones at the next hop)."""
+        return {**self.__dict__, "_scratch": None, "_pool_buf": None}
+
+    def _buffers(self) -> tuple[np.ndarray, ...]:
+        if self._scratch is None:
+            self._scratch = (_e(), _e(), _e(), _e(np.int32))
+        spare = self._scratch[0]
+        return (_e() if spare is self._pool_buf else spare, *self._scratch[1:])
 
     def reset(self) -> None:
         """Forget every flood and zero the hop counter."""
@@ -208,6 +222,7 @@ class PartFloods:
         self._end = _e()
         self._hops = _e(np.int32)
         self._rd_start, self._rd_len, self._pool = _e(), _e(), _e()
+        self._pool_buf = None
         self._add_row, self._add_slot = _e(), _e()  # reads added since the lists were last rebuilt
         self._fr_row, self._fr_slot = _e(), _e()  # own frontier entries
         self._clock = 0
@@ -347,6 +362,7 @@ class PartFloods:
         self._pool, self._rd_start, self._rd_len, rows, out = split_reads(
             self._rd_start, self._rd_len, self._pool, add_start, add_len, add_v, ~leaving
         )
+        self._pool_buf = None  # a new buffer, which no spare is
         self._add_row, self._add_slot = _e(), _e()
         go = leaving[self._fr_slot]
         s = self.n_slots
@@ -417,14 +433,20 @@ class PartFloods:
             )
         add_start, add_len, add_v = self._adds()
         relayed = np.flatnonzero(np.bincount(self._fr_row, minlength=n))  # sorted distinct rows
-        pool, rd_start, rd_len, out_v, out_f, out_h, row_h, edges, self._token = hop_kernel(
+        spare, out_v, out_f, out_h = self._buffers()
+        spare, npool, rd_start, rd_len, out_v, out_f, out_h, nd, row_h, edges, self._token = hop_kernel(
             start, end, indices, own, e_row[order], e_slot[order], e_own[order], e_hops[order], self._rd_start,
-            self._rd_len, self._pool, add_start, add_len, add_v, self._stamp, self._token,
+            self._rd_len, self._pool, add_start, add_len, add_v, self._stamp, self._token, spare, out_v, out_f, out_h,
         )  # fmt: skip
-        self._pool, self._rd_start, self._rd_len = pool, rd_start, rd_len
+        # the old pool's buffer is the next hop's spare; the deliveries are copied out of the reused buffers
+        old = self._pool if self._pool_buf is None else self._pool_buf
+        self._scratch = (old if old.flags.writeable else _e(), out_v, out_f, out_h)
+        self._pool_buf, self._pool, self._rd_start, self._rd_len = spare, spare[:npool], rd_start, rd_len
         self._add_row, self._add_slot = _e(), _e()
-        out = FloodDeliveries(out_v, self._o[out_f], self._c[out_f], self._q[out_f], out_h,
+        out_f, out_h = out_f[:nd], out_h[:nd]
+        out = FloodDeliveries(out_v[:nd].copy(), self._o[out_f], self._c[out_f], self._q[out_f], out_h.copy(),
                               np.take(self._pay, out_f, axis=0))  # fmt: skip
+        out_v = out.receiver
         done = row_h >= 0
         self._end[done] = self._clock + self._limit[done] - row_h[done]
         self._hops[done] = row_h[done]

@@ -38,6 +38,7 @@ import ipaddress
 import logging
 import os
 import re
+import secrets
 import socket
 import time
 from collections.abc import Iterator
@@ -48,9 +49,12 @@ from agentsim_env.distributed.bridge import Bridge, Packed
 from agentsim_env.distributed.exchange import ExchangeActor
 from agentsim_env.distributed.partition import Strips
 from agentsim_env.distributed.shard import Shard as _Shard
+from agentsim_env.distributed.wire import TOKEN_BYTES, WireClient
 
 INSTALL_HINT = "shards need Ray: pip install 'agentsim-env[ray]' (or pip install 'ray>=2.40')"
 STARTUP_TIMEOUT_S = 300.0
+EXCHANGE_WAIT_S = 60.0
+"""Longest wait at one barrier of the exchange (the driver's deadline normally drops a late shard before)."""
 """Seconds a shard may take to start (import, kernels) and answer its first reset."""
 _ADDRESS = re.compile(r"^(auto|local|(ray://)?[A-Za-z0-9_.\-]+:\d{1,5})$")
 _users = 0  # envs using the local cluster this process started
@@ -285,13 +289,11 @@ class Shard(OnNode):
     """A ``Shard`` in a Ray actor, its exchange reached through the exchange actor's handle; its address also
     names the Ray node it runs on."""
 
-    def __init__(self, index: int, name: str, config: dict[str, Any], strips: Strips, exchange: Any) -> None:
-        ray = import_ray()
-
-        def swap(key: tuple[int, str], k: int, payload: Packed) -> Packed:
-            return ray.get(exchange.swap.remote(key, k, payload))  # type: ignore[no-any-return]
-
-        self.worker = _Shard(index, name, config, strips, swap)
+    def __init__(self, index: int, name: str, config: dict[str, Any], strips: Strips, wire: tuple[str, int, bytes],
+                 wait_s: float) -> None:  # fmt: skip
+        host, port, token = wire
+        self.wire = WireClient(host, port, token, index, wait_s)
+        self.worker = _Shard(index, name, config, strips, self.wire.swap)
         self.worker.address = f"{self.worker.address} on node {self.node()[:12]}"
 
     def reset(self, *args: Any) -> Packed:
@@ -354,7 +356,12 @@ class RayShards:
 
         here = NodeAffinitySchedulingStrategy(ray.get_runtime_context().get_node_id(), soft=False)
         self.exchange = ray.remote(num_cpus=0, max_restarts=0)(ExchangeActor).options(
-            scheduling_strategy=here).remote(bridge, self.n_shards)  # next to the driver  # fmt: skip
+            scheduling_strategy=here).remote(bridge, self.n_shards, EXCHANGE_WAIT_S)  # next to the driver  # fmt: skip
+        # the barriers' data path (``distributed.wire``): on loopback for the local cluster, else on the driver
+        # node's address, where Ray's own ports are
+        host = LOOPBACK if self._own else str(ray.util.get_node_ip_address())
+        token = secrets.token_bytes(TOKEN_BYTES)
+        self.wire = (host, int(ray.get(self.exchange.serve.remote(host, token))), token)
         self.placement = Placement(ray, not self._own if spread is None else bool(spread))
         self._args = (name, config, strips)
         self.actors: dict[int, Any] = {k: self._start(k) for k in range(self.n_shards)}
@@ -362,7 +369,7 @@ class RayShards:
 
     def _start(self, k: int) -> Any:
         name, config, strips = self._args
-        return self.placement.start(k, self._cls, k, name, config, strips, self.exchange)
+        return self.placement.start(k, self._cls, k, name, config, strips, self.wire, EXCHANGE_WAIT_S + 30.0)
 
     def node_of(self, k: int) -> str:
         """The id (hex) of the Ray node worker ``k`` runs on (or last ran on); ``""`` when it never said."""
