@@ -243,8 +243,11 @@ class Shard:
 
     def flat_rows(self, slots: np.ndarray) -> np.ndarray:
         """The flat observation rows of ``slots``, computed for those rows only (``Scenario.observation_rows``)."""
-        parts = self.scenario.observation_rows(self.world, slots)
-        n = slots.size
+        return self.flat_layout(self.scenario.observation_rows(self.world, slots), slots.size)
+
+    @staticmethod
+    def flat_layout(parts: dict[str, np.ndarray], n: int) -> np.ndarray:
+        """Observation parts of ``n`` rows as flat rows ``(n, obs_dim)`` float32 (the parts in their order)."""
         out = np.empty((n, sum(int(np.prod(v.shape[1:])) for v in parts.values())), dtype=np.float32)
         at = 0
         for v in parts.values():  # each part straight into its columns

@@ -59,7 +59,13 @@ class ShardRollout:
         worker.carry.update({"live": self.live, "returns": self.returns, "ended_here": self.ended_here})
         worker.carry.update({f"sum.{k}": v for k, v in self.sums.items()})
         self.slots = np.flatnonzero(self.live & worker.own)
-        self.flat = worker.flat_rows(self.slots)
+        self.parts = self._observe(self.slots)
+
+    def _observe(self, slots: np.ndarray) -> dict[str, np.ndarray]:
+        """The observation parts of ``slots`` in the layout's shapes and float32 (the values the flat rows hold),
+        not flattened: the policy gets parts."""
+        got = self.worker.scenario.observation_rows(self.worker.world, slots)
+        return {k: got[k].astype(np.float32, copy=False).reshape(slots.size, *shape) for k, _, shape in self.layout}
 
     def act(self, control: Packed) -> Packed:
         """One step: the policy's actions for the own live agents, the step, the sums; counts back."""
@@ -67,9 +73,12 @@ class ShardRollout:
         st = w.world.state
         s = st.n_slots
         slots = np.flatnonzero(self.live & w.own)
-        rows = self.flat if np.array_equal(slots, self.slots) else self.flat[np.searchsorted(self.slots, slots)]
         n = slots.size
-        obs = {k: rows[:, sl].reshape(n, *shape) for k, sl, shape in self.layout}
+        if np.array_equal(slots, self.slots):
+            obs = self.parts
+        else:
+            at = np.searchsorted(self.slots, slots)
+            obs = {k: v[at] for k, v in self.parts.items()}
         if n:
             acts = self.policy.act_rows(obs, slots, int(control["taken"]))
         else:  # no own agent acts this step: the shard still steps (its neighbours meet it at the exchange)
@@ -89,7 +98,7 @@ class ShardRollout:
         w.own[acting & terminated] = False  # they stay where they stopped (``ended_here``)
         w._sender_positions()
         self.slots = np.flatnonzero(self.live & w.own)
-        self.flat = w.flat_rows(self.slots)
+        self.parts = self._observe(self.slots)
         counts = count_events(w.world.last_events)
         out: Packed = {"live": int((self.live & w.own).sum()), "events": [counts[k] for k in EVENT_KEYS],
                        "ended": np.flatnonzero(acting & terminated), "arrived": w.arrived}  # fmt: skip
@@ -108,7 +117,7 @@ class ShardRollout:
                        "live": np.flatnonzero(self.live & w.own)}  # fmt: skip
         out["sums"] = {k: v[slots] for k, v in self.sums.items()}
         out["own"] = np.flatnonzero(w.own)
-        out["obs"] = self.flat  # of ``live``: step() can go on from here
+        out["obs"] = self.worker.flat_layout(self.parts, self.slots.size)  # of ``live``: step() can go on from here
         for key in ("live", "returns", "ended_here", *(f"sum.{k}" for k in self.info_keys)):
             w.carry.pop(key, None)
         return out
