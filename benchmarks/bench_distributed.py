@@ -262,6 +262,106 @@ def paper_table(res: dict[tuple[int, str, str], dict[str, Any]], n_ref: int) -> 
                            "vs one process"], rows)  # fmt: skip
 
 
+def record_posts(n: int, steps: int) -> tuple[Any, dict[int, list[tuple[str, Any]]]]:
+    """Every post of a 2-shard rollout of ``steps`` steps after a 3-step warm-up (local backend): per shard, the
+    phases and payloads in order; with the exchange's routing (``Bridge``)."""
+    env = build(n, 2, "local", api="rollout")
+    policy = Cycle(actions(n, "full"), env.scenario.act_parts())
+    env.rollout(policy, 3, seed=0)
+    posts: dict[int, list[tuple[str, Any]]] = {0: [], 1: []}
+    backend = env.coordinator.backend
+    for k, shard in backend.shards.items():
+        inner = shard._swap
+
+        def swap(key: Any, i: int, payload: Any, inner: Any = inner, k: int = k) -> Any:
+            posts[k].append((key[1], payload))
+            return inner(key, i, payload)
+
+        shard._swap = swap
+    env.rollout(policy, steps, seed=1)
+    bridge = backend.exchange.bridge
+    close(env)
+    return bridge, posts
+
+
+class _NullShard:
+    """A Ray actor that only posts recorded payloads at the exchange (no simulation): the exchange's floor."""
+
+    def __init__(self, k: int, posts: list[tuple[str, Any]], wire: Any, exchange: Any) -> None:
+        from agentsim_env.distributed.wire import WireClient
+
+        self.k, self.posts, self.exchange = k, posts, exchange
+        self.client = WireClient(*wire, k, 120.0) if wire is not None else None
+
+    def run(self, per_step: int, steps: int, tick0: int) -> float:
+        """Post ``steps`` steps of recorded payloads (cycled); this process's CPU seconds."""
+        import ray
+
+        c0 = time.process_time()
+        for s in range(steps):
+            for i in range(per_step):
+                phase, payload = self.posts[(s * per_step + i) % len(self.posts)]
+                key = (tick0 + s, phase)
+                if self.client is not None:
+                    self.client.swap(key, self.k, payload)
+                else:
+                    ray.get(self.exchange.swap.remote(key, self.k, payload))
+        return time.process_time() - c0
+
+
+def exchange_floor(ray: Any, n: int, steps: int) -> tuple[str, dict[str, float]]:
+    """Table d: the exchange alone, replaying a 2-shard rollout's posts with no simulation, over the wire (the data
+    path of today) and over one Ray actor call per barrier (the earlier one)."""
+    import secrets
+
+    from agentsim_env.distributed.exchange import ExchangeActor
+
+    bridge, posts = record_posts(n, steps)
+    per_step = len(posts[0]) // steps
+
+    class TimedExchange(ExchangeActor):
+        async def cpu(self) -> float:
+            return time.process_time()
+
+    rows, out = [], {}
+    for label, use_wire in (("TCP connection per shard (today)", True), ("Ray actor call per barrier", False)):
+        ex = ray.remote(num_cpus=0)(TimedExchange).remote(bridge, 2, 120.0)
+        ray.get(ex.set_slot_owner.remote(bridge.slot_owner))
+        token = secrets.token_bytes(32)
+        wire = ("127.0.0.1", ray.get(ex.serve.remote("127.0.0.1", token)), token) if use_wire else None
+        actors = [ray.remote(num_cpus=0)(_NullShard).remote(k, posts[k], wire, ex) for k in (0, 1)]
+        ray.get([a.run.remote(per_step, steps, 0) for a in actors])  # warm-up
+        c0 = ray.get(ex.cpu.remote())
+        t0 = time.perf_counter()
+        cpu = ray.get([a.run.remote(per_step, steps, 10_000) for a in actors])
+        wall = (time.perf_counter() - t0) / steps * 1e3
+        ex_cpu = (ray.get(ex.cpu.remote()) - c0) / steps * 1e3
+        out[label] = wall
+        rows.append([label, str(per_step), fmt_num(wall), fmt_num(ex_cpu), fmt_num(max(cpu) / steps * 1e3)])
+        for a in (*actors, ex):
+            ray.kill(a)
+    table = markdown_table(["data path", "barriers / step", "wall ms / step", "exchange CPU ms / step",
+                            "a shard's CPU ms / step"], rows)  # fmt: skip
+    return table, out
+
+
+def scaling_table(n: int, shard_counts: list[int], steps: int) -> str:
+    """Table e: one process vs K shards on this machine's local Ray cluster, through ``env.rollout`` (wall ms per
+    step without the reset, whether the results equal one process's). For machines with more cores than this one:
+    each shard is a process, so K shards need K cores (plus one for the driver and the exchange)."""
+    base = run_rollout(n, None, "full", steps)
+    rows = [[fmt_num(n), "one process", fmt_num(base["step_ms"]), fmt_num(1e3 / base["step_ms"]), "1.00", "-", "-",
+             "-"]]  # fmt: skip
+    for k in shard_counts:
+        r = run_rollout(n, k, "full", steps)
+        rows.append([fmt_num(n), f"{k} shards (Ray)", fmt_num(r["step_ms"]), fmt_num(1e3 / r["step_ms"]),
+                     f"{base['step_ms'] / r['step_ms']:.2f}", fmt_num(r["busy_ms"]), fmt_num(r["wait_ms"]),
+                     "yes" if same_result(base["result"], r["result"]) else "NO"])  # fmt: skip
+        print(f"  {k} shards: {r['step_ms']:.0f} ms/step", file=sys.stderr, flush=True)
+    return markdown_table(["agents", "system", "ms/step", "env-steps/s", "speed-up", "slowest shard busy ms",
+                           "exchange ms", "same results"], rows)  # fmt: skip
+
+
 def border_bytes(
     sizes: list[int], steps: int, shards: int = 2, traffic: str = "full"
 ) -> list[dict[str, float]]:
@@ -307,8 +407,24 @@ def main(argv: list[str] | None = None) -> int:
     """Print the tables."""
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--quick", action="store_true", help="small sizes and few steps (smoke test)")
+    p.add_argument("--scaling", type=int, metavar="N", default=None,
+                   help="only table e: N agents, one process vs --shards K (a machine with many cores)")
+    p.add_argument("--shards", type=str, default="2,4,8", help="shard counts of --scaling, comma separated")
+    p.add_argument("--steps", type=int, default=None, help="steps of each measured rollout")
     args = p.parse_args(argv)
     q = args.quick
+    if args.scaling is not None:
+        ks = [int(x) for x in args.shards.split(",") if x.strip()]
+        print(f"# One world over K shards on one machine\n\nMachine: {machine_description()}\n")
+        ray = start_ray()
+        if ray is None:
+            print("Ray is not installed: pip install 'agentsim-env[ray]'")
+            return 1
+        try:
+            print(scaling_table(args.scaling, ks, args.steps or 6))
+        finally:
+            ray.shutdown()
+        return 0
     sizes, steps = ([10_000], 4) if q else ([100_000, 200_000], 12)
     border = [2000, 10_000] if q else [10_000, 40_000, 100_000]
     print(f"# One world over shards that step themselves\n\nMachine: {machine_description()}\n")
@@ -329,6 +445,16 @@ def main(argv: list[str] | None = None) -> int:
                   f"profile; 0 with shard worlds sized to their agents); 7 exchange barriers a step at ~1 ms each; "
                   f"the bytes between neighbouring shards grow with the strip edge (sqrt(N)) over 10 Gb/s links; "
                   f"the coordinator's share grows linearly with the number of shards; one process linear in N.")  # fmt: skip
+            print(f"\n## The exchange alone: {sizes[0]:,} agents, 2 shards, the posts of a rollout replayed with no "
+                  f"simulation\n")  # fmt: skip
+            floor_table, floor = exchange_floor(ray, sizes[0], steps)
+            print(floor_table)
+            one = res[sizes[0], "rollout", "one process"]["step_ms"]
+            wall = floor["TCP connection per shard (today)"]
+            print(f"\nThe floor bounds the rollout's speed-up over 2 shards on this machine: with no other cost than "
+                  f"the exchange, a step takes half of one process's ({one:.0f} / 2 ms) plus the exchange's wall time "
+                  f"({wall:.1f} ms): at most {one / (one / 2 + wall):.2f}x (at most "
+                  f"{one / (one / 2 + floor['Ray actor call per barrier']):.2f}x over Ray actor calls).")  # fmt: skip
         print(f"\n## Bytes per step vs agents near the strip edge (2 shards, local backend, full traffic, step "
               f"API, mean of {2 if q else 3} steps)\n")  # fmt: skip
         rows = border_bytes(border, 2 if q else 3)
