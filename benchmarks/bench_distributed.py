@@ -151,20 +151,26 @@ def _shard_times(env: Any) -> dict[str, float]:
 
 
 def run_rollout(n: int, shards: int | None, traffic: str, steps: int, backend: str = "ray") -> dict[str, Any]:
-    """``env.rollout`` of the action cycle: wall ms per step without the reset (a rollout of ``steps`` steps minus
-    one of 1 step, both after a 2-step warm-up rollout), the same way for every system."""
+    """``env.rollout`` of the action cycle after a 2-step warm-up rollout: wall ms per step, the mean over steps 2..
+    ``steps`` (the reset and the first step left out, the same way for every system: one process times its steps
+    with an ``on_step`` observer that only reads the clock, the shards with the coordinator's per-step profile, which
+    times each step's call to the shards)."""
     env = build(n, shards, backend, api="rollout")
     policy = Cycle(actions(n, traffic), env.scenario.act_parts())
     env.rollout(policy, 2, seed=0)
-    t0 = time.perf_counter()
-    env.rollout(policy, 1, seed=0)
-    one = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    res = env.rollout(policy, steps, seed=0)
-    wall = time.perf_counter() - t0
-    out: dict[str, Any] = {"result": res, "step_ms": (wall - one) / (steps - 1) * 1e3}
-    if shards is not None:
+    stamps: list[float] = []
+
+    def clock(env: Any, taken: int, view: Any) -> bool:
+        stamps.append(time.perf_counter())
+        return False
+
+    res = env.rollout(policy, steps, seed=0, on_step=clock if shards is None else None)
+    out: dict[str, Any] = {"result": res}
+    if shards is None:
+        out["step_ms"] = float(np.mean(np.diff(stamps[1:]))) * 1e3  # stamps: after the reset, then each step
+    else:
         out.update(_shard_times(env))
+        out["step_ms"] = out["call_wall_ms"]
         # the coordinator's part of a step call: its wall time outside the slowest shard's call
         out["coord_ms"] = max(0.0, out["call_wall_ms"] - out["max_call_ms"])
         tr = env.coordinator.traffic
@@ -233,33 +239,46 @@ def speed_table(sizes: list[int], steps: int, ray: Any) -> tuple[str, dict[tuple
 
 
 FIXED_MS_PER_SLOT = 45.0 / 100_000
-"""A shard's work that does not shrink with its share of the agents (kernels over its full-length slot arrays,
-the gathering of observation rows), per slot of the world: ~45 ms at 100,000 slots in a shard's profile."""
+"""A shard's work that does not shrink with its share of the agents (kernels over its full-length slot arrays),
+per slot of the world: ~45 ms at 100,000 slots in a shard's profile."""
+LINK_BYTES_S = 1.25e9
+"""A 10 Gb/s link."""
+PAPER_N, PAPER_K = 1_000_000, 16
 
 
-def paper_table(res: dict[tuple[int, str, str], dict[str, Any]], n_ref: int) -> str:
-    """Table c: 1,000,000 agents on 16 machines from the rollout measurements at ``n_ref`` agents, with the shards'
-    full-length slot arrays of today and with shard worlds sized to their own agents."""
+def paper_table(res: dict[tuple[int, str, str], dict[str, Any]], n_ref: int, floor: dict[str, float],
+                by_k: dict[int, dict[str, float]], n_small: int) -> str:  # fmt: skip
+    """Table f: 1,000,000 agents on 16 machines from this run's measurements (see ``main`` for the assumptions)."""
     one = res[n_ref, "rollout", "one process"]
     two = res[n_ref, "rollout", "2 shards (Ray)"]
-    fixed_ref = FIXED_MS_PER_SLOT * n_ref
-    per_agent = (two["busy_ms"] - fixed_ref) / (n_ref / 2)  # ms per own agent of a shard (2 shards, 2 cores)
-    n, k = 1_000_000, 16
-    one_ms = one["step_ms"] * n / n_ref  # one process scales linearly with N
+    n, k = PAPER_N, PAPER_K
+    one_ms = one["step_ms"] * n / n_ref  # one process linear in N (measured: a little worse than linear)
+    per_agent = (two["busy_ms"] - FIXED_MS_PER_SLOT * n_ref) / (n_ref / 2)  # ms per own agent of a shard
     own = per_agent * n / k * 1.08  # + 8 % ghosts at 16 strips of a 1,000,000-agent map
-    rounds = 7.0  # exchange barriers a step, ~1 ms each
-    side_ratio = np.sqrt(n / n_ref)  # an edge of the bigger map vs the measured one
-    link_ms = two["bytes"] * side_ratio / 1.25e9 * 1e3  # the busiest shard's two edges, 10 Gb/s
+    wire = "TCP connection per shard (today)"
+    barriers = floor[wire]  # the barriers' latency a step, measured with no simulation (2 shards, loopback)
+    hub_cpu_per_byte = floor[wire + " cpu"] / two["bytes"]  # the exchange's CPU per byte it routes
+    kk = max(by_k)
+    # bytes a step through the exchange at K shards: the phases at strip edges grow with the edge (sqrt(N)), the
+    # bus, the far senders' positions and the group sums with N
+    b = by_k[kk]
+    edge = sum(b[f] for f in ("halo", "handover", "offline"))
+    hub_bytes = edge * np.sqrt(n / n_small) + (b["total"] - edge) * n / n_small
     coord = two["coord_ms"] * k / 2  # the coordinator's calls grow with the number of shards
     rows = []
-    for label, fixed in (("full-length slot arrays (today)", FIXED_MS_PER_SLOT * n), ("compact shard worlds", 0.0)):
+    for label, fixed, peer in (("full-length slot arrays, one exchange (today)", FIXED_MS_PER_SLOT * n, False),
+                               ("compact shard worlds, one exchange", 0.0, False),
+                               ("compact shard worlds, shards exchange directly", 0.0, True)):  # fmt: skip
         busy = own + fixed
-        step = busy + rounds + link_ms + coord
-        rows.append([label, fmt_num(n), str(k), fmt_num(one_ms), fmt_num(busy), fmt_num(rounds), fmt_num(link_ms),
-                     fmt_num(coord), fmt_num(step), f"{one_ms / step:.1f}x"])  # fmt: skip
-    return markdown_table(["shards hold", "agents", "machines", "one process ms", "shard busy ms",
-                           "exchange round trips ms", "halo + bus link ms", "coordinator ms", "step ms",
-                           "vs one process"], rows)  # fmt: skip
+        # one exchange routes every byte on one CPU and one link; shards exchanging directly split both K ways
+        route = hub_bytes * hub_cpu_per_byte / (k if peer else 1)
+        link = hub_bytes / LINK_BYTES_S * 1e3 / (k if peer else 1)
+        step = busy + barriers + route + link + coord
+        rows.append([label, fmt_num(one_ms), fmt_num(busy), fmt_num(barriers), _bytes(hub_bytes / (k if peer else 1)),
+                     fmt_num(route), fmt_num(link), fmt_num(coord), fmt_num(step), f"{one_ms / step:.1f}x"])  # fmt: skip
+    return markdown_table(["shards hold, exchange", "one process ms", "shard busy ms", "barriers ms",
+                           "bytes / step on the busiest link", "routing ms", "link ms", "coordinator ms",
+                           "step ms", "vs one process"], rows)  # fmt: skip
 
 
 def record_posts(n: int, steps: int) -> tuple[Any, dict[int, list[tuple[str, Any]]]]:
@@ -337,6 +356,7 @@ def exchange_floor(ray: Any, n: int, steps: int) -> tuple[str, dict[str, float]]
         wall = (time.perf_counter() - t0) / steps * 1e3
         ex_cpu = (ray.get(ex.cpu.remote()) - c0) / steps * 1e3
         out[label] = wall
+        out[label + " cpu"] = ex_cpu
         rows.append([label, str(per_step), fmt_num(wall), fmt_num(ex_cpu), fmt_num(max(cpu) / steps * 1e3)])
         for a in (*actors, ex):
             ray.kill(a)
@@ -394,6 +414,34 @@ def border_bytes(
     return out
 
 
+def bytes_by_shards(n: int, shard_counts: list[int], steps: int) -> dict[int, dict[str, float]]:
+    """Bytes per step through the exchange by phase (posted and routed back, mean over ``steps`` step-API steps
+    after a warm-up step), local backend, for each shard count: what grows with K at a fixed N."""
+    out: dict[int, dict[str, float]] = {}
+    for k in shard_counts:
+        env = build(n, k, "local")
+        acts = actions(n, "full")
+        env.step(acts[0])
+        got: dict[str, list[float]] = {}
+        for i in range(1, steps + 1):
+            env.step(acts[i % bc.CYCLE])
+            tr = env.coordinator.traffic
+            for f in ("halo", "handover", "offline", "bus", "positions", "groups"):
+                got.setdefault(f, []).append(getattr(tr, f))
+            got.setdefault("total", []).append(tr.between_shards)
+        close(env)
+        out[k] = {f: float(np.mean(v)) for f, v in got.items()}
+    return out
+
+
+def hub_table(by_k: dict[int, dict[str, float]], n: int) -> str:
+    """The exchange's bytes per step by phase and shard count (posted plus routed back)."""
+    rows = [[str(k), *(_bytes(b[f]) for f in ("halo", "handover", "offline", "bus", "positions", "groups", "total")),
+             _bytes(b["total"] / n)] for k, b in by_k.items()]  # fmt: skip
+    return markdown_table(["shards", "halo", "handover", "offline", "bus", "positions", "groups", "total",
+                           "total / agent"], rows)  # fmt: skip
+
+
 def border_table(rows: list[dict[str, float]]) -> str:
     """Table c, with halo bytes per agent and per sqrt(agent) (flat when the halo grows as sqrt(N))."""
     body = [[fmt_num(r["n"]), fmt_num(r["side"]), fmt_num(r["ghosts"]), fmt_num(r["expected"]), _bytes(r["halo"]),
@@ -437,14 +485,6 @@ def main(argv: list[str] | None = None) -> int:
         table, res = speed_table(sizes, steps, ray)
         print(table)
         if ray is not None:
-            print("\n## On paper: 1,000,000 agents on 16 machines\n")
-            print(paper_table(res, sizes[0]))
-            print(f"\nAssumptions: one shard per machine; its busy time = a part per own agent (measured above at "
-                  f"{sizes[0]:,} agents over 2 shards, minus the fixed part) x (1,000,000 / 16 agents + 8 % ghosts) "
-                  f"+ a fixed part per slot of the world ({FIXED_MS_PER_SLOT * 1e6:.0f} ns a slot, from a shard's "
-                  f"profile; 0 with shard worlds sized to their agents); 7 exchange barriers a step at ~1 ms each; "
-                  f"the bytes between neighbouring shards grow with the strip edge (sqrt(N)) over 10 Gb/s links; "
-                  f"the coordinator's share grows linearly with the number of shards; one process linear in N.")  # fmt: skip
             print(f"\n## The exchange alone: {sizes[0]:,} agents, 2 shards, the posts of a rollout replayed with no "
                   f"simulation\n")  # fmt: skip
             floor_table, floor = exchange_floor(ray, sizes[0], steps)
@@ -455,6 +495,30 @@ def main(argv: list[str] | None = None) -> int:
                   f"the exchange, a step takes half of one process's ({one:.0f} / 2 ms) plus the exchange's wall time "
                   f"({wall:.1f} ms): at most {one / (one / 2 + wall):.2f}x (at most "
                   f"{one / (one / 2 + floor['Ray actor call per barrier']):.2f}x over Ray actor calls).")  # fmt: skip
+            n_small = 5_000 if q else 20_000
+            ks = [2, 4] if q else [2, 4, 8, 16]
+            print(f"\n## Bytes through the exchange vs shards ({n_small:,} agents, local backend, full traffic, step "
+                  f"API, mean of 3 steps; posted plus routed back)\n")  # fmt: skip
+            by_k = bytes_by_shards(n_small, ks, 3)
+            print(hub_table(by_k, n_small))
+            print("\nThe bus's bytes grow with the agents, not with the strip edge: a quarter of the messages go to "
+                  "a named agent anywhere on the map and a quarter to a group whose members live anywhere (a GROUP "
+                  "message goes to every shard), so with K shards (K - 1) / K of the named ones cross and every "
+                  "GROUP message is sent K times.")  # fmt: skip
+            print(f"\n## On paper: {PAPER_N:,} agents on {PAPER_K} machines\n")
+            print(paper_table(res, sizes[0], floor, by_k, n_small))
+            print(f"\nAssumptions: one shard per machine; its busy time = a part per own agent (measured above at "
+                  f"{sizes[0]:,} agents over 2 shards, minus the fixed part) x ({PAPER_N:,} / {PAPER_K} agents + 8 % "
+                  f"ghosts) + a fixed part per slot of the world ({FIXED_MS_PER_SLOT * 1e6:.0f} ns a slot, from a "
+                  f"shard's profile; 0 with shard worlds sized to their agents); the barriers' latency as measured "
+                  f"above with no simulation; the bytes through the exchange at {max(ks)} shards (table above), "
+                  f"those of the edge phases (halo, hand-overs, offline) times sqrt({PAPER_N:,} / {n_small:,}), the "
+                  f"others (bus, positions, groups) times {PAPER_N:,} / {n_small:,}, routed at the CPU cost per byte measured above and sent over "
+                  f"10 Gb/s links (one exchange: every byte on its one CPU and link; shards exchanging directly: "
+                  f"each carries 1 / {PAPER_K} of them); the coordinator's share linear in the number of shards; "
+                  f"one process linear in N (measured here: a little worse than linear, "
+                  f"{res[sizes[-1], 'rollout', 'one process']['step_ms'] / res[sizes[0], 'rollout', 'one process']['step_ms']:.2f}x "
+                  f"for {sizes[-1] / sizes[0]:.0f}x the agents).")  # fmt: skip
         print(f"\n## Bytes per step vs agents near the strip edge (2 shards, local backend, full traffic, step "
               f"API, mean of {2 if q else 3} steps)\n")  # fmt: skip
         rows = border_bytes(border, 2 if q else 3)

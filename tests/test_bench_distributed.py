@@ -25,3 +25,15 @@ def test_border_bytes_rows_have_positive_byte_counts() -> None:
     assert row["expected"] > 0
     table = bd.border_table(rows)
     assert table.count("\n") == 2 and "500" in table
+
+
+@pytest.mark.slow
+def test_bytes_through_the_exchange_grow_with_the_shards() -> None:
+    by_k = bd.bytes_by_shards(2000, [2, 3], steps=1)
+    assert set(by_k) == {2, 3}
+    for b in by_k.values():
+        assert b["total"] > 0 and b["bus"] > 0 and b["groups"] > 0
+        assert b["total"] >= sum(b[f] for f in ("halo", "handover", "offline", "bus", "positions", "groups")) - 1
+    assert by_k[3]["groups"] > by_k[2]["groups"]  # every shard posts and gets every group's sums
+    table = bd.hub_table(by_k, 2000)
+    assert table.count("\n") == 3
