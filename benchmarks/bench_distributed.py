@@ -516,7 +516,7 @@ def main(argv: list[str] | None = None) -> int:
                   f"others (bus, positions, groups) times {PAPER_N:,} / {n_small:,}, routed at the CPU cost per byte measured above and sent over "
                   f"10 Gb/s links (one exchange: every byte on its one CPU and link; shards exchanging directly: "
                   f"each carries 1 / {PAPER_K} of them); the coordinator's share linear in the number of shards; "
-                  f"one process linear in N (measured here: a little worse than linear, "
+                  f"one process linear in N, the choice that favours one process (measured here: worse than linear, "
                   f"{res[sizes[-1], 'rollout', 'one process']['step_ms'] / res[sizes[0], 'rollout', 'one process']['step_ms']:.2f}x "
                   f"for {sizes[-1] / sizes[0]:.0f}x the agents).")  # fmt: skip
         print(f"\n## Bytes per step vs agents near the strip edge (2 shards, local backend, full traffic, step "
