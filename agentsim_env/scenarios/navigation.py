@@ -77,26 +77,40 @@ def _slot_task(goal, pos, prev_dist, acting, online, s, goal_radius, bonus):  # 
     return d, arr, (prev_dist[s] - d if acting[s] else 0.0) + bonus * (1.0 if arr else 0.0)
 
 
+def _scored_rows(world: World) -> tuple[np.ndarray, bool]:
+    """The slots the scoring kernels compute: every slot in one process, a shard's own slots on a shard (its
+    world holds every slot of the map, most of them other shards' agents)."""
+    bridge = world.bridge
+    if bridge is None:
+        return np.zeros(0, dtype=np.int64), True
+    return np.flatnonzero(bridge.own), False
+
+
 @nb.njit(cache=True, error_model="numpy")
-def _task_kernel(goal, pos, prev_dist, acting, online, goal_radius, bonus):  # type: ignore[no-untyped-def]
-    # The task values alone, changing no state (the group partial sums read them before the scoring).
-    task = np.empty(pos.shape[0])
-    for s in range(pos.shape[0]):
+def _task_kernel(goal, pos, prev_dist, acting, online, goal_radius, bonus, rows, every):  # type: ignore[no-untyped-def]
+    # The task values alone, changing no state (the group partial sums read them before the scoring); every slot
+    # when ``every``, else only ``rows`` (the others 0: a shard scores its own agents only).
+    task = np.empty(pos.shape[0]) if every else np.zeros(pos.shape[0])
+    for r in range(pos.shape[0] if every else rows.shape[0]):
+        s = r if every else rows[r]
         task[s] = _slot_task(goal, pos, prev_dist, acting, online, s, goal_radius, bonus)[2]
     return task
 
 
 @nb.njit(cache=True, error_model="numpy")
 def _score_kernel(
-    goal, pos, vel, prev_dist, arrived_acc, energy, acting, online, went, goal_radius, bonus, dt
+    goal, pos, vel, prev_dist, arrived_acc, energy, acting, online, went, goal_radius, bonus, dt, rows, every
 ):  # type: ignore[no-untyped-def]
+    # Every slot when ``every``, else only ``rows`` (a shard's own slots; the others' outputs are 0 and their
+    # state is left alone: a slot's state travels with its agent when it changes shards).
     s_n = pos.shape[0]
-    dist = np.empty(s_n)
+    dist = np.empty(s_n) if every else np.zeros(s_n)
     arrived = np.zeros(s_n, dtype=np.bool_)
-    task = np.empty(s_n)
+    task = np.empty(s_n) if every else np.zeros(s_n)
     collided = np.zeros(s_n)
-    effort = np.empty(s_n)
-    for s in range(s_n):
+    effort = np.empty(s_n) if every else np.zeros(s_n)
+    for r in range(s_n if every else rows.shape[0]):
+        s = r if every else rows[r]
         d, arr, task[s] = _slot_task(goal, pos, prev_dist, acting, online, s, goal_radius, bonus)
         dist[s] = d
         arrived[s] = arr
@@ -309,7 +323,7 @@ class NavigationScenario(Scenario[NavigationConfig]):
         if not c.reward.group_share:
             return {}
         task = _task_kernel(t.goal, st.pos, t.prev_dist, acting, st.online, float(c.goal_radius),
-                            float(c.arrival_bonus))  # fmt: skip
+                            float(c.arrival_bonus), *_scored_rows(world))  # fmt: skip
         return task_partials(task, st.group, st.world_id, acting & mine, int(c.n_groups or 1), world.n_worlds)
 
     def score(
@@ -319,11 +333,16 @@ class NavigationScenario(Scenario[NavigationConfig]):
         c, st, t = self.config, world.state, world.task
         went = events.went_offline  # always writable: one kernel signature whether or not anyone went offline
         went = went if went.flags.writeable else went.copy()
+        rows, every = _scored_rows(world)
         dist, arrived, task, collided, effort = _score_kernel(
             t.goal, st.pos, st.vel, t.prev_dist, t.arrived, st.energy, acting, st.online, went,
-            float(c.goal_radius), float(c.arrival_bonus), float(world.config.dt),
+            float(c.goal_radius), float(c.arrival_bonus), float(world.config.dt), rows, every,
         )  # fmt: skip
-        np.copyto(t.prev_dist, dist)  # the state keeps its array (resets write it); dist goes out as info
+        # the state keeps its array (resets write it); dist goes out as info
+        if every:
+            np.copyto(t.prev_dist, dist)
+        else:
+            t.prev_dist[rows] = dist[rows]
         rewards = compose_rewards(c.reward, task, group=st.group, world=st.world_id, acting=acting,
                                   n_groups=int(c.n_groups or 1), collided=collided, energy=effort,
                                   messages_sent=None if world.comms is None else world.comms.sent,

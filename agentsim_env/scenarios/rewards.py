@@ -118,17 +118,19 @@ def task_partials(
     A finite value over ``MAX_TASK_VALUE`` in magnitude is summed as a float apart (``task_big``): exact within
     one process, not across parts.
     """
-    mask = np.asarray(mask, dtype=np.bool_)
-    key = group_keys(group, world, n_worlds)
+    # only the masked slots from here on (a shard's world holds every slot of the map, half of them or more
+    # another shard's); integer sums, so the order of the slots does not matter
+    idx = np.flatnonzero(np.asarray(mask, dtype=np.bool_))
+    key = group_keys(np.asarray(group)[idx], np.asarray(world)[idx], n_worlds)
     size = int(n_worlds) * max(int(n_groups), 1)
-    if mask.any():
-        size = max(size, int(key[mask].max()) + 1)
-    task = np.asarray(task, dtype=np.float64)
+    if idx.size:
+        size = max(size, int(key.max()) + 1)
+    task = np.asarray(task, dtype=np.float64)[idx]
     # values beyond the fixed point's range (a config with huge reward weights) are summed as floats apart: the
     # sum is then exact only within one process, which a valid config must still be able to run
-    big = mask & (np.abs(np.nan_to_num(task, nan=0.0, posinf=0.0, neginf=0.0)) > MAX_TASK_VALUE)
+    big = np.abs(np.nan_to_num(task, nan=0.0, posinf=0.0, neginf=0.0)) > MAX_TASK_VALUE
     fixed = np.where(big, 0.0, task) if big.any() else task
-    hi, lo, cnt, odd, over = _partials_kernel(fixed, key, mask, size, MAX_TASK_VALUE)
+    hi, lo, cnt, odd, over = _partials_kernel(fixed, key, np.ones(idx.size, dtype=np.bool_), size, MAX_TASK_VALUE)
     assert over < 0, "the values over the bound were taken out"
     big_sum = np.bincount(key[big], weights=task[big], minlength=size)[:size] if big.any() else np.zeros(size)
     return {"task_hi": hi, "task_lo": lo, "task_count": cnt, "task_nan": odd[0], "task_pinf": odd[1],
