@@ -157,7 +157,8 @@ def _sharded(name: str) -> None:
 
 
 def _stored_swap(swap: Callable[..., Any]) -> Callable[..., Any]:
-    """A shard's exchange whose posts and parts travel as through Ray (``_through_store``)."""
+    """A shard's exchange whose posts and parts arrive read-only (``_through_store``), as the exchange actor gets
+    the posts of Ray shards: the routing's kernels compile for read-only arrays too."""
 
     def stored(key: Any, k: int, payload: Any) -> Any:
         return _through_store(swap(key, k, _through_store(payload)))

@@ -7,7 +7,7 @@ replies, for splitting the caller's actions), each shard's heartbeat, the strips
 and the rows the caller asked for (rewards, terminations, infos, observations; kinematics into ``world``, the
 mirror the step hooks, ``render`` and ``state()`` read).
 
-Faults: a shard that dies, misses the deadline or raises is offline at once (the pool drops it from the
+Faults: a shard that dies, misses the deadline or raises is offline at once (the backend drops it from the
 exchange, so the others finish their step): its agents report ``terminations`` once, its strips pass to the
 nearest live shard, the rest goes on; ``reset`` restarts it. With no shard left the call raises a
 ``RuntimeError`` naming every shard's reason (chained to the exception a shard raised, if any).
@@ -107,7 +107,7 @@ class Coordinator:
         scenario: The scenario (validated config, shardable).
         world: The mirror world (``scenario.build(1)``): kinematics when asked, the scene, the clock.
         strips: The partition.
-        pool: The workers (``pool.LocalPool`` or ``ray_pool.RayPool``).
+        pool: The shards' backend (``backends.LocalShards`` or ``ray_backend.RayShards``).
         timeout_s: Deadline of every call, in seconds.
     """
 

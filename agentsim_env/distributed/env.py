@@ -141,13 +141,11 @@ class DistributedParallelEnv(AgentSimParallelEnv):
         return self.coordinator.step(parts, acting)
 
     def _flat_obs(self, rows: np.ndarray, result: Any = None) -> np.ndarray:
-        co = self.coordinator
-        if isinstance(co, Coordinator):  # the observations were built on the shards
-            assert co.obs is not None
-            out = self._obs_out.get()
-            np.copyto(out, co.obs)
-            return out
-        return super()._flat_obs(rows, result)
+        obs = self.coordinator.obs  # built on the shards, gathered by the step
+        assert obs is not None
+        out = self._obs_out.get()
+        np.copyto(out, obs)
+        return out
 
     def send_message(
         self, sender: str, payload: Any, *, to: str | None = None, group: int | None = None
@@ -258,16 +256,14 @@ class DistributedBatchedEnv(BatchedEnv):
     def _flat_obs(
         self, rows: np.ndarray | None = None, step: int = 0, result: Any = None, out: np.ndarray | None = None
     ) -> np.ndarray:
-        co = self.coordinator
-        if isinstance(co, Coordinator):  # the observations were built on the shards
-            assert co.obs is not None
-            if out is None:
-                flat = co.obs.copy()
-            else:
-                np.copyto(out, co.obs)
-                flat = out
-            return flat.reshape(self.n_worlds, self.n_agents, self.obs_dim)
-        return super()._flat_obs(rows, step, result, out)
+        obs = self.coordinator.obs  # built on the shards, gathered by the step
+        assert obs is not None
+        if out is None:
+            flat = obs.copy()
+        else:
+            np.copyto(out, obs)
+            flat = out
+        return flat.reshape(self.n_worlds, self.n_agents, self.obs_dim)
 
     def close(self) -> None:
         """Stop the shards."""

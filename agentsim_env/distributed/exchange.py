@@ -151,6 +151,8 @@ class ExchangeActor:
         self._events: dict[Key, asyncio.Event] = {}
         self.wait_s = float(wait_s)
         self._wire: WireServer | None = None
+        self.port = 0
+        """The TCP port the shards post to (``serve``; 0 before)."""
 
     async def serve(self, host: str, token: bytes) -> int:
         """Serve ``swap`` to the shards over TCP on ``host`` (``distributed.wire``); the port."""

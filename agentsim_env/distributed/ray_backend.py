@@ -3,7 +3,8 @@
 ``RayShards`` starts one actor per shard on a Ray cluster (a local one bound to 127.0.0.1 when no address is
 given, started here, stopped when the last env using it closes; or the cluster at ``ray_address``) and the
 exchange the shards meet at during a step (``distributed.exchange.ExchangeActor``, an asyncio actor using no CPU,
-next to the driver). A call runs on every shard at once; ``ray.wait`` bounds it by the deadline, so a step never
+next to the driver; each shard posts to it over one TCP connection, ``distributed.wire``, with a token the driver
+makes). A call runs on every shard at once; ``ray.wait`` bounds it by the deadline, so a step never
 hangs on a dead or slow machine: a shard that misses it is killed and reported as a
 :class:`~agentsim_env.distributed.backends.Failure`, as is one whose process died, and one whose code raised (its
 actor is killed: its state is unknown after it); each is dropped from the exchange at once, so the others finish
@@ -286,8 +287,8 @@ def leave_cluster(ray: Any, user: bool) -> None:
 
 
 class Shard(OnNode):
-    """A ``Shard`` in a Ray actor, its exchange reached through the exchange actor's handle; its address also
-    names the Ray node it runs on."""
+    """A ``Shard`` in a Ray actor, posting to the exchange over its TCP connection (``distributed.wire``); its
+    address also names the Ray node it runs on."""
 
     def __init__(self, index: int, name: str, config: dict[str, Any], strips: Strips, wire: tuple[str, int, bytes],
                  wait_s: float) -> None:  # fmt: skip

@@ -2,11 +2,13 @@
 
 A ``Shard`` holds a whole-map ``World`` of the scenario (full-length slot arrays, so a slot keeps its index
 everywhere) and a replica of the static scene; its own agents and its ghosts are online in it. One step is one
-call, ``step``: the scenario's ``run_step`` (stage 1 for the own agents that act, ``World.step``, the scoring),
-the same code as one process, with the world's ``bridge`` set to the worker, so ``World.step`` exchanges with
-the other shards through the coordinator's ``distributed.exchange`` at two points (after the motion: hand-overs
-and ghosts; after the groups stage: the ghosts that went offline) and the scoring a third time (the per-group
-sums). What it returns is what the caller asked for: the own agents' rows of rewards, terminations and infos,
+call, ``step`` (or ``act`` in a rollout, the policy inside the shard): the scenario's ``run_step`` (stage 1 for
+the own agents that act, ``World.step``, the scoring), the same code as one process, with the world's ``bridge``
+set to the shard, so the step meets the other shards at the exchange (``distributed.exchange``, routed by
+``distributed.bridge``) at six barriers: after the motion (hand-overs and ghosts), after the groups stage (the
+ghosts that went offline, the overlay's ghost frontier), at the bus delivery (messages across shards), at the
+scoring (per-group sums) and before the observations (the positions of far senders in its inboxes, asked for and
+answered). What it returns is what the caller asked for: the own agents' rows of rewards, terminations and infos,
 their observations (``obs=True``) and their kinematics (``kinematics=True``, for a mirror of the world).
 
 This module imports no Ray: ``distributed.ray_backend`` wraps a ``Shard`` in an actor.
@@ -100,7 +102,7 @@ class Shard:
         """The slots handed over to this shard in the latest step."""
         self.config = config
         self.carry: dict[str, np.ndarray] = {"acting": self.acting}
-        """The worker's own per-slot arrays that travel with a handed-over agent (a rollout adds its sums)."""
+        """The shard's own per-slot arrays that travel with a handed-over agent (a rollout adds its sums)."""
         self.rollout: Any = None
         """The rollout in progress (``distributed.shard_rollout.ShardRollout``)."""
         self.address = f"{socket.gethostname()}:{os.getpid()}"

@@ -2,7 +2,7 @@
 
 A shard's ``CommsStack`` keeps its single-process code; only its ``overlay`` is this object: floods start on the
 origin's shard (stage 1), a hop walks the links from the own frontier entries and the ghost frontier entries
-the neighbours sent in this step's exchange (``ghost_frontier``, set by the worker before stage 7) into own
+the neighbours sent in this step's exchange (``ghost_frontier``, set by the shard before stage 7) into own
 agents only, and statistics are the shard's share (``distributed.floods.combine_stats`` adds them up).
 """
 
@@ -19,7 +19,7 @@ class ShardOverlay:
 
     Args:
         like: The single-process overlay it replaces (its ranges are kept).
-        own: ``(S,)`` bool, the shard's own slots (the worker's mask, read at every hop).
+        own: ``(S,)`` bool, the shard's own slots (the shard's mask, read at every hop).
     """
 
     def __init__(self, like: Overlay, own: np.ndarray) -> None:
