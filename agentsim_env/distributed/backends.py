@@ -118,6 +118,14 @@ class LocalShards:
         """The shard owning each slot (for routing bus messages)."""
         self.exchange.set_slot_owner(owner)
 
+    def share_obs(self, n_slots: int, obs_dim: int) -> None:
+        """Nothing to share: in-process shards hand their observation rows over by reference."""
+        del n_slots, obs_dim
+
+    def obs_rows(self, k: int, n: int) -> Any:
+        """Never called: in-process shards return their rows in the reply."""
+        raise RuntimeError(f"shard {k} returns its {n} observation rows in its reply")
+
     def exchange_bytes(self) -> dict[str, int]:
         """The bytes the exchange routed since the previous call, by phase."""
         return self.exchange.take_bytes()

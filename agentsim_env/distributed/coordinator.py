@@ -123,7 +123,8 @@ class Coordinator:
         self._ended = _NONE
         self._objects: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
         self.lost = _NONE
-        self.traffic = Traffic()
+        self._traffic = Traffic()
+        self._unread = 0  # steps whose exchange bytes the exchange still holds (fetched when traffic is read)
         self.obs: np.ndarray | None = None
         self.kinematics = True
         """Gather every own agent's position each step into ``world`` (the mirror); off for rollouts."""
@@ -138,6 +139,18 @@ class Coordinator:
     def alive(self) -> np.ndarray:
         """``(K,)`` bool: the shards still answering."""
         return np.array([i.alive for i in self.shards], dtype=bool)
+
+    @property
+    def traffic(self) -> Traffic:
+        """Bytes of the latest step (after a rollout: per step of it), by kind (:class:`Traffic`).
+
+        The exchange's part is asked for when this is read, not every step (a call to the exchange): read after
+        every step it is that step's; read after several, their mean per step.
+        """
+        if self._unread:
+            self._traffic.add_exchange(self.backend.exchange_bytes(), 1.0 / self._unread)
+            self._unread = 0
+        return self._traffic
 
     def _declare_offline(self, k: int, failure: Failure) -> None:
         info = self.shards[k]
@@ -215,8 +228,8 @@ class Coordinator:
         if obs:
             out = self.obs
             assert out is not None
-            for r in replies.values():
-                out[r["slots"]] = r["obs"]
+            for k, r in replies.items():  # rows returned, or written into the shared segment (``obs_shm``)
+                out[r["slots"]] = r["obs"] if "obs" in r else self.backend.obs_rows(k, int(r["obs_n"]))
         for r in replies.values():
             if "pos" in r:
                 mine = r["own"]
@@ -237,6 +250,8 @@ class Coordinator:
         self.owner[:] = -1
         s = world.state.n_slots
         self.obs = np.zeros((s, _obs_dim(sc)), np.float32)
+        if gather:  # shards beside the driver send their rows through shared memory
+            self.backend.share_obs(s, _obs_dim(sc))
         replies = self._call("reset", {k: (seed, self.strips.owner, gather, self.kinematics and gather,
                                            int(world.tick)) for k in range(len(self.shards))})  # fmt: skip
         self._take(replies, obs=gather)
@@ -274,8 +289,9 @@ class Coordinator:
         events = np.zeros(len(EVENT_KEYS), dtype=np.int64)
         taken = agent_steps = 0
         self.profile = {"wall_s": 0.0, "compute_s": np.zeros(n), "wait_s": np.zeros(n), "steps": []}
-        tr = self.traffic = Traffic()
-        self.backend.exchange_bytes()  # the reset's are not the steps'
+        tr = self._traffic = Traffic()
+        self.backend.exchange_bytes()  # the reset's (and unread steps') are not the rollout's
+        self._unread = 0
         t_start = time.perf_counter()
         while taken < steps and live:
             self.lost = _NONE
@@ -353,7 +369,7 @@ class Coordinator:
         world, st = self.world, self.world.state
         s = st.n_slots
         self.lost = _NONE
-        tr = self.traffic = Traffic()
+        tr = self._traffic = Traffic()
         events_wanted = self.gather_events or bool(world.hooks)
         control: Packed = {"ended": self._ended, "objects": self._objects, "owner": self.strips.owner,
                            "obs": True, "kinematics": self.kinematics, "events": events_wanted}  # fmt: skip
@@ -381,7 +397,7 @@ class Coordinator:
         for key in keys:
             info.setdefault(key, np.zeros(s))
         self._take(replies, obs=True)
-        tr.add_exchange(self.backend.exchange_bytes())
+        self._unread += 1
         lost = self.lost
         if lost.size:  # agents of a shard that went offline: they terminate now, with their last observation
             terminated[lost[acting[lost]]] = True

@@ -48,6 +48,7 @@ from typing import Any
 from agentsim_env.distributed.backends import Failure, raised
 from agentsim_env.distributed.bridge import Bridge, Packed
 from agentsim_env.distributed.exchange import ExchangeActor
+from agentsim_env.distributed.obs_shm import ObsSegment, ObsWriter
 from agentsim_env.distributed.partition import Strips
 from agentsim_env.distributed.shard import Shard as _Shard
 from agentsim_env.distributed.wire import TOKEN_BYTES, WireClient
@@ -295,7 +296,19 @@ class Shard(OnNode):
         host, port, token = wire
         self.wire = WireClient(host, port, token, index, wait_s)
         self.worker = _Shard(index, name, config, strips, self.wire.swap)
+        self.obs: ObsWriter | None = None
         self.worker.address = f"{self.worker.address} on node {self.node()[:12]}"
+
+    def attach_obs(self, name: str, n_shards: int, n_slots: int, obs_dim: int, node: str) -> bool:
+        """Write the step API's observation rows into region ``index`` of the driver's segment ``name`` when
+        this actor runs on the driver's node ``node`` (``distributed.obs_shm``); whether it does."""
+        if node != self.node():
+            return False
+        if self.obs is not None:
+            self.obs.close()
+        self.obs = ObsWriter(name, self.worker.index, n_shards, n_slots, obs_dim)
+        self.worker.obs_out = self.obs.array
+        return True
 
     def reset(self, *args: Any) -> Packed:
         """``Shard.reset``."""
@@ -367,6 +380,34 @@ class RayShards:
         self._args = (name, config, strips)
         self.actors: dict[int, Any] = {k: self._start(k) for k in range(self.n_shards)}
         self.address = address or "local cluster on 127.0.0.1"
+        self.obs_segment: ObsSegment | None = None
+        self.obs_shared: dict[int, bool] = {}
+        """Which workers write their observation rows into ``obs_segment`` (those on the driver's node)."""
+
+    def share_obs(self, n_slots: int, obs_dim: int) -> None:
+        """Workers on the driver's node write the step API's observation rows into a shared-memory segment
+        (``distributed.obs_shm``) instead of returning them through Ray; the others keep returning them."""
+        if self.obs_segment is None:
+            self.obs_segment = ObsSegment(self.n_shards, n_slots, obs_dim)
+        for k in self.actors:
+            if k not in self.obs_shared:
+                self._attach_obs(k)
+
+    def _attach_obs(self, k: int) -> None:
+        seg = self.obs_segment
+        assert seg is not None
+        here = str(self._ray.get_runtime_context().get_node_id())
+        ref = self.actors[k].attach_obs.remote(seg.name, seg.n_shards, seg.n_slots, seg.obs_dim, here)
+        try:
+            self.obs_shared[k] = bool(self._ray.get(ref, timeout=STARTUP_TIMEOUT_S))
+        except Exception:  # a worker that cannot map it returns its rows through Ray (a dead one fails its call)
+            self.obs_shared[k] = False
+
+    def obs_rows(self, k: int, n: int) -> Any:
+        """The ``n`` observation rows worker ``k`` wrote into the segment in its latest call (a view)."""
+        if self.obs_segment is None or not self.obs_shared.get(k):
+            raise RuntimeError(f"shard {k} does not share its observation rows")
+        return self.obs_segment.rows(k, n)
 
     def _start(self, k: int) -> Any:
         name, config, strips = self._args
@@ -437,6 +478,8 @@ class RayShards:
         self.kill(index)
         self.actors[index] = self._start(index)
         self._ray.get(self.exchange.revive.remote(index))
+        if self.obs_segment is not None:
+            self._attach_obs(index)
 
     def kill(self, index: int) -> None:
         """Kill worker ``index``'s actor at once and drop it from the exchange."""
@@ -444,6 +487,7 @@ class RayShards:
             self._ray.kill(self.actors[index], no_restart=True)
         except Exception:  # already gone
             pass
+        self.obs_shared.pop(index, None)
         self._drop(index)
 
     def set_delay(self, index: int, delay_s: float) -> None:
@@ -474,5 +518,8 @@ class RayShards:
             self._ray.kill(self.exchange, no_restart=True)
         except Exception:  # already gone
             pass
+        if self.obs_segment is not None:
+            self.obs_segment.close()
+            self.obs_segment, self.obs_shared = None, {}
         leave_cluster(self._ray, self._own)
         self._own = False

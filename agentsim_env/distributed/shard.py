@@ -106,6 +106,8 @@ class Shard:
         self.rollout: Any = None
         """The rollout in progress (``distributed.shard_rollout.ShardRollout``)."""
         self.address = f"{socket.gethostname()}:{os.getpid()}"
+        self.obs_out: np.ndarray | None = None
+        """Where the step API's observation rows go instead of the reply (``distributed.obs_shm``), if set."""
         self.world.bridge = self
         self.overlay: ShardOverlay | None = None
         comms = self.world.comms
@@ -154,7 +156,12 @@ class Shard:
             out["info"] = {k: v[slots] for k, v in res.info.items()}
         if obs:
             self._sender_positions()
-            out["obs"] = self.flat_rows(slots)
+            if self.obs_out is not None and slots.size <= self.obs_out.shape[0]:  # the driver's shared rows
+                self.flat_layout(self.scenario.observation_rows(self.world, slots), slots.size,
+                                 self.obs_out[: slots.size])  # fmt: skip
+                out["obs_n"] = int(slots.size)
+            else:
+                out["obs"] = self.flat_rows(slots)
         if kin:
             mine = out["own"]
             out["pos"], out["vel"], out["heading"] = st.pos[mine], st.vel[mine], st.heading[mine]
@@ -248,9 +255,11 @@ class Shard:
         return self.flat_layout(self.scenario.observation_rows(self.world, slots), slots.size)
 
     @staticmethod
-    def flat_layout(parts: dict[str, np.ndarray], n: int) -> np.ndarray:
-        """Observation parts of ``n`` rows as flat rows ``(n, obs_dim)`` float32 (the parts in their order)."""
-        out = np.empty((n, sum(int(np.prod(v.shape[1:])) for v in parts.values())), dtype=np.float32)
+    def flat_layout(parts: dict[str, np.ndarray], n: int, out: np.ndarray | None = None) -> np.ndarray:
+        """Observation parts of ``n`` rows as flat rows ``(n, obs_dim)`` float32 (the parts in their order), into
+        ``out`` when given."""
+        if out is None:
+            out = np.empty((n, sum(int(np.prod(v.shape[1:])) for v in parts.values())), dtype=np.float32)
         at = 0
         for v in parts.values():  # each part straight into its columns
             w = int(np.prod(v.shape[1:]))

@@ -1,0 +1,101 @@
+"""The shared-memory segment through which shards beside the driver send their observation rows."""
+
+from __future__ import annotations
+
+import os
+import stat
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from agentsim_env.distributed.obs_shm import ObsSegment, ObsWriter
+
+if not sys.platform.startswith("linux"):  # pragma: no cover - POSIX segments live in /dev/shm
+    pytest.skip("reads /dev/shm", allow_module_level=True)
+
+
+def _path(seg: ObsSegment) -> str:
+    return os.path.join("/dev/shm", seg.name)
+
+
+_CHILD = """
+import sys
+import numpy as np
+from agentsim_env.distributed.obs_shm import ObsWriter
+name, region, n_shards, n_slots, obs_dim, n = sys.argv[1], *map(int, sys.argv[2:])
+w = ObsWriter(name, region, n_shards, n_slots, obs_dim)
+w.array[:n] = np.arange(n * obs_dim, dtype=np.float32).reshape(n, obs_dim) + region
+w.close()
+"""
+
+
+def test_rows_written_by_a_shard_are_read_by_the_driver() -> None:
+    seg = ObsSegment(3, 10, 4)
+    try:
+        w = ObsWriter(seg.name, 1, 3, 10, 4)
+        rows = np.random.default_rng(0).random((7, 4)).astype(np.float32)
+        w.array[:7] = rows
+        assert np.array_equal(seg.rows(1, 7), rows)
+        assert not seg.rows(0, 7).any() and not seg.rows(2, 7).any()  # the other regions are untouched
+        w.close()
+    finally:
+        seg.close()
+
+
+def test_the_segment_is_its_owners_only_and_gone_after_close() -> None:
+    seg = ObsSegment(2, 100, 8)
+    path = _path(seg)
+    st = os.stat(path)
+    assert stat.S_IMODE(st.st_mode) == 0o600 and st.st_uid == os.getuid()
+    assert len(seg.name) > 24  # a random name, not a guessable one
+    seg.close()
+    assert not os.path.exists(path)
+    seg.close()  # idempotent
+    with pytest.raises(RuntimeError, match="closed"):
+        seg.rows(0, 1)
+
+
+def test_a_shard_process_that_exits_leaves_the_segment_to_the_driver() -> None:
+    seg = ObsSegment(2, 50, 3)
+    try:
+        # a process of its own, as a Ray worker is (not a multiprocessing child sharing this one's tracker)
+        done = subprocess.run([sys.executable, "-c", _CHILD, seg.name, "1", "2", "50", "3", "20"],
+                              capture_output=True, text=True, timeout=120)  # fmt: skip
+        assert done.returncode == 0, done.stderr
+        assert "leaked" not in done.stderr
+        assert os.path.exists(_path(seg))  # the child's resource tracker did not unlink it
+        want = np.arange(60, dtype=np.float32).reshape(20, 3) + 1
+        assert np.array_equal(seg.rows(1, 20), want)
+    finally:
+        seg.close()
+
+
+@pytest.mark.parametrize(
+    ("region", "n_shards", "n_slots", "obs_dim"),
+    [(2, 2, 10, 4), (-1, 2, 10, 4), (0, 3, 10, 4), (0, 2, 11, 4), (0, 2, 10, 5)],
+)
+def test_a_writer_refuses_a_region_the_segment_does_not_hold(region: int, n_shards: int, n_slots: int,
+                                                            obs_dim: int) -> None:  # fmt: skip
+    seg = ObsSegment(2, 10, 4)
+    try:
+        with pytest.raises(ValueError, match="observation segment"):
+            ObsWriter(seg.name, region, n_shards, n_slots, obs_dim)
+    finally:
+        seg.close()
+
+
+def test_a_missing_segment_is_a_clear_error() -> None:
+    with pytest.raises(FileNotFoundError):
+        ObsWriter("agentsim-obs-does-not-exist", 0, 1, 1, 1)
+
+
+@pytest.mark.parametrize(("k", "n"), [(-1, 1), (2, 1), (0, -1), (0, 11)])
+def test_the_driver_reads_only_rows_a_region_holds(k: int, n: int) -> None:
+    seg = ObsSegment(2, 10, 4)
+    try:
+        with pytest.raises(ValueError, match="shard must be in"):
+            seg.rows(k, n)
+    finally:
+        seg.close()
