@@ -130,10 +130,12 @@ class _StoreTransport:
         self.n_shards = inner.n_shards
         self.address = inner.address
 
-    def call(self, method: str, calls: dict[int, tuple[Any, ...]], timeout_s: float) -> dict[int, Any]:
+    def call(self, method: str, calls: dict[int, tuple[Any, ...]], timeout_s: float,
+             on_reply: Any = None) -> dict[int, Any]:  # fmt: skip
         """Run ``method`` on the shards with their arguments and replies passed through ``_through_store``."""
         from agentsim_env.distributed.backends import Failure
 
+        del on_reply  # as the in-process shards: the replies come all at once
         sent = {k: _through_store(args) for k, args in calls.items()}
         replies = self.inner.call(method, sent, timeout_s)
         return {k: r if isinstance(r, Failure) else _through_store(r) for k, r in replies.items()}

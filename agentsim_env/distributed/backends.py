@@ -61,8 +61,11 @@ class LocalShards:
         self.shards: dict[int, Shard | None] = {k: factory(k, self.exchange.swap) for k in range(self.n_shards)}
         self.address = "local"
 
-    def call(self, method: str, calls: dict[int, tuple[Any, ...]], timeout_s: float) -> dict[int, Packed | Failure]:
-        """Run ``method`` on each named shard at once; a reply or a ``Failure`` per shard."""
+    def call(self, method: str, calls: dict[int, tuple[Any, ...]], timeout_s: float,
+             on_reply: Any = None) -> dict[int, Packed | Failure]:  # fmt: skip
+        """Run ``method`` on each named shard at once; a reply or a ``Failure`` per shard (``on_reply`` is not
+        called: the replies are in this process as soon as the last shard is done)."""
+        del on_reply
         out: dict[int, Packed | Failure] = {}
         threads: dict[int, threading.Thread] = {}
 

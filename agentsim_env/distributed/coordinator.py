@@ -170,9 +170,11 @@ class Coordinator:
         log.warning("shard %d (%s) is offline: %s; its %d agents terminate, the simulation goes on",
                     k, info.address, failure.reason, slots.size, exc_info=failure.error)  # fmt: skip
 
-    def _call(self, method: str, calls: dict[int, tuple[Any, ...]]) -> dict[int, Packed]:
+    def _call(self, method: str, calls: dict[int, tuple[Any, ...]], on_reply: Any = None) -> dict[int, Packed]:
+        # ``on_reply(k, reply)``: called with each shard's reply as it comes in (the Ray backend), while the
+        # others still run
         calls = {k: a for k, a in calls.items() if self.shards[k].alive}
-        replies = self.backend.call(method, calls, self.timeout_s)
+        replies = self.backend.call(method, calls, self.timeout_s, on_reply)
         out: dict[int, Packed] = {}
         now = time.time()
         failed = []
@@ -221,15 +223,21 @@ class Coordinator:
         self._objects.append((sc.kind[-k:].copy(), sc.centre[-k:].copy(), sc.half[-k:].copy()))
 
     # ------------------------------------------------------------------ gathering
-    def _take(self, replies: dict[int, Packed], obs: bool) -> None:
+    def _take_obs(self, k: int, r: Packed) -> None:
+        """Shard ``k``'s observation rows into ``obs``: returned, or written into the shared segment (``obs_shm``)."""
+        out = self.obs
+        assert out is not None
+        out[r["slots"]] = r["obs"] if "obs" in r else self.backend.obs_rows(k, int(r["obs_n"]))
+
+    def _take(self, replies: dict[int, Packed], obs: bool, taken: set[int] | frozenset[int] = frozenset()) -> None:
+        # ``taken``: shards whose observation rows were scattered as their reply came in
         st = self.world.state
         for k, r in replies.items():
             self.owner[r["own"]] = k
         if obs:
-            out = self.obs
-            assert out is not None
-            for k, r in replies.items():  # rows returned, or written into the shared segment (``obs_shm``)
-                out[r["slots"]] = r["obs"] if "obs" in r else self.backend.obs_rows(k, int(r["obs_n"]))
+            for k, r in replies.items():
+                if k not in taken:
+                    self._take_obs(k, r)
         for r in replies.values():
             if "pos" in r:
                 mine = r["own"]
@@ -312,7 +320,7 @@ class Coordinator:
             for k, r in replies.items():
                 call[k], wait[k] = r["beat"]["compute_s"], r["beat"]["wait_s"]
                 events += np.asarray(r["events"], dtype=np.int64)
-                tr.replies += nbytes(r)
+                tr.replies += nbytes(r) + 4 * int(r.get("obs_n", 0)) * self.obs.shape[1]  # shared rows: float32
                 self.owner[r["arrived"]] = k
             self.profile["compute_s"] += call
             self.profile["wait_s"] += wait
@@ -379,7 +387,13 @@ class Coordinator:
             calls[k] = (slots, {p: v[slots] for p, v in parts.items()}, control)
             tr.actions += nbytes(calls[k][:2])
         self._objects = []
-        replies = self._call("step", calls)
+        taken: set[int] = set()
+
+        def early(k: int, r: Packed) -> None:  # scatter a shard's rows while the slower ones still run
+            self._take_obs(k, r)
+            taken.add(k)
+
+        replies = self._call("step", calls, early)
         rewards = np.zeros(s)
         terminated = np.zeros(s, dtype=bool)
         info: dict[str, np.ndarray] = {}
@@ -393,10 +407,10 @@ class Coordinator:
                 if key not in info:
                     info[key] = np.zeros(s, dtype=v.dtype)
                 info[key][sl] = v
-            tr.replies += nbytes(r)
+            tr.replies += nbytes(r) + 4 * int(r.get("obs_n", 0)) * self.obs.shape[1]  # shared rows: float32
         for key in keys:
             info.setdefault(key, np.zeros(s))
-        self._take(replies, obs=True)
+        self._take(replies, obs=True, taken=taken)
         self._unread += 1
         lost = self.lost
         if lost.size:  # agents of a shard that went offline: they terminate now, with their last observation

@@ -420,8 +420,10 @@ class RayShards:
     def _drop(self, k: int) -> None:
         self._ray.get(self.exchange.drop.remote(k))
 
-    def call(self, method: str, calls: dict[int, tuple[Any, ...]], timeout_s: float) -> dict[int, Packed | Failure]:
-        """Run ``method`` on every named worker at once; a reply or a ``Failure`` per worker."""
+    def call(self, method: str, calls: dict[int, tuple[Any, ...]], timeout_s: float,
+             on_reply: Any = None) -> dict[int, Packed | Failure]:  # fmt: skip
+        """Run ``method`` on every named worker at once; a reply or a ``Failure`` per worker. ``on_reply(k, reply)``
+        is called with each reply (not with failures) as it comes in, while slower workers still run."""
         ray = self._ray
         if method == "reset":
             timeout_s = max(timeout_s, STARTUP_TIMEOUT_S)
@@ -434,7 +436,9 @@ class RayShards:
             if not ready:
                 break
             for ref in ready:
-                out[refs[ref]] = self._answer(ref, refs[ref])
+                got = out[refs[ref]] = self._answer(ref, refs[ref])
+                if on_reply is not None and not isinstance(got, Failure):
+                    on_reply(refs[ref], got)
         if pending:  # late: the ones not waiting at the exchange are killed and dropped; the others then finish
             waiting = ray.get(self.exchange.waiting.remote())
             late = [ref for ref in pending if refs[ref] not in waiting] or pending
