@@ -320,7 +320,7 @@ class Coordinator:
             for k, r in replies.items():
                 call[k], wait[k] = r["beat"]["compute_s"], r["beat"]["wait_s"]
                 events += np.asarray(r["events"], dtype=np.int64)
-                tr.replies += nbytes(r) + 4 * int(r.get("obs_n", 0)) * self.obs.shape[1]  # shared rows: float32
+                tr.replies += nbytes(r)
                 self.owner[r["arrived"]] = k
             self.profile["compute_s"] += call
             self.profile["wait_s"] += wait
@@ -407,7 +407,7 @@ class Coordinator:
                 if key not in info:
                     info[key] = np.zeros(s, dtype=v.dtype)
                 info[key][sl] = v
-            tr.replies += nbytes(r) + 4 * int(r.get("obs_n", 0)) * self.obs.shape[1]  # shared rows: float32
+            tr.replies += nbytes(r) + 4 * int(r.get("obs_n", 0)) * _obs_dim(self.scenario)  # shared rows: float32
         for key in keys:
             info.setdefault(key, np.zeros(s))
         self._take(replies, obs=True, taken=taken)
