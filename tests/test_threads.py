@@ -11,6 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import agentsim_env
+from agentsim_env.comms.rangegraph import RangeGraph
 from agentsim_env.core import threads as threads_mod
 from agentsim_env.core.collisions import find_collisions
 from agentsim_env.core.scene import Scene
@@ -87,7 +88,7 @@ def test_results_do_not_depend_on_the_thread_count(
     # Tiny ranges so that these small worlds are really split over threads.
     monkeypatch.setattr(threads_mod, "MIN_ROWS", 2)
     one = _rollout(name, cfg, 1)
-    for k in (2, 3):
+    for k in (2, 3, 4):
         other = _rollout(name, cfg, k)
         assert len(one) == len(other)
         for i, (a, b) in enumerate(zip(one, other)):
@@ -129,6 +130,34 @@ def test_collision_events_and_scans_do_not_depend_on_the_thread_count(seed: int,
         mp.setattr(threads_mod, "MIN_ROWS", 8)
         got = sensor.scan(*scan_args)
     for a, b in zip(ref, (got.distance, got.hit_kind, got.hit_id)):
+        np.testing.assert_array_equal(a, b)
+
+
+@given(seed=st.integers(0, 10_000), k=st.integers(2, 5), n_worlds=st.integers(1, 3))
+@settings(max_examples=40, deadline=None)
+def test_the_range_graph_does_not_depend_on_the_thread_count(seed: int, k: int, n_worlds: int) -> None:
+    # Crowded worlds, ranges that differ per slot and some offline slots: the links (their rows and the one
+    # output's layout, which the overlay reads in order) and the nearest neighbours of every thread count.
+    rng = np.random.default_rng(seed)
+    s = 150
+    pos = np.column_stack([rng.uniform(0, 40, (s, 2)), rng.uniform(0, 6, s)])
+    online = rng.random(s) < 0.9
+    world = rng.integers(0, n_worlds, s)
+    link_range = rng.uniform(2.0, 12.0, s)
+    grid = build_grid(GridSpec.for_bounds((0, 40, 0, 40), 5.0, n_worlds), pos, world, online)
+
+    def graph(threads: int) -> tuple[np.ndarray, ...]:
+        g = RangeGraph(s, 8.0, 6.0)
+        g.threads = RowThreads(threads)
+        with pytest.MonkeyPatch.context() as mp:
+            mp.setattr(threads_mod, "MIN_ROWS", 4)
+            g.set_grid(grid, pos, online, world, link_range, True)
+            start, end, indices = g.links(link_range)
+            return start.copy(), end.copy(), indices[: int(end.max(initial=0))].copy(), g.nearest().copy()
+
+    one, many = graph(1), graph(k)
+    assert one[2].size > 0
+    for a, b in zip(one, many):
         np.testing.assert_array_equal(a, b)
 
 

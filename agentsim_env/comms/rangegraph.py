@@ -24,6 +24,7 @@ import numba as nb
 import numpy as np
 
 from agentsim_env.core.spatial import Grid, cell_of
+from agentsim_env.core.threads import RowThreads
 
 
 @nb.njit(cache=True)
@@ -83,25 +84,44 @@ def _grown(a, need, keep):  # type: ignore[no-untyped-def]
     return b
 
 
-@nb.njit(cache=True, error_model="numpy")
-def _graph_kernel(pos, online, world, cell_start, items, ox, oy, cell, nx, ny, reach, pair_d, rng, near_r,  # type: ignore[no-untyped-def]  # noqa: E501
-                  links, start, end, near, indices, cand, sp, ok_link):  # fmt: skip
-    # One window scan per indexed slot u (every pair is seen from both ends), in two phases. Phase 1 keeps
-    # the grid positions q of the candidates within reach, branch free (whether a candidate is in range is
-    # data, not something to predict) with one store each. Phase 2 walks those few: nearest, then the links in
-    # the order of the pairs path: lower slots found before u in grid order (A), every higher slot (B), then
-    # lower slots found after u (C), each in grid order. The window's cells come in grid order whatever its
-    # size, so a longer reach adds candidates but never reorders a row. A nearest neighbour must also lie
-    # within pair_d (<= reach), as with the pairs path: it does not depend on how far the links reach.
-    m = items.shape[0]
-    # coordinates, range and link eligibility in grid order: a window's candidates are read sequentially
-    for q in range(m):
+@nb.njit(cache=True, nogil=True)
+def _graph_prep(pos, online, items, rng, links, start, end, near, sp, ok_link):  # type: ignore[no-untyped-def]
+    # Coordinates, range and link eligibility in grid order (a window's candidates are then read sequentially);
+    # every row empty and every nearest -1 until the row kernel fills the indexed slots'.
+    for q in range(items.shape[0]):
         s = items[q]
         sp[q, 0], sp[q, 1], sp[q, 2], sp[q, 3] = pos[s, 0], pos[s, 1], pos[s, 2], rng[s]
         ok_link[q] = links and online[s]
     start[:] = 0
     end[:] = 0
     near[:] = -1
+
+
+@nb.njit(cache=True, nogil=True)
+def _graph_shift(items, lo, hi, start, end, base, src, n, dst):  # type: ignore[no-untyped-def]
+    # Rows of the grid positions [lo, hi) were written at 0.. of ``src`` (n entries): move them to ``base``..
+    # of ``dst`` (each range's own part of the one output, so ranges copy on their own threads).
+    for i in range(n):
+        dst[base + i] = src[i]
+    for q in range(lo, hi):
+        u = items[q]
+        start[u] += base
+        end[u] += base
+
+
+@nb.njit(cache=True, error_model="numpy", nogil=True)
+def _graph_rows(lo, hi, world, cell_start, items, ox, oy, cell, nx, ny, reach, pair_d, near_r,  # type: ignore[no-untyped-def]  # noqa: E501
+                start, end, near, indices, cand, d2c, sp, ok_link):  # fmt: skip
+    # One window scan per indexed slot u at grid positions [lo, hi) (every pair is seen from both ends), in two
+    # phases. Phase 1 keeps the grid positions q of the candidates within reach, branch free (whether a
+    # candidate is in range is data, not something to predict) with one store each. Phase 2 walks those few:
+    # nearest, then the links in the order of the pairs path: lower slots found before u in grid order (A),
+    # every higher slot (B), then lower slots found after u (C), each in grid order. The window's cells come in
+    # grid order whatever its size, so a longer reach adds candidates but never reorders a row. A nearest
+    # neighbour must also lie within pair_d (<= reach), as with the pairs path: it does not depend on how far
+    # the links reach. The rows go to ``indices`` from 0 in grid order (start / end relative to it); a row
+    # depends only on its own window, so ranges may run on different threads, each with its own buffers.
+    m = items.shape[0]
     r2 = reach * reach
     pair_d2 = pair_d * pair_d
     # sqrt is monotone and correctly rounded: d2 above (1 + 1e-9) times a bound cannot round to within it
@@ -112,9 +132,10 @@ def _graph_kernel(pos, online, world, cell_start, items, ox, oy, cell, nx, ny, r
     hi_x, hi_y = ox + (nx + 1) * cell, oy + (ny + 1) * cell
     if cand.shape[0] < 3 * m + 3:  # room for any window (<= m candidates) and the two row scratch lists
         cand = _grown(cand, 3 * m + 3, 0)
-    d2c = np.empty(m + 1)  # squared distance of each kept candidate
+    if d2c.shape[0] < m + 1:  # squared distance of each kept candidate
+        d2c = np.empty(m + 1)
     n = 0
-    for idx in range(m):
+    for idx in range(lo, hi):
         u = items[idx]
         xu, yu, zu, ru = sp[idx, 0], sp[idx, 1], sp[idx, 2], sp[idx, 3]
         x0, y0 = cell_of(max(xu - reach, lo_x), max(yu - reach, lo_y), ox, oy, cell, nx, ny)
@@ -178,7 +199,7 @@ def _graph_kernel(pos, online, world, cell_start, items, ox, oy, cell, nx, ny, r
         start[u] = row0
         near[u] = bslot
         end[u] = n
-    return indices, cand
+    return indices, cand, d2c, n
 
 
 class RangeGraph:
@@ -193,7 +214,7 @@ class RangeGraph:
     """
 
     __slots__ = ("n_slots", "max_dist", "nearest_range", "_grid", "_pairs", "_pos", "_online", "_world",
-                 "_near", "_near_ok", "_links", "_links_ok", "_buf")  # fmt: skip
+                 "_near", "_near_ok", "_links", "_links_ok", "_buf", "_parts", "threads")  # fmt: skip
 
     def __init__(self, n_slots: int, max_dist: float, nearest_range: float) -> None:
         self.n_slots = int(n_slots)
@@ -204,12 +225,16 @@ class RangeGraph:
         self._pos, self._online, self._world = np.zeros((0, 3)), np.zeros(0, dtype=bool), empty
         self._near = np.full(self.n_slots, -1, dtype=np.int64)
         self._links = (np.zeros(self.n_slots, dtype=np.int64), np.zeros(self.n_slots, dtype=np.int64), empty)
-        # grid scan buffers, reused: row starts, row ends, nearest, links, two row scratch lists, and the
-        # grid-ordered copies of (x, y, z, range) and of the link eligibility
+        # grid scan buffers, reused: row starts, row ends, nearest, links, and the grid-ordered copies of
+        # (x, y, z, range) and of the link eligibility; per range of rows (a thread each): its rows, the two
+        # row scratch lists and the candidates' squared distances
         s = self.n_slots
         self._buf = (np.zeros(s, dtype=np.int64), np.zeros(s, dtype=np.int64), np.full(s, -1, dtype=np.int64),
-                     empty, empty, np.zeros((s, 4)), np.zeros(s, dtype=bool))  # fmt: skip
+                     empty, np.zeros((s, 4)), np.zeros(s, dtype=bool))  # fmt: skip
+        self._parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
         self._near_ok = self._links_ok = False
+        self.threads = RowThreads(1)
+        """Threads for the grid scan's rows (``World.set_num_threads`` sets them); results do not change."""
 
     @property
     def pairs(self) -> tuple[np.ndarray, ...]:
@@ -250,12 +275,43 @@ class RangeGraph:
         pos = np.ascontiguousarray(self._pos, dtype=np.float64)
         online = np.ascontiguousarray(self._online, dtype=np.bool_)
         world = np.ascontiguousarray(self._world, dtype=np.int64)
-        start, end, near, indices, cand, sp4, ok_link = self._buf
-        indices, cand = _graph_kernel(
-            pos, online, world, g.cell_start, g.items, sp.origin_x, sp.origin_y, sp.cell, sp.nx, sp.ny, reach,
-            self.max_dist, link_range, self.nearest_range, links, start, end, near, indices, cand, sp4, ok_link,
-        )  # fmt: skip
-        self._buf = (start, end, near, indices, cand, sp4, ok_link)
+        start, end, near, indices, sp4, ok_link = self._buf
+        items = g.items
+        _graph_prep(pos, online, items, link_range, links, start, end, near, sp4, ok_link)
+        m = items.shape[0]
+        ranges = self.threads.ranges(m)  # the ranges ``threads.run(rows, m)`` calls ``rows`` with
+        parts = self._parts
+        while len(parts) < len(ranges):
+            parts.append((np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros(0)))
+        parts[0] = (indices, *parts[0][1:])  # the first range writes where the one output begins
+
+        def rows(lo: int, hi: int, part: int) -> int:
+            out, cand, d2c = parts[part]
+            out, cand, d2c, n = _graph_rows(
+                lo, hi, world, g.cell_start, items, sp.origin_x, sp.origin_y, sp.cell, sp.nx, sp.ny, reach,
+                self.max_dist, self.nearest_range, start, end, near, out, cand, d2c, sp4, ok_link,
+            )  # fmt: skip
+            parts[part] = (out, cand, d2c)
+            return int(n)
+
+        if len(ranges) == 1:
+            rows(0, m, 0)
+            indices = parts[0][0]
+        else:  # each range's rows into a buffer of its own, then the later ranges' moved behind the first's
+            counts = self.threads.run(rows, m)
+            base = np.cumsum([0, *counts])
+            indices = parts[0][0]
+            if indices.shape[0] < base[-1]:
+                indices = _grown(indices, int(base[-1]), counts[0])
+                parts[0] = (indices, *parts[0][1:])
+
+            def move(lo: int, hi: int, _: int) -> None:
+                for p in range(1 + lo, 1 + hi):
+                    _graph_shift(items, ranges[p][0], ranges[p][1], start, end, int(base[p]), parts[p][0],
+                                 counts[p], indices)  # fmt: skip
+
+            self.threads.run(move, len(ranges) - 1, 1)
+        self._buf = (start, end, near, indices, sp4, ok_link)
         self._near, self._near_ok = near, True
         if links:
             self._links, self._links_ok = (start, end, indices), True

@@ -52,6 +52,7 @@ from agentsim_env.comms.overlay import Deliveries, Overlay
 from agentsim_env.comms.rangegraph import RangeGraph
 from agentsim_env.core.pipeline import StepContext
 from agentsim_env.core.spatial import Grid
+from agentsim_env.core.threads import RowThreads
 from agentsim_env.core.validation import check_float, check_int, coerce_fields
 
 CHANNELS = ("none", "group", "nearest", "named", "overlay")
@@ -262,6 +263,16 @@ class CommsStack:
         self.events = CommsEvents(None, None, self.sent.copy())
         self.router: BusRouter | None = None
         """A shard's bus delivery (``distributed.shard``): its due messages bridged with the other shards."""
+
+    @property
+    def threads(self) -> RowThreads:
+        """Threads of the comms kernels that split over row ranges (the range graph's grid scan); results do
+        not depend on them."""
+        return self.graph.threads
+
+    @threads.setter
+    def threads(self, threads: RowThreads) -> None:
+        self.graph.threads = threads
 
     @property
     def pairs(self) -> tuple[np.ndarray, ...]:
