@@ -68,10 +68,10 @@ def _make_dict_env(n: int, comms: bool):  # type: ignore[no-untyped-def]
     return env, acts
 
 
-def _make_array_env(n: int, comms: bool):  # type: ignore[no-untyped-def]
+def _make_array_env(n: int, comms: bool, threads: int = 1):  # type: ignore[no-untyped-def]
     from agentsim_env.env.vector import BatchedEnv
 
-    b = BatchedEnv("navigation", 1, **_config(n, comms))
+    b = BatchedEnv("navigation", 1, num_threads=threads, **_config(n, comms))
     b.reset(seed=0)
     return b, [a[None] for a in _actions(n, comms, np.random.default_rng(0))]
 
@@ -92,9 +92,9 @@ def dict_case(n: int, comms: bool) -> Case:
     return _cycling(*_make_dict_env(n, comms), n)
 
 
-def array_case(n: int, comms: bool) -> Case:
-    """The batched array API with one world."""
-    return _cycling(*_make_array_env(n, comms), n)
+def array_case(n: int, comms: bool, threads: int = 1) -> Case:
+    """The batched array API with one world (``threads``: its ``num_threads``)."""
+    return _cycling(*_make_array_env(n, comms, threads), n)
 
 
 # Stages of the comms path, each the listed methods (the first that exists: the names changed over time).

@@ -76,6 +76,10 @@ class Row:
                 "PASS" if met else "short", self.note]  # fmt: skip
 
 
+THREAD_COUNTS = [1, 2, 4, 8, 16]
+"""The thread scaling curve's counts (those above the machine's cores are left out)."""
+
+
 def _vmas(b: int, n: int) -> common.Case | None:
     try:
         return bench_step.vmas_case(b, n, 0)
@@ -127,7 +131,7 @@ def full_stack(sizes: list[int], rounds: int, block_s: float) -> list[Row]:
         rows.append(Row(f"full stack 1x{n:,}, dict API", e["dict"], "env-steps/s", td))
         rows.append(Row(f"full stack 1x{n:,}, array API", e["array"], "env-steps/s", ta))
         rows.append(Row(f"comms cost 1x{n:,} (full step / step without comms)", e["bare"] / e["array"], "x",
-                        1.5 if n in targets else None,
+                        {1000: 1.5, 10_000: 2.5}.get(n),
                         higher=False, note=f"without comms {fmt_num(e['bare'])} env-steps/s"))  # fmt: skip
     return rows
 
@@ -154,6 +158,55 @@ def big_world(n: int, rounds: int) -> list[Row]:
         rows.append(Row(f"1x{n:,}: 2 threads vs 1 (wall)", ratio, "x", tgt,
                         note=f"{st['1'].wall_step_s * 1e3:.1f} vs {st['2'].wall_step_s * 1e3:.1f} ms/step wall"))  # fmt: skip
     return rows
+
+
+def full_stack_threads(sizes: list[int], rounds: int) -> list[Row]:
+    """Full stack (comms on) through the array API, 2 threads vs 1 in wall time, interleaved, per size."""
+    rows: list[Row] = []
+    cores = available_cores()
+    for n in sizes:
+        label = f"full stack 1x{n:,}: 2 threads vs 1 (wall)"
+        if cores < 2:
+            rows.append(Row(label, None, "x", 1.7, note=f"only {cores} core available"))
+            continue
+        cases = {"1": bench_comms.array_case(n, True, 1), "2": bench_comms.array_case(n, True, 2)}
+        st = measure_interleaved(cases, rounds=rounds, block_s=0.3 if n < 100_000 else 0.6, warmup=2)
+        w1, w2 = st["1"].wall_step_s, st["2"].wall_step_s
+        rows.append(Row(label, w1 / w2, "x", 1.7, note=f"{w1 * 1e3:.1f} vs {w2 * 1e3:.1f} ms/step wall"))
+        if n == 10_000:
+            rows.append(Row(f"full stack 1x{n:,}, array API, 2 threads (wall)", 1.0 / w2, "env-steps/s", 130))
+    return rows
+
+
+def thread_curve(n: int, counts: list[int], rounds: int) -> dict[int, float]:
+    """Wall ms per step of the full stack at 1xN for each thread count (interleaved), up to the cores there are."""
+    counts = [k for k in counts if k <= available_cores()]
+    cases = {str(k): bench_comms.array_case(n, True, k) for k in counts}
+    st = measure_interleaved(cases, rounds=rounds, block_s=0.5, warmup=2)
+    return {k: st[str(k)].wall_step_s * 1e3 for k in counts}
+
+
+def plot_threads(curve: dict[int, float], n: int, path: str) -> None:
+    """Speed-up over one thread against threads, with the ideal line."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    ks = sorted(curve)
+    fig, ax = plt.subplots(figsize=(5.0, 3.5))
+    ax.plot(ks, [curve[ks[0]] / curve[k] for k in ks], marker="o", label="measured")
+    ax.plot(ks, ks, ls="--", color="grey", label="ideal")
+    ax.set_xlabel("threads (num_threads)")
+    ax.set_ylabel("speed-up over 1 thread (wall)")
+    ax.set_xticks(ks)
+    ax.set_title(f"navigation full stack, 1x{n:,}, array API ({available_cores()} cores)")
+    ax.grid(alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
 
 
 def cold_start(quick: bool) -> list[Row]:
@@ -219,6 +272,9 @@ def main(argv: list[str] | None = None) -> int:
     )
     p.add_argument("--plot", default=None, help="write the scaling curve to this PNG")
     p.add_argument("--no-coldstart", action="store_true", help="skip the cold-start rows")
+    p.add_argument("--threads-only", action="store_true",
+                   help="only the full stack's thread rows and the thread scaling curve")  # fmt: skip
+    p.add_argument("--thread-plot", default=None, help="write the thread scaling curve to this PNG")
     args = p.parse_args(argv)
     q = args.quick
     rounds, block = (2, 0.02) if q else (11, 0.15)
@@ -228,11 +284,14 @@ def main(argv: list[str] | None = None) -> int:
     print(
         f"mode: {'quick' if q else 'full'}; CPU time, one thread unless stated; medians of interleaved rounds\n"
     )
+    if args.threads_only:
+        return threads_report(q, args.thread_plot)
     rows: list[Row] = []
     small, rates = _timed("small worlds", lambda: small_worlds(rounds, block))
     rows += small
     rows += _timed("full stack", lambda: full_stack(comm_sizes, max(3, rounds // 2), 0.3 if not q else 0.02))
     rows += _timed(f"1x{big}", lambda: big_world(big, 2 if q else 5))
+    rows += _timed("full stack, threads", lambda: full_stack_threads(comm_sizes[1:] + [big], 2 if q else 5))
     if not args.no_coldstart:
         rows += _timed("cold start", lambda: cold_start(q))
     print("## Targets\n")
@@ -255,6 +314,29 @@ def main(argv: list[str] | None = None) -> int:
     if args.plot:
         plot_scaling(curve, args.plot)
         print(f"\nscaling plot: {args.plot}")
+    _print_thread_curve(q, args.thread_plot)
+    return 0
+
+
+def _print_thread_curve(quick: bool, plot: str | None) -> None:
+    n = 5_000 if quick else 100_000
+    curve = _timed("thread curve", lambda: thread_curve(n, THREAD_COUNTS, 2 if quick else 4))
+    one = curve[min(curve)]
+    print(f"\n## Threads: full stack 1x{n:,}, array API, wall ms per step ({available_cores()} cores here)\n")
+    print(markdown_table(["threads", "ms/step", "speed-up"],
+                         [[str(k), f"{v:.1f}", f"{one / v:.2f}"] for k, v in sorted(curve.items())]))  # fmt: skip
+    if plot:
+        plot_threads(curve, n, plot)
+        print(f"\nthread plot: {plot}")
+
+
+def threads_report(quick: bool, plot: str | None) -> int:
+    """``--threads-only``: the full stack's 2-vs-1 thread rows and the thread curve."""
+    print(f"machine: {machine_description()}\n")
+    sizes = [1_000, 5_000] if quick else [10_000, 100_000]
+    rows = _timed("full stack, threads", lambda: full_stack_threads(sizes, 2 if quick else 7))
+    print(markdown_table(["case", "result", "target", "met", "measured alongside"], [r.cells() for r in rows]))
+    _print_thread_curve(quick, plot)
     return 0
 
 

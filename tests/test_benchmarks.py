@@ -12,6 +12,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from agentsim_env.core.threads import available_cores
 from tests.bench_tables import markdown_tables
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -138,17 +139,18 @@ def test_measure_interleaved_counts_agent_steps() -> None:
 
 @pytest.mark.slow
 def test_perf_benchmark_quick_run_prints_every_row_with_target_and_result(tmp_path: Path) -> None:
-    plot = tmp_path / "scaling.png"
+    plot, thread_plot = tmp_path / "scaling.png", tmp_path / "threads.png"
     cmd = [sys.executable, str(ROOT / "benchmarks" / "bench_perf.py"), "--quick", "--no-coldstart", "--plot",
-           str(plot)]  # fmt: skip
+           str(plot), "--thread-plot", str(thread_plot)]  # fmt: skip
     res = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert res.returncode == 0, res.stderr[-3000:]
     assert res.stdout.startswith("machine: ")
-    (head, rows), (core_head, core_rows), (scale_head, scale_rows) = _tables(res.stdout)
+    (head, rows), (core_head, core_rows), (scale_head, scale_rows), (thr_head, thr_rows) = _tables(res.stdout)
     assert head == ["case", "result", "target", "met", "measured alongside"]
     cases = [r[0] for r in rows]
     for wanted in ("1x64, array API", "1x64, dict API", "512x4", "dict API cost", "full stack 1x200, dict API",
-                   "comms cost 1x500", "array API, no comms, 1 core", "2 threads vs 1"):  # fmt: skip
+                   "comms cost 1x500", "array API, no comms, 1 core", "2 threads vs 1",
+                   "full stack 1x5,000: 2 threads vs 1"):  # fmt: skip
         assert any(wanted in c for c in cases), wanted
     for row in rows:
         value = row[1].split(" ")[0]
@@ -161,6 +163,10 @@ def test_perf_benchmark_quick_run_prints_every_row_with_target_and_result(tmp_pa
     assert scale_head == ["agents", "no comms", "full stack"] and len(scale_rows) == 2
     assert all(_number_or_skipped(c) for r in scale_rows for c in r[1:])
     assert plot.stat().st_size > 1000
+    # the thread curve: one thread first (speed-up 1), then as many counts as the machine has cores for
+    assert thr_head == ["threads", "ms/step", "speed-up"] and thr_rows[0][0] == "1" and thr_rows[0][2] == "1.00"
+    assert [int(r[0]) for r in thr_rows] == [k for k in (1, 2, 4, 8, 16) if k <= available_cores()]
+    assert thread_plot.stat().st_size > 1000
 
 
 def test_run_all_finds_benchmarks_with_main() -> None:

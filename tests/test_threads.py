@@ -11,6 +11,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import agentsim_env
+from agentsim_env.comms.messages import Inbox
+from agentsim_env.comms.overlay import Overlay
 from agentsim_env.comms.rangegraph import RangeGraph
 from agentsim_env.core import threads as threads_mod
 from agentsim_env.core.collisions import find_collisions
@@ -159,6 +161,47 @@ def test_the_range_graph_does_not_depend_on_the_thread_count(seed: int, k: int, 
     assert one[2].size > 0
     for a, b in zip(one, many):
         np.testing.assert_array_equal(a, b)
+
+
+@given(seed=st.integers(0, 10_000), k=st.integers(2, 5))
+@settings(max_examples=30, deadline=None)
+def test_overlay_hops_and_inbox_pushes_do_not_depend_on_the_thread_count(seed: int, k: int) -> None:
+    # Floods started over several steps on a random graph (hop limits 1-4, some slots offline), each hop's
+    # deliveries pushed into small inboxes: every delivery field in order, the counters, and the inboxes.
+    rng = np.random.default_rng(seed)
+    s, d = 120, 3
+    pos = np.column_stack([rng.uniform(0, 30, (s, 2)), rng.uniform(0, 3, s)])
+    online = rng.random(s) < 0.9
+    world = np.zeros(s, dtype=np.int64)
+    grid = build_grid(GridSpec.for_bounds((0, 30, 0, 30), 5.0, 1), pos, world, online)
+    starts = [(rng.choice(np.flatnonzero(online), rng.integers(1, 30)), rng.integers(1, 5, 30)) for _ in range(6)]
+
+    def run(threads: int) -> list[np.ndarray]:
+        ov = Overlay(s, d, 7.0)
+        inbox = Inbox(s, 3, d)
+        graph = RangeGraph(s, 7.0, 7.0)
+        ov.threads = inbox.threads = graph.threads = RowThreads(threads)
+        out: list[np.ndarray] = []
+        with pytest.MonkeyPatch.context() as mp:
+            mp.setattr(threads_mod, "MIN_ROWS", 2)
+            for step, (origin, limit) in enumerate(starts):
+                origin = np.sort(origin)
+                ov.start(origin, limit[: origin.size], np.full((origin.size, d), step, np.float32), step)
+                graph.set_grid(grid, pos, online, world, ov.link_range, True)
+                got = ov.advance_graph(*graph.links(ov.link_range))
+                inbox.push_rows(got.receiver, np.full(len(got), 3, np.int8), got.origin, got.hops, got.created,
+                                got.payload, np.zeros(0, dtype=np.int64))  # fmt: skip
+                st_ = ov.stats
+                out += [got.receiver, got.flood, got.origin, got.hops, got.created, got.payload,
+                        np.array([st_.started, st_.delivered, st_.duplicates, st_.finished, ov.frontier_size])]
+            out += [inbox.valid, inbox.sender, inbox.hops, inbox.created, inbox.payload, inbox.received,
+                    inbox.observe(pos, len(starts))]  # fmt: skip
+        return out
+
+    one, many = run(1), run(k)
+    assert sum(len(a) for a in one[::7]) > 0  # floods did reach someone
+    for i, (a, b) in enumerate(zip(one, many)):
+        np.testing.assert_array_equal(a, b, err_msg=f"array {i} differs with {k} threads")
 
 
 def test_make_and_batched_env_take_the_thread_count() -> None:

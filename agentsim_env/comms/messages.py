@@ -31,8 +31,12 @@ live transmitter; the environment and the group controller (sender ``-1``) have 
 
 from __future__ import annotations
 
+from functools import partial
+
 import numba as nb
 import numpy as np
+
+from agentsim_env.core.threads import RowThreads
 
 AGENT = 1
 """Agent -> agent unicast (sender slot -> receiver slot)."""
@@ -123,26 +127,28 @@ def env_collision_payload(what: np.ndarray | int, ident: np.ndarray, payload_dim
     return out
 
 
-@nb.njit(cache=True)
-def _push_kernel(valid, kind, sender, hops, created, payload, received, newest, taken,  # type: ignore[no-untyped-def]
+@nb.njit(cache=True, nogil=True)
+def _push_kernel(lo, hi, valid, kind, sender, hops, created, payload, received, newest, taken,  # type: ignore[no-untyped-def]
                  ra, ka, sa, ha, ca, pa, qa, rb, kb, sb, hb, cb, pb, qb):  # fmt: skip
-    # Two batches a then b, as one push of their concatenation. Message j of a batch goes to slot r[j] (skipped
-    # when < 0) with payload row p[q[j]] (row j when q is empty) and hops clipped to [0, 32767]; the inputs come
-    # in one form (``_kernel_batch``), so this compiles once. Pass 1 walks the messages newest first and keeps, per receiver, the
-    # M newest (index into a ++ b) and the count; pass 2 walks the receivers in slot order (the inbox arrays
-    # stream through the cache once): shift the old rows down by min(count, M), write the new ones on top.
-    n_slots, m = valid.shape
+    # Two batches a then b, as one push of their concatenation, into the inboxes of slots [lo, hi) (ranges on
+    # different threads touch different inboxes). Message j of a batch goes to slot r[j] (skipped when < 0) with
+    # payload row p[q[j]] (row j when q is empty) and hops clipped to [0, 32767]; the inputs come in one form
+    # (``_kernel_batch``), so this compiles once. Pass 1 walks the messages newest first and keeps, per receiver
+    # in the range, the M newest (index into a ++ b) and the count; pass 2 walks the range's receivers in slot
+    # order (the inbox arrays stream through the cache once): shift the old rows down by min(count, M), write
+    # the new ones on top.
+    m = valid.shape[1]
     d = payload.shape[2]
     na = ra.shape[0]
     for g in range(na + rb.shape[0] - 1, -1, -1):
         s = ra[g] if g < na else rb[g - na]
-        if s < 0:
+        if s < lo or s >= hi:
             continue
         t = taken[s]
         if t < m:
             newest[s, t] = g
         taken[s] = t + 1
-    for s in range(n_slots):
+    for s in range(lo, hi):
         c = taken[s]
         if c == 0:
             continue
@@ -199,9 +205,9 @@ def _observe_row(s, r, valid, kind, sender, hops, created, payload, pos, step, p
             out[r, i, FEATURES_PER_MESSAGE + c] = payload[s, i, c]
 
 
-@nb.njit(cache=True)
-def _observe_kernel(valid, kind, sender, hops, created, payload, pos, step, pos_scale, age_h, hop_h, out):  # type: ignore[no-untyped-def]
-    for s in range(valid.shape[0]):
+@nb.njit(cache=True, nogil=True)
+def _observe_kernel(lo, hi, valid, kind, sender, hops, created, payload, pos, step, pos_scale, age_h, hop_h, out):  # type: ignore[no-untyped-def]  # noqa: E501
+    for s in range(lo, hi):
         _observe_row(s, s, valid, kind, sender, hops, created, payload, pos, step, pos_scale, age_h, hop_h, out)
 
 
@@ -250,6 +256,7 @@ class Inbox:
         "dropped",
         "_newest",
         "_taken",
+        "threads",
     )
 
     def __init__(
@@ -301,6 +308,8 @@ class Inbox:
         # push scratch: the M newest new messages of each slot and how many it got (all 0 between pushes)
         self._newest = np.zeros((s, m), dtype=np.int64)
         self._taken = np.zeros(s, dtype=np.int64)
+        self.threads = RowThreads(1)
+        """Threads of the push and observe kernels (slot ranges); results do not depend on them."""
 
     @property
     def n_features(self) -> int:
@@ -381,8 +390,12 @@ class Inbox:
         for k in range(0, len(batches), 2):  # pairs in turn: the same as one push of everything, in order
             a = _kernel_batch(batches[k])
             b = _kernel_batch(batches[k + 1]) if k + 1 < len(batches) else _EMPTY_BATCH
-            _push_kernel(self.valid, self.kind, self.sender, self.hops, self.created, self.payload, self.received,
-                         self._newest, self._taken, *a, *b)  # fmt: skip
+            self.threads.run(partial(self._push_range, (*a, *b)), self.n_slots)
+
+    def _push_range(self, batches: tuple[np.ndarray, ...], lo: int, hi: int, _part: int) -> None:
+        # one pair of batches (``_kernel_batch`` form, a then b) into the inboxes of slots [lo, hi)
+        _push_kernel(lo, hi, self.valid, self.kind, self.sender, self.hops, self.created, self.payload,
+                     self.received, self._newest, self._taken, *batches)  # fmt: skip
 
     def add_dropped(self, slots: np.ndarray) -> None:
         """Count one lost message per entry of ``slots`` (repeats count several times).
@@ -414,20 +427,9 @@ class Inbox:
         p = np.asarray(pos, dtype=np.float64)
         if p.shape != (self.n_slots, 3):
             raise ValueError(f"pos must have shape ({self.n_slots}, 3), got {p.shape}")
-        _observe_kernel(
-            self.valid,
-            self.kind,
-            self.sender,
-            self.hops,
-            self.created,
-            self.payload,
-            p,
-            int(step),
-            self.pos_scale,
-            self.age_horizon,
-            self.hop_horizon,
-            out,
-        )
+        args = (self.valid, self.kind, self.sender, self.hops, self.created, self.payload, p, int(step),
+                self.pos_scale, self.age_horizon, self.hop_horizon, out)  # fmt: skip
+        self.threads.run(lambda lo, hi, _: _observe_kernel(lo, hi, *args), self.n_slots)
         return out
 
     def observe_rows(self, pos: np.ndarray, step: int, rows: np.ndarray) -> np.ndarray:

@@ -27,11 +27,14 @@ table of floods that doubles when full.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
+from agentsim_env.comms.flood_threads import flood_ranges, gather_deliveries, spread_threads
 from agentsim_env.comms.flooding import spread
 from agentsim_env.comms.rangegraph import _links_from_pairs
+from agentsim_env.core.threads import RowThreads
 
 
 @dataclass(slots=True, frozen=True)
@@ -136,7 +139,7 @@ class Overlay:
     __slots__ = (
         "n_slots", "payload_dim", "full_propagation", "_range", "_rd_start", "_rd_len", "_pool", "_n_pool",
         "_origin", "_limit", "_hops", "_created", "_payload", "_active", "_free", "_n_free", "_front_f",
-        "_front_n", "_pending_started", "_last", "_totals", "_scratch",
+        "_front_n", "_pending_started", "_last", "_totals", "_scratch", "_tscratch", "threads",
     )  # fmt: skip
 
     def __init__(
@@ -160,16 +163,22 @@ class Overlay:
         self.set_range(comm_range)
         self._alloc(int(capacity))
         self._scratch = _new_scratch(self.n_slots)
+        self._tscratch: list[list[Any]] = []  # per range of a hop on threads (``comms.flood_threads``)
+        self.threads = RowThreads(1)
+        """Threads of a one-hop spread (whole floods per thread); results do not depend on them."""
 
     def __getstate__(self) -> dict:
         """Pickle the state without the kernel scratch buffers."""
-        return {k: getattr(self, k) for k in self.__slots__ if k != "_scratch"}
+        return {k: getattr(self, k) for k in self.__slots__ if k not in ("_scratch", "_tscratch")}
 
     def __setstate__(self, state: dict) -> None:
         """Restore a pickled state."""
         for k, v in state.items():
             setattr(self, k, v)
         self._scratch = _new_scratch(self.n_slots)
+        self._tscratch = []
+        if "threads" not in state:
+            self.threads = RowThreads(1)
 
     # ------------------------------------------------------------------ state
     def _alloc(self, cap: int) -> None:
@@ -410,26 +419,40 @@ class Overlay:
         started = self._pending_started
         self._pending_started = 0
         stamp, token, spare, out_r, out_f, out_h = self._scratch
-        nf, nn, nd, fin, dups, token, n_pool, pool, out_r, out_f, out_h = spread(
-            start, end, indices, self._hops, self._limit, self._active, self._rd_start, self._rd_len, self._pool,
-            self._front_f, self._front_n, self.full_propagation, stamp, token, spare, out_r, out_f, out_h,
-        )  # fmt: skip
-        self._scratch = (stamp, token, self._pool, out_r, out_f, out_h)  # the old pool is the next spare
+        ranges = [] if self.full_propagation else flood_ranges(self._front_f, self.threads)
+        if len(ranges) > 1:  # whole floods per thread, joined in the one-thread order
+            nf, nn, nd, fin, dups, n_pool, pool, out_r, out_f, out_h = spread_threads(
+                start, end, indices, self._hops, self._limit, self._active, self._rd_start, self._rd_len,
+                self._pool, self._front_f, self._front_n, self.threads, ranges, self._tscratch, spare,
+            )  # fmt: skip
+            self._scratch = (stamp, token, self._pool, *self._scratch[3:])
+        else:
+            nf, nn, nd, fin, dups, token, n_pool, pool, out_r, out_f, out_h = spread(
+                start, end, indices, self._hops, self._limit, self._active, self._rd_start, self._rd_len,
+                self._pool, self._front_f, self._front_n, self.full_propagation, stamp, token, spare, out_r, out_f,
+                out_h,
+            )  # fmt: skip
+            self._scratch = (stamp, token, self._pool, out_r, out_f, out_h)  # the old pool is the next spare
         self._pool, self._n_pool = pool, n_pool
-        fl = out_f[:nd].copy()
         self._front_f, self._front_n = nf, nn
+        if len(ranges) > 1:  # the per-delivery look-ups on the threads too
+            r, fl, h, o, c, pl = gather_deliveries(out_r, out_f, out_h, nd, self._origin, self._created,
+                                                   self._payload, self.threads)  # fmt: skip
+            out = Deliveries(receiver=r, flood=fl, origin=o, hops=h, created=c, payload=pl)
+        else:
+            fl = out_f[:nd].copy()
+            out = Deliveries(
+                receiver=out_r[:nd].copy(),
+                flood=fl,
+                origin=self._origin[fl],
+                hops=out_h[:nd].copy(),
+                created=self._created[fl],
+                payload=np.take(self._payload, fl, axis=0),  # much faster than fancy indexing of rows
+            )
         if fin.shape[0]:
             self._active[fin] = False
             self._free[self._n_free : self._n_free + fin.shape[0]] = fin[::-1]
             self._n_free += fin.shape[0]
-        out = Deliveries(
-            receiver=out_r[:nd].copy(),
-            flood=fl,
-            origin=self._origin[fl],
-            hops=out_h[:nd].copy(),
-            created=self._created[fl],
-            payload=np.take(self._payload, fl, axis=0),  # much faster than fancy indexing of rows
-        )
         self._last = OverlayStats(started, len(out), int(dups), int(fin.shape[0]))
         self._totals = self._totals + self._last
         return out

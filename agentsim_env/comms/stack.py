@@ -266,13 +266,13 @@ class CommsStack:
 
     @property
     def threads(self) -> RowThreads:
-        """Threads of the comms kernels that split over row ranges (the range graph's grid scan); results do
-        not depend on them."""
+        """Threads of the comms kernels that split their work (the range graph's grid scan by rows, the
+        overlay hop by floods, the inbox pushes and observations by receivers); results do not depend on them."""
         return self.graph.threads
 
     @threads.setter
     def threads(self, threads: RowThreads) -> None:
-        self.graph.threads = threads
+        self.graph.threads = self.overlay.threads = self.bus.inbox.threads = threads
 
     @property
     def pairs(self) -> tuple[np.ndarray, ...]:

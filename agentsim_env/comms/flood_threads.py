@@ -1,0 +1,220 @@
+"""One overlay hop over several threads, with the same result as ``flooding.spread`` on one.
+
+Floods do not interact within a hop: a flood's new readers depend only on its frontier entries, its reader list
+and the links. The frontier (grouped by flood, in the frontier's flood order) is therefore cut into contiguous
+ranges of whole floods, and each range spreads on a thread of the env's pool with a stamp array, delivery
+buffers and a reader pool of its own (``spread_range``). The ranges' outputs are then put behind one another in
+range order (each range copies its own part, on its own thread), which is the order one thread writes them in:
+deliveries, the next frontier, the floods that ended, and the reader lists of the new pool. The active floods
+without a frontier entry keep their readers at the end, as in ``spread``.
+
+One-hop mode only (the comms stack's); ``full_propagation`` spreads on one thread.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numba as nb
+import numpy as np
+
+from agentsim_env.comms.flooding import _hop, _room, next_token
+from agentsim_env.core.threads import RowThreads
+
+
+@nb.njit(cache=True, nogil=True)
+def spread_range(start, end, indices, hops, limit, rd_start, rd_len, pool, cur_f, cur_n, a0, b0, stamp, token,  # type: ignore[no-untyped-def]  # noqa: E501
+                 seen, new_pool, out_r, out_f, out_h, segs, fin):  # fmt: skip
+    """One hop of the floods of the frontier entries ``[a0, b0)`` (whole floods), into this range's buffers.
+
+    Deliveries go to ``out_*`` from 0, reader lists to ``new_pool`` from 0 (``rd_start`` of these floods
+    relative to it), and per flood one segment ``(first delivery, count, goes on)`` and, when it ended, its id
+    in ``fin``.
+
+    Returns:
+        ``(nd, npool, n_seg, nfin, dups, token, new_pool, out_r, out_f, out_h, segs, fin)``.
+    """
+    bound = 0
+    live = 0
+    n_fl = 0
+    for q in range(a0, b0):
+        bound += end[cur_n[q]] - start[cur_n[q]]
+        if q == a0 or cur_f[q] != cur_f[q - 1]:
+            live += rd_len[cur_f[q]]
+            n_fl += 1
+    out_r, out_f, out_h = _room(out_r, bound, 0), _room(out_f, bound, 0), _room(out_h, bound, 0)
+    new_pool = _room(new_pool, live + bound, 0)
+    segs = _room(segs, 3 * n_fl, 0)
+    fin = _room(fin, n_fl, 0)
+    nd = 0
+    npool = 0
+    n_seg = 0
+    nfin = 0
+    dups = 0
+    a = a0
+    while a < b0:
+        f = cur_f[a]
+        b = a
+        while b < b0 and cur_f[b] == f:
+            b += 1
+        seen[f] = True
+        token = next_token(stamp, token)
+        tok = np.int32(token)
+        s0 = rd_start[f]
+        p0 = npool
+        for k in range(rd_len[f]):
+            x = pool[s0 + k]
+            new_pool[npool] = x
+            npool += 1
+            stamp[x] = tok
+        h = hops[f] + 1
+        first = nd
+        nd, npool, d = _hop(start, end, indices, cur_n, a, b, f, h, stamp, tok, out_r, out_f, out_h, nd, new_pool,
+                            npool, h < limit[f])  # fmt: skip
+        dups += d
+        hops[f] = h
+        ends = nd == first or h >= limit[f]
+        segs[3 * n_seg], segs[3 * n_seg + 1], segs[3 * n_seg + 2] = first, nd - first, not ends
+        n_seg += 1
+        if ends:  # its new readers keep the message but do not relay it; its reader list goes
+            fin[nfin] = f
+            nfin += 1
+            npool = p0
+        rd_start[f] = p0
+        rd_len[f] = npool - p0
+        a = b
+    return nd, npool, n_seg, nfin, dups, token, new_pool, out_r, out_f, out_h, segs, fin
+
+
+@nb.njit(cache=True, nogil=True)
+def _place(cur_f, a0, b0, rd_start, pool_base, src_pool, n_pool, dst_pool, out_base, n_out, src_r, src_f, src_h,  # type: ignore[no-untyped-def]  # noqa: E501
+           dst_r, dst_f, dst_h):  # fmt: skip
+    # A range's reader lists and deliveries behind the earlier ranges' (its floods' rd_start shifted with them).
+    for i in range(n_pool):
+        dst_pool[pool_base + i] = src_pool[i]
+    for q in range(a0, b0):
+        if q == a0 or cur_f[q] != cur_f[q - 1]:
+            rd_start[cur_f[q]] += pool_base
+    for i in range(n_out):
+        dst_r[out_base + i] = src_r[i]
+        dst_f[out_base + i] = src_f[i]
+        dst_h[out_base + i] = src_h[i]
+
+
+@nb.njit(cache=True)
+def _keep_rest(active, seen, rd_start, rd_len, pool, new_pool, npool):  # type: ignore[no-untyped-def]
+    # The active floods without a frontier entry keep their readers, behind every spread flood's.
+    rest = 0
+    for f in range(active.shape[0]):
+        if active[f] and not seen[f]:
+            rest += rd_len[f]
+    new_pool = _room(new_pool, npool + rest, npool)
+    for f in range(active.shape[0]):
+        if active[f] and not seen[f]:
+            s0 = rd_start[f]
+            rd_start[f] = npool
+            for k in range(rd_len[f]):
+                new_pool[npool] = pool[s0 + k]
+                npool += 1
+    return new_pool, npool
+
+
+def flood_ranges(cur_f: np.ndarray, threads: RowThreads) -> list[tuple[int, int]]:
+    """The frontier entries ``[0, n)`` cut into the pool's row ranges, each boundary moved to a flood's start."""
+    n = int(cur_f.shape[0])
+    if threads.num_threads == 1 or len(threads.ranges(n)) == 1:
+        return [(0, n)] if n else []
+    heads = np.flatnonzero(np.r_[True, cur_f[1:] != cur_f[:-1]]) if n else np.zeros(0, dtype=np.int64)
+    cuts = [0]
+    for _, hi in threads.ranges(n)[:-1]:
+        at = int(heads[np.searchsorted(heads, hi)]) if hi <= heads[-1] else n
+        if at > cuts[-1]:
+            cuts.append(at)
+    if cuts[-1] < n:
+        cuts.append(n)
+    return list(zip(cuts[:-1], cuts[1:]))
+
+
+def spread_threads(start: np.ndarray, end: np.ndarray, indices: np.ndarray, hops: np.ndarray, limit: np.ndarray,
+                   active: np.ndarray, rd_start: np.ndarray, rd_len: np.ndarray, pool: np.ndarray,
+                   cur_f: np.ndarray, cur_n: np.ndarray, threads: RowThreads, ranges: list[tuple[int, int]],
+                   scratch: list[list[Any]], new_pool: np.ndarray) -> tuple[Any, ...]:  # fmt: skip
+    """``flooding.spread`` in one-hop mode over ``ranges`` (``flood_ranges``'s; same values as ``spread``).
+
+    ``scratch`` holds each range's ``[stamp, token, out_r, out_f, out_h, pool, segs, fin]`` between calls (grown
+    here); range 0's delivery buffers and ``new_pool`` become the returned ones.
+
+    Returns:
+        ``(nxt_f, nxt_n, nd, fin, dups, npool, new_pool, out_r, out_f, out_h)``, as ``spread`` without the token.
+    """
+    if not ranges:
+        raise ValueError("spread_threads needs a frontier entry")
+    seen = np.zeros(active.shape[0], dtype=np.bool_)
+    e = np.zeros(0, dtype=np.int64)
+    while len(scratch) < len(ranges):
+        scratch.append([np.zeros(start.shape[0], dtype=np.int32), 0, e, e.copy(), np.zeros(0, dtype=np.int32),
+                        e.copy(), e.copy(), e.copy()])  # fmt: skip
+    scratch[0][5] = new_pool
+    got: list[tuple[int, ...]] = [(0, 0, 0, 0, 0)] * len(ranges)
+
+    def run(_lo: int, _hi: int, part: int) -> None:
+        sc = scratch[part]
+        if sc[0].shape[0] != start.shape[0]:
+            sc[0] = np.zeros(start.shape[0], dtype=np.int32)
+        a0, b0 = ranges[part]
+        nd, npool, n_seg, nfin, dups, sc[1], sc[5], sc[2], sc[3], sc[4], sc[6], sc[7] = spread_range(
+            start, end, indices, hops, limit, rd_start, rd_len, pool, cur_f, cur_n, a0, b0, sc[0], sc[1], seen,
+            sc[5], sc[2], sc[3], sc[4], sc[6], sc[7],
+        )  # fmt: skip
+        got[part] = (nd, npool, n_seg, nfin, dups)
+
+    threads.run(run, len(ranges), 1)
+    nds = np.array([g[0] for g in got], dtype=np.int64)
+    pools = np.array([g[1] for g in got], dtype=np.int64)
+    out_base, pool_base = np.r_[0, np.cumsum(nds)], np.r_[0, np.cumsum(pools)]
+    first = scratch[0]
+    nd, npool, n0 = int(out_base[-1]), int(pool_base[-1]), int(nds[0])
+    out_r, out_f, out_h = _room(first[2], nd, n0), _room(first[3], nd, n0), _room(first[4], nd, n0)
+    new_pool = _room(first[5], npool, int(pools[0]))
+    first[2], first[3], first[4], first[5] = out_r, out_f, out_h, new_pool
+
+    def place(lo: int, hi: int, _: int) -> None:
+        for p in range(1 + lo, 1 + hi):
+            sc = scratch[p]
+            _place(cur_f, ranges[p][0], ranges[p][1], rd_start, int(pool_base[p]), sc[5], int(pools[p]), new_pool,
+                   int(out_base[p]), int(nds[p]), sc[2], sc[3], sc[4], out_r, out_f, out_h)  # fmt: skip
+
+    if len(ranges) > 1:
+        threads.run(place, len(ranges) - 1, 1)
+    new_pool, npool = _keep_rest(active, seen, rd_start, rd_len, pool, new_pool, npool)
+    first[5] = new_pool
+    # the next frontier: the deliveries of the floods that go on, in order; the floods that ended, in order
+    segs = [scratch[p][6][: 3 * got[p][2]].reshape(-1, 3) for p in range(len(ranges))]
+    goes = np.concatenate([np.repeat(s[:, 2], s[:, 1]) for s in segs]).astype(bool)
+    nxt_f, nxt_n = out_f[:nd][goes], out_r[:nd][goes]
+    fin = np.concatenate([scratch[p][7][: got[p][3]] for p in range(len(ranges))])
+    dups = sum(g[4] for g in got)
+    return nxt_f, nxt_n, nd, fin, dups, npool, new_pool, out_r, out_f, out_h
+
+
+@nb.njit(cache=True, nogil=True)
+def _gather(lo, hi, out_r, out_f, out_h, origin, created, payload, r, f, h, o, c, pl):  # type: ignore[no-untyped-def]  # noqa: E501
+    # Deliveries [lo, hi): receiver, flood, hops copied out of the reused buffers, origin, created step and
+    # payload row looked up in the flood table.
+    for k in range(lo, hi):
+        fl = out_f[k]
+        r[k], f[k], h[k], o[k], c[k] = out_r[k], fl, out_h[k], origin[fl], created[fl]
+        for j in range(payload.shape[1]):
+            pl[k, j] = payload[fl, j]
+
+
+def gather_deliveries(out_r: np.ndarray, out_f: np.ndarray, out_h: np.ndarray, nd: int, origin: np.ndarray,
+                      created: np.ndarray, payload: np.ndarray, threads: RowThreads) -> tuple[np.ndarray, ...]:  # fmt: skip
+    """The first ``nd`` deliveries as fresh arrays ``(receiver, flood, hops, origin, created, payload)``, the
+    flood table's columns looked up per delivery, over the pool's row ranges."""
+    r, f, o, c = (np.empty(nd, dtype=np.int64) for _ in range(4))
+    h = np.empty(nd, dtype=out_h.dtype)
+    pl = np.empty((nd, payload.shape[1]), dtype=payload.dtype)
+    threads.run(lambda lo, hi, _: _gather(lo, hi, out_r, out_f, out_h, origin, created, payload, r, f, h, o, c, pl),
+                nd)  # fmt: skip
+    return r, f, h, o, c, pl
