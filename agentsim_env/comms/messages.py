@@ -128,26 +128,32 @@ def env_collision_payload(what: np.ndarray | int, ident: np.ndarray, payload_dim
 
 
 @nb.njit(cache=True, nogil=True)
-def _push_kernel(lo, hi, valid, kind, sender, hops, created, payload, received, newest, taken,  # type: ignore[no-untyped-def]
-                 ra, ka, sa, ha, ca, pa, qa, rb, kb, sb, hb, cb, pb, qb):  # fmt: skip
-    # Two batches a then b, as one push of their concatenation, into the inboxes of slots [lo, hi) (ranges on
-    # different threads touch different inboxes). Message j of a batch goes to slot r[j] (skipped when < 0) with
-    # payload row p[q[j]] (row j when q is empty) and hops clipped to [0, 32767]; the inputs come in one form
-    # (``_kernel_batch``), so this compiles once. Pass 1 walks the messages newest first and keeps, per receiver
-    # in the range, the M newest (index into a ++ b) and the count; pass 2 walks the range's receivers in slot
-    # order (the inbox arrays stream through the cache once): shift the old rows down by min(count, M), write
-    # the new ones on top.
-    m = valid.shape[1]
-    d = payload.shape[2]
+def _push_count(newest, taken, ra, rb):  # type: ignore[no-untyped-def]
+    # Pass 1 of a push of batches a then b (as one push of their concatenation): walk the messages newest first
+    # and keep, per receiver (>= 0), the M newest (index into a ++ b) and the count.
+    m = newest.shape[1]
     na = ra.shape[0]
     for g in range(na + rb.shape[0] - 1, -1, -1):
         s = ra[g] if g < na else rb[g - na]
-        if s < lo or s >= hi:
+        if s < 0:
             continue
         t = taken[s]
         if t < m:
             newest[s, t] = g
         taken[s] = t + 1
+
+
+@nb.njit(cache=True, nogil=True)
+def _push_kernel(lo, hi, valid, kind, sender, hops, created, payload, received, newest, taken,  # type: ignore[no-untyped-def]
+                 ra, ka, sa, ha, ca, pa, qa, rb, kb, sb, hb, cb, pb, qb):  # fmt: skip
+    # Pass 2 of a push (after ``_push_count``) into the inboxes of slots [lo, hi): ranges on different threads
+    # touch different inboxes. Message j of a batch goes to slot r[j] with payload row p[q[j]] (row j when q is
+    # empty) and hops clipped to [0, 32767]; the inputs come in one form (``_kernel_batch``), so this compiles
+    # once. The receivers are walked in slot order (the inbox arrays stream through the cache once): shift the
+    # old rows down by min(count, M), write the new ones on top.
+    m = valid.shape[1]
+    d = payload.shape[2]
+    na = ra.shape[0]
     for s in range(lo, hi):
         c = taken[s]
         if c == 0:
@@ -390,6 +396,7 @@ class Inbox:
         for k in range(0, len(batches), 2):  # pairs in turn: the same as one push of everything, in order
             a = _kernel_batch(batches[k])
             b = _kernel_batch(batches[k + 1]) if k + 1 < len(batches) else _EMPTY_BATCH
+            _push_count(self._newest, self._taken, a[0], b[0])
             self.threads.run(partial(self._push_range, (*a, *b)), self.n_slots)
 
     def _push_range(self, batches: tuple[np.ndarray, ...], lo: int, hi: int, _part: int) -> None:
