@@ -387,7 +387,7 @@ class AgentSimParallelEnv(MessageCalls, ParallelEnv):
         if self.check_finite:
             parts = self.scenario.observation(self.world)
             assert_finite(self.scenario, rows, self._steps, parts, result)
-            return flat_parts(parts, self.world.state.n_slots, out)
+            return flat_parts(parts, self.world.state.n_slots, out, self.world.threads)
         return self.scenario.flat_observation(self.world, out)
 
     def _obs_dicts(self, flat: np.ndarray, agents: list[str], idx: np.ndarray | None) -> dict[str, Any]:

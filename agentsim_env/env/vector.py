@@ -106,7 +106,7 @@ class BatchedEnv:
         if self.check_finite and rows is not None:
             parts = self.scenario.observation(self.world)
             assert_finite(self.scenario, rows, step, parts, result)
-            flat = flat_parts(parts, self.world.state.n_slots, out)
+            flat = flat_parts(parts, self.world.state.n_slots, out, self.world.threads)
         else:
             flat = self.scenario.flat_observation(self.world, out)
         return flat.reshape(self.n_worlds, self.n_agents, self.obs_dim)

@@ -33,6 +33,7 @@ import numpy as np
 
 from agentsim_env.core.budget import check_memory
 from agentsim_env.core.pipeline import Part
+from agentsim_env.core.threads import RowThreads
 from agentsim_env.motion import MotionLimits, decode_primitive
 from agentsim_env.motion.actions import decode_velocity_unchecked
 from agentsim_env.scenarios.config import ScenarioConfig
@@ -352,7 +353,7 @@ class Scenario(ABC, Generic[ConfigT]):
         The parts of :meth:`observation` concatenated in layout order, into ``out`` when given (else a fresh
         array); a scenario may write them straight into the flat array instead (same values).
         """
-        return flat_parts(self.observation(world), world.state.n_slots, out)
+        return flat_parts(self.observation(world), world.state.n_slots, out, world.threads)
 
     def state(self, world: World, w: int) -> np.ndarray:
         """Global state of world ``w``: per agent pos / 100, vel / 10, online, group / 10; then ``state_extra``."""
@@ -365,13 +366,19 @@ class Scenario(ABC, Generic[ConfigT]):
         return np.clip(np.concatenate([per.ravel(), extra]), -10.0, 10.0).astype(np.float32)
 
 
-def flat_parts(parts: dict[str, np.ndarray], n_slots: int, out: np.ndarray | None = None) -> np.ndarray:
+def flat_parts(parts: dict[str, np.ndarray], n_slots: int, out: np.ndarray | None = None,
+               threads: RowThreads | None = None) -> np.ndarray:  # fmt: skip
     """Observation parts ``{part: (S, ...)}`` concatenated per slot into ``(S, obs_dim)`` float32: ``out`` when
-    given, else a fresh array."""
+    given, else a fresh array; with ``threads``, row ranges are copied on them (numpy copies without the GIL)."""
     cols = [p.reshape(n_slots, -1) for p in parts.values()]
     if out is None:
-        return np.concatenate(cols, axis=1, dtype=np.float32)
-    return np.concatenate(cols, axis=1, out=out)
+        if threads is None or threads.num_threads == 1:
+            return np.concatenate(cols, axis=1, dtype=np.float32)
+        out = np.empty((n_slots, sum(c.shape[1] for c in cols)), dtype=np.float32)
+    if threads is None or threads.num_threads == 1:
+        return np.concatenate(cols, axis=1, out=out)
+    threads.run(lambda lo, hi, _: np.concatenate([c[lo:hi] for c in cols], axis=1, out=out[lo:hi]), n_slots)
+    return out
 
 
 CHECK_FINITE_ENV = "AGENTSIM_CHECK_FINITE"
