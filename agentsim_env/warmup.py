@@ -110,6 +110,24 @@ def _batched(name: str) -> None:
         batch.step(rng.uniform(-1.0, 1.0, (batch.n_worlds, batch.n_agents, batch.act_dim)))
 
 
+def _threaded(name: str, config: dict[str, Any]) -> None:
+    """A few steps over 2 threads with ranges of a few slots, so the kernels that only big worlds split (the
+    range graph's and the overlay's joins, the delivery look-ups) compile here too."""
+    from agentsim_env.core import threads
+    from agentsim_env.env.vector import BatchedEnv
+
+    saved = threads.MIN_ROWS
+    threads.MIN_ROWS = 4
+    try:
+        batch = BatchedEnv(name, WARMUP_WORLDS, num_threads=2, **config)
+        rng = np.random.default_rng(0)
+        batch.reset(seed=0)
+        for _ in range(WARMUP_STEPS):
+            batch.step(rng.uniform(-1.0, 1.0, (batch.n_worlds, batch.n_agents, batch.act_dim)))
+    finally:
+        threads.MIN_ROWS = saved
+
+
 def _through_store(obj: Any) -> Any:
     """``obj`` as a Ray actor receives it (or the driver, a reply): pickled with out-of-band buffers (protocol 5)
     and read back from immutable copies of them, so its arrays come back read-only, as from Ray's object store."""
@@ -183,6 +201,9 @@ def scenario_steps(name: str) -> list[tuple[str, Callable[[], None]]]:
         if _importable(v.needs):
             steps.append((f"variant {i}", partial(_baselines, name, _config(name, v.config), every=False)))
     steps.append(("batched", lambda: _batched(name)))
+    for i, v in enumerate(VARIANTS.get(name, [])):
+        if "comms" in v.config:
+            steps.append((f"threads, variant {i}", partial(_threaded, name, _config(name, v.config))))
     if name in SHARDED:
         steps.append(("sharded", lambda: _sharded(name)))
     return steps

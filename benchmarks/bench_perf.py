@@ -280,12 +280,12 @@ def main(argv: list[str] | None = None) -> int:
     rounds, block = (2, 0.02) if q else (11, 0.15)
     big = 5_000 if q else 100_000
     comm_sizes = [200, 500] if q else [1000, 10_000]
+    if args.threads_only:
+        return threads_report(q, args.thread_plot)
     print(f"machine: {machine_description()}")
     print(
         f"mode: {'quick' if q else 'full'}; CPU time, one thread unless stated; medians of interleaved rounds\n"
     )
-    if args.threads_only:
-        return threads_report(q, args.thread_plot)
     rows: list[Row] = []
     small, rates = _timed("small worlds", lambda: small_worlds(rounds, block))
     rows += small
