@@ -70,7 +70,7 @@ def test_a_rollout_inside_ray_shards_on_two_nodes_equals_one_process(name: str, 
     assert np.array_equal(got.returns, ref.returns) and np.array_equal(got.final_pos, ref.final_pos)
 
 
-def test_the_shard_beside_the_driver_sends_its_observation_rows_through_shared_memory() -> None:
+def test_the_shard_beside_the_driver_takes_actions_and_sends_rows_through_shared_memory() -> None:
     env = make_sharded("navigation", shards=2, n_agents=200, collisions=False)
     try:
         env.reset(seed=0)
@@ -78,14 +78,15 @@ def test_the_shard_beside_the_driver_sends_its_observation_rows_through_shared_m
         backend = env.coordinator.backend
         here = ray.get_runtime_context().get_node_id()
         # the shard on this node writes into the segment; the one on the other node returns its rows
-        assert backend.obs_shared == {0: backend.node_of(0) == here, 1: backend.node_of(1) == here}
-        assert sorted(backend.obs_shared.values()) == [False, True]
-        path = os.path.join("/dev/shm", backend.obs_segment.name)
-        st = os.stat(path)
-        assert stat.S_IMODE(st.st_mode) == 0o600 and st.st_uid == os.getuid()
+        assert backend.shared == {0: backend.node_of(0) == here, 1: backend.node_of(1) == here}
+        assert sorted(backend.shared.values()) == [False, True]
+        paths = [os.path.join("/dev/shm", seg.name) for seg in (backend.obs_segment, backend.act_segment)]
+        for path in paths:
+            st = os.stat(path)
+            assert stat.S_IMODE(st.st_mode) == 0o600 and st.st_uid == os.getuid()
     finally:
         env.close()
-    assert not os.path.exists(path)  # removed with the env
+    assert not any(os.path.exists(path) for path in paths)  # removed with the env
 
 
 def test_a_killed_shard_actor_loses_only_its_agents(tmp_path) -> None:  # type: ignore[no-untyped-def]

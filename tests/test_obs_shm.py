@@ -1,4 +1,4 @@
-"""The shared-memory segment through which shards beside the driver send their observation rows."""
+"""The shared-memory segments through which shards beside the driver take their actions and send their rows."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import sys
 import numpy as np
 import pytest
 
-from agentsim_env.distributed.obs_shm import ObsSegment, ObsWriter
+from agentsim_env.distributed.obs_shm import ActionReader, ActionSegment, ObsSegment, ObsWriter
 
 if not sys.platform.startswith("linux"):  # pragma: no cover - POSIX segments live in /dev/shm
     pytest.skip("reads /dev/shm", allow_module_level=True)
@@ -97,5 +97,50 @@ def test_the_driver_reads_only_rows_a_region_holds(k: int, n: int) -> None:
     try:
         with pytest.raises(ValueError, match="shard must be in"):
             seg.rows(k, n)
+    finally:
+        seg.close()
+
+
+LAYOUT = (("motion", 3, "<f8"), ("comm", 7, "<f8"))
+
+
+def test_actions_written_by_the_driver_are_read_by_their_shard() -> None:
+    seg = ActionSegment(2, 50, LAYOUT)
+    try:
+        rng = np.random.default_rng(1)
+        parts = {"motion": rng.uniform(-1, 1, (50, 3)), "comm": rng.uniform(-1, 1, (50, 7))}
+        mine, theirs = np.array([3, 7, 8, 40]), np.array([0, 1, 49])
+        assert seg.write(1, mine, parts) == 4 and seg.write(0, theirs, parts) == 3
+        reader = ActionReader(seg.name, 1, 2, 50, LAYOUT)
+        slots, rows = reader.read(4)
+        assert np.array_equal(slots, mine) and list(rows) == ["motion", "comm"]
+        for name, v in parts.items():
+            assert np.array_equal(rows[name], v[mine]) and rows[name].dtype == np.float64
+        seg.write(1, np.array([5]), parts)  # the next step overwrites the region: the slots read were a copy
+        assert np.array_equal(slots, mine)
+        with pytest.raises(ValueError, match="action rows must number"):
+            reader.read(51)
+        reader.close()
+    finally:
+        seg.close()
+
+
+def test_the_action_segment_is_its_owners_only_and_gone_after_close() -> None:
+    seg = ActionSegment(2, 10, LAYOUT)
+    path = os.path.join("/dev/shm", seg.name)
+    assert stat.S_IMODE(os.stat(path).st_mode) == 0o600
+    seg.close()
+    assert not os.path.exists(path)
+    with pytest.raises(RuntimeError, match="closed"):
+        seg.write(0, np.zeros(0, dtype=np.int64), {})
+
+
+@pytest.mark.parametrize(("region", "n_shards", "n_slots"), [(2, 2, 10), (-1, 2, 10), (0, 3, 10), (0, 2, 11)])
+def test_a_reader_refuses_a_region_the_action_segment_does_not_hold(region: int, n_shards: int,
+                                                                   n_slots: int) -> None:  # fmt: skip
+    seg = ActionSegment(2, 10, LAYOUT)
+    try:
+        with pytest.raises(ValueError, match="action segment"):
+            ActionReader(seg.name, region, n_shards, n_slots, LAYOUT)
     finally:
         seg.close()

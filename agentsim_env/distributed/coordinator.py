@@ -258,8 +258,8 @@ class Coordinator:
         self.owner[:] = -1
         s = world.state.n_slots
         self.obs = np.zeros((s, _obs_dim(sc)), np.float32)
-        if gather:  # shards beside the driver send their rows through shared memory
-            self.backend.share_obs(s, _obs_dim(sc))
+        if gather:  # shards beside the driver take their actions and send their rows through shared memory
+            self.backend.share_rows(s, _obs_dim(sc), tuple((k, p.size, "<f8") for k, p in sc.act_parts().items()))
         replies = self._call("reset", {k: (seed, self.strips.owner, gather, self.kinematics and gather,
                                            int(world.tick)) for k in range(len(self.shards))})  # fmt: skip
         self._take(replies, obs=gather)
@@ -384,8 +384,13 @@ class Coordinator:
         calls: dict[int, tuple[Any, ...]] = {}
         for k in range(len(self.shards)):
             slots = np.flatnonzero(acting & (self.owner == k))
-            calls[k] = (slots, {p: v[slots] for p, v in parts.items()}, control)
-            tr.actions += nbytes(calls[k][:2])
+            n = self.backend.write_actions(k, slots, parts) if self.shards[k].alive else None
+            if n is None:  # the call carries them
+                calls[k] = (slots, {p: v[slots] for p, v in parts.items()}, control)
+                tr.actions += nbytes(calls[k][:2])
+            else:  # written into the shard's region of the action segment: the call carries their count
+                calls[k] = (None, None, {**control, "act_n": n})
+                tr.actions += nbytes(slots) + sum(v.itemsize * v[0].size * n for v in parts.values() if len(v))
         self._objects = []
         taken: set[int] = set()
 

@@ -48,7 +48,7 @@ from typing import Any
 from agentsim_env.distributed.backends import Failure, raised
 from agentsim_env.distributed.bridge import Bridge, Packed
 from agentsim_env.distributed.exchange import ExchangeActor
-from agentsim_env.distributed.obs_shm import ObsSegment, ObsWriter
+from agentsim_env.distributed.obs_shm import ActionReader, ActionSegment, ObsSegment, ObsWriter
 from agentsim_env.distributed.partition import Strips
 from agentsim_env.distributed.shard import Shard as _Shard
 from agentsim_env.distributed.wire import TOKEN_BYTES, WireClient
@@ -299,15 +299,19 @@ class Shard(OnNode):
         self.obs: ObsWriter | None = None
         self.worker.address = f"{self.worker.address} on node {self.node()[:12]}"
 
-    def attach_obs(self, name: str, n_shards: int, n_slots: int, obs_dim: int, node: str) -> bool:
-        """Write the step API's observation rows into region ``index`` of the driver's segment ``name`` when
-        this actor runs on the driver's node ``node`` (``distributed.obs_shm``); whether it does."""
+    def attach_rows(self, node: str, obs: tuple[str, int, int, int], act: tuple[str, int, int, Any]) -> bool:
+        """Read the step API's actions from and write its observation rows into region ``index`` of the
+        driver's segments (``distributed.obs_shm``: ``obs`` = name, shards, slots, row length; ``act`` = name,
+        shards, slots, layout) when this actor runs on the driver's node ``node``; whether it does."""
         if node != self.node():
             return False
-        if self.obs is not None:
-            self.obs.close()
-        self.obs = ObsWriter(name, self.worker.index, n_shards, n_slots, obs_dim)
+        k = self.worker.index
+        for old in (self.obs, self.worker.act_in):
+            if old is not None:
+                old.close()
+        self.obs = ObsWriter(obs[0], k, *obs[1:])
         self.worker.obs_out = self.obs.array
+        self.worker.act_in = ActionReader(act[0], k, act[1], act[2], tuple(tuple(p) for p in act[3]))
         return True
 
     def reset(self, *args: Any) -> Packed:
@@ -381,31 +385,42 @@ class RayShards:
         self.actors: dict[int, Any] = {k: self._start(k) for k in range(self.n_shards)}
         self.address = address or "local cluster on 127.0.0.1"
         self.obs_segment: ObsSegment | None = None
-        self.obs_shared: dict[int, bool] = {}
-        """Which workers write their observation rows into ``obs_segment`` (those on the driver's node)."""
+        self.act_segment: ActionSegment | None = None
+        self.shared: dict[int, bool] = {}
+        """Which workers take their actions from ``act_segment`` and write their observation rows into
+        ``obs_segment`` (those on the driver's node)."""
 
-    def share_obs(self, n_slots: int, obs_dim: int) -> None:
-        """Workers on the driver's node write the step API's observation rows into a shared-memory segment
-        (``distributed.obs_shm``) instead of returning them through Ray; the others keep returning them."""
-        if self.obs_segment is None:
+    def share_rows(self, n_slots: int, obs_dim: int, act_layout: tuple[tuple[str, int, str], ...]) -> None:
+        """Workers on the driver's node exchange the step API's actions and observation rows through
+        shared-memory segments (``distributed.obs_shm``) instead of Ray's object store; the others keep Ray."""
+        if self.obs_segment is None or self.act_segment is None:
             self.obs_segment = ObsSegment(self.n_shards, n_slots, obs_dim)
+            self.act_segment = ActionSegment(self.n_shards, n_slots, act_layout)
         for k in self.actors:
-            if k not in self.obs_shared:
-                self._attach_obs(k)
+            if k not in self.shared:
+                self._attach_rows(k)
 
-    def _attach_obs(self, k: int) -> None:
-        seg = self.obs_segment
-        assert seg is not None
+    def _attach_rows(self, k: int) -> None:
+        obs, act = self.obs_segment, self.act_segment
+        assert obs is not None and act is not None
         here = str(self._ray.get_runtime_context().get_node_id())
-        ref = self.actors[k].attach_obs.remote(seg.name, seg.n_shards, seg.n_slots, seg.obs_dim, here)
+        ref = self.actors[k].attach_rows.remote(here, (obs.name, obs.n_shards, obs.n_slots, obs.obs_dim),
+                                                (act.name, act.n_shards, act.n_slots, act.layout))  # fmt: skip
         try:
-            self.obs_shared[k] = bool(self._ray.get(ref, timeout=STARTUP_TIMEOUT_S))
-        except Exception:  # a worker that cannot map it returns its rows through Ray (a dead one fails its call)
-            self.obs_shared[k] = False
+            self.shared[k] = bool(self._ray.get(ref, timeout=STARTUP_TIMEOUT_S))
+        except Exception:  # a worker that cannot map them uses Ray (a dead one fails its next call)
+            self.shared[k] = False
+
+    def write_actions(self, k: int, slots: Any, parts: dict[str, Any]) -> int | None:
+        """Worker ``k``'s acting slots and action rows into its region of the action segment: their count, or
+        None when the worker does not share (its call then carries them)."""
+        if self.act_segment is None or not self.shared.get(k):
+            return None
+        return self.act_segment.write(k, slots, parts)
 
     def obs_rows(self, k: int, n: int) -> Any:
         """The ``n`` observation rows worker ``k`` wrote into the segment in its latest call (a view)."""
-        if self.obs_segment is None or not self.obs_shared.get(k):
+        if self.obs_segment is None or not self.shared.get(k):
             raise RuntimeError(f"shard {k} does not share its observation rows")
         return self.obs_segment.rows(k, n)
 
@@ -483,7 +498,7 @@ class RayShards:
         self.actors[index] = self._start(index)
         self._ray.get(self.exchange.revive.remote(index))
         if self.obs_segment is not None:
-            self._attach_obs(index)
+            self._attach_rows(index)
 
     def kill(self, index: int) -> None:
         """Kill worker ``index``'s actor at once and drop it from the exchange."""
@@ -491,7 +506,7 @@ class RayShards:
             self._ray.kill(self.actors[index], no_restart=True)
         except Exception:  # already gone
             pass
-        self.obs_shared.pop(index, None)
+        self.shared.pop(index, None)
         self._drop(index)
 
     def set_delay(self, index: int, delay_s: float) -> None:
@@ -522,8 +537,9 @@ class RayShards:
             self._ray.kill(self.exchange, no_restart=True)
         except Exception:  # already gone
             pass
-        if self.obs_segment is not None:
-            self.obs_segment.close()
-            self.obs_segment, self.obs_shared = None, {}
+        for seg in (self.obs_segment, self.act_segment):
+            if seg is not None:
+                seg.close()
+        self.obs_segment, self.act_segment, self.shared = None, None, {}
         leave_cluster(self._ray, self._own)
         self._own = False

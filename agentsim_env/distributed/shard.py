@@ -108,6 +108,9 @@ class Shard:
         self.address = f"{socket.gethostname()}:{os.getpid()}"
         self.obs_out: np.ndarray | None = None
         """Where the step API's observation rows go instead of the reply (``distributed.obs_shm``), if set."""
+        self.act_in: Any = None
+        """Where the step API's actions come from when a call carries only their count (an
+        ``obs_shm.ActionReader``), if set."""
         self.world.bridge = self
         self.overlay: ShardOverlay | None = None
         comms = self.world.comms
@@ -413,6 +416,10 @@ class Shard:
         """
         t0 = time.perf_counter()
         self._pause()
+        if slots is None:  # the driver wrote them into this shard's region of its action segment
+            if self.act_in is None:
+                raise RuntimeError("a step without its actions, and no action segment to read them from")
+            slots, parts = self.act_in.read(int(control["act_n"]))
         s = self.world.state.n_slots
         full = {}
         for key, rows in parts.items():
