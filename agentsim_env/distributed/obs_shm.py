@@ -1,25 +1,25 @@
 """The step API's rows between the driver and the shards on its own machine, through shared memory.
 
-Actions go the other way the same way: the driver writes each shard's acting slots and their action rows into
-that shard's region of a second segment (``ActionSegment``) before the call, which then carries only a count, so
-the call's arguments no longer pass through Ray's object store (8.8 MB a step at 100,000 agents).
-
 The step API brings every acting agent's observation row back to the driver each step (73 MB at 100,000 agents
 in ``navigation`` with comms). Returned through Ray, each shard's rows are copied into Ray's object store after
-the shard's step (~30 ms a step at 100,000 agents on 2 CPUs, measured) and read from there by the driver. A shard
-on the driver's node instead writes its rows straight into its region of one segment that the driver created
+the shard's step (~20-30 ms a step at 100,000 agents on 2 CPUs, measured) and read from there by the driver. A
+shard on the driver's node instead writes its rows straight into its region of a segment that the driver created
 (``ObsSegment``), and replies with their count; the driver scatters them into its observation array as it does
-with rows returned through Ray. A shard on another node keeps returning its rows through Ray.
+with rows returned through Ray. Actions go the other way the same way: the driver writes such a shard's acting
+slots and action rows into its region of a second segment (``ActionSegment``) before the call, which then
+carries only their count instead of 8.8 MB through the object store. A shard on another node keeps Ray for both.
 
 Region ``k`` belongs to shard ``k`` and holds up to every slot of the world (a shard may come to own them all);
-the segment is a file of ``/dev/shm`` whose pages exist only once written, so it occupies about one row per
-acting agent, not ``K`` times the world. The driver reads a region only after its shard answered the step, and
-never the region of a shard that failed: a shard killed while writing leaves nothing half-written behind in
-what the driver keeps.
+a segment is a file of ``/dev/shm`` whose pages exist only once written, so it occupies about one row per acting
+agent, not ``K`` times the world. The driver reads a region only after its shard answered the step, and never the
+region of a shard that failed: a shard killed while writing leaves nothing half-written behind in what the driver
+keeps. A shard copies the slots it reads; it reads the action rows during the call, before the driver writes the
+next step's.
 
-Security: the segment is created with mode 0600 (its owner only) under a random name that only the driver and,
-through Ray, its shards know; a shard checks the segment's size before it maps rows. The driver unlinks it when
-the env closes (and Python's resource tracker does if the driver dies); shards map it without taking ownership.
+Security: the segments are created with mode 0600 (their owner only) under random names that only the driver
+and, through Ray, its shards know; a shard checks a segment's size before it maps rows. The driver unlinks them
+when the env closes (and Python's resource tracker does if the driver dies); shards map them without taking
+ownership.
 """
 
 from __future__ import annotations
