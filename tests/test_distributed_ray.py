@@ -89,6 +89,18 @@ def test_the_shard_beside_the_driver_takes_actions_and_sends_rows_through_shared
     assert not any(os.path.exists(path) for path in paths)  # removed with the env
 
 
+def _wait_dead(actor: object, timeout_s: float = 60.0) -> None:
+    """Return once calls to ``actor`` fail because it died."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        try:
+            ray.get(actor.node.remote(), timeout=10)  # type: ignore[attr-defined]
+        except ray.exceptions.RayActorError:
+            return
+        time.sleep(0.05)
+    raise AssertionError(f"the actor still answered {timeout_s:g} s after ray.kill")
+
+
 def test_a_killed_shard_actor_loses_only_its_agents(tmp_path) -> None:  # type: ignore[no-untyped-def]
     env = record(make_sharded("navigation", shards=2, n_agents=200, collisions=False), tmp_path / "run.db")
     inner = env.env
@@ -97,7 +109,9 @@ def test_a_killed_shard_actor_loses_only_its_agents(tmp_path) -> None:  # type: 
     live_steps(env, 5, rng)
     assert len({s.address.split(" on node ")[1] for s in inner.shards}) == 2  # one shard on each node
     doomed = {inner.possible_agents[i] for i in np.flatnonzero(inner.coordinator.owner == 0)}
-    ray.kill(inner.coordinator.backend.actors[0], no_restart=True)
+    victim = inner.coordinator.backend.actors[0]
+    ray.kill(victim, no_restart=True)
+    _wait_dead(victim)  # ray.kill is asynchronous: a step sent before it lands would still be answered
     _, _, term, _, _ = env.step(random_actions(env, rng))
     assert {a for a, t in term.items() if t} == doomed
     assert not inner.shards[0].alive and "died" in inner.shards[0].reason
