@@ -11,6 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import agentsim_env
+from agentsim_env.comms.flood_threads import flood_ranges
 from agentsim_env.comms.messages import Inbox
 from agentsim_env.comms.overlay import Overlay
 from agentsim_env.comms.rangegraph import RangeGraph
@@ -202,6 +203,23 @@ def test_overlay_hops_and_inbox_pushes_do_not_depend_on_the_thread_count(seed: i
     assert sum(len(a) for a in one[::7]) > 0  # floods did reach someone
     for i, (a, b) in enumerate(zip(one, many)):
         np.testing.assert_array_equal(a, b, err_msg=f"array {i} differs with {k} threads")
+
+
+@given(sizes=st.lists(st.integers(1, 40), min_size=0, max_size=60), k=st.integers(1, 6),
+       min_rows=st.integers(1, 50))
+@settings(max_examples=200, deadline=None)
+def test_flood_ranges_cut_the_frontier_only_between_floods(sizes: list[int], k: int, min_rows: int) -> None:
+    # a frontier grouped by flood (runs of one flood id): contiguous ranges over every entry, at most one per
+    # thread, each boundary at the first entry of a flood
+    cur_f = np.repeat(np.arange(len(sizes)) * 3 + 1, sizes).astype(np.int64)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(threads_mod, "MIN_ROWS", min_rows)
+        ranges = flood_ranges(cur_f, RowThreads(k))
+    n = cur_f.shape[0]
+    assert ranges == [] if n == 0 else (ranges[0][0] == 0 and ranges[-1][1] == n)
+    assert len(ranges) <= k and all(lo < hi for lo, hi in ranges)
+    assert all(a[1] == b[0] for a, b in zip(ranges, ranges[1:]))
+    assert all(cur_f[lo] != cur_f[lo - 1] for lo, _ in ranges[1:])
 
 
 def test_make_and_batched_env_take_the_thread_count() -> None:
