@@ -175,3 +175,43 @@ def test_replay_frames_colour_agents_by_group_beyond_a_dozen(tmp_path: Path) -> 
         assert (first[int(cy), int(cx)] == agent_color(a, 16, int(group[a]))).all(), a
         seen.add(tuple(first[int(cy), int(cx)]))
     assert len(seen) == 2
+
+
+def test_a_goal_per_agent_of_a_big_world_leaves_the_paths_visible(tmp_path: Path,
+                                                                  monkeypatch: pytest.MonkeyPatch) -> None:  # fmt: skip
+    # 12,000 agents with a goal each on a 1 km map: an even sample of the goals is drawn, small enough that they
+    # cover a few percent of the map, and the legend says how many of them
+    import matplotlib.axes
+    import matplotlib.collections
+
+    import agentsim_env.render.trajectories as tr
+
+    n, side = 12_000, 1_000.0
+    rng = np.random.default_rng(0)
+    xy = rng.uniform(0, side, (2, n, 2))
+    markers = (rng.uniform(0, side, (n, 2)), np.tile(np.array([[40, 170, 60]], np.uint8), (n, 1)), np.full(n, 1.0))
+    traj = tr.Trajectories([f"agent_{i}" for i in range(n)], xy, np.ones(n, np.int64), ["active"] * n,
+                           (0.0, side, 0.0, side), markers=markers, steps=1)  # fmt: skip
+    drawn: list[Any] = []
+    real = matplotlib.collections.PatchCollection
+
+    def spy(patches: Any, **kw: Any) -> Any:
+        drawn.append(list(patches))
+        return real(patches, **kw)
+
+    labels: list[str] = []
+    real_legend = matplotlib.axes.Axes.legend
+
+    def legend_spy(ax: Any, *a: Any, **kw: Any) -> Any:
+        labels.extend(str(h.get_label()) for h in kw.get("handles", []))
+        return real_legend(ax, *a, **kw)
+
+    monkeypatch.setattr(matplotlib.collections, "PatchCollection", spy)  # imported when the plot is drawn
+    monkeypatch.setattr(matplotlib.axes.Axes, "legend", legend_spy)
+    plot_trajectories(traj, tmp_path / "big.png", "big")
+    discs = drawn[-1]
+    assert len(discs) == tr.MAX_PATHS
+    covered = sum(np.pi * d.radius**2 for d in discs) / side**2
+    assert covered < 0.05, covered
+    assert any(f"{tr.MAX_PATHS:,} of {n:,}" in lab for lab in labels), labels
+    assert (tmp_path / "big.png").stat().st_size > 10_000

@@ -223,12 +223,17 @@ def plot_trajectories(traj: Trajectories, path: str | os.PathLike[str], title: s
         handles.append(Patch(facecolor="0.5", label=f"obstacles ({len(traj.obstacles)})"))
     if traj.markers is not None and len(traj.markers[0]):
         mxy, rgb, rad = traj.markers
-        floor = 0.006 * max(w, h)  # a goal of a metre still shows on a map of kilometres
-        discs = [Circle((float(x), float(y)), max(float(r), floor)) for (x, y), r in zip(mxy, rad)]
-        ax.add_collection(PatchCollection(discs, facecolors=np.asarray(rgb, dtype=float) / 255.0, edgecolors="none",
-                                          alpha=0.6))  # fmt: skip
-        handles.append(Patch(facecolor=tuple(np.asarray(rgb[0], dtype=float) / 255.0), alpha=0.6,
-                             label="scenario markers (goals, zones, sensors)"))  # fmt: skip
+        # past MAX_PATHS markers (a goal per agent of a big world) an even sample of them, and past 200 their
+        # smallest size shrinks as the paths' do: 100,000 goals at full size would cover the whole map
+        m = len(mxy)
+        keep = np.unique(np.linspace(0, m - 1, min(m, MAX_PATHS)).astype(np.int64))
+        crowd_m = min(1.0, 200.0 / keep.size)
+        floor = 0.006 * max(w, h) * max(crowd_m**0.5, 0.2)  # a goal of a metre still shows on a map of kilometres
+        discs = [Circle((float(mxy[i, 0]), float(mxy[i, 1])), max(float(rad[i]), floor)) for i in keep.tolist()]
+        ax.add_collection(PatchCollection(discs, facecolors=np.asarray(rgb, dtype=float)[keep] / 255.0,
+                                          edgecolors="none", alpha=0.6))  # fmt: skip
+        label = "scenario markers (goals, zones, sensors)" + (f", {keep.size:,} of {m:,}" if keep.size < m else "")
+        handles.append(Patch(facecolor=tuple(np.asarray(rgb[0], dtype=float) / 255.0), alpha=0.6, label=label))
     counts = dict.fromkeys(OUTCOMES, 0)
     n = len(traj.outcome)
     shown = np.unique(np.linspace(0, n - 1, min(n, MAX_PATHS)).astype(np.int64)) if n else np.zeros(0, np.int64)
