@@ -18,7 +18,7 @@ from typing import Any
 import numba as nb
 import numpy as np
 
-from agentsim_env.comms.flooding import _hop, _room, next_token
+from agentsim_env.comms.flooding import _hop, _room, keep_rest, next_token, take_readers
 from agentsim_env.core.threads import RowThreads
 
 
@@ -60,13 +60,8 @@ def spread_range(start, end, indices, hops, limit, rd_start, rd_len, pool, cur_f
         seen[f] = True
         token = next_token(stamp, token)
         tok = np.int32(token)
-        s0 = rd_start[f]
         p0 = npool
-        for k in range(rd_len[f]):
-            x = pool[s0 + k]
-            new_pool[npool] = x
-            npool += 1
-            stamp[x] = tok
+        npool = take_readers(f, rd_start, rd_len, pool, new_pool, npool, stamp, tok)
         h = hops[f] + 1
         first = nd
         nd, npool, d = _hop(start, end, indices, cur_n, a, b, f, h, stamp, tok, out_r, out_f, out_h, nd, new_pool,
@@ -99,24 +94,6 @@ def _place(cur_f, a0, b0, rd_start, pool_base, src_pool, n_pool, dst_pool, out_b
         dst_r[out_base + i] = src_r[i]
         dst_f[out_base + i] = src_f[i]
         dst_h[out_base + i] = src_h[i]
-
-
-@nb.njit(cache=True)
-def _keep_rest(active, seen, rd_start, rd_len, pool, new_pool, npool):  # type: ignore[no-untyped-def]
-    # The active floods without a frontier entry keep their readers, behind every spread flood's.
-    rest = 0
-    for f in range(active.shape[0]):
-        if active[f] and not seen[f]:
-            rest += rd_len[f]
-    new_pool = _room(new_pool, npool + rest, npool)
-    for f in range(active.shape[0]):
-        if active[f] and not seen[f]:
-            s0 = rd_start[f]
-            rd_start[f] = npool
-            for k in range(rd_len[f]):
-                new_pool[npool] = pool[s0 + k]
-                npool += 1
-    return new_pool, npool
 
 
 def flood_ranges(cur_f: np.ndarray, threads: RowThreads) -> list[tuple[int, int]]:
@@ -186,7 +163,7 @@ def spread_threads(start: np.ndarray, end: np.ndarray, indices: np.ndarray, hops
 
     if len(ranges) > 1:
         threads.run(place, len(ranges) - 1, 1)
-    new_pool, npool = _keep_rest(active, seen, rd_start, rd_len, pool, new_pool, npool)
+    new_pool, npool = keep_rest(active, seen, rd_start, rd_len, pool, new_pool, npool)
     first[5] = new_pool
     # the next frontier: the deliveries of the floods that go on, in order; the floods that ended, in order
     segs = [scratch[p][6][: 3 * got[p][2]].reshape(-1, 3) for p in range(len(ranges))]

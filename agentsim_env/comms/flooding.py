@@ -39,6 +39,38 @@ def _room(a, need, keep):  # type: ignore[no-untyped-def]
     return b
 
 
+@nb.njit(cache=True, nogil=True)
+def take_readers(f, rd_start, rd_len, pool, new_pool, npool, stamp, tok):  # type: ignore[no-untyped-def]
+    """Copy flood ``f``'s reader list into ``new_pool`` at ``npool`` and stamp its readers with ``tok`` (they
+    have read it: the hop skips them); the new ``npool``."""
+    s0 = rd_start[f]
+    for k in range(rd_len[f]):
+        x = pool[s0 + k]
+        new_pool[npool] = x
+        npool += 1
+        stamp[x] = tok
+    return npool
+
+
+@nb.njit(cache=True, nogil=True)
+def keep_rest(active, seen, rd_start, rd_len, pool, new_pool, npool):  # type: ignore[no-untyped-def]
+    """The active floods without a frontier entry (not ``seen``) keep their readers, behind the spread floods'
+    in ``new_pool[:npool]``; ``(new_pool, npool)``."""
+    rest = 0
+    for f in range(active.shape[0]):
+        if active[f] and not seen[f]:
+            rest += rd_len[f]
+    new_pool = _room(new_pool, npool + rest, npool)
+    for f in range(active.shape[0]):
+        if active[f] and not seen[f]:
+            s0 = rd_start[f]
+            rd_start[f] = npool
+            for k in range(rd_len[f]):
+                new_pool[npool] = pool[s0 + k]
+                npool += 1
+    return new_pool, npool
+
+
 @nb.njit(cache=True)
 def _hop(
     start, end, indices, src, q_lo, q_hi, f, h, stamp, token, out_r, out_f, out_h, nd, pool, npool, keep
@@ -126,13 +158,8 @@ def spread(start, end, indices, hops, limit, active, rd_start, rd_len, pool, cur
                 )
             if npool + rd_len[f] + b0 + live > new_pool.shape[0]:
                 new_pool = _room(new_pool, npool + rd_len[f] + b0 + live, npool)
-        s0 = rd_start[f]
         p0 = npool
-        for k in range(rd_len[f]):
-            x = pool[s0 + k]
-            new_pool[npool] = x
-            npool += 1
-            stamp[x] = tok
+        npool = take_readers(f, rd_start, rd_len, pool, new_pool, npool, stamp, tok)
         rnd = 0
         lo = hi = 0
         while True:
@@ -180,19 +207,7 @@ def spread(start, end, indices, hops, limit, active, rd_start, rd_len, pool, cur
         rd_start[f] = p0
         rd_len[f] = npool - p0
         a = b
-    rest = 0
-    for f in range(cap):
-        if active[f] and not seen[f]:
-            rest += rd_len[f]
-    if npool + rest > new_pool.shape[0]:
-        new_pool = _room(new_pool, npool + rest, npool)
-    for f in range(cap):  # active floods without a frontier entry keep their readers
-        if active[f] and not seen[f]:
-            s0 = rd_start[f]
-            rd_start[f] = npool
-            for k in range(rd_len[f]):
-                new_pool[npool] = pool[s0 + k]
-                npool += 1
+    new_pool, npool = keep_rest(active, seen, rd_start, rd_len, pool, new_pool, npool)
     # one-hop mode: the new readers of the floods that go on relay at the next call
     nn = 0
     if not full:
