@@ -28,7 +28,7 @@ import sys
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TypeVar
+from typing import Any, TypeVar
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import common  # noqa: E402, I001  (first: pins the thread pools)
@@ -188,13 +188,8 @@ def thread_curve(n: int, counts: list[int], rounds: int) -> dict[int, float]:
 
 def plot_threads(curve: dict[int, float], n: int, path: str) -> None:
     """Speed-up over one thread against threads, with the ideal line."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     ks = sorted(curve)
-    fig, ax = plt.subplots(figsize=(5.0, 3.5))
+    fig, ax = _figure(5.0)
     ax.plot(ks, [curve[ks[0]] / curve[k] for k in ks], marker="o", label="measured")
     ax.plot(ks, ks, ls="--", color="grey", label="ideal")
     ax.set_xlabel("threads (num_threads)")
@@ -203,10 +198,7 @@ def plot_threads(curve: dict[int, float], n: int, path: str) -> None:
     ax.set_title(f"navigation full stack, 1x{n:,}, array API ({available_cores()} cores)")
     ax.grid(alpha=0.3)
     ax.legend()
-    fig.tight_layout()
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    _save(fig, path)
 
 
 def cold_start(quick: bool) -> list[Row]:
@@ -235,14 +227,29 @@ def scaling(sizes: list[int], rounds: int) -> dict[str, dict[int, float]]:
     return curve
 
 
-def plot_scaling(curve: dict[str, dict[int, float]], path: str) -> None:
-    """Draw microseconds per agent-step against agents (log x)."""
+def _figure(width: float) -> tuple[Any, Any]:
+    """A figure and its axes, 3.5 inches high, on the Agg backend."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(5.5, 3.5))
+    return plt.subplots(figsize=(width, 3.5))
+
+
+def _save(fig: Any, path: str) -> None:
+    """Write ``fig`` as a PNG at ``path`` (folders made) and close it."""
+    import matplotlib.pyplot as plt
+
+    fig.tight_layout()
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def plot_scaling(curve: dict[str, dict[int, float]], path: str) -> None:
+    """Draw microseconds per agent-step against agents (log x)."""
+    fig, ax = _figure(5.5)
     for k, pts in curve.items():
         ns = sorted(pts)
         ax.plot(ns, [pts[n] for n in ns], marker="o", label=k)
@@ -253,10 +260,7 @@ def plot_scaling(curve: dict[str, dict[int, float]], path: str) -> None:
     ax.set_title("navigation, array API, 1 thread")
     ax.grid(alpha=0.3)
     ax.legend()
-    fig.tight_layout()
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    _save(fig, path)
 
 
 def _timed(label: str, fn: Callable[[], T]) -> T:
