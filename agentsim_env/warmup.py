@@ -99,11 +99,11 @@ def _baselines(name: str, config: dict[str, Any], every: bool = True) -> None:
     _play(name, agentsim_env.make(name, **config), every)
 
 
-def _batched(name: str) -> None:
+def _batched(name: str, config: dict[str, Any] | None = None, num_threads: int = 1) -> None:
     """A few steps of ``BatchedEnv`` (training's vector env) with random actions, past an episode's end."""
     from agentsim_env.env.vector import BatchedEnv
 
-    batch = BatchedEnv(name, WARMUP_WORLDS, **_config(name))
+    batch = BatchedEnv(name, WARMUP_WORLDS, num_threads=num_threads, **(config or _config(name)))
     rng = np.random.default_rng(0)
     batch.reset(seed=0)
     for _ in range(WARMUP_STEPS + 1):  # one step past max_steps: the worlds reset automatically
@@ -111,19 +111,14 @@ def _batched(name: str) -> None:
 
 
 def _threaded(name: str, config: dict[str, Any]) -> None:
-    """A few steps over 2 threads with ranges of a few slots, so the kernels that only big worlds split (the
+    """``_batched`` over 2 threads with ranges of a few slots, so the kernels that only big worlds split (the
     range graph's and the overlay's joins, the delivery look-ups) compile here too."""
     from agentsim_env.core import threads
-    from agentsim_env.env.vector import BatchedEnv
 
     saved = threads.MIN_ROWS
     threads.MIN_ROWS = 4
     try:
-        batch = BatchedEnv(name, WARMUP_WORLDS, num_threads=2, **config)
-        rng = np.random.default_rng(0)
-        batch.reset(seed=0)
-        for _ in range(WARMUP_STEPS):
-            batch.step(rng.uniform(-1.0, 1.0, (batch.n_worlds, batch.n_agents, batch.act_dim)))
+        _batched(name, config, num_threads=2)
     finally:
         threads.MIN_ROWS = saved
 

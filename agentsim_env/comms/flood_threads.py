@@ -99,11 +99,12 @@ def _place(cur_f, a0, b0, rd_start, pool_base, src_pool, n_pool, dst_pool, out_b
 def flood_ranges(cur_f: np.ndarray, threads: RowThreads) -> list[tuple[int, int]]:
     """The frontier entries ``[0, n)`` cut into the pool's row ranges, each boundary moved to a flood's start."""
     n = int(cur_f.shape[0])
-    if threads.num_threads == 1 or len(threads.ranges(n)) == 1:
+    rows = threads.ranges(n)
+    if len(rows) == 1:
         return [(0, n)] if n else []
-    heads = np.flatnonzero(np.r_[True, cur_f[1:] != cur_f[:-1]]) if n else np.zeros(0, dtype=np.int64)
+    heads = np.flatnonzero(np.r_[True, cur_f[1:] != cur_f[:-1]])
     cuts = [0]
-    for _, hi in threads.ranges(n)[:-1]:
+    for _, hi in rows[:-1]:
         at = int(heads[np.searchsorted(heads, hi)]) if hi <= heads[-1] else n
         if at > cuts[-1]:
             cuts.append(at)

@@ -390,7 +390,7 @@ class Coordinator:
                 tr.actions += nbytes(calls[k][:2])
             else:  # written into the shard's region of the action segment: the call carries their count
                 calls[k] = (None, None, {**control, "act_n": n})
-                tr.actions += nbytes(slots) + sum(v.itemsize * v[0].size * n for v in parts.values() if len(v))
+                tr.actions += slots.nbytes + n * sum(v[0].nbytes for v in parts.values())
         self._objects = []
         taken: set[int] = set()
 

@@ -159,12 +159,10 @@ class Shard:
             out["info"] = {k: v[slots] for k, v in res.info.items()}
         if obs:
             self._sender_positions()
-            if self.obs_out is not None and slots.size <= self.obs_out.shape[0]:  # the driver's shared rows
-                self.flat_layout(self.scenario.observation_rows(self.world, slots), slots.size,
-                                 self.obs_out[: slots.size])  # fmt: skip
-                out["obs_n"] = int(slots.size)
-            else:
+            if self.obs_out is None:
                 out["obs"] = self.flat_rows(slots)
+            else:  # into this shard's region of the driver's segment
+                out["obs_n"] = int(self.flat_rows(slots, self.obs_out[: slots.size]).shape[0])
         if kin:
             mine = out["own"]
             out["pos"], out["vel"], out["heading"] = st.pos[mine], st.vel[mine], st.heading[mine]
@@ -253,9 +251,10 @@ class Shard:
         return DeliveryEvents(int(step), *(MessageLog.concat([getattr(r, f) for r in rounds])
                                            for f in ("sent", "delivered", "dropped")))  # fmt: skip
 
-    def flat_rows(self, slots: np.ndarray) -> np.ndarray:
-        """The flat observation rows of ``slots``, computed for those rows only (``Scenario.observation_rows``)."""
-        return self.flat_layout(self.scenario.observation_rows(self.world, slots), slots.size)
+    def flat_rows(self, slots: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """The flat observation rows of ``slots``, computed for those rows only (``Scenario.observation_rows``),
+        into ``out`` when given."""
+        return self.flat_layout(self.scenario.observation_rows(self.world, slots), slots.size, out)
 
     @staticmethod
     def flat_layout(parts: dict[str, np.ndarray], n: int, out: np.ndarray | None = None) -> np.ndarray:
