@@ -473,3 +473,37 @@ def test_property_small_graphs(case: tuple) -> None:
         assert origin not in got
     assert got == want
     assert ov.active_count == 0
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    seed=st.integers(0, 2**31 - 1),
+    lattice=st.sampled_from([0.0, 1.0, 2.5]),
+    cell=st.sampled_from([1.0, 5.0, 40.0]),
+    dense=st.booleans(),
+)
+def test_grid_scan_equals_pairs_path_with_ties(seed: int, lattice: float, cell: float, dense: bool) -> None:
+    """The grid scan's links (rows in order) and nearest neighbours equal the pairs path's, on positions snapped
+    to a lattice (many equal distances, so the nearest's tie rule decides) and in cells holding many slots
+    (dense: windows whose columns hold more than the scan copies unconditionally)."""
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(2, 160))
+    side = 15.0 if dense else 120.0
+    pos = np.column_stack([rng.uniform(0, side, n), rng.uniform(0, side, n), rng.uniform(0, 4, n)])
+    if lattice:
+        pos = np.round(pos / lattice) * lattice
+    online = rng.random(n) >= 0.15
+    world = rng.integers(0, 2, n)
+    ranges = np.where(rng.random(n) < 0.5, CONFIGURED, rng.uniform(1.0, CONFIGURED, n))
+    grid = _grid(pos, world, online, cell=cell)
+    graph = _stack_graph(n)
+    graph.set_grid(grid, pos, online, world, ranges, True)
+    start, end, indices = (a.copy() for a in graph.links(ranges))
+    near = graph.nearest().copy()
+    pi, pj, d = neighbor_pairs(grid, pos, world, CONFIGURED)  # the same grid: the same order
+    indptr, want_idx = _links_from_pairs(pi, pj, pos, online, world, ranges, n)
+    for s in range(n):
+        assert indices[start[s] : end[s]].tolist() == want_idx[indptr[s] : indptr[s + 1]].tolist(), s
+    by_pairs = RangeGraph(n, CONFIGURED, CONFIGURED)
+    by_pairs.set_pairs((pi, pj, d), pos, online, world)
+    np.testing.assert_array_equal(near, by_pairs.nearest())

@@ -109,18 +109,26 @@ def _graph_shift(items, lo, hi, start, end, base, src, n, dst):  # type: ignore[
         end[u] += base
 
 
+_W = 6  # entries copied unconditionally per window column and per row list (see _graph_rows)
+
+
 @nb.njit(cache=True, error_model="numpy", nogil=True)
 def _graph_rows(lo, hi, world, cell_start, items, ox, oy, cell, nx, ny, reach, pair_d, near_r,  # type: ignore[no-untyped-def]  # noqa: E501
                 start, end, near, indices, cand, d2c, sp, ok_link):  # fmt: skip
     # One window scan per indexed slot u at grid positions [lo, hi) (every pair is seen from both ends), in two
-    # phases. Phase 1 keeps the grid positions q of the candidates within reach, branch free (whether a
-    # candidate is in range is data, not something to predict) with one store each. Phase 2 walks those few:
-    # nearest, then the links in the order of the pairs path: lower slots found before u in grid order (A),
-    # every higher slot (B), then lower slots found after u (C), each in grid order. The window's cells come in
-    # grid order whatever its size, so a longer reach adds candidates but never reorders a row. A nearest
-    # neighbour must also lie within pair_d (<= reach), as with the pairs path: it does not depend on how far
-    # the links reach. The rows go to ``indices`` from 0 in grid order (start / end relative to it); a row
-    # depends only on its own window, so ranges may run on different threads, each with its own buffers.
+    # phases. Phase 1 lists the window's grid positions column by column, then keeps those within reach. Both
+    # are branch free where the data decide: a column holds 0 to a few candidates (at 10,000 agents ~2), so a
+    # loop over each column's candidates mispredicts its exit once a column; instead each column writes its
+    # first _W positions unconditionally and advances by how many are real (a longer column finishes in a loop
+    # that is rarely entered). Phase 2 walks the candidates in range: the nearest (one running minimum and the
+    # second smallest: the careful tie rule below runs only when they lie within 1e-9 of each other), then the
+    # links in the order of the pairs path: lower slots found before u in grid order (A), every higher slot
+    # (B), then lower slots found after u (C), each in grid order; B and C are copied behind A the same way as
+    # the columns. The window's cells come in grid order whatever its size, so a longer reach adds candidates
+    # but never reorders a row. A nearest neighbour must also lie within pair_d (<= reach), as with the pairs
+    # path: it does not depend on how far the links reach. The rows go to ``indices`` from 0 in grid order
+    # (start / end relative to it); a row depends only on its own window, so ranges may run on different
+    # threads, each with its own buffers.
     m = items.shape[0]
     r2 = reach * reach
     pair_d2 = pair_d * pair_d
@@ -130,10 +138,14 @@ def _graph_rows(lo, hi, world, cell_start, items, ox, oy, cell, nx, ny, reach, p
     # cells (the same cells): a reach far beyond the map must not overflow the integer cell index
     lo_x, lo_y = ox - cell, oy - cell
     hi_x, hi_y = ox + (nx + 1) * cell, oy + (ny + 1) * cell
-    if cand.shape[0] < 3 * m + 3:  # room for any window (<= m candidates) and the two row scratch lists
-        cand = _grown(cand, 3 * m + 3, 0)
+    # cand: the kept candidates [0, k), the B and C lists [k + _W, 3 (k + _W)), the window's positions after
+    # 3 (m + _W); any window holds <= m candidates
+    need = 4 * (m + _W) + 8
+    if cand.shape[0] < need:
+        cand = _grown(cand, need, 0)
     if d2c.shape[0] < m + 1:  # squared distance of each kept candidate
         d2c = np.empty(m + 1)
+    qs = cand[3 * (m + _W) + 4:]
     n = 0
     for idx in range(lo, hi):
         u = items[idx]
@@ -141,32 +153,49 @@ def _graph_rows(lo, hi, world, cell_start, items, ox, oy, cell, nx, ny, reach, p
         x0, y0 = cell_of(max(xu - reach, lo_x), max(yu - reach, lo_y), ox, oy, cell, nx, ny)
         x1, y1 = cell_of(min(xu + reach, hi_x), min(yu + reach, hi_y), ox, oy, cell, nx, ny)
         base0 = world[u] * nx
-        k = 0
+        nq = 0
         for a in range(x0, x1 + 1):
             base = (base0 + a) * ny
-            for q in range(cell_start[base + y0], cell_start[base + y1 + 1]):
-                dx = sp[q, 0] - xu
-                dy = sp[q, 1] - yu
-                dz = sp[q, 2] - zu
-                d2 = dx * dx + dy * dy + dz * dz
-                cand[k] = q
-                d2c[k] = d2
-                k += d2 <= r2
+            s0 = cell_start[base + y0]
+            e0 = cell_start[base + y1 + 1]
+            for t in range(_W):
+                qs[nq + t] = s0 + t
+            nq += min(e0 - s0, _W)
+            for q in range(s0 + _W, e0):
+                qs[nq] = q
+                nq += 1
+        k = 0
+        for c in range(nq):
+            q = qs[c]
+            dx = sp[q, 0] - xu
+            dy = sp[q, 1] - yu
+            dz = sp[q, 2] - zu
+            d2 = dx * dx + dy * dy + dz * dz
+            cand[k] = q
+            d2c[k] = d2
+            k += d2 <= r2
         # phase 2 over the k candidates in range (u itself among them, at q == idx); A goes straight to the
-        # row, B and C to cand[k:2k] and cand[2k:3k], branch free as well
-        if n + k > indices.shape[0]:
-            indices = _grown(indices, n + k, n)
+        # row, B and C to their lists
+        if n + k + _W > indices.shape[0]:
+            indices = _grown(indices, n + k + _W, n)
         lu = ok_link[idx]
-        m2 = np.inf  # smallest squared distance to another slot
+        m2 = np.inf  # smallest squared distance to another slot, its slot, and the second smallest
+        bv = -1
+        s2 = np.inf
         row0 = n
-        nb_ = k
-        nc = 2 * k
+        kb = k + _W
+        kc = 2 * (k + _W)
+        nb_ = kb
+        nc = kc
         for c in range(k):
             q = cand[c]
             v = items[q]
             d2 = d2c[c]
             other = q != idx
-            m2 = min(m2, d2 if other else np.inf)
+            dd = d2 if other else np.inf
+            s2 = min(s2, max(m2, dd))
+            bv = v if dd < m2 else bv
+            m2 = min(m2, dd)
             r = min(ru, sp[q, 3])
             link = other & lu & ok_link[q] & (d2 <= r * r)
             higher = v > u
@@ -176,26 +205,36 @@ def _graph_rows(lo, hi, world, cell_start, items, ox, oy, cell, nx, ny, reach, p
             n += link & ~higher & (q < idx)
             nb_ += link & higher
             nc += link & ~higher & (q > idx)
-        # nearest: the pairs path's rule (smallest sqrt distance, then lowest slot) among the few candidates
-        # whose d2 is within 1e-9 of the minimum; sqrt is monotone and correctly rounded, so no other candidate
-        # can round to the same or a smaller distance
+        # nearest: the pairs path's rule (smallest sqrt distance, then lowest slot); only candidates whose d2 is
+        # within 1e-9 of the minimum can round to the same distance (sqrt is monotone and correctly rounded),
+        # so with the second smallest beyond that the minimum's slot is the answer
         bslot = -1
         if m2 <= near_hi:
             lim = min(m2 * (1.0 + 1e-9), pair_d2)
-            best = np.inf
-            for c in range(k):
-                if d2c[c] <= lim and cand[c] != idx:
-                    v = items[cand[c]]
-                    d = np.sqrt(d2c[c])
-                    if d <= near_r and (d < best or (d == best and v < bslot)):
-                        best = d
-                        bslot = v
-        for c in range(k, nb_):
-            indices[n] = cand[c]
-            n += 1
-        for c in range(2 * k, nc):
-            indices[n] = cand[c]
-            n += 1
+            if s2 > m2 * (1.0 + 1e-9):
+                if m2 <= pair_d2 and np.sqrt(m2) <= near_r:
+                    bslot = bv
+            else:
+                best = np.inf
+                for c in range(k):
+                    if d2c[c] <= lim and cand[c] != idx:
+                        v = items[cand[c]]
+                        d = np.sqrt(d2c[c])
+                        if d <= near_r and (d < best or (d == best and v < bslot)):
+                            best = d
+                            bslot = v
+        nbk = nb_ - kb
+        for t in range(_W):
+            indices[n + t] = cand[kb + t]
+        for t in range(_W, nbk):
+            indices[n + t] = cand[kb + t]
+        n += nbk
+        nck = nc - kc
+        for t in range(_W):
+            indices[n + t] = cand[kc + t]
+        for t in range(_W, nck):
+            indices[n + t] = cand[kc + t]
+        n += nck
         start[u] = row0
         near[u] = bslot
         end[u] = n
