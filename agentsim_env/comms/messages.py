@@ -188,41 +188,56 @@ def _push_kernel(lo, hi, valid, kind, sender, hops, created, payload, received, 
 
 
 @nb.njit(cache=True, inline="always")
-def _observe_row(s, r, valid, kind, sender, hops, created, payload, pos, step, pos_scale, age_h, hop_h, out):  # type: ignore[no-untyped-def]
-    # Slot s's inbox into row r of out; every output value is written once (the buffer may be reused).
+def _bound(v, lim):  # type: ignore[no-untyped-def]
+    # v clipped to [-lim, lim] as np.clip does it (NaN stays NaN)
+    if v > lim:
+        return lim
+    if v < -lim:
+        return -lim
+    return v
+
+
+@nb.njit(cache=True, inline="always", error_model="numpy")
+def _observe_row(s, r, valid, kind, sender, hops, created, payload, pos, step, pos_scale, age_h, hop_h, out, c0,  # type: ignore[no-untyped-def]  # noqa: E501
+                 lim):  # fmt: skip
+    # Slot s's inbox into row r of the 2D ``out`` from column c0 (message i at c0 + i F), each value clipped to
+    # [-lim, lim]; every output value is written once (the buffer may be reused).
     m = valid.shape[1]
     d = payload.shape[2]
-    f = out.shape[2]
+    f = FEATURES_PER_MESSAGE + d
     for i in range(m):
+        c = c0 + i * f
         if not valid[s, i]:
-            for c in range(f):
-                out[r, i, c] = 0.0
+            for x in range(f):
+                out[r, c + x] = 0.0
             continue
-        out[r, i, 0] = 1.0
+        out[r, c] = 1.0
         k = kind[s, i]
-        for c in range(1, 6):  # kinds 1..5 map to columns 1..5
-            out[r, i, c] = 1.0 if c == k else 0.0
+        for x in range(1, 6):  # kinds 1..5 map to columns 1..5
+            out[r, c + x] = 1.0 if x == k else 0.0
         q = sender[s, i]
         for a in range(3):
-            out[r, i, 6 + a] = (pos[q, a] - pos[s, a]) / pos_scale if q >= 0 else 0.0
-        out[r, i, 9] = min(max(hops[s, i], 0), hop_h) / hop_h
-        out[r, i, 10] = min(max(step - created[s, i], 0), age_h) / age_h
-        for c in range(d):
-            out[r, i, FEATURES_PER_MESSAGE + c] = payload[s, i, c]
+            out[r, c + 6 + a] = _bound((pos[q, a] - pos[s, a]) / pos_scale, lim) if q >= 0 else 0.0
+        out[r, c + 9] = min(max(hops[s, i], 0), hop_h) / hop_h
+        out[r, c + 10] = min(max(step - created[s, i], 0), age_h) / age_h
+        for x in range(d):
+            out[r, c + FEATURES_PER_MESSAGE + x] = _bound(payload[s, i, x], lim)
 
 
-@nb.njit(cache=True, nogil=True)
-def _observe_kernel(lo, hi, valid, kind, sender, hops, created, payload, pos, step, pos_scale, age_h, hop_h, out):  # type: ignore[no-untyped-def]  # noqa: E501
+@nb.njit(cache=True, nogil=True, error_model="numpy")  # no zero-division checks: every divisor is >= 1 or > 0
+def _observe_kernel(lo, hi, valid, kind, sender, hops, created, payload, pos, step, pos_scale, age_h, hop_h, out,  # type: ignore[no-untyped-def]  # noqa: E501
+                    c0, lim):  # fmt: skip
     for s in range(lo, hi):
-        _observe_row(s, s, valid, kind, sender, hops, created, payload, pos, step, pos_scale, age_h, hop_h, out)
+        _observe_row(s, s, valid, kind, sender, hops, created, payload, pos, step, pos_scale, age_h, hop_h, out, c0,
+                     lim)  # fmt: skip
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def _observe_rows_kernel(rows, valid, kind, sender, hops, created, payload, pos, step, pos_scale, age_h, hop_h,  # type: ignore[no-untyped-def]
                          out):  # fmt: skip
     for r in range(rows.shape[0]):
         _observe_row(rows[r], r, valid, kind, sender, hops, created, payload, pos, step, pos_scale, age_h, hop_h,
-                     out)  # fmt: skip
+                     out, 0, np.inf)  # fmt: skip
 
 
 class Inbox:
@@ -429,15 +444,26 @@ class Inbox:
         shape = (self.n_slots, self.size, self.n_features)
         if out is None:
             out = np.empty(shape, dtype=np.float32)
-        elif out.shape != shape or out.dtype != np.float32:
-            raise ValueError(f"out must be a float32 array of shape {shape}, got {out.dtype} {out.shape}")
+        elif out.shape != shape or out.dtype != np.float32 or not out.flags.c_contiguous:
+            raise ValueError(f"out must be a C-contiguous float32 array of shape {shape}, got {out.dtype} {out.shape}")
+        self.observe_flat(pos, step, out.reshape(self.n_slots, -1), 0, np.inf)
+        return out
+
+    def observe_flat(self, pos: np.ndarray, step: int, out: np.ndarray, col: int, clip: float) -> None:
+        """``observe`` written into columns ``[col, col + M F)`` of a 2D float32 ``out`` ``(S, >= col + M F)``
+        (message ``i`` of a slot at ``col + i F``; any row stride), each value clipped to ``[-clip, clip]``
+        (``np.inf``: none): a flat observation row gets its inbox part without a copy.
+        """
+        if out.ndim != 2 or out.shape[0] != self.n_slots or out.dtype != np.float32 or out.strides[1] != 4:
+            raise ValueError(f"out must be float32 (S={self.n_slots}, width) with unit column stride")
+        if not 0 <= col <= out.shape[1] - self.size * self.n_features:
+            raise ValueError(f"col must leave {self.size * self.n_features} columns, got {col} of {out.shape[1]}")
         p = np.asarray(pos, dtype=np.float64)
         if p.shape != (self.n_slots, 3):
             raise ValueError(f"pos must have shape ({self.n_slots}, 3), got {p.shape}")
         args = (self.valid, self.kind, self.sender, self.hops, self.created, self.payload, p, int(step),
-                self.pos_scale, self.age_horizon, self.hop_horizon, out)  # fmt: skip
+                self.pos_scale, self.age_horizon, self.hop_horizon, out, int(col), float(clip))  # fmt: skip
         self.threads.run(lambda lo, hi, _: _observe_kernel(lo, hi, *args), self.n_slots)
-        return out
 
     def observe_rows(self, pos: np.ndarray, step: int, rows: np.ndarray) -> np.ndarray:
         """The features of the inboxes of ``rows`` only: ``(len(rows), M, F)`` float32, a fresh array (the rows
@@ -446,7 +472,8 @@ class Inbox:
         r = np.ascontiguousarray(rows, dtype=np.int64)
         out = np.empty((r.shape[0], self.size, self.n_features), dtype=np.float32)
         _observe_rows_kernel(r, self.valid, self.kind, self.sender, self.hops, self.created, self.payload, p,
-                             int(step), self.pos_scale, self.age_horizon, self.hop_horizon, out)  # fmt: skip
+                             int(step), self.pos_scale, self.age_horizon, self.hop_horizon,
+                             out.reshape(r.shape[0], -1))  # fmt: skip
         return out
 
     def clear(self, slots: np.ndarray | None = None) -> None:

@@ -60,7 +60,7 @@ N_CHANNELS = len(CHANNELS)
 COMM_HEADER = 3
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")  # n_agents >= 1: no zero-division checks
 def _decode(comm, acting, n_agents, max_hops):  # type: ignore[no-untyped-def]
     # The header columns of float64 actions, with the float64 operations of the numpy path in ``send_actions``
     # (same order and rounding: the same bins, receivers and hop limits bit for bit).
@@ -469,6 +469,16 @@ class CommsStack:
         """
         inbox = self.bus.inbox.observe(pos, step, out=self._inbox_out)
         return inbox, self._stats(slice(None))
+
+    def observe_flat(self, pos: np.ndarray, step: int, out: np.ndarray, col: int, clip: float) -> None:
+        """``observe`` written into columns ``[col, col + M F + 2)`` of a flat observation ``out`` ``(S, width)``
+        float32: the inbox features clipped to ``[-clip, clip]``, then the two counters (no intermediate arrays)."""
+        inbox = self.bus.inbox
+        width = inbox.size * inbox.n_features
+        inbox.observe_flat(pos, step, out, col, clip)
+        m = float(self.cfg.inbox_size)
+        for c, (now, before) in enumerate(((inbox.received, self._received0), (inbox.dropped, self._dropped0))):
+            out[:, col + width + c] = np.clip((now - before) / m, 0.0, 1.0)
 
     def observe_rows(self, pos: np.ndarray, step: int, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``observe`` for the slots ``rows`` only (fresh arrays): what a shard needs for its own agents."""

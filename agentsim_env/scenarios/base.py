@@ -89,6 +89,8 @@ class SlotState:
 
 _BYTES_PER_SLOT = 1200
 """Fixed bytes per slot of the memory estimate (agent state, motion primitives, grid, bookkeeping)."""
+INBOX_CLIP = 1e4
+"""Bound of the inbox features in observations: each is clipped to ``[-INBOX_CLIP, INBOX_CLIP]``."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -291,7 +293,7 @@ class Scenario(ABC, Generic[ConfigT]):
 
     def _bounds(self, world: World, part: str) -> tuple[float, float]:
         if part in ("inbox", "comms"):
-            return (-1e4, 1e4) if part == "inbox" else (0.0, 1.0)
+            return (-INBOX_CLIP, INBOX_CLIP) if part == "inbox" else (0.0, 1.0)
         for s in world.sensors:
             if s.name == part and s.obs_part is not None:
                 return s.obs_part.low, s.obs_part.high
@@ -326,7 +328,7 @@ class Scenario(ABC, Generic[ConfigT]):
                 out[s.name] = s.observe(world.readings[s.name])
         if world.comms is not None:
             inbox, stats = world.comms.observe(world.state.pos, max(world.tick - 1, 0))
-            out["inbox"] = np.clip(inbox, -1e4, 1e4, out=inbox)
+            out["inbox"] = np.clip(inbox, -INBOX_CLIP, INBOX_CLIP, out=inbox)
             out["comms"] = stats
         return out
 
@@ -343,7 +345,7 @@ class Scenario(ABC, Generic[ConfigT]):
                 out[s.name] = s.observe(world.readings[s.name])[slots]
         if world.comms is not None:
             inbox, stats = world.comms.observe_rows(world.state.pos, max(world.tick - 1, 0), slots)
-            out["inbox"] = np.clip(inbox, -1e4, 1e4, out=inbox)
+            out["inbox"] = np.clip(inbox, -INBOX_CLIP, INBOX_CLIP, out=inbox)
             out["comms"] = stats
         return out
 
@@ -353,7 +355,21 @@ class Scenario(ABC, Generic[ConfigT]):
         The parts of :meth:`observation` concatenated in layout order, into ``out`` when given (else a fresh
         array); a scenario may write them straight into the flat array instead (same values).
         """
-        return flat_parts(self.observation(world), world.state.n_slots, out, world.threads)
+        if world.comms is None:
+            return flat_parts(self.observation(world), world.state.n_slots, out, world.threads)
+        # the scenario's and sensors' parts copied in, the inbox and counters written in place (no copy of the
+        # largest part, no second pass to clip it)
+        parts = self.observe(world)
+        for s in world.sensors:
+            if s.obs_part is not None:
+                parts[s.name] = s.observe(world.readings[s.name])
+        n = world.state.n_slots
+        lead = sum(int(np.prod(p.shape[1:], dtype=np.int64)) for p in parts.values())
+        if out is None:
+            out = np.empty((n, lead + comms_width(world)), dtype=np.float32)
+        flat_parts(parts, n, out[:, :lead], world.threads)
+        write_comms(world, out, lead)
+        return out
 
     def state(self, world: World, w: int) -> np.ndarray:
         """Global state of world ``w``: per agent pos / 100, vel / 10, online, group / 10; then ``state_extra``."""
@@ -364,6 +380,21 @@ class Scenario(ABC, Generic[ConfigT]):
         )
         extra = np.asarray(self.state_extra(world, w), dtype=np.float64).ravel()
         return np.clip(np.concatenate([per.ravel(), extra]), -10.0, 10.0).astype(np.float32)
+
+
+def comms_width(world: World) -> int:
+    """Columns of the inbox and counter parts in a flat observation row (0 without comms)."""
+    if world.comms is None:
+        return 0
+    inbox = world.comms.bus.inbox
+    return inbox.size * inbox.n_features + 2
+
+
+def write_comms(world: World, out: np.ndarray, col: int) -> None:
+    """The inbox (clipped to ``INBOX_CLIP``) and counter parts of every slot into ``out[:, col:]``, as
+    :meth:`Scenario.observation` gives them (the flat layout ends with them)."""
+    assert world.comms is not None
+    world.comms.observe_flat(world.state.pos, max(world.tick - 1, 0), out, col, INBOX_CLIP)
 
 
 def flat_parts(parts: dict[str, np.ndarray], n_slots: int, out: np.ndarray | None = None,

@@ -48,7 +48,7 @@ import numpy as np
 from agentsim_env.core.pipeline import Sensor
 from agentsim_env.core.validation import check_float, check_int, check_pair
 from agentsim_env.motion import MotionLimits
-from agentsim_env.scenarios.base import Scenario, SlotState, StepResult, slot
+from agentsim_env.scenarios.base import Scenario, SlotState, StepResult, comms_width, slot, write_comms
 from agentsim_env.scenarios.config import ScenarioConfig
 from agentsim_env.scenarios.placement import jittered_points, obstacle_layout, placement_problem
 from agentsim_env.scenarios.rewards import RewardConfig, compose_rewards, task_partials
@@ -378,13 +378,18 @@ class NavigationScenario(Scenario[NavigationConfig]):
                 "task": out[:, SELF_DIM + 2 * k :]}  # fmt: skip
 
     def flat_observation(self, world: World, out: np.ndarray | None = None) -> np.ndarray:
-        """The flat layout written by the observation kernel straight into ``out`` or a fresh array (when the
-        three parts are all there is)."""
-        if world.comms is not None or any(s.obs_part is not None for s in world.sensors):
+        """The flat layout written straight into ``out`` or a fresh array: the three parts by the observation
+        kernel, then the inbox and counters (with comms), when no sensor adds a part."""
+        if any(s.obs_part is not None for s in world.sensors):
             return super().flat_observation(world, out)
+        lead = self._obs.shape[1]
         if out is None:
-            out = np.empty((world.state.n_slots, self._obs.shape[1]), dtype=np.float32)
-        return self._write_obs(world, out)
+            out = np.empty((world.state.n_slots, lead + comms_width(world)), dtype=np.float32)
+        if world.comms is None:
+            return self._write_obs(world, out)
+        self._write_obs(world, out[:, :lead])
+        write_comms(world, out, lead)
+        return out
 
     def _write_obs(self, world: World, out: np.ndarray) -> np.ndarray:
         """The self | lidar | task columns of every slot into ``out`` ``(S, obs_dim)`` float32."""
