@@ -473,7 +473,7 @@ class Inbox:
         out = np.empty((r.shape[0], self.size, self.n_features), dtype=np.float32)
         _observe_rows_kernel(r, self.valid, self.kind, self.sender, self.hops, self.created, self.payload, p,
                              int(step), self.pos_scale, self.age_horizon, self.hop_horizon,
-                             out.reshape(r.shape[0], -1))  # fmt: skip
+                             out.reshape(r.shape[0], self.size * self.n_features))  # fmt: skip
         return out
 
     def clear(self, slots: np.ndarray | None = None) -> None:
