@@ -507,3 +507,41 @@ def test_grid_scan_equals_pairs_path_with_ties(seed: int, lattice: float, cell: 
     by_pairs = RangeGraph(n, CONFIGURED, CONFIGURED)
     by_pairs.set_pairs((pi, pj, d), pos, online, world)
     np.testing.assert_array_equal(near, by_pairs.nearest())
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1))
+def test_one_hop_kernel_equals_the_general_spread(seed: int) -> None:
+    """The comms stack's one-hop kernel (``spread_hop``) gives what the general ``spread`` gives in one-hop mode:
+    deliveries in order, hops, ended floods, duplicates and the reader lists, over calls that start new floods
+    while older ones spread and slots go offline."""
+    import agentsim_env.comms.flooding as flooding
+    import agentsim_env.comms.overlay as overlay_mod
+
+    def general(*a):  # type: ignore[no-untyped-def]
+        *head, stamp, token, new_pool, out_r, out_f, out_h = a
+        return flooding.spread(*head, False, stamp, token, new_pool, out_r, out_f, out_h)
+
+    def run(patch: bool) -> list:
+        with pytest.MonkeyPatch.context() as mp:
+            if patch:
+                mp.setattr(overlay_mod, "spread_hop", general)
+            rng = np.random.default_rng(seed)
+            pos, online, world, comm_range = _scene(seed)
+            n = len(pos)
+            ov = Overlay(n, D, comm_range)
+            out = []
+            for step in range(6):
+                _start_random(ov, rng, online, int(rng.integers(0, 8)), step)
+                d = ov.advance(pos, online, world, _pairs(pos, world, 25.0), step)
+                out.append((d.receiver, d.flood, d.hops, d.origin, d.payload, ov.stats.duplicates, ov.active_count,
+                            [ov.readers(f).tolist() for f in range(ov.capacity) if ov.is_active(f)]))  # fmt: skip
+                online = online & (rng.random(n) > 0.05)
+            return out
+
+    for a, b in zip(run(False), run(True), strict=True):
+        for x, y in zip(a, b, strict=True):
+            if isinstance(x, np.ndarray):
+                np.testing.assert_array_equal(x, y)
+            else:
+                assert x == y

@@ -3,7 +3,7 @@
 Floods do not interact within a hop: a flood's new readers depend only on its frontier entries, its reader list
 and the links. The frontier (grouped by flood, in the frontier's flood order) is therefore cut into contiguous
 ranges of whole floods, and each range spreads on a thread of the env's pool with a stamp array, delivery
-buffers and a reader pool of its own (``spread_range``). The ranges' outputs are then put behind one another in
+buffers and a reader pool of its own (``flooding.hop_range``, the one-thread hop's kernel too). The ranges' outputs are then put behind one another in
 range order (each range copies its own part, on its own thread), which is the order one thread writes them in:
 deliveries, the next frontier, the floods that ended, and the reader lists of the new pool. The active floods
 without a frontier entry keep their readers at the end, as in ``spread``.
@@ -18,67 +18,8 @@ from typing import Any
 import numba as nb
 import numpy as np
 
-from agentsim_env.comms.flooding import _hop, _room, keep_rest, next_token, take_readers
+from agentsim_env.comms.flooding import _room, hop_range, keep_rest
 from agentsim_env.core.threads import RowThreads
-
-
-@nb.njit(cache=True, nogil=True)
-def spread_range(start, end, indices, hops, limit, rd_start, rd_len, pool, cur_f, cur_n, a0, b0, stamp, token,  # type: ignore[no-untyped-def]  # noqa: E501
-                 seen, new_pool, out_r, out_f, out_h, segs, fin):  # fmt: skip
-    """One hop of the floods of the frontier entries ``[a0, b0)`` (whole floods), into this range's buffers.
-
-    Deliveries go to ``out_*`` from 0, reader lists to ``new_pool`` from 0 (``rd_start`` of these floods
-    relative to it), and per flood one segment ``(first delivery, count, goes on)`` and, when it ended, its id
-    in ``fin``.
-
-    Returns:
-        ``(nd, npool, n_seg, nfin, dups, token, new_pool, out_r, out_f, out_h, segs, fin)``.
-    """
-    bound = 0
-    live = 0
-    n_fl = 0
-    for q in range(a0, b0):
-        bound += end[cur_n[q]] - start[cur_n[q]]
-        if q == a0 or cur_f[q] != cur_f[q - 1]:
-            live += rd_len[cur_f[q]]
-            n_fl += 1
-    out_r, out_f, out_h = _room(out_r, bound, 0), _room(out_f, bound, 0), _room(out_h, bound, 0)
-    new_pool = _room(new_pool, live + bound, 0)
-    segs = _room(segs, 3 * n_fl, 0)
-    fin = _room(fin, n_fl, 0)
-    nd = 0
-    npool = 0
-    n_seg = 0
-    nfin = 0
-    dups = 0
-    a = a0
-    while a < b0:
-        f = cur_f[a]
-        b = a
-        while b < b0 and cur_f[b] == f:
-            b += 1
-        seen[f] = True
-        token = next_token(stamp, token)
-        tok = np.int32(token)
-        p0 = npool
-        npool = take_readers(f, rd_start, rd_len, pool, new_pool, npool, stamp, tok)
-        h = hops[f] + 1
-        first = nd
-        nd, npool, d = _hop(start, end, indices, cur_n, a, b, f, h, stamp, tok, out_r, out_f, out_h, nd, new_pool,
-                            npool, h < limit[f])  # fmt: skip
-        dups += d
-        hops[f] = h
-        ends = nd == first or h >= limit[f]
-        segs[3 * n_seg], segs[3 * n_seg + 1], segs[3 * n_seg + 2] = first, nd - first, not ends
-        n_seg += 1
-        if ends:  # its new readers keep the message but do not relay it; its reader list goes
-            fin[nfin] = f
-            nfin += 1
-            npool = p0
-        rd_start[f] = p0
-        rd_len[f] = npool - p0
-        a = b
-    return nd, npool, n_seg, nfin, dups, token, new_pool, out_r, out_f, out_h, segs, fin
 
 
 @nb.njit(cache=True, nogil=True)
@@ -119,8 +60,8 @@ def spread_threads(start: np.ndarray, end: np.ndarray, indices: np.ndarray, hops
                    scratch: list[list[Any]], new_pool: np.ndarray) -> tuple[Any, ...]:  # fmt: skip
     """``flooding.spread`` in one-hop mode over ``ranges`` (``flood_ranges``'s; same values as ``spread``).
 
-    ``scratch`` holds each range's ``[stamp, token, out_r, out_f, out_h, pool, segs, fin]`` between calls (grown
-    here); range 0's delivery buffers and ``new_pool`` become the returned ones.
+    ``scratch`` holds each range's ``[stamp, token, out_r, out_f, out_h, pool, nxt_f, nxt_n, fin]`` between calls
+    (grown here); range 0's delivery buffers and ``new_pool`` become the returned ones.
 
     Returns:
         ``(nxt_f, nxt_n, nd, fin, dups, npool, new_pool, out_r, out_f, out_h)``, as ``spread`` without the token.
@@ -131,7 +72,7 @@ def spread_threads(start: np.ndarray, end: np.ndarray, indices: np.ndarray, hops
     e = np.zeros(0, dtype=np.int64)
     while len(scratch) < len(ranges):
         scratch.append([np.zeros(start.shape[0], dtype=np.int32), 0, e, e.copy(), np.zeros(0, dtype=np.int32),
-                        e.copy(), e.copy(), e.copy()])  # fmt: skip
+                        e.copy(), e.copy(), e.copy(), e.copy()])  # fmt: skip
     scratch[0][5] = new_pool
     got: list[tuple[int, ...]] = [(0, 0, 0, 0, 0)] * len(ranges)
 
@@ -140,11 +81,11 @@ def spread_threads(start: np.ndarray, end: np.ndarray, indices: np.ndarray, hops
         if sc[0].shape[0] != start.shape[0]:
             sc[0] = np.zeros(start.shape[0], dtype=np.int32)
         a0, b0 = ranges[part]
-        nd, npool, n_seg, nfin, dups, sc[1], sc[5], sc[2], sc[3], sc[4], sc[6], sc[7] = spread_range(
+        nd, npool, nn, nfin, dups, sc[1], sc[5], sc[2], sc[3], sc[4], sc[6], sc[7], sc[8] = hop_range(
             start, end, indices, hops, limit, rd_start, rd_len, pool, cur_f, cur_n, a0, b0, sc[0], sc[1], seen,
-            sc[5], sc[2], sc[3], sc[4], sc[6], sc[7],
+            sc[5], sc[2], sc[3], sc[4], sc[6], sc[7], sc[8],
         )  # fmt: skip
-        got[part] = (nd, npool, n_seg, nfin, dups)
+        got[part] = (nd, npool, nn, nfin, dups)
 
     threads.run(run, len(ranges), 1)
     nds = np.array([g[0] for g in got], dtype=np.int64)
@@ -166,11 +107,10 @@ def spread_threads(start: np.ndarray, end: np.ndarray, indices: np.ndarray, hops
         threads.run(place, len(ranges) - 1, 1)
     new_pool, npool = keep_rest(active, seen, rd_start, rd_len, pool, new_pool, npool)
     first[5] = new_pool
-    # the next frontier: the deliveries of the floods that go on, in order; the floods that ended, in order
-    segs = [scratch[p][6][: 3 * got[p][2]].reshape(-1, 3) for p in range(len(ranges))]
-    goes = np.concatenate([np.repeat(s[:, 2], s[:, 1]) for s in segs]).astype(bool)
-    nxt_f, nxt_n = out_f[:nd][goes], out_r[:nd][goes]
-    fin = np.concatenate([scratch[p][7][: got[p][3]] for p in range(len(ranges))])
+    # the next frontier and the floods that ended, in range order (fresh arrays: the frontier is kept)
+    nxt_f = np.concatenate([scratch[p][6][: got[p][2]] for p in range(len(ranges))])
+    nxt_n = np.concatenate([scratch[p][7][: got[p][2]] for p in range(len(ranges))])
+    fin = np.concatenate([scratch[p][8][: got[p][3]] for p in range(len(ranges))])
     dups = sum(g[4] for g in got)
     return nxt_f, nxt_n, nd, fin, dups, npool, new_pool, out_r, out_f, out_h
 

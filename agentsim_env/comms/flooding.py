@@ -245,3 +245,97 @@ def spread(start, end, indices, hops, limit, active, rd_start, rd_len, pool, cur
         order = np.argsort(fin_round[:nfin], kind="mergesort")
         fin[:nfin] = fin[:nfin][order]
     return nxt_f, nxt_n, nd, fin[:nfin].copy(), dups, token, npool, new_pool, out_r, out_f, out_h
+
+
+@nb.njit(cache=True, nogil=True)
+def hop_range(start, end, indices, hops, limit, rd_start, rd_len, pool, cur_f, cur_n, a0, b0, stamp, token,  # type: ignore[no-untyped-def]  # noqa: E501
+              seen, new_pool, out_r, out_f, out_h, nxt_f, nxt_n, fin):  # fmt: skip
+    """One hop of the floods of the frontier entries ``[a0, b0)`` (whole floods, grouped by flood), one-hop mode.
+
+    Per flood, in frontier order: its readers are copied to ``new_pool`` and stamped, the edges leaving its
+    frontier entries are walked (branch free: every neighbour is written at the end of ``out_r`` and kept only if
+    it had not read the flood; about 4 in 5 have at hop 2), and its new readers either join its reader list and
+    the next frontier (it goes on) or it ends (``fin``; its new readers keep the message but do not relay it).
+    Outputs go to the buffers from 0 (``rd_start`` of these floods relative to ``new_pool``); buffers too small
+    are grown. ``spread_hop`` runs it over the whole frontier, ``flood_threads`` over ranges on threads.
+
+    Returns:
+        ``(nd, npool, nn, nfin, dups, token, new_pool, out_r, out_f, out_h, nxt_f, nxt_n, fin)``: deliveries,
+        live pool entries, next-frontier entries and ended floods written, duplicate copies, the last token, and
+        the (possibly grown) buffers.
+    """
+    bound = 0
+    live = 0
+    n_fl = 0
+    for q in range(a0, b0):
+        bound += end[cur_n[q]] - start[cur_n[q]]
+        if q == a0 or cur_f[q] != cur_f[q - 1]:
+            live += rd_len[cur_f[q]]
+            n_fl += 1
+    out_r, out_f, out_h = _room(out_r, bound, 0), _room(out_f, bound, 0), _room(out_h, bound, 0)
+    nxt_f, nxt_n = _room(nxt_f, bound, 0), _room(nxt_n, bound, 0)
+    new_pool = _room(new_pool, live + bound, 0)
+    fin = _room(fin, n_fl, 0)
+    nd = 0
+    npool = 0
+    nn = 0
+    nfin = 0
+    edges = 0
+    a = a0
+    while a < b0:
+        f = cur_f[a]
+        b = a
+        while b < b0 and cur_f[b] == f:
+            b += 1
+        seen[f] = True
+        token = next_token(stamp, token)
+        tok = np.int32(token)
+        p0 = npool
+        npool = take_readers(f, rd_start, rd_len, pool, new_pool, npool, stamp, tok)
+        h = hops[f] + 1
+        hops[f] = h
+        first = nd
+        for q in range(a, b):
+            u = cur_n[q]
+            e0 = end[u]
+            edges += e0 - start[u]
+            for p in range(start[u], e0):
+                v = indices[p]
+                fresh = stamp[v] != tok
+                stamp[v] = tok
+                out_r[nd] = v
+                nd += fresh
+        for k in range(first, nd):
+            out_f[k] = f
+            out_h[k] = h
+        if nd > first and h < limit[f]:  # it goes on: the new readers join its list and relay next time
+            for k in range(first, nd):
+                v = out_r[k]
+                new_pool[npool] = v
+                nxt_f[nn] = f
+                nxt_n[nn] = v
+                npool += 1
+                nn += 1
+        else:
+            fin[nfin] = f
+            nfin += 1
+            npool = p0  # its reader list is no longer needed
+        rd_start[f] = p0
+        rd_len[f] = npool - p0
+        a = b
+    return nd, npool, nn, nfin, edges - nd, token, new_pool, out_r, out_f, out_h, nxt_f, nxt_n, fin
+
+
+@nb.njit(cache=True)
+def spread_hop(start, end, indices, hops, limit, active, rd_start, rd_len, pool, cur_f, cur_n, stamp, token,  # type: ignore[no-untyped-def]  # noqa: E501
+               new_pool, out_r, out_f, out_h):  # fmt: skip
+    """``spread`` in one-hop mode (the same results and return values) through ``hop_range``: the comms stack's
+    hop on one thread."""
+    ncur = cur_f.shape[0]
+    seen = np.zeros(active.shape[0], dtype=np.bool_)
+    e = np.empty(0, dtype=np.int64)
+    nd, npool, nn, nfin, dups, token, new_pool, out_r, out_f, out_h, nxt_f, nxt_n, fin = hop_range(
+        start, end, indices, hops, limit, rd_start, rd_len, pool, cur_f, cur_n, 0, ncur, stamp, token, seen,
+        new_pool, out_r, out_f, out_h, e, e.copy(), e.copy())
+    new_pool, npool = keep_rest(active, seen, rd_start, rd_len, pool, new_pool, npool)
+    return nxt_f[:nn], nxt_n[:nn], nd, fin[:nfin], dups, token, npool, new_pool, out_r, out_f, out_h

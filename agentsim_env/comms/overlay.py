@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 
 from agentsim_env.comms.flood_threads import flood_ranges, gather_deliveries, spread_threads
-from agentsim_env.comms.flooding import spread
+from agentsim_env.comms.flooding import spread, spread_hop
 from agentsim_env.comms.rangegraph import _links_from_pairs
 from agentsim_env.core.threads import RowThreads
 
@@ -426,13 +426,18 @@ class Overlay:
                 self._pool, self._front_f, self._front_n, self.threads, ranges, self._tscratch, spare,
             )  # fmt: skip
             self._scratch = (stamp, token, self._pool, *self._scratch[3:])
-        else:
+        elif self.full_propagation:
             nf, nn, nd, fin, dups, token, n_pool, pool, out_r, out_f, out_h = spread(
                 start, end, indices, self._hops, self._limit, self._active, self._rd_start, self._rd_len,
-                self._pool, self._front_f, self._front_n, self.full_propagation, stamp, token, spare, out_r, out_f,
-                out_h,
+                self._pool, self._front_f, self._front_n, True, stamp, token, spare, out_r, out_f, out_h,
             )  # fmt: skip
             self._scratch = (stamp, token, self._pool, out_r, out_f, out_h)  # the old pool is the next spare
+        else:
+            nf, nn, nd, fin, dups, token, n_pool, pool, out_r, out_f, out_h = spread_hop(
+                start, end, indices, self._hops, self._limit, self._active, self._rd_start, self._rd_len,
+                self._pool, self._front_f, self._front_n, stamp, token, spare, out_r, out_f, out_h,
+            )  # fmt: skip
+            self._scratch = (stamp, token, self._pool, out_r, out_f, out_h)
         self._pool, self._n_pool = pool, n_pool
         self._front_f, self._front_n = nf, nn
         if len(ranges) > 1:  # the per-delivery look-ups on the threads too
