@@ -240,6 +240,12 @@ class Overlay:
         return self._totals
 
     @property
+    def payload_table(self) -> np.ndarray:
+        """``(capacity, D)`` float32: row ``f`` is flood ``f``'s payload while it is active, and until the next
+        ``start`` for the floods that ended in the latest ``advance`` (an internal buffer: read, do not keep)."""
+        return self._payload
+
+    @property
     def frontier_size(self) -> int:
         """(flood, slot) entries that relay at the next ``advance`` (0: that call has nothing to spread)."""
         return int(self._front_f.shape[0])
