@@ -223,3 +223,38 @@ def test_run_step_scores_from_the_partials_of_one_part(monkeypatch: pytest.Monke
     parts = _actions(scenario, world, np.random.default_rng(2))
     run_step(scenario, world, parts, world.state.online.copy())
     assert len(seen) == 1 and seen[0].all()
+
+
+@given(st.integers(0, 2**32 - 1), st.integers(2, 5))
+@settings(max_examples=60, deadline=None)
+def test_group_sums_and_rewards_do_not_depend_on_the_thread_count(seed: int, k: int) -> None:
+    """The partial sums and the composed rewards over slot ranges on threads equal the one-thread ones, with
+    non-finite values and values past the fixed point's range among them."""
+    from agentsim_env.core import threads as threads_mod
+    from agentsim_env.core.threads import RowThreads
+
+    rng = np.random.default_rng(seed)
+    s, b, g = int(rng.integers(0, 200)), int(rng.integers(1, 3)), int(rng.integers(1, 4))
+    task = rng.normal(size=s) * 10.0 ** rng.integers(-8, 9, s)
+    odd = rng.random(s)
+    task[odd < 0.05] = np.nan
+    task[(odd >= 0.05) & (odd < 0.08)] = np.inf
+    task[(odd >= 0.08) & (odd < 0.1)] = 4.0 * MAX_TASK_VALUE
+    group = rng.integers(-1, g + 2, s)
+    world = rng.integers(0, b, s)
+    acting = rng.random(s) < 0.8
+    cfg = RewardConfig(group_share=0.5, collision_penalty=0.3, energy_weight=0.01)
+    kw = dict(group=group, world=world, acting=acting, n_groups=g, n_worlds=b, collided=(odd < 0.3) * 1.0,
+              energy=rng.random(s))  # fmt: skip
+    one_sums = task_partials(task, group, world, acting, g, b)
+    one = compose_rewards(cfg, task, **kw)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(threads_mod, "MIN_ROWS", 3)
+        many_sums = task_partials(task, group, world, acting, g, b, RowThreads(k))
+        many = compose_rewards(cfg, task, threads=RowThreads(k), **kw)
+    assert one_sums.keys() == many_sums.keys()
+    for name in one_sums:
+        np.testing.assert_array_equal(one_sums[name], many_sums[name], err_msg=name)
+    np.testing.assert_array_equal(one, many)
+    ref_kw = {k: v for k, v in kw.items() if k != "n_worlds"}
+    np.testing.assert_array_equal(one, compose_rewards_reference(cfg, task, **ref_kw))

@@ -239,11 +239,11 @@ class Overlay:
         """Counters summed over every ``advance`` since construction or ``reset``."""
         return self._totals
 
-    @property
-    def payload_table(self) -> np.ndarray:
-        """``(capacity, D)`` float32: row ``f`` is flood ``f``'s payload while it is active, and until the next
-        ``start`` for the floods that ended in the latest ``advance`` (an internal buffer: read, do not keep)."""
-        return self._payload
+    def payload_rows(self, out: Deliveries) -> tuple[np.ndarray, np.ndarray]:
+        """``(table, rows)``: the payload of delivery ``j`` of the latest ``advance``'s ``out`` is ``table[rows[j]]``
+        (the flood table by flood id: a few rows, cache resident, where ``out.payload`` is a copy per delivery).
+        Valid until the next ``start`` (an internal buffer: read, do not keep)."""
+        return self._payload, out.flood
 
     @property
     def frontier_size(self) -> int:

@@ -454,9 +454,9 @@ class CommsStack:
             ov = self.overlay.advance_graph(*_NO_LINKS)
         k = len(ov)
         if k:
-            # payload rows read from the flood table by flood id (cache resident), not from the deliveries' copy
+            # payload rows read from the flood table by flood id where the overlay has one (cache resident)
             pushes.append((ov.receiver, np.broadcast_to(_OVERLAY_KIND, (k,)), ov.origin, ov.hops, ov.created,
-                           self.overlay.payload_table, ov.flood))  # fmt: skip
+                           *self.overlay.payload_rows(ov)))  # fmt: skip
         self.bus.inbox.push_batches(pushes)  # bus deliveries, then the overlay's: one pass over the inboxes
         self.events = CommsEvents(bus_ev, ov, self.sent.copy(), self.bus.take_answers())
         return self.events

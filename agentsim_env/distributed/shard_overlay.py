@@ -13,6 +13,8 @@ import numpy as np
 from agentsim_env.comms.overlay import Deliveries, Overlay, OverlayStats
 from agentsim_env.distributed.floods import FloodEntries, PartFloods
 
+_NO_ROWS = np.zeros(0, dtype=np.int64)  # Inbox.push_rows: delivery j takes payload row j
+
 
 class ShardOverlay:
     """Overlay floods of one shard (see the module docstring).
@@ -95,3 +97,7 @@ class ShardOverlay:
         self._last = OverlayStats(int(st.started), int(st.delivered), int(st.duplicates), 0)
         self._totals = self._totals + self._last
         return Deliveries(d.receiver, np.full(len(d), -1, dtype=np.int64), d.origin, d.hops, d.created, d.payload)
+
+    def payload_rows(self, out: Deliveries) -> tuple[np.ndarray, np.ndarray]:
+        """``(out.payload, [])``: a shard's deliveries carry their payloads (no flood table by flood id)."""
+        return out.payload, _NO_ROWS

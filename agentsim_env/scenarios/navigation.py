@@ -77,12 +77,11 @@ def _scored_rows(world: World) -> tuple[np.ndarray, bool]:
 # The two kernels below replace a few dozen small numpy passes per step (the fixed cost that dominated small
 # worlds). They evaluate the same float64 expressions in the same order as the numpy statements they replace
 # (error_model="numpy": x / 0 gives inf like numpy), so observations and rewards are unchanged bit for bit.
-@nb.njit(cache=True, error_model="numpy")
-def _task_kernel(goal, pos, prev_dist, acting, online, goal_radius, bonus, rows, every):  # type: ignore[no-untyped-def]
-    # The task values alone, changing no state (the group partial sums read them before the scoring); every slot
-    # when ``every``, else only ``rows`` (the others 0: a shard scores its own agents only).
-    task = np.empty(pos.shape[0]) if every else np.zeros(pos.shape[0])
-    for r in range(pos.shape[0] if every else rows.shape[0]):
+@nb.njit(cache=True, error_model="numpy", nogil=True)
+def _task_kernel(lo, hi, goal, pos, prev_dist, acting, online, goal_radius, bonus, rows, every, task):  # type: ignore[no-untyped-def]  # noqa: E501
+    # The task values alone, changing no state (the group partial sums read them before the scoring), of the slots
+    # [lo, hi) when ``every``, else of rows[lo:hi] (the caller zeroes the others: a shard scores its own agents).
+    for r in range(lo, hi):
         s = r if every else rows[r]
         # the task expression of _score_kernel, written out in both: a helper returning (d, arrived, task) per
         # slot kept the loop from vectorizing (3.8 ms instead of 0.22 at 100,000 slots)
@@ -90,22 +89,14 @@ def _task_kernel(goal, pos, prev_dist, acting, online, goal_radius, bonus, rows,
         d = np.sqrt(dx * dx + dy * dy + dz * dz)
         arr = acting[s] and online[s] and d <= goal_radius
         task[s] = (prev_dist[s] - d if acting[s] else 0.0) + bonus * (1.0 if arr else 0.0)
-    return task
 
 
-@nb.njit(cache=True, error_model="numpy")
-def _score_kernel(
-    goal, pos, vel, prev_dist, arrived_acc, energy, acting, online, went, goal_radius, bonus, dt, rows, every
-):  # type: ignore[no-untyped-def]
-    # Every slot when ``every``, else only ``rows`` (a shard's own slots; the others' outputs are 0 and their
-    # state is left alone: a slot's state travels with its agent when it changes shards).
-    s_n = pos.shape[0]
-    dist = np.empty(s_n) if every else np.zeros(s_n)
-    arrived = np.zeros(s_n, dtype=np.bool_)
-    task = np.empty(s_n) if every else np.zeros(s_n)
-    collided = np.zeros(s_n)
-    effort = np.empty(s_n) if every else np.zeros(s_n)
-    for r in range(s_n if every else rows.shape[0]):
+@nb.njit(cache=True, error_model="numpy", nogil=True)
+def _score_kernel(lo, hi, goal, pos, vel, prev_dist, arrived_acc, energy, acting, online, goal_radius, bonus, dt,  # type: ignore[no-untyped-def]  # noqa: E501
+                  rows, every, dist, arrived, task, effort):  # fmt: skip
+    # The slots [lo, hi) when ``every``, else rows[lo:hi] (a shard's own slots; the caller zeroes the others'
+    # outputs and their state is left alone: a slot's state travels with its agent when it changes shards).
+    for r in range(lo, hi):
         s = r if every else rows[r]
         # slot s's distance to its goal, arrival and task value (the expression of _task_kernel)
         dx, dy, dz = goal[s, 0] - pos[s, 0], goal[s, 1] - pos[s, 1], goal[s, 2] - pos[s, 2]
@@ -119,9 +110,6 @@ def _score_kernel(
         e = ((vel[s, 0] * vel[s, 0] + vel[s, 2] * vel[s, 2]) + vel[s, 1] * vel[s, 1]) * dt
         effort[s] = e
         energy[s] += e if acting[s] else 0.0
-    for q in range(went.shape[0]):
-        collided[went[q]] = 1.0
-    return dist, arrived, task, collided, effort
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
@@ -322,22 +310,29 @@ class NavigationScenario(Scenario[NavigationConfig]):
         c, st, t = self.config, world.state, world.task
         if not c.reward.group_share:
             return {}
-        task = _task_kernel(t.goal, st.pos, t.prev_dist, acting, st.online, float(c.goal_radius),
-                            float(c.arrival_bonus), *_scored_rows(world))  # fmt: skip
-        return task_partials(task, st.group, st.world_id, acting & mine, int(c.n_groups or 1), world.n_worlds)
+        rows, every = _scored_rows(world)
+        n = st.n_slots
+        task = np.empty(n) if every else np.zeros(n)  # rows not scored stay 0
+        args = (t.goal, st.pos, t.prev_dist, acting, st.online, float(c.goal_radius), float(c.arrival_bonus), rows,
+                every, task)  # fmt: skip
+        world.threads.run(lambda lo, hi, _: _task_kernel(lo, hi, *args), n if every else rows.shape[0])
+        return task_partials(task, st.group, st.world_id, acting & mine, int(c.n_groups or 1), world.n_worlds,
+                             world.threads)  # fmt: skip
 
     def score(
         self, world: World, events: StepEvents, acting: np.ndarray, totals: dict[str, np.ndarray] | None = None
     ) -> StepResult:
         """Progress, arrival, collisions and energy -> rewards and terminations (group share from ``totals``)."""
         c, st, t = self.config, world.state, world.task
-        went = events.went_offline  # always writable: one kernel signature whether or not anyone went offline
-        went = went if went.flags.writeable else went.copy()
         rows, every = _scored_rows(world)
-        dist, arrived, task, collided, effort = _score_kernel(
-            t.goal, st.pos, st.vel, t.prev_dist, t.arrived, st.energy, acting, st.online, went,
-            float(c.goal_radius), float(c.arrival_bonus), float(world.config.dt), rows, every,
-        )  # fmt: skip
+        n = st.n_slots
+        new = np.empty if every else np.zeros  # rows not scored stay 0
+        dist, task, effort = new(n), new(n), new(n)
+        arrived, collided = np.zeros(n, dtype=np.bool_), np.zeros(n)
+        args = (t.goal, st.pos, st.vel, t.prev_dist, t.arrived, st.energy, acting, st.online, float(c.goal_radius),
+                float(c.arrival_bonus), float(world.config.dt), rows, every, dist, arrived, task, effort)  # fmt: skip
+        world.threads.run(lambda lo, hi, _: _score_kernel(lo, hi, *args), n if every else rows.shape[0])
+        collided[events.went_offline] = 1.0
         # the state keeps its array (resets write it); dist goes out as info
         if every:
             np.copyto(t.prev_dist, dist)
@@ -346,8 +341,9 @@ class NavigationScenario(Scenario[NavigationConfig]):
         rewards = compose_rewards(c.reward, task, group=st.group, world=st.world_id, acting=acting,
                                   n_groups=int(c.n_groups or 1), collided=collided, energy=effort,
                                   messages_sent=None if world.comms is None else world.comms.sent,
-                                  totals=totals, n_worlds=world.n_worlds)  # fmt: skip
-        info = {"arrived": arrived.astype(np.int8), "collided": collided.astype(np.int8), "distance": dist}
+                                  totals=totals, n_worlds=world.n_worlds, threads=world.threads)  # fmt: skip
+        info: dict[str, np.ndarray] = {"arrived": arrived.astype(np.int8), "collided": collided.astype(np.int8),
+                                       "distance": dist}  # fmt: skip
         return StepResult(rewards, arrived, info)
 
     def observe(self, world: World) -> dict[str, np.ndarray]:

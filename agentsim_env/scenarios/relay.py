@@ -165,7 +165,8 @@ class RelayScenario(Scenario[RelayConfig]):
         size = world.n_worlds * c.n_groups
         out = {"pending": np.bincount(self._key(world)[pending], minlength=size).astype(np.int64)}
         if c.reward.group_share:
-            out.update(task_partials(task, st.group, st.world_id, acting & mine, c.n_groups, world.n_worlds))
+            out.update(task_partials(task, st.group, st.world_id, acting & mine, c.n_groups, world.n_worlds,
+                                     world.threads))
         return out
 
     def score(
@@ -191,7 +192,8 @@ class RelayScenario(Scenario[RelayConfig]):
         rewards = compose_rewards(c.reward, task, group=st.group, world=st.world_id, acting=acting,
                                   n_groups=c.n_groups, collided=collided, energy=effort,
                                   messages_sent=world.comms.sent,
-                                  totals=totals if c.reward.group_share else None, n_worlds=world.n_worlds)  # fmt: skip
+                                  totals=totals if c.reward.group_share else None, n_worlds=world.n_worlds,
+                                  threads=world.threads)  # fmt: skip
         info = {"arrived": arrived.astype(np.int8), "collided": collided.astype(np.int8), "distance": dist,
                 "scout": t.scout.astype(np.int8)}  # fmt: skip
         return StepResult(rewards, arrived | scout_done, info)

@@ -20,7 +20,10 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
+from agentsim_env.core.threads import RowThreads
 from agentsim_env.core.validation import check_float, coerce_fields
+
+_ONE_THREAD = RowThreads(1)
 
 
 @dataclass(frozen=True)
@@ -61,29 +64,42 @@ MAX_TASK_VALUE = 2.0**40
 # With |v| <= MAX_TASK_VALUE = 2**40 neither word can overflow for groups of up to 2**22 (hi) and 2**31 (lo)
 # members; a larger finite value is an error that names it. Non-finite values are counted apart (NaN, +inf, -inf),
 # so a group mean over them is what a float sum gives (NaN, or the infinity) and check_finite still names it.
-@nb.njit(cache=True)
-def _partials_kernel(task, key, mask, size, bound):  # type: ignore[no-untyped-def]
-    hi = np.zeros(size, dtype=np.int64)
-    lo = np.zeros(size, dtype=np.int64)
-    cnt = np.zeros(size, dtype=np.int64)
-    bad = np.zeros((3, size), dtype=np.int64)  # NaN, +inf, -inf
-    for s in range(task.shape[0]):
+@nb.njit(cache=True, nogil=True)
+def _max_key(lo, hi, group, world, mask, n_worlds):  # type: ignore[no-untyped-def]
+    # The largest group_keys value among the masked slots [lo, hi) (-1: none).
+    top = -1
+    for s in range(lo, hi):
+        if mask[s]:
+            g = group[s]
+            top = max(top, (g if g >= 0 else 0) * n_worlds + world[s])
+    return top
+
+
+@nb.njit(cache=True, nogil=True)
+def _partials_kernel(lo, hi, task, group, world, mask, n_worlds, bound, hi_w, lo_w, cnt, bad, big):  # type: ignore[no-untyped-def]  # noqa: E501
+    # The fixed-point sums of the masked slots [lo, hi) added into this range's arrays (integer sums: ranges may
+    # run on different threads and be added in any order). A finite value over the bound is counted and marked
+    # in ``big`` (summed as a float apart); returns how many.
+    n_big = 0
+    for s in range(lo, hi):
         if not mask[s]:
             continue
+        g = group[s]
+        k = (g if g >= 0 else 0) * n_worlds + world[s]
         v = task[s]
-        k = key[s]
         cnt[k] += 1
         if np.isnan(v):
             bad[0, k] += 1
         elif np.isinf(v):
             bad[1 if v > 0 else 2, k] += 1
         elif abs(v) > bound:
-            return hi, lo, cnt, bad, s
+            big[s] = True
+            n_big += 1
         else:
             f = np.floor(v)
-            hi[k] += np.int64(f)
-            lo[k] += np.int64(np.rint((v - f) * 4294967296.0))
-    return hi, lo, cnt, bad, -1
+            hi_w[k] += np.int64(f)
+            lo_w[k] += np.int64(np.rint((v - f) * 4294967296.0))
+    return n_big
 
 
 def group_keys(group: np.ndarray, world: np.ndarray, n_worlds: int) -> np.ndarray:
@@ -97,7 +113,8 @@ def group_keys(group: np.ndarray, world: np.ndarray, n_worlds: int) -> np.ndarra
 
 
 def task_partials(
-    task: np.ndarray, group: np.ndarray, world: np.ndarray, mask: np.ndarray, n_groups: int, n_worlds: int
+    task: np.ndarray, group: np.ndarray, world: np.ndarray, mask: np.ndarray, n_groups: int, n_worlds: int,
+    threads: RowThreads | None = None,
 ) -> dict[str, np.ndarray]:
     """One part's group sums of the task values over the slots in ``mask``, in fixed point.
 
@@ -108,6 +125,7 @@ def task_partials(
         mask: The slots this part sums (e.g. acting slots that the part owns).
         n_groups: Groups per world (the arrays hold at least these).
         n_worlds: Worlds B.
+        threads: Row threads to sum slot ranges on (the sums do not depend on them).
 
     Returns:
         ``{"task_hi", "task_lo", "task_count", "task_nan", "task_pinf", "task_ninf"}`` (the fixed-point words,
@@ -118,22 +136,36 @@ def task_partials(
     A finite value over ``MAX_TASK_VALUE`` in magnitude is summed as a float apart (``task_big``): exact within
     one process, not across parts.
     """
-    # only the masked slots from here on (a shard's world holds every slot of the map, half of them or more
-    # another shard's); integer sums, so the order of the slots does not matter
-    idx = np.flatnonzero(np.asarray(mask, dtype=np.bool_))
-    key = group_keys(np.asarray(group)[idx], np.asarray(world)[idx], n_worlds)
-    size = int(n_worlds) * max(int(n_groups), 1)
-    if idx.size:
-        size = max(size, int(key.max()) + 1)
-    task = np.asarray(task, dtype=np.float64)[idx]
-    # values beyond the fixed point's range (a config with huge reward weights) are summed as floats apart: the
-    # sum is then exact only within one process, which a valid config must still be able to run
-    big = np.abs(np.nan_to_num(task, nan=0.0, posinf=0.0, neginf=0.0)) > MAX_TASK_VALUE
-    fixed = np.where(big, 0.0, task) if big.any() else task
-    hi, lo, cnt, odd, over = _partials_kernel(fixed, key, np.ones(idx.size, dtype=np.bool_), size, MAX_TASK_VALUE)
-    assert over < 0, "the values over the bound were taken out"
-    big_sum = np.bincount(key[big], weights=task[big], minlength=size)[:size] if big.any() else np.zeros(size)
-    return {"task_hi": hi, "task_lo": lo, "task_count": cnt, "task_nan": odd[0], "task_pinf": odd[1],
+    task = np.ascontiguousarray(task, dtype=np.float64)
+    group = np.ascontiguousarray(group, dtype=np.int64)
+    world = np.ascontiguousarray(world, dtype=np.int64)
+    mask = np.ascontiguousarray(mask, dtype=np.bool_)
+    threads = threads or _ONE_THREAD
+    n, b = task.shape[0], int(n_worlds)
+    size = b * max(int(n_groups), 1)
+    top = max(threads.run(lambda lo, hi, _: _max_key(lo, hi, group, world, mask, b), n))  # -1: none masked
+    size = max(size, top + 1)
+    big = np.zeros(n, dtype=np.bool_)
+    parts: list[tuple[np.ndarray, ...]] = []
+
+    def sums(lo: int, hi: int, _: int) -> int:
+        # each range its own arrays, added after (exact: integer sums)
+        out = (np.zeros(size, dtype=np.int64), np.zeros(size, dtype=np.int64), np.zeros(size, dtype=np.int64),
+               np.zeros((3, size), dtype=np.int64))  # fmt: skip
+        parts.append(out)
+        return int(_partials_kernel(lo, hi, task, group, world, mask, b, MAX_TASK_VALUE, *out, big))
+
+    n_big = sum(threads.run(sums, n))  # every range appended its arrays (one at least, even for n = 0)
+    hi_w, lo_w, cnt, odd = parts[0]
+    for p in parts[1:]:
+        hi_w, lo_w, cnt, odd = hi_w + p[0], lo_w + p[1], cnt + p[2], odd + p[3]
+    # values beyond the fixed point's range (a config with huge reward weights) are summed as floats apart, in
+    # slot order: the sum is then exact only within one process, which a valid config must still be able to run
+    big_sum = np.zeros(size)
+    if n_big:
+        at = np.flatnonzero(big)
+        big_sum = np.bincount(group_keys(group[at], world[at], b), weights=task[at], minlength=size)[:size]
+    return {"task_hi": hi_w, "task_lo": lo_w, "task_count": cnt, "task_nan": odd[0], "task_pinf": odd[1],
             "task_ninf": odd[2], "task_big": big_sum}  # fmt: skip
 
 
@@ -206,14 +238,13 @@ _NONE = np.zeros(0)  # stands in for an absent term (the kernel never reads it)
 _NONE_KEY = np.zeros(0, dtype=np.int64)
 
 
-@nb.njit(cache=True, error_model="numpy")
-def _compose_kernel(task, group, acting, key, means, collided, energy, sent, w, use):  # type: ignore[no-untyped-def]
-    # The terms are added in the order of the numpy expression, so the result is bit-identical to it.
+@nb.njit(cache=True, error_model="numpy", nogil=True)
+def _compose_kernel(lo, hi, task, group, acting, key, means, collided, energy, sent, w, use, out):  # type: ignore[no-untyped-def]  # noqa: E501
+    # Slots [lo, hi) of out. The terms are added in the order of the numpy expression, so the result is
+    # bit-identical to it.
     tw, gs, cp, ew, mc = w[0], w[1], w[2], w[3], w[4]
     use_group, use_coll, use_energy, use_sent = use
-    s_n = task.shape[0]
-    out = np.empty(s_n)
-    for s in range(s_n):
+    for s in range(lo, hi):
         if not acting[s]:
             out[s] = 0.0
             continue
@@ -244,6 +275,7 @@ def compose_rewards(
     messages_sent: np.ndarray | None = None,
     totals: dict[str, np.ndarray] | None = None,
     n_worlds: int | None = None,
+    threads: RowThreads | None = None,
 ) -> np.ndarray:
     """Combine the terms into one reward per slot (zero for slots that were not acting).
 
@@ -263,6 +295,7 @@ def compose_rewards(
         totals: The group sums (:func:`task_partials` of every part, combined) when the slots are split over
             parts; ``None``: summed here over every acting slot.
         n_worlds: Worlds B, the stride of the group sums (``None``: one more than the largest world id).
+        threads: Row threads to compose slot ranges on (the rewards do not depend on them).
 
     Returns:
         Rewards ``(S,)`` as float64 (a fresh array).
@@ -283,22 +316,17 @@ def compose_rewards(
         b = int(np.max(world)) + 1 if n_worlds is None else int(n_worlds)
         key = group_keys(group, world, b)
         if totals is None:
-            totals = task_partials(task, group, world, acting, n_groups, b)
+            totals = task_partials(task, group, world, acting, n_groups, b, threads)
         means = group_means(totals)
         if int(key.max()) >= means.shape[0]:  # a group no part had acting members of (read by no acting slot)
             means = np.concatenate([means, np.zeros(int(key.max()) + 1 - means.shape[0])])
-    return _compose_kernel(
-        task,
-        group,
-        acting,
-        key,
-        means,
-        _NONE if collided is None else np.asarray(collided, dtype=np.float64),
-        _NONE if energy is None else np.asarray(energy, dtype=np.float64),
-        _NONE if messages_sent is None else np.asarray(messages_sent),
-        w,
-        use,
-    )
+    args = (task, group, acting, key, means,
+            _NONE if collided is None else np.asarray(collided, dtype=np.float64),
+            _NONE if energy is None else np.asarray(energy, dtype=np.float64),
+            _NONE if messages_sent is None else np.asarray(messages_sent), w, use)  # fmt: skip
+    out = np.empty(task.shape[0])
+    (threads or _ONE_THREAD).run(lambda lo, hi, _: _compose_kernel(lo, hi, *args, out), task.shape[0])
+    return out
 
 
 def compose_rewards_reference(

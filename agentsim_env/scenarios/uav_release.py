@@ -254,7 +254,8 @@ class UavReleaseScenario(Scenario[UavReleaseConfig]):
             task[sl] += final_bonus(ps, w, self.zones, c, self.fnd_oracle)
             terminated[sl] |= world.step_count[w] < c.max_steps  # finished, not cut off by the time limit
         rewards = compose_rewards(c.reward, task, group=st.group, world=st.world_id, acting=acting, n_groups=1,
-                                  collided=collided, messages_sent=world.comms.sent if world.comms else None)  # fmt: skip
+                                  collided=collided, messages_sent=world.comms.sent if world.comms else None,
+                                  threads=world.threads)  # fmt: skip
         cov = np.repeat([t.tracker.weighted_coverage(w) for w in range(world.n_worlds)], n)
         info: dict[str, np.ndarray] = {
             "released": t.released.copy(), "landed": n_landed.astype(np.int8),
