@@ -23,18 +23,23 @@ from agentsim_env.core.threads import RowThreads
 
 
 @nb.njit(cache=True, nogil=True)
-def _place(cur_f, a0, b0, rd_start, pool_base, src_pool, n_pool, dst_pool, out_base, n_out, src_r, src_f, src_h,  # type: ignore[no-untyped-def]  # noqa: E501
-           dst_r, dst_f, dst_h):  # fmt: skip
-    # A range's reader lists and deliveries behind the earlier ranges' (its floods' rd_start shifted with them).
-    for i in range(n_pool):
-        dst_pool[pool_base + i] = src_pool[i]
-    for q in range(a0, b0):
-        if q == a0 or cur_f[q] != cur_f[q - 1]:
-            rd_start[cur_f[q]] += pool_base
+def _place(cur_f, a0, b0, rd_start, pool_base, src_pool, n_pool, dst_pool, shift, out_base, n_out, src_r, src_f,  # type: ignore[no-untyped-def]  # noqa: E501
+           src_h, origin, created, payload, r, f, h, o, c, pl):  # fmt: skip
+    # A range's part of the join: its reader lists behind the earlier ranges' (its floods' rd_start shifted with
+    # them; range 0's are in place already), and its deliveries as rows [out_base, out_base + n_out) of the fresh
+    # delivery arrays, the flood table's columns looked up per delivery.
+    if shift:
+        for i in range(n_pool):
+            dst_pool[pool_base + i] = src_pool[i]
+        for q in range(a0, b0):
+            if q == a0 or cur_f[q] != cur_f[q - 1]:
+                rd_start[cur_f[q]] += pool_base
     for i in range(n_out):
-        dst_r[out_base + i] = src_r[i]
-        dst_f[out_base + i] = src_f[i]
-        dst_h[out_base + i] = src_h[i]
+        k = out_base + i
+        fl = src_f[i]
+        r[k], f[k], h[k], o[k], c[k] = src_r[i], fl, src_h[i], origin[fl], created[fl]
+        for j in range(payload.shape[1]):
+            pl[k, j] = payload[fl, j]
 
 
 def flood_ranges(cur_f: np.ndarray, threads: RowThreads) -> list[tuple[int, int]]:
@@ -57,14 +62,16 @@ def flood_ranges(cur_f: np.ndarray, threads: RowThreads) -> list[tuple[int, int]
 def spread_threads(start: np.ndarray, end: np.ndarray, indices: np.ndarray, hops: np.ndarray, limit: np.ndarray,
                    active: np.ndarray, rd_start: np.ndarray, rd_len: np.ndarray, pool: np.ndarray,
                    cur_f: np.ndarray, cur_n: np.ndarray, threads: RowThreads, ranges: list[tuple[int, int]],
-                   scratch: list[list[Any]], new_pool: np.ndarray) -> tuple[Any, ...]:  # fmt: skip
-    """``flooding.spread`` in one-hop mode over ``ranges`` (``flood_ranges``'s; same values as ``spread``).
+                   scratch: list[list[Any]], new_pool: np.ndarray, origin: np.ndarray, created: np.ndarray,
+                   payload: np.ndarray) -> tuple[Any, ...]:  # fmt: skip
+    """``flooding.spread`` in one-hop mode over ``ranges`` (``flood_ranges``'s; same values as ``spread``), and
+    the deliveries as fresh arrays with the flood table's ``origin``, ``created`` and ``payload`` looked up.
 
     ``scratch`` holds each range's ``[stamp, token, out_r, out_f, out_h, pool, nxt_f, nxt_n, fin]`` between calls
-    (grown here); range 0's delivery buffers and ``new_pool`` become the returned ones.
+    (grown here); ``new_pool`` (the spare pool) becomes the returned pool.
 
     Returns:
-        ``(nxt_f, nxt_n, nd, fin, dups, npool, new_pool, out_r, out_f, out_h)``, as ``spread`` without the token.
+        ``(nxt_f, nxt_n, fin, dups, npool, new_pool, (receiver, flood, hops, origin, created, payload))``.
     """
     if not ranges:
         raise ValueError("spread_threads needs a frontier entry")
@@ -91,48 +98,27 @@ def spread_threads(start: np.ndarray, end: np.ndarray, indices: np.ndarray, hops
     nds = np.array([g[0] for g in got], dtype=np.int64)
     pools = np.array([g[1] for g in got], dtype=np.int64)
     out_base, pool_base = np.r_[0, np.cumsum(nds)], np.r_[0, np.cumsum(pools)]
-    first = scratch[0]
-    nd, npool, n0 = int(out_base[-1]), int(pool_base[-1]), int(nds[0])
-    out_r, out_f, out_h = _room(first[2], nd, n0), _room(first[3], nd, n0), _room(first[4], nd, n0)
-    new_pool = _room(first[5], npool, int(pools[0]))
-    first[2], first[3], first[4], first[5] = out_r, out_f, out_h, new_pool
+    nd, npool = int(out_base[-1]), int(pool_base[-1])
+    # the active floods without a frontier entry keep their readers behind every range's (range 0's pool is the
+    # one returned; the later ranges' lists are placed below, at offsets keep_rest does not touch)
+    new_pool, npool = keep_rest(active, seen, rd_start, rd_len, pool, _room(scratch[0][5], npool, int(pools[0])),
+                                npool)  # fmt: skip
+    scratch[0][5] = new_pool
+    r, f, o, c = (np.empty(nd, dtype=np.int64) for _ in range(4))
+    h = np.empty(nd, dtype=scratch[0][4].dtype)
+    pl = np.empty((nd, payload.shape[1]), dtype=payload.dtype)
 
-    def place(lo: int, hi: int, _: int) -> None:
-        for p in range(1 + lo, 1 + hi):
+    def place(lo: int, hi: int, _: int) -> None:  # each range on a thread: its pool part and its deliveries
+        for p in range(lo, hi):
             sc = scratch[p]
             _place(cur_f, ranges[p][0], ranges[p][1], rd_start, int(pool_base[p]), sc[5], int(pools[p]), new_pool,
-                   int(out_base[p]), int(nds[p]), sc[2], sc[3], sc[4], out_r, out_f, out_h)  # fmt: skip
+                   p > 0, int(out_base[p]), int(nds[p]), sc[2], sc[3], sc[4], origin, created, payload, r, f, h, o,
+                   c, pl)  # fmt: skip
 
-    if len(ranges) > 1:
-        threads.run(place, len(ranges) - 1, 1)
-    new_pool, npool = keep_rest(active, seen, rd_start, rd_len, pool, new_pool, npool)
-    first[5] = new_pool
+    threads.run(place, len(ranges), 1)
     # the next frontier and the floods that ended, in range order (fresh arrays: the frontier is kept)
     nxt_f = np.concatenate([scratch[p][6][: got[p][2]] for p in range(len(ranges))])
     nxt_n = np.concatenate([scratch[p][7][: got[p][2]] for p in range(len(ranges))])
     fin = np.concatenate([scratch[p][8][: got[p][3]] for p in range(len(ranges))])
     dups = sum(g[4] for g in got)
-    return nxt_f, nxt_n, nd, fin, dups, npool, new_pool, out_r, out_f, out_h
-
-
-@nb.njit(cache=True, nogil=True)
-def _gather(lo, hi, out_r, out_f, out_h, origin, created, payload, r, f, h, o, c, pl):  # type: ignore[no-untyped-def]  # noqa: E501
-    # Deliveries [lo, hi): receiver, flood, hops copied out of the reused buffers, origin, created step and
-    # payload row looked up in the flood table.
-    for k in range(lo, hi):
-        fl = out_f[k]
-        r[k], f[k], h[k], o[k], c[k] = out_r[k], fl, out_h[k], origin[fl], created[fl]
-        for j in range(payload.shape[1]):
-            pl[k, j] = payload[fl, j]
-
-
-def gather_deliveries(out_r: np.ndarray, out_f: np.ndarray, out_h: np.ndarray, nd: int, origin: np.ndarray,
-                      created: np.ndarray, payload: np.ndarray, threads: RowThreads) -> tuple[np.ndarray, ...]:  # fmt: skip
-    """The first ``nd`` deliveries as fresh arrays ``(receiver, flood, hops, origin, created, payload)``, the
-    flood table's columns looked up per delivery, over the pool's row ranges."""
-    r, f, o, c = (np.empty(nd, dtype=np.int64) for _ in range(4))
-    h = np.empty(nd, dtype=out_h.dtype)
-    pl = np.empty((nd, payload.shape[1]), dtype=payload.dtype)
-    threads.run(lambda lo, hi, _: _gather(lo, hi, out_r, out_f, out_h, origin, created, payload, r, f, h, o, c, pl),
-                nd)  # fmt: skip
-    return r, f, h, o, c, pl
+    return nxt_f, nxt_n, fin, dups, npool, new_pool, (r, f, h, o, c, pl)

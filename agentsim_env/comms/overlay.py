@@ -31,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from agentsim_env.comms.flood_threads import flood_ranges, gather_deliveries, spread_threads
+from agentsim_env.comms.flood_threads import flood_ranges, spread_threads
 from agentsim_env.comms.flooding import spread, spread_hop
 from agentsim_env.comms.rangegraph import _links_from_pairs
 from agentsim_env.core.threads import RowThreads
@@ -426,31 +426,26 @@ class Overlay:
         self._pending_started = 0
         stamp, token, spare, out_r, out_f, out_h = self._scratch
         ranges = [] if self.full_propagation else flood_ranges(self._front_f, self.threads)
-        if len(ranges) > 1:  # whole floods per thread, joined in the one-thread order
-            nf, nn, nd, fin, dups, n_pool, pool, out_r, out_f, out_h = spread_threads(
+        if len(ranges) > 1:  # whole floods per thread, joined in the one-thread order (deliveries looked up there)
+            nf, nn, fin, dups, n_pool, pool, (r, fl, h, o, c, pl) = spread_threads(
                 start, end, indices, self._hops, self._limit, self._active, self._rd_start, self._rd_len,
-                self._pool, self._front_f, self._front_n, self.threads, ranges, self._tscratch, spare,
+                self._pool, self._front_f, self._front_n, self.threads, ranges, self._tscratch, spare, self._origin,
+                self._created, self._payload,
             )  # fmt: skip
             self._scratch = (stamp, token, self._pool, *self._scratch[3:])
-        elif self.full_propagation:
-            nf, nn, nd, fin, dups, token, n_pool, pool, out_r, out_f, out_h = spread(
-                start, end, indices, self._hops, self._limit, self._active, self._rd_start, self._rd_len,
-                self._pool, self._front_f, self._front_n, True, stamp, token, spare, out_r, out_f, out_h,
-            )  # fmt: skip
-            self._scratch = (stamp, token, self._pool, out_r, out_f, out_h)  # the old pool is the next spare
-        else:
-            nf, nn, nd, fin, dups, token, n_pool, pool, out_r, out_f, out_h = spread_hop(
-                start, end, indices, self._hops, self._limit, self._active, self._rd_start, self._rd_len,
-                self._pool, self._front_f, self._front_n, stamp, token, spare, out_r, out_f, out_h,
-            )  # fmt: skip
-            self._scratch = (stamp, token, self._pool, out_r, out_f, out_h)
-        self._pool, self._n_pool = pool, n_pool
-        self._front_f, self._front_n = nf, nn
-        if len(ranges) > 1:  # the per-delivery look-ups on the threads too
-            r, fl, h, o, c, pl = gather_deliveries(out_r, out_f, out_h, nd, self._origin, self._created,
-                                                   self._payload, self.threads)  # fmt: skip
             out = Deliveries(receiver=r, flood=fl, origin=o, hops=h, created=c, payload=pl)
         else:
+            if self.full_propagation:
+                nf, nn, nd, fin, dups, token, n_pool, pool, out_r, out_f, out_h = spread(
+                    start, end, indices, self._hops, self._limit, self._active, self._rd_start, self._rd_len,
+                    self._pool, self._front_f, self._front_n, True, stamp, token, spare, out_r, out_f, out_h,
+                )  # fmt: skip
+            else:
+                nf, nn, nd, fin, dups, token, n_pool, pool, out_r, out_f, out_h = spread_hop(
+                    start, end, indices, self._hops, self._limit, self._active, self._rd_start, self._rd_len,
+                    self._pool, self._front_f, self._front_n, stamp, token, spare, out_r, out_f, out_h,
+                )  # fmt: skip
+            self._scratch = (stamp, token, self._pool, out_r, out_f, out_h)  # the old pool is the next spare
             fl = out_f[:nd].copy()
             out = Deliveries(
                 receiver=out_r[:nd].copy(),
@@ -460,6 +455,8 @@ class Overlay:
                 created=self._created[fl],
                 payload=np.take(self._payload, fl, axis=0),  # much faster than fancy indexing of rows
             )
+        self._pool, self._n_pool = pool, n_pool
+        self._front_f, self._front_n = nf, nn
         if fin.shape[0]:
             self._active[fin] = False
             self._free[self._n_free : self._n_free + fin.shape[0]] = fin[::-1]
