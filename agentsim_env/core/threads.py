@@ -29,6 +29,7 @@ MAX_THREADS = 256
 MIN_ROWS = 4096
 """Default smallest range worth a thread: below it the hand-off costs more than the rows (about 30 us)."""
 
+
 _POOLS: dict[int, ThreadPoolExecutor] = {}
 T = TypeVar("T")
 
@@ -39,6 +40,12 @@ def _pool(n: int) -> ThreadPoolExecutor:
     if pool is None:
         pool = _POOLS[n] = ThreadPoolExecutor(max_workers=n, thread_name_prefix=f"agentsim-{n}")
     return pool
+
+
+def light_min_rows() -> int:
+    """Smallest range worth a thread for kernels of a few nanoseconds per row (scoring, reward sums), where a
+    hand-off costs as much as ~10,000 rows: ``8 * MIN_ROWS`` (read at call time), for ``RowThreads.run``."""
+    return 8 * MIN_ROWS
 
 
 def check_num_threads(num_threads: object) -> int:

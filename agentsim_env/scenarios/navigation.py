@@ -46,6 +46,7 @@ import numba as nb
 import numpy as np
 
 from agentsim_env.core.pipeline import Sensor
+from agentsim_env.core.threads import light_min_rows
 from agentsim_env.core.validation import check_float, check_int, check_pair
 from agentsim_env.motion import MotionLimits
 from agentsim_env.scenarios.base import Scenario, SlotState, StepResult, comms_width, slot, write_comms
@@ -315,7 +316,8 @@ class NavigationScenario(Scenario[NavigationConfig]):
         task = np.empty(n) if every else np.zeros(n)  # rows not scored stay 0
         args = (t.goal, st.pos, t.prev_dist, acting, st.online, float(c.goal_radius), float(c.arrival_bonus), rows,
                 every, task)  # fmt: skip
-        world.threads.run(lambda lo, hi, _: _task_kernel(lo, hi, *args), n if every else rows.shape[0])
+        world.threads.run(lambda lo, hi, _: _task_kernel(lo, hi, *args), n if every else rows.shape[0],
+                          light_min_rows())
         return task_partials(task, st.group, st.world_id, acting & mine, int(c.n_groups or 1), world.n_worlds,
                              world.threads)  # fmt: skip
 
@@ -331,7 +333,8 @@ class NavigationScenario(Scenario[NavigationConfig]):
         arrived, collided = np.zeros(n, dtype=np.bool_), np.zeros(n)
         args = (t.goal, st.pos, st.vel, t.prev_dist, t.arrived, st.energy, acting, st.online, float(c.goal_radius),
                 float(c.arrival_bonus), float(world.config.dt), rows, every, dist, arrived, task, effort)  # fmt: skip
-        world.threads.run(lambda lo, hi, _: _score_kernel(lo, hi, *args), n if every else rows.shape[0])
+        world.threads.run(lambda lo, hi, _: _score_kernel(lo, hi, *args), n if every else rows.shape[0],
+                          light_min_rows())
         collided[events.went_offline] = 1.0
         # the state keeps its array (resets write it); dist goes out as info
         if every:

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
-from agentsim_env.core.threads import RowThreads
+from agentsim_env.core.threads import RowThreads, light_min_rows
 from agentsim_env.core.validation import check_float, coerce_fields
 
 _ONE_THREAD = RowThreads(1)
@@ -143,7 +143,8 @@ def task_partials(
     threads = threads or _ONE_THREAD
     n, b = task.shape[0], int(n_worlds)
     size = b * max(int(n_groups), 1)
-    top = max(threads.run(lambda lo, hi, _: _max_key(lo, hi, group, world, mask, b), n))  # -1: none masked
+    light = light_min_rows()
+    top = max(threads.run(lambda lo, hi, _: _max_key(lo, hi, group, world, mask, b), n, light))  # -1: none
     size = max(size, top + 1)
     big = np.zeros(n, dtype=np.bool_)
     parts: list[tuple[np.ndarray, ...]] = []
@@ -155,7 +156,7 @@ def task_partials(
         parts.append(out)
         return int(_partials_kernel(lo, hi, task, group, world, mask, b, MAX_TASK_VALUE, *out, big))
 
-    n_big = sum(threads.run(sums, n))  # every range appended its arrays (one at least, even for n = 0)
+    n_big = sum(threads.run(sums, n, light))  # every range appended its arrays (one at least, even for n = 0)
     hi_w, lo_w, cnt, odd = parts[0]
     for p in parts[1:]:
         hi_w, lo_w, cnt, odd = hi_w + p[0], lo_w + p[1], cnt + p[2], odd + p[3]
@@ -325,7 +326,8 @@ def compose_rewards(
             _NONE if energy is None else np.asarray(energy, dtype=np.float64),
             _NONE if messages_sent is None else np.asarray(messages_sent), w, use)  # fmt: skip
     out = np.empty(task.shape[0])
-    (threads or _ONE_THREAD).run(lambda lo, hi, _: _compose_kernel(lo, hi, *args, out), task.shape[0])
+    (threads or _ONE_THREAD).run(lambda lo, hi, _: _compose_kernel(lo, hi, *args, out), task.shape[0],
+                                 light_min_rows())
     return out
 
 
