@@ -63,6 +63,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -246,7 +247,7 @@ class MessageBus:
         self._drop_log: list[MessageLog] = []
         self._ans_slot: list[np.ndarray] = []
         self._ans_step: list[np.ndarray] = []
-        self._pushes: list[tuple[np.ndarray, ...]] = []
+        self._pushes: list[tuple[Any, ...]] = []
 
     def set_starts(self, starts: np.ndarray) -> None:
         """Set the step at which each world's current episode began (loss draws key ``created - starts[w]``).
@@ -491,7 +492,7 @@ class MessageBus:
         self._sent_log, self._drop_log = [], []
         return DeliveryEvents(step, sent, MessageLog.concat(delivered), dropped)
 
-    def take_pushes(self) -> list[tuple[np.ndarray, ...]]:
+    def take_pushes(self) -> list[tuple[Any, ...]]:
         """The deliveries of the latest ``deliver(..., push=False)`` as ``Inbox.push_batches`` batches (once)."""
         out, self._pushes = self._pushes, []
         return out

@@ -32,6 +32,7 @@ live transmitter; the environment and the group controller (sender ``-1``) have 
 from __future__ import annotations
 
 from functools import partial
+from typing import Any
 
 import numba as nb
 import numpy as np
@@ -55,11 +56,11 @@ _SAME_ROWS = np.zeros(0, dtype=np.int64)  # push_rows: message j takes payload r
 #: The push kernel's one signature: receiver, kind, sender, hops, created, payload, rows of each batch.
 _BATCH_DTYPES = (np.int64, np.int8, np.int64, np.int64, np.int64, np.float32, np.int64)
 _EMPTY_BATCH = (_SAME_ROWS, np.zeros(0, dtype=np.int8), _SAME_ROWS, _SAME_ROWS, _SAME_ROWS,
-                np.zeros((0, 0), dtype=np.float32), _SAME_ROWS)  # fmt: skip
+                np.zeros((0, 0), dtype=np.float32), _SAME_ROWS, False)  # fmt: skip
 
 
-def _kernel_batch(batch: tuple[np.ndarray, ...]) -> tuple[np.ndarray, ...]:
-    """``batch`` with every array C-contiguous, writable and of the push kernel's dtype.
+def _kernel_batch(batch: tuple[Any, ...]) -> tuple[Any, ...]:
+    """``batch`` with every array C-contiguous, writable and of the push kernel's dtype, and its table flag.
 
     numba compiles a kernel once per signature, and a signature tells C-contiguous from strided arrays (a
     stride-0 broadcast of one kind or hop count is strided with two messages or more, contiguous with one) and
@@ -67,11 +68,12 @@ def _kernel_batch(batch: tuple[np.ndarray, ...]) -> tuple[np.ndarray, ...]:
     keeps the kernel at one compiled version, whatever a step delivers. The arrays are a step's messages, so
     the copies this may take are small; arrays already in form pass through untouched.
     """
-    out = []
-    for a, dtype in zip(batch, _BATCH_DTYPES):
+    out: list[np.ndarray | bool] = []
+    for a, dtype in zip(batch[:7], _BATCH_DTYPES):
         if a.dtype != dtype or not a.flags.c_contiguous or not a.flags.writeable:
             a = np.array(a, dtype=dtype, order="C")  # a fresh array: contiguous and writable
         out.append(a)
+    out.append(bool(batch[7]) if len(batch) > 7 else False)
     return tuple(out)
 
 FEATURES_PER_MESSAGE = 11
@@ -145,12 +147,14 @@ def _push_count(newest, taken, ra, rb):  # type: ignore[no-untyped-def]
 
 @nb.njit(cache=True, nogil=True)
 def _push_kernel(lo, hi, valid, kind, sender, hops, created, payload, received, newest, taken,  # type: ignore[no-untyped-def]
-                 ra, ka, sa, ha, ca, pa, qa, rb, kb, sb, hb, cb, pb, qb):  # fmt: skip
+                 ra, ka, sa, ha, ca, pa, qa, ta, rb, kb, sb, hb, cb, pb, qb, tb):  # fmt: skip
     # Pass 2 of a push (after ``_push_count``) into the inboxes of slots [lo, hi): ranges on different threads
     # touch different inboxes. Message j of a batch goes to slot r[j] with payload row p[q[j]] (row j when q is
-    # empty) and hops clipped to [0, 32767]; the inputs come in one form (``_kernel_batch``), so this compiles
-    # once. The receivers are walked in slot order (the inbox arrays stream through the cache once): shift the
-    # old rows down by min(count, M), write the new ones on top.
+    # empty) and hops clipped to [0, 32767]; its sender and created step are s[j] and c[j], or s[q[j]] and
+    # c[q[j]] when the batch's flag t says they are tables too (the overlay's flood table: a few rows that stay
+    # in the cache, where per-message columns are read at random). The inputs come in one form
+    # (``_kernel_batch``), so this compiles once. The receivers are walked in slot order (the inbox arrays stream
+    # through the cache once): shift the old rows down by min(count, M), write the new ones on top.
     m = valid.shape[1]
     d = payload.shape[2]
     na = ra.shape[0]
@@ -173,16 +177,18 @@ def _push_kernel(lo, hi, valid, kind, sender, hops, created, payload, received, 
             g = newest[s, i]
             valid[s, i] = True
             if g < na:
-                kind[s, i], sender[s, i], created[s, i] = ka[g], sa[g], ca[g]
-                hops[s, i] = min(max(ha[g], 0), 32767)
                 row = g if qa.shape[0] == 0 else qa[g]
+                at = row if ta else g
+                kind[s, i], sender[s, i], created[s, i] = ka[g], sa[at], ca[at]
+                hops[s, i] = min(max(ha[g], 0), 32767)
                 for x in range(d):
                     payload[s, i, x] = pa[row, x]
             else:
                 g -= na
-                kind[s, i], sender[s, i], created[s, i] = kb[g], sb[g], cb[g]
-                hops[s, i] = min(max(hb[g], 0), 32767)
                 row = g if qb.shape[0] == 0 else qb[g]
+                at = row if tb else g
+                kind[s, i], sender[s, i], created[s, i] = kb[g], sb[at], cb[at]
+                hops[s, i] = min(max(hb[g], 0), 32767)
                 for x in range(d):
                     payload[s, i, x] = pb[row, x]
 
@@ -402,11 +408,13 @@ class Inbox:
         """
         self.push_batches([(receiver, kind, sender, hops, created, payload, rows)])
 
-    def push_batches(self, batches: list[tuple[np.ndarray, ...]]) -> None:
+    def push_batches(self, batches: list[tuple[Any, ...]]) -> None:
         """``push_rows`` of several batches in one pass (as one batch of their concatenation, in order).
 
         Args:
-            batches: ``(receiver, kind, sender, hops, created, payload, rows)`` tuples, as for ``push_rows``.
+            batches: ``(receiver, kind, sender, hops, created, payload, rows)`` tuples, as for ``push_rows``, each
+                optionally with an eighth item ``True``: ``sender`` and ``created`` are then tables indexed by
+                ``rows`` like ``payload`` (message ``j`` has ``sender[rows[j]]``), not one value per message.
         """
         for k in range(0, len(batches), 2):  # pairs in turn: the same as one push of everything, in order
             a = _kernel_batch(batches[k])
@@ -414,7 +422,7 @@ class Inbox:
             _push_count(self._newest, self._taken, a[0], b[0])
             self.threads.run(partial(self._push_range, (*a, *b)), self.n_slots)
 
-    def _push_range(self, batches: tuple[np.ndarray, ...], lo: int, hi: int, _part: int) -> None:
+    def _push_range(self, batches: tuple[Any, ...], lo: int, hi: int, _part: int) -> None:
         # one pair of batches (``_kernel_batch`` form, a then b) into the inboxes of slots [lo, hi)
         _push_kernel(lo, hi, self.valid, self.kind, self.sender, self.hops, self.created, self.payload,
                      self.received, self._newest, self._taken, *batches)  # fmt: skip

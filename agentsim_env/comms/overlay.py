@@ -239,11 +239,12 @@ class Overlay:
         """Counters summed over every ``advance`` since construction or ``reset``."""
         return self._totals
 
-    def payload_rows(self, out: Deliveries) -> tuple[np.ndarray, np.ndarray]:
-        """``(table, rows)``: the payload of delivery ``j`` of the latest ``advance``'s ``out`` is ``table[rows[j]]``
-        (the flood table by flood id: a few rows, cache resident, where ``out.payload`` is a copy per delivery).
-        Valid until the next ``start`` (an internal buffer: read, do not keep)."""
-        return self._payload, out.flood
+    def push_columns(self, out: Deliveries) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, bool]:
+        """``(sender, created, payload, rows, True)`` for ``Inbox.push_batches``: delivery ``j`` of the latest
+        ``advance``'s ``out`` has ``sender[rows[j]]``, ``created[rows[j]]`` and ``payload[rows[j]]``, read from
+        the flood table by flood id (a few rows, cache resident, where ``out``'s columns hold one copy per
+        delivery). Valid until the next ``start`` (internal buffers: read, do not keep)."""
+        return self._origin, self._created, self._payload, out.flood, True
 
     @property
     def frontier_size(self) -> int:

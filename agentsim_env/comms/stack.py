@@ -454,9 +454,9 @@ class CommsStack:
             ov = self.overlay.advance_graph(*_NO_LINKS)
         k = len(ov)
         if k:
-            # payload rows read from the flood table by flood id where the overlay has one (cache resident)
-            pushes.append((ov.receiver, np.broadcast_to(_OVERLAY_KIND, (k,)), ov.origin, ov.hops, ov.created,
-                           *self.overlay.payload_rows(ov)))  # fmt: skip
+            # sender, created step and payload read from the flood table by flood id where the overlay has one
+            snd, cre, pay, rows, by_rows = self.overlay.push_columns(ov)
+            pushes.append((ov.receiver, np.broadcast_to(_OVERLAY_KIND, (k,)), snd, ov.hops, cre, pay, rows, by_rows))
         self.bus.inbox.push_batches(pushes)  # bus deliveries, then the overlay's: one pass over the inboxes
         self.events = CommsEvents(bus_ev, ov, self.sent.copy(), self.bus.take_answers())
         return self.events

@@ -98,6 +98,6 @@ class ShardOverlay:
         self._totals = self._totals + self._last
         return Deliveries(d.receiver, np.full(len(d), -1, dtype=np.int64), d.origin, d.hops, d.created, d.payload)
 
-    def payload_rows(self, out: Deliveries) -> tuple[np.ndarray, np.ndarray]:
-        """``(out.payload, [])``: a shard's deliveries carry their payloads (no flood table by flood id)."""
-        return out.payload, _NO_ROWS
+    def push_columns(self, out: Deliveries) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, bool]:
+        """``(origin, created, payload, [], False)`` of ``out``: a shard's deliveries carry their own columns."""
+        return out.origin, out.created, out.payload, _NO_ROWS, False
