@@ -545,3 +545,40 @@ def test_one_hop_kernel_equals_the_general_spread(seed: int) -> None:
                 np.testing.assert_array_equal(x, y)
             else:
                 assert x == y
+
+
+@pytest.mark.parametrize("threads", [1, 3])
+def test_deliveries_read_late_keep_their_values_after_flood_rows_are_reused(threads: int) -> None:
+    """A hop's deliveries look their origin, created step and payload up in the flood table when read; reading
+    them only after later steps started floods in the recycled rows (a tiny table: rows are reused at once) gives
+    the values read at once, whole tables copied or rows looked up, and pickles alike."""
+    from agentsim_env.core import threads as threads_mod
+    from agentsim_env.core.threads import RowThreads
+
+    def run(read_now: bool) -> list:
+        with pytest.MonkeyPatch.context() as mp:
+            mp.setattr(threads_mod, "MIN_ROWS", 2)
+            rng = np.random.default_rng(5)
+            pos, online, world, comm_range = _scene(3)
+            ov = Overlay(len(pos), D, comm_range, capacity=4)
+            ov.threads = RowThreads(threads)
+            kept = []
+            for step in range(8):
+                _start_random(ov, rng, online, int(rng.integers(1, 30)), step)
+                d = ov.advance(pos, online, world, _pairs(pos, world, 25.0), step)
+                kept.append((d, (d.origin.copy(), d.created.copy(), d.payload.copy()) if read_now else None))
+            return [(d.receiver, d.flood, d.hops, *(now or (d.origin, d.created, d.payload))) for d, now in kept]
+
+    now, late = run(True), run(False)
+    assert sum(len(x[0]) for x in now) > 100 and any(len(set(x[1].tolist())) < len(x[1]) for x in now)
+    for a, b in zip(now, late, strict=True):
+        for x, y in zip(a, b, strict=True):
+            np.testing.assert_array_equal(x, y)
+    d = Overlay(3, D, 50.0)
+    d.start(np.array([0]), 2, np.ones((1, D)), step=0)
+    got = d.advance(np.zeros((3, 3)), np.ones(3, bool), np.zeros(3, int), _pairs(np.zeros((3, 3)), np.zeros(3, int), 25.0), 0)
+    back = pickle.loads(pickle.dumps(got))
+    np.testing.assert_array_equal(back.payload, np.ones((2, D), dtype=np.float32))
+    assert back.origin.tolist() == [0, 0] and back.receiver.tolist() == [1, 2]
+    with pytest.raises(AttributeError, match="read-only"):
+        got.receiver = back.receiver  # type: ignore[misc]

@@ -24,10 +24,10 @@ from agentsim_env.core.threads import RowThreads
 
 @nb.njit(cache=True, nogil=True)
 def _place(cur_f, a0, b0, rd_start, pool_base, src_pool, n_pool, dst_pool, shift, out_base, n_out, src_r, src_f,  # type: ignore[no-untyped-def]  # noqa: E501
-           src_h, origin, created, payload, r, f, h, o, c, pl):  # fmt: skip
+           src_h, r, f, h):  # fmt: skip
     # A range's part of the join: its reader lists behind the earlier ranges' (its floods' rd_start shifted with
     # them; range 0's are in place already), and its deliveries as rows [out_base, out_base + n_out) of the fresh
-    # delivery arrays, the flood table's columns looked up per delivery.
+    # delivery arrays.
     if shift:
         for i in range(n_pool):
             dst_pool[pool_base + i] = src_pool[i]
@@ -36,10 +36,7 @@ def _place(cur_f, a0, b0, rd_start, pool_base, src_pool, n_pool, dst_pool, shift
                 rd_start[cur_f[q]] += pool_base
     for i in range(n_out):
         k = out_base + i
-        fl = src_f[i]
-        r[k], f[k], h[k], o[k], c[k] = src_r[i], fl, src_h[i], origin[fl], created[fl]
-        for j in range(payload.shape[1]):
-            pl[k, j] = payload[fl, j]
+        r[k], f[k], h[k] = src_r[i], src_f[i], src_h[i]
 
 
 def flood_ranges(cur_f: np.ndarray, threads: RowThreads) -> list[tuple[int, int]]:
@@ -62,16 +59,15 @@ def flood_ranges(cur_f: np.ndarray, threads: RowThreads) -> list[tuple[int, int]
 def spread_threads(start: np.ndarray, end: np.ndarray, indices: np.ndarray, hops: np.ndarray, limit: np.ndarray,
                    active: np.ndarray, rd_start: np.ndarray, rd_len: np.ndarray, pool: np.ndarray,
                    cur_f: np.ndarray, cur_n: np.ndarray, threads: RowThreads, ranges: list[tuple[int, int]],
-                   scratch: list[list[Any]], new_pool: np.ndarray, origin: np.ndarray, created: np.ndarray,
-                   payload: np.ndarray) -> tuple[Any, ...]:  # fmt: skip
-    """``flooding.spread`` in one-hop mode over ``ranges`` (``flood_ranges``'s; same values as ``spread``), and
-    the deliveries as fresh arrays with the flood table's ``origin``, ``created`` and ``payload`` looked up.
+                   scratch: list[list[Any]], new_pool: np.ndarray) -> tuple[Any, ...]:  # fmt: skip
+    """``flooding.spread`` in one-hop mode over ``ranges`` (``flood_ranges``'s; same values as ``spread``), the
+    deliveries as fresh arrays.
 
     ``scratch`` holds each range's ``[stamp, token, out_r, out_f, out_h, pool, nxt_f, nxt_n, fin]`` between calls
     (grown here); ``new_pool`` (the spare pool) becomes the returned pool.
 
     Returns:
-        ``(nxt_f, nxt_n, fin, dups, npool, new_pool, (receiver, flood, hops, origin, created, payload))``.
+        ``(nxt_f, nxt_n, fin, dups, npool, new_pool, (receiver, flood, hops))``.
     """
     if not ranges:
         raise ValueError("spread_threads needs a frontier entry")
@@ -104,16 +100,14 @@ def spread_threads(start: np.ndarray, end: np.ndarray, indices: np.ndarray, hops
     new_pool, npool = keep_rest(active, seen, rd_start, rd_len, pool, _room(scratch[0][5], npool, int(pools[0])),
                                 npool)  # fmt: skip
     scratch[0][5] = new_pool
-    r, f, o, c = (np.empty(nd, dtype=np.int64) for _ in range(4))
+    r, f = np.empty(nd, dtype=np.int64), np.empty(nd, dtype=np.int64)
     h = np.empty(nd, dtype=scratch[0][4].dtype)
-    pl = np.empty((nd, payload.shape[1]), dtype=payload.dtype)
 
     def place(lo: int, hi: int, _: int) -> None:  # each range on a thread: its pool part and its deliveries
         for p in range(lo, hi):
             sc = scratch[p]
             _place(cur_f, ranges[p][0], ranges[p][1], rd_start, int(pool_base[p]), sc[5], int(pools[p]), new_pool,
-                   p > 0, int(out_base[p]), int(nds[p]), sc[2], sc[3], sc[4], origin, created, payload, r, f, h, o,
-                   c, pl)  # fmt: skip
+                   p > 0, int(out_base[p]), int(nds[p]), sc[2], sc[3], sc[4], r, f, h)  # fmt: skip
 
     threads.run(place, len(ranges), 1)
     # the next frontier and the floods that ended, in range order (fresh arrays: the frontier is kept)
@@ -121,4 +115,4 @@ def spread_threads(start: np.ndarray, end: np.ndarray, indices: np.ndarray, hops
     nxt_n = np.concatenate([scratch[p][7][: got[p][2]] for p in range(len(ranges))])
     fin = np.concatenate([scratch[p][8][: got[p][3]] for p in range(len(ranges))])
     dups = sum(g[4] for g in got)
-    return nxt_f, nxt_n, fin, dups, npool, new_pool, (r, f, h, o, c, pl)
+    return nxt_f, nxt_n, fin, dups, npool, new_pool, (r, f, h)

@@ -37,9 +37,8 @@ from agentsim_env.comms.rangegraph import _links_from_pairs
 from agentsim_env.core.threads import RowThreads
 
 
-@dataclass(slots=True, frozen=True)
 class Deliveries:
-    """Overlay messages read during one ``advance`` call, one row per (receiver, flood).
+    """Overlay messages read during one ``advance`` call, one row per (receiver, flood). Read-only.
 
     Attributes:
         receiver: Slot that read the message ``(k,)`` int64.
@@ -48,18 +47,89 @@ class Deliveries:
         hops: Hops from the origin to the receiver ``(k,)`` int32 (>= 1).
         created: Step the flood was started ``(k,)`` int64.
         payload: Message payload ``(k, D)`` float32 (a fresh array).
+
+    The overlay hands out ``origin``, ``created`` and ``payload`` as its flood table's rows, looked up by
+    ``flood`` when first read (a step's deliveries are mostly counted and pushed, not read: 1.4M rows and
+    ~45 MB a step at 100,000 agents). Before its table changes (the next floods started) the overlay hands the
+    deliveries it has not yet read a copy of the rows they need, so the values never change.
     """
 
+    __slots__ = ("receiver", "flood", "hops", "_origin", "_created", "_payload", "_table")
     receiver: np.ndarray
     flood: np.ndarray
-    origin: np.ndarray
     hops: np.ndarray
-    created: np.ndarray
-    payload: np.ndarray
+    _origin: np.ndarray | None
+    _created: np.ndarray | None
+    _payload: np.ndarray | None
+    _table: tuple[np.ndarray, np.ndarray, np.ndarray] | None
+
+    def __init__(self, receiver: np.ndarray, flood: np.ndarray, origin: np.ndarray, hops: np.ndarray,
+                 created: np.ndarray, payload: np.ndarray) -> None:  # fmt: skip
+        for name, value in (("receiver", receiver), ("flood", flood), ("hops", hops), ("_origin", origin),
+                            ("_created", created), ("_payload", payload), ("_table", None)):  # fmt: skip
+            object.__setattr__(self, name, value)
+
+    @classmethod
+    def by_flood(cls, receiver: np.ndarray, flood: np.ndarray, hops: np.ndarray,
+                 table: tuple[np.ndarray, np.ndarray, np.ndarray]) -> Deliveries:  # fmt: skip
+        """Deliveries whose ``origin``, ``created`` and ``payload`` are ``table``'s rows ``flood`` (the flood
+        table's ``(origin, created, payload)`` columns), looked up when read."""
+        out = cls(receiver, flood, None, hops, None, None)  # type: ignore[arg-type]
+        object.__setattr__(out, "_table", table)
+        return out
+
+    def _column(self, name: str, i: int) -> np.ndarray:
+        value = getattr(self, name)
+        if value is None:
+            col = self._table[i]  # type: ignore[index]
+            value = np.take(col, self.flood, axis=0)  # rows: much faster than fancy indexing
+            object.__setattr__(self, name, value)
+        return value  # type: ignore[no-any-return]
+
+    @property
+    def origin(self) -> np.ndarray:
+        """Slot that started the flood ``(k,)`` int64."""
+        return self._column("_origin", 0)
+
+    @property
+    def created(self) -> np.ndarray:
+        """Step the flood was started ``(k,)`` int64."""
+        return self._column("_created", 1)
+
+    @property
+    def payload(self) -> np.ndarray:
+        """Message payload ``(k, D)`` float32."""
+        return self._column("_payload", 2)
+
+    def keep_rows(self) -> None:
+        """Take what is still to be looked up out of the flood table, which is about to change: the rows
+        themselves for a few deliveries, else a copy of the table."""
+        t = self._table
+        if t is None or (self._origin is not None and self._created is not None and self._payload is not None):
+            return
+        if 2 * len(self) < t[0].shape[0]:
+            self.origin, self.created, self.payload  # noqa: B018  (looked up now)
+        else:
+            object.__setattr__(self, "_table", tuple(a.copy() for a in t))
 
     def __len__(self) -> int:
         """Number of deliveries."""
         return int(self.receiver.shape[0])
+
+    def __setattr__(self, name: str, value: object) -> None:
+        raise AttributeError(f"Deliveries is read-only (cannot set {name!r})")
+
+    def __getstate__(self) -> dict[str, np.ndarray]:
+        """Pickle every column (looked up now)."""
+        return {"receiver": self.receiver, "flood": self.flood, "origin": self.origin, "hops": self.hops,
+                "created": self.created, "payload": self.payload}  # fmt: skip
+
+    def __setstate__(self, state: dict[str, np.ndarray]) -> None:
+        """Restore a pickled state."""
+        self.__init__(**state)  # type: ignore[misc]
+
+    def __repr__(self) -> str:
+        return f"Deliveries({len(self)} rows)"
 
 
 @dataclass(slots=True, frozen=True)
@@ -139,7 +209,7 @@ class Overlay:
     __slots__ = (
         "n_slots", "payload_dim", "full_propagation", "_range", "_rd_start", "_rd_len", "_pool", "_n_pool",
         "_origin", "_limit", "_hops", "_created", "_payload", "_active", "_free", "_n_free", "_front_f",
-        "_front_n", "_pending_started", "_last", "_totals", "_scratch", "_tscratch", "threads",
+        "_front_n", "_pending_started", "_last", "_totals", "_scratch", "_tscratch", "threads", "_unread",
     )  # fmt: skip
 
     def __init__(
@@ -164,12 +234,13 @@ class Overlay:
         self._alloc(int(capacity))
         self._scratch = _new_scratch(self.n_slots)
         self._tscratch: list[list[Any]] = []  # per range of a hop on threads (``comms.flood_threads``)
+        self._unread: Deliveries | None = None  # the latest deliveries, which read the flood table when asked
         self.threads = RowThreads(1)
         """Threads of a one-hop spread (whole floods per thread); results do not depend on them."""
 
     def __getstate__(self) -> dict:
         """Pickle the state without the kernel scratch buffers."""
-        return {k: getattr(self, k) for k in self.__slots__ if k not in ("_scratch", "_tscratch")}
+        return {k: getattr(self, k) for k in self.__slots__ if k not in ("_scratch", "_tscratch", "_unread")}
 
     def __setstate__(self, state: dict) -> None:
         """Restore a pickled state."""
@@ -177,6 +248,7 @@ class Overlay:
             setattr(self, k, v)
         self._scratch = _new_scratch(self.n_slots)
         self._tscratch = []
+        self._unread = None
         if "threads" not in state:
             self.threads = RowThreads(1)
 
@@ -344,6 +416,9 @@ class Overlay:
         k = origin.shape[0]
         if k == 0:
             return np.empty(0, dtype=np.int64)
+        if self._unread is not None:  # the table's rows are about to change: the latest deliveries keep theirs
+            self._unread.keep_rows()
+            self._unread = None
         if self._n_free < k:
             self._grow(k)
         ids = self._free[self._n_free - k : self._n_free][::-1].copy()
@@ -427,14 +502,13 @@ class Overlay:
         self._pending_started = 0
         stamp, token, spare, out_r, out_f, out_h = self._scratch
         ranges = [] if self.full_propagation else flood_ranges(self._front_f, self.threads)
-        if len(ranges) > 1:  # whole floods per thread, joined in the one-thread order (deliveries looked up there)
-            nf, nn, fin, dups, n_pool, pool, (r, fl, h, o, c, pl) = spread_threads(
+        if len(ranges) > 1:  # whole floods per thread, joined in the one-thread order
+            nf, nn, fin, dups, n_pool, pool, (r, fl, h) = spread_threads(
                 start, end, indices, self._hops, self._limit, self._active, self._rd_start, self._rd_len,
-                self._pool, self._front_f, self._front_n, self.threads, ranges, self._tscratch, spare, self._origin,
-                self._created, self._payload,
+                self._pool, self._front_f, self._front_n, self.threads, ranges, self._tscratch, spare,
             )  # fmt: skip
             self._scratch = (stamp, token, self._pool, *self._scratch[3:])
-            out = Deliveries(receiver=r, flood=fl, origin=o, hops=h, created=c, payload=pl)
+            out = Deliveries.by_flood(r, fl, h, (self._origin, self._created, self._payload))
         else:
             if self.full_propagation:
                 nf, nn, nd, fin, dups, token, n_pool, pool, out_r, out_f, out_h = spread(
@@ -447,15 +521,9 @@ class Overlay:
                     self._pool, self._front_f, self._front_n, stamp, token, spare, out_r, out_f, out_h,
                 )  # fmt: skip
             self._scratch = (stamp, token, self._pool, out_r, out_f, out_h)  # the old pool is the next spare
-            fl = out_f[:nd].copy()
-            out = Deliveries(
-                receiver=out_r[:nd].copy(),
-                flood=fl,
-                origin=self._origin[fl],
-                hops=out_h[:nd].copy(),
-                created=self._created[fl],
-                payload=np.take(self._payload, fl, axis=0),  # much faster than fancy indexing of rows
-            )
+            out = Deliveries.by_flood(out_r[:nd].copy(), out_f[:nd].copy(), out_h[:nd].copy(),
+                                      (self._origin, self._created, self._payload))  # fmt: skip
+        self._unread = out
         self._pool, self._n_pool = pool, n_pool
         self._front_f, self._front_n = nf, nn
         if fin.shape[0]:
