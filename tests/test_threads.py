@@ -206,15 +206,18 @@ def test_overlay_hops_and_inbox_pushes_do_not_depend_on_the_thread_count(seed: i
 
 
 @given(sizes=st.lists(st.integers(1, 40), min_size=0, max_size=60), k=st.integers(1, 6),
-       min_rows=st.integers(1, 50))
+       min_rows=st.integers(1, 50), weights=st.one_of(st.none(), st.lists(st.integers(1, 100), min_size=2400,
+                                                                            max_size=2400)))  # fmt: skip
 @settings(max_examples=200, deadline=None)
-def test_flood_ranges_cut_the_frontier_only_between_floods(sizes: list[int], k: int, min_rows: int) -> None:
+def test_flood_ranges_cut_the_frontier_only_between_floods(sizes: list[int], k: int, min_rows: int,
+                                                           weights: list[int] | None) -> None:  # fmt: skip
     # a frontier grouped by flood (runs of one flood id): contiguous ranges over every entry, at most one per
-    # thread, each boundary at the first entry of a flood
+    # thread, each boundary at the first entry of a flood; by entries, or by a cumulative cost per entry
     cur_f = np.repeat(np.arange(len(sizes)) * 3 + 1, sizes).astype(np.int64)
+    cost = None if weights is None else np.cumsum(weights[: cur_f.shape[0]]).astype(np.int64)
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(threads_mod, "MIN_ROWS", min_rows)
-        ranges = flood_ranges(cur_f, RowThreads(k))
+        ranges = flood_ranges(cur_f, RowThreads(k), cost)
     n = cur_f.shape[0]
     assert ranges == [] if n == 0 else (ranges[0][0] == 0 and ranges[-1][1] == n)
     assert len(ranges) <= k and all(lo < hi for lo, hi in ranges)

@@ -39,15 +39,42 @@ def _place(cur_f, a0, b0, rd_start, pool_base, src_pool, n_pool, dst_pool, shift
         r[k], f[k], h[k] = src_r[i], src_f[i], src_h[i]
 
 
-def flood_ranges(cur_f: np.ndarray, threads: RowThreads) -> list[tuple[int, int]]:
-    """The frontier entries ``[0, n)`` cut into the pool's row ranges, each boundary moved to a flood's start."""
+@nb.njit(cache=True)
+def hop_cost(cur_f, cur_n, start, end, hops, limit):  # type: ignore[no-untyped-def]
+    """Cumulative estimated cost of the frontier entries ``(n,)`` int64, to cut a hop into ranges of equal work.
+
+    An entry walks its slot's links; a flood at its first hop that goes on finds nearly every neighbour new and
+    writes each as a delivery, a reader and a next-frontier entry, about 4x the cost per link of a later hop
+    (which mostly meets readers: ~1.7 ns a link, ~14 ns a new reader, measured at 10,000 agents).
+    """
+    out = np.empty(cur_f.shape[0], dtype=np.int64)
+    acc = 0
+    for q in range(cur_f.shape[0]):
+        f = cur_f[q]
+        u = cur_n[q]
+        acc += 1 + (end[u] - start[u]) * (4 if hops[f] == 0 and limit[f] > 1 else 1)
+        out[q] = acc
+    return out
+
+
+def flood_ranges(cur_f: np.ndarray, threads: RowThreads, cost: np.ndarray | None = None) -> list[tuple[int, int]]:
+    """The frontier entries ``[0, n)`` cut into the pool's row ranges, each boundary moved to a flood's start.
+
+    With ``cost`` (``hop_cost``'s cumulative cost per entry) the ranges hold equal shares of it instead of equal
+    numbers of entries (as many ranges either way).
+    """
     n = int(cur_f.shape[0])
     rows = threads.ranges(n)
     if len(rows) == 1:
         return [(0, n)] if n else []
     heads = np.flatnonzero(np.r_[True, cur_f[1:] != cur_f[:-1]])
+    if cost is None:
+        ends = [hi for _, hi in rows[:-1]]
+    else:
+        k = len(rows)
+        ends = [int(x) for x in np.searchsorted(cost, [cost[-1] * i / k for i in range(1, k)], side="right")]
     cuts = [0]
-    for _, hi in rows[:-1]:
+    for hi in ends:
         at = int(heads[np.searchsorted(heads, hi)]) if hi <= heads[-1] else n
         if at > cuts[-1]:
             cuts.append(at)

@@ -31,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from agentsim_env.comms.flood_threads import flood_ranges, spread_threads
+from agentsim_env.comms.flood_threads import flood_ranges, hop_cost, spread_threads
 from agentsim_env.comms.flooding import spread, spread_hop
 from agentsim_env.comms.rangegraph import _links_from_pairs
 from agentsim_env.core.threads import RowThreads
@@ -501,7 +501,10 @@ class Overlay:
         started = self._pending_started
         self._pending_started = 0
         stamp, token, spare, out_r, out_f, out_h = self._scratch
-        ranges = [] if self.full_propagation else flood_ranges(self._front_f, self.threads)
+        ranges: list[tuple[int, int]] = []
+        if not self.full_propagation and self.threads.num_threads > 1:  # ranges of equal estimated work
+            cost = hop_cost(self._front_f, self._front_n, start, end, self._hops, self._limit)
+            ranges = flood_ranges(self._front_f, self.threads, cost)
         if len(ranges) > 1:  # whole floods per thread, joined in the one-thread order
             nf, nn, fin, dups, n_pool, pool, (r, fl, h) = spread_threads(
                 start, end, indices, self._hops, self._limit, self._active, self._rd_start, self._rd_len,
