@@ -110,7 +110,8 @@ STAGES = {
     "overlay": [("agentsim_env.comms.overlay", "Overlay", "advance_graph"),
                 ("agentsim_env.comms.overlay", "Overlay", "advance")],
     "deliver (7)": [("agentsim_env.comms.stack", "CommsStack", "deliver")],
-    "observe (9)": [("agentsim_env.comms.stack", "CommsStack", "observe")],
+    "observe (9)": [("agentsim_env.comms.stack", "CommsStack", "observe_flat"),  # the array API's flat rows
+                    ("agentsim_env.comms.stack", "CommsStack", "observe")],
 }  # fmt: skip
 
 
