@@ -55,3 +55,23 @@ def test_inbox_features_are_clipped_in_flat_rows_as_in_parts(gnss: bool) -> None
     parts = flat_parts(scenario.observation(world), world.state.n_slots)
     np.testing.assert_array_equal(flat, parts)
     assert np.nanmax(np.abs(flat)) == INBOX_CLIP and np.isnan(flat).sum() == 1
+
+
+def test_a_scenario_that_adds_parts_in_observation_keeps_them_in_its_flat_rows() -> None:
+    """A subclass that overrides ``observation`` (here: one more part after the counters) gets flat rows of its
+    own parts in order, not the written-in-place layout of the stock parts."""
+    from agentsim_env.scenarios.navigation import NavigationScenario
+
+    class Extra(NavigationScenario):
+        def observation(self, world):  # type: ignore[no-untyped-def]
+            out = super().observation(world)
+            out["extra"] = np.full((world.state.n_slots, 2), 7.0, dtype=np.float32)
+            return out
+
+    base = agentsim_env.make("navigation", n_agents=5, comms={}).scenario
+    scenario = Extra(base.config)
+    world = scenario.build(1)
+    reset_worlds(scenario, world, [0], [np.random.SeedSequence(0)])
+    flat = scenario.flat_observation(world)
+    np.testing.assert_array_equal(flat, flat_parts(scenario.observation(world), world.state.n_slots))
+    assert (flat[:, -2:] == 7.0).all()

@@ -355,7 +355,7 @@ class Scenario(ABC, Generic[ConfigT]):
         The parts of :meth:`observation` concatenated in layout order, into ``out`` when given (else a fresh
         array); a scenario may write them straight into the flat array instead (same values).
         """
-        if world.comms is None:
+        if world.comms is None or type(self).observation is not Scenario.observation:
             return flat_parts(self.observation(world), world.state.n_slots, out, world.threads)
         # the scenario's and sensors' parts copied in, the inbox and counters written in place (no copy of the
         # largest part, no second pass to clip it)

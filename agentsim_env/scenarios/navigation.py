@@ -379,7 +379,7 @@ class NavigationScenario(Scenario[NavigationConfig]):
     def flat_observation(self, world: World, out: np.ndarray | None = None) -> np.ndarray:
         """The flat layout written straight into ``out`` or a fresh array: the three parts by the observation
         kernel, then the inbox and counters (with comms), when no sensor adds a part."""
-        if any(s.obs_part is not None for s in world.sensors):
+        if any(s.obs_part is not None for s in world.sensors) or type(self).observation is not Scenario.observation:
             return super().flat_observation(world, out)
         lead = self._obs.shape[1]
         if out is None:
