@@ -36,6 +36,8 @@ from agentsim_env.comms.flooding import spread, spread_hop
 from agentsim_env.comms.rangegraph import _links_from_pairs
 from agentsim_env.core.threads import RowThreads
 
+_NO_ROWS = np.zeros(0, dtype=np.int64)  # Inbox.push_rows: delivery j takes payload row j
+
 
 class Deliveries:
     """Overlay messages read during one ``advance`` call, one row per (receiver, flood). Read-only.
@@ -54,7 +56,7 @@ class Deliveries:
     deliveries it has not yet read a copy of the rows they need, so the values never change.
     """
 
-    __slots__ = ("receiver", "flood", "hops", "_origin", "_created", "_payload", "_table")
+    __slots__ = ("receiver", "flood", "hops", "_origin", "_created", "_payload", "_table", "_rows")
     receiver: np.ndarray
     flood: np.ndarray
     hops: np.ndarray
@@ -62,29 +64,41 @@ class Deliveries:
     _created: np.ndarray | None
     _payload: np.ndarray | None
     _table: tuple[np.ndarray, np.ndarray, np.ndarray] | None
+    _rows: np.ndarray | None
 
     def __init__(self, receiver: np.ndarray, flood: np.ndarray, origin: np.ndarray, hops: np.ndarray,
                  created: np.ndarray, payload: np.ndarray) -> None:  # fmt: skip
         for name, value in (("receiver", receiver), ("flood", flood), ("hops", hops), ("_origin", origin),
-                            ("_created", created), ("_payload", payload), ("_table", None)):  # fmt: skip
+                            ("_created", created), ("_payload", payload), ("_table", None),
+                            ("_rows", None)):  # fmt: skip
             object.__setattr__(self, name, value)
 
     @classmethod
     def by_flood(cls, receiver: np.ndarray, flood: np.ndarray, hops: np.ndarray,
-                 table: tuple[np.ndarray, np.ndarray, np.ndarray]) -> Deliveries:  # fmt: skip
-        """Deliveries whose ``origin``, ``created`` and ``payload`` are ``table``'s rows ``flood`` (the flood
-        table's ``(origin, created, payload)`` columns), looked up when read."""
+                 table: tuple[np.ndarray, np.ndarray, np.ndarray], rows: np.ndarray | None = None) -> Deliveries:  # fmt: skip
+        """Deliveries whose ``origin``, ``created`` and ``payload`` are ``table``'s rows (``(origin, created,
+        payload)`` columns of a flood table), looked up when read: rows ``rows``, or ``flood`` when None. The
+        caller keeps the table's rows unchanged, or calls :meth:`keep_rows` before it changes them."""
         out = cls(receiver, flood, None, hops, None, None)  # type: ignore[arg-type]
         object.__setattr__(out, "_table", table)
+        object.__setattr__(out, "_rows", flood if rows is None else rows)
         return out
 
     def _column(self, name: str, i: int) -> np.ndarray:
         value = getattr(self, name)
         if value is None:
-            col = self._table[i]  # type: ignore[index]
-            value = np.take(col, self.flood, axis=0)  # rows: much faster than fancy indexing
+            assert self._table is not None and self._rows is not None
+            value = np.take(self._table[i], self._rows, axis=0)  # rows: much faster than fancy indexing
             object.__setattr__(self, name, value)
         return value  # type: ignore[no-any-return]
+
+    def push_columns(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, bool]:
+        """``(sender, created, payload, rows, by_rows)`` for an ``Inbox.push_batches`` batch: the table's columns
+        and the rows (read by the push from a few cache-resident rows) while they are looked up on reading, else
+        the columns themselves."""
+        if self._table is not None and self._rows is not None:
+            return self._table[0], self._table[1], self._table[2], self._rows, True
+        return self.origin, self.created, self.payload, _NO_ROWS, False
 
     @property
     def origin(self) -> np.ndarray:
@@ -310,13 +324,6 @@ class Overlay:
     def totals(self) -> OverlayStats:
         """Counters summed over every ``advance`` since construction or ``reset``."""
         return self._totals
-
-    def push_columns(self, out: Deliveries) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, bool]:
-        """``(sender, created, payload, rows, True)`` for ``Inbox.push_batches``: delivery ``j`` of the latest
-        ``advance``'s ``out`` has ``sender[rows[j]]``, ``created[rows[j]]`` and ``payload[rows[j]]``, read from
-        the flood table by flood id (a few rows, cache resident, where ``out``'s columns hold one copy per
-        delivery). Valid until the next ``start`` (internal buffers: read, do not keep)."""
-        return self._origin, self._created, self._payload, out.flood, True
 
     @property
     def frontier_size(self) -> int:

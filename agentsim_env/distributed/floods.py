@@ -102,7 +102,6 @@ class FloodEntries:
         return cls(*(np.concatenate([getattr(p, f.name) for p in parts]) for f in fields(cls)))
 
 
-@dataclass(slots=True, frozen=True)
 class FloodDeliveries:
     """Flood messages read by own slots during one ``hop``, grouped by flood in key order.
 
@@ -113,14 +112,42 @@ class FloodDeliveries:
         seq: The flood's sequence number in its key ``(k,)`` int64.
         hops: Hops from the origin to the receiver ``(k,)`` int32 (>= 1).
         payload: Message payload ``(k, D)`` float32.
+        rows: Each delivery's row in ``table``.
+        table: The part's flood columns ``(origin, created, payload, seq)`` at the hop (replaced, never written,
+            afterwards), from which ``origin``, ``created``, ``seq`` and ``payload`` are looked up when read.
     """
 
-    receiver: np.ndarray
-    origin: np.ndarray
-    created: np.ndarray
-    seq: np.ndarray
-    hops: np.ndarray
-    payload: np.ndarray
+    __slots__ = ("receiver", "hops", "rows", "table", "_cols")
+
+    def __init__(self, receiver: np.ndarray, hops: np.ndarray, rows: np.ndarray,
+                 table: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]) -> None:  # fmt: skip
+        self.receiver, self.hops, self.rows, self.table = receiver, hops, rows, table
+        self._cols: dict[int, np.ndarray] = {}
+
+    def _col(self, i: int) -> np.ndarray:
+        if i not in self._cols:
+            self._cols[i] = np.take(self.table[i], self.rows, axis=0)
+        return self._cols[i]
+
+    @property
+    def origin(self) -> np.ndarray:
+        """Slot that started the flood ``(k,)`` int64."""
+        return self._col(0)
+
+    @property
+    def created(self) -> np.ndarray:
+        """Step the flood was started ``(k,)`` int64."""
+        return self._col(1)
+
+    @property
+    def payload(self) -> np.ndarray:
+        """Message payload ``(k, D)`` float32."""
+        return self._col(2)
+
+    @property
+    def seq(self) -> np.ndarray:
+        """The flood's sequence number in its key ``(k,)`` int64."""
+        return self._col(3)
 
     def __len__(self) -> int:
         """Number of deliveries."""
@@ -444,8 +471,7 @@ class PartFloods:
         self._pool_buf, self._pool, self._rd_start, self._rd_len = spare, spare[:npool], rd_start, rd_len
         self._add_row, self._add_slot = _e(), _e()
         out_f, out_h = out_f[:nd], out_h[:nd]
-        out = FloodDeliveries(out_v[:nd].copy(), self._o[out_f], self._c[out_f], self._q[out_f], out_h.copy(),
-                              np.take(self._pay, out_f, axis=0))  # fmt: skip
+        out = FloodDeliveries(out_v[:nd].copy(), out_h.copy(), out_f.copy(), (self._o, self._c, self._pay, self._q))
         out_v = out.receiver
         done = row_h >= 0
         self._end[done] = self._clock + self._limit[done] - row_h[done]

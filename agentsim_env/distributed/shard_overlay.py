@@ -13,8 +13,6 @@ import numpy as np
 from agentsim_env.comms.overlay import Deliveries, Overlay, OverlayStats
 from agentsim_env.distributed.floods import FloodEntries, PartFloods
 
-_NO_ROWS = np.zeros(0, dtype=np.int64)  # Inbox.push_rows: delivery j takes payload row j
-
 
 class ShardOverlay:
     """Overlay floods of one shard (see the module docstring).
@@ -96,8 +94,6 @@ class ShardOverlay:
         st = self.part.stats
         self._last = OverlayStats(int(st.started), int(st.delivered), int(st.duplicates), 0)
         self._totals = self._totals + self._last
-        return Deliveries(d.receiver, np.full(len(d), -1, dtype=np.int64), d.origin, d.hops, d.created, d.payload)
-
-    def push_columns(self, out: Deliveries) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, bool]:
-        """``(origin, created, payload, [], False)`` of ``out``: a shard's deliveries carry their own columns."""
-        return out.origin, out.created, out.payload, _NO_ROWS, False
+        # origin, created and payload looked up in the part's flood table when read (it replaces its columns
+        # instead of writing them, so these rows stay as they are)
+        return Deliveries.by_flood(d.receiver, np.full(len(d), -1, dtype=np.int64), d.hops, d.table[:3], d.rows)
