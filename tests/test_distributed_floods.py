@@ -18,7 +18,7 @@ from hypothesis import strategies as st
 
 from agentsim_env.comms.overlay import Overlay
 from agentsim_env.comms.rangegraph import _links_from_pairs
-from agentsim_env.distributed.floods import FloodEntries, PartFloods, combine_stats
+from agentsim_env.distributed.floods import FloodDeliveries, FloodEntries, PartFloods, combine_stats
 from agentsim_env.distributed.partition import Strips
 
 D = 2
@@ -48,6 +48,7 @@ class _Run:
         self.ref = Overlay(n, D, self.reach)
         self.parts = [PartFloods(n, D) for _ in range(k)]
         self.owner = self.strips.owner_of(self.pos[:, 0])
+        self.kept: list[tuple[FloodDeliveries, list[tuple]]] = []  # deliveries read later, and what they read
         self.keys: dict[int, tuple[int, int, int]] = {}  # the reference's flood id -> key
 
     def start(self, step: int, count: int) -> None:
@@ -94,8 +95,10 @@ class _Run:
             known[ghosts[p]] = True
             d = part.hop(_links(self.pos, online & known, self.reach), own, received[p])
             assert own[d.receiver].all()
-            got += list(zip(d.receiver.tolist(), d.created.tolist(), d.origin.tolist(), d.seq.tolist(),
-                            d.hops.tolist(), map(tuple, d.payload.tolist())))  # fmt: skip
+            unread = FloodDeliveries(d.receiver, d.hops, d.rows, d.table)  # its columns read only at the end
+            rows = _rows(d)
+            got += rows
+            self.kept.append((unread, rows))
         want = [(r, *self.keys[f], h, tuple(pl))
                 for r, f, h, pl in zip(a.receiver.tolist(), a.flood.tolist(), a.hops.tolist(), a.payload.tolist())]  # fmt: skip
         assert sorted(got) == sorted(want)
@@ -108,6 +111,11 @@ class _Run:
         stats, active = combine_stats([part.stats for part in self.parts])
         assert stats == self.ref.stats
         assert active == self.ref.active_count
+
+
+def _rows(d) -> list[tuple]:  # type: ignore[no-untyped-def]
+    return list(zip(d.receiver.tolist(), d.created.tolist(), d.origin.tolist(), d.seq.tolist(), d.hops.tolist(),
+                    map(tuple, d.payload.tolist())))  # fmt: skip
 
 
 def _where(e: FloodEntries, sel: np.ndarray) -> FloodEntries:
@@ -131,6 +139,9 @@ def test_part_floods_hop_like_one_overlay(seed: int, n: int, k: int, steps: int,
             run.start(step, int(rng.integers(0, 5)))
         run.move(sigma)
         run.hop(rng.random(n) >= 0.1)
+    # deliveries read after later starts, hand-overs and hops (which replace a part's columns) read the same
+    for unread, rows in run.kept:
+        assert _rows(unread) == rows
 
 
 def test_part_forgets_floods_after_their_hop_limit() -> None:
