@@ -2,10 +2,11 @@
 
 Floods do not interact within a hop: a flood's new readers depend only on its frontier entries, its reader list
 and the links. The frontier (grouped by flood, in the frontier's flood order) is therefore cut into contiguous
-ranges of whole floods, and each range spreads on a thread of the env's pool with a stamp array, delivery
-buffers and a reader pool of its own (``flooding.hop_range``, the one-thread hop's kernel too). The ranges' outputs are then put behind one another in
-range order (each range copies its own part, on its own thread), which is the order one thread writes them in:
-deliveries, the next frontier, the floods that ended, and the reader lists of the new pool. The active floods
+ranges of whole floods of about equal work (``hop_cost``), and each range spreads on a thread of the env's pool
+with a stamp array, delivery buffers and a reader pool of its own (``flooding.hop_range``, the one-thread hop's
+kernel too). The ranges' outputs are then put behind one another in range order (each range copies its own part,
+on its own thread), which is the order one thread writes them in: deliveries, the next frontier, the floods that
+ended, and the reader lists of the new pool. The active floods
 without a frontier entry keep their readers at the end, as in ``spread``.
 
 One-hop mode only (the comms stack's); ``full_propagation`` spreads on one thread.
