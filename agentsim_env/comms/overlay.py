@@ -26,6 +26,7 @@ table of floods that doubles when full.
 
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass
 from typing import Any
 
@@ -56,7 +57,7 @@ class Deliveries:
     deliveries it has not yet read a copy of the rows they need, so the values never change.
     """
 
-    __slots__ = ("receiver", "flood", "hops", "_origin", "_created", "_payload", "_table", "_rows")
+    __slots__ = ("receiver", "flood", "hops", "_origin", "_created", "_payload", "_table", "_rows", "__weakref__")
     receiver: np.ndarray
     flood: np.ndarray
     hops: np.ndarray
@@ -248,7 +249,8 @@ class Overlay:
         self._alloc(int(capacity))
         self._scratch = _new_scratch(self.n_slots)
         self._tscratch: list[list[Any]] = []  # per range of a hop on threads (``comms.flood_threads``)
-        self._unread: Deliveries | None = None  # the latest deliveries, which read the flood table when asked
+        # deliveries still alive that read the flood table when asked (the caller's, or the stack's events)
+        self._unread: weakref.WeakSet[Deliveries] = weakref.WeakSet()
         self.threads = RowThreads(1)
         """Threads of a one-hop spread (whole floods per thread); results do not depend on them."""
 
@@ -262,7 +264,7 @@ class Overlay:
             setattr(self, k, v)
         self._scratch = _new_scratch(self.n_slots)
         self._tscratch = []
-        self._unread = None
+        self._unread = weakref.WeakSet()
         if "threads" not in state:
             self.threads = RowThreads(1)
 
@@ -423,9 +425,9 @@ class Overlay:
         k = origin.shape[0]
         if k == 0:
             return np.empty(0, dtype=np.int64)
-        if self._unread is not None:  # the table's rows are about to change: the latest deliveries keep theirs
-            self._unread.keep_rows()
-            self._unread = None
+        for d in list(self._unread):  # the table's rows are about to change: deliveries still alive keep theirs
+            d.keep_rows()
+        self._unread.clear()
         if self._n_free < k:
             self._grow(k)
         ids = self._free[self._n_free - k : self._n_free][::-1].copy()
@@ -533,7 +535,7 @@ class Overlay:
             self._scratch = (stamp, token, self._pool, out_r, out_f, out_h)  # the old pool is the next spare
             out = Deliveries.by_flood(out_r[:nd].copy(), out_f[:nd].copy(), out_h[:nd].copy(),
                                       (self._origin, self._created, self._payload))  # fmt: skip
-        self._unread = out
+        self._unread.add(out)
         self._pool, self._n_pool = pool, n_pool
         self._front_f, self._front_n = nf, nn
         if fin.shape[0]:
