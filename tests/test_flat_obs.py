@@ -75,3 +75,28 @@ def test_a_scenario_that_adds_parts_in_observation_keeps_them_in_its_flat_rows()
     flat = scenario.flat_observation(world)
     np.testing.assert_array_equal(flat, flat_parts(scenario.observation(world), world.state.n_slots))
     assert (flat[:, -2:] == 7.0).all()
+
+
+@pytest.mark.parametrize(
+    ("make_out", "col", "match"),
+    [
+        (lambda n: np.zeros((n, 40), dtype=np.float64), 0, "float32"),
+        (lambda n: np.zeros((n + 1, 40), dtype=np.float32), 0, "float32"),
+        (lambda n: np.zeros((n, 80), dtype=np.float32)[:, ::2], 0, "unit column stride"),
+        (lambda n: np.zeros((n, 40), dtype=np.float32)[:, :, None], 0, "float32"),
+        (lambda n: np.zeros((n, 40), dtype=np.float32), 30, "col must leave 15 columns"),
+        (lambda n: np.zeros((n, 40), dtype=np.float32), -1, "col must leave"),
+    ],
+)  # fmt: skip
+def test_inbox_flat_write_refuses_bad_outputs_by_name(make_out: Any, col: int, match: str) -> None:
+    from agentsim_env.comms.messages import Inbox
+
+    inbox = Inbox(6, 1, 4)
+    with pytest.raises(ValueError, match=match):
+        inbox.observe_flat(np.zeros((6, 3)), 0, make_out(6), col, 1e4)
+    frozen = np.zeros((6, 40), dtype=np.float32)
+    frozen.flags.writeable = False
+    with pytest.raises(ValueError, match="writable"):
+        inbox.observe_flat(np.zeros((6, 3)), 0, frozen, 0, 1e4)
+    with pytest.raises(ValueError, match="pos must have shape"):
+        inbox.observe_flat(np.zeros((5, 3)), 0, np.zeros((6, 40), dtype=np.float32), 0, 1e4)

@@ -462,8 +462,9 @@ class Inbox:
         (message ``i`` of a slot at ``col + i F``; any row stride), each value clipped to ``[-clip, clip]``
         (``np.inf``: none): a flat observation row gets its inbox part without a copy.
         """
-        if out.ndim != 2 or out.shape[0] != self.n_slots or out.dtype != np.float32 or out.strides[1] != 4:
-            raise ValueError(f"out must be float32 (S={self.n_slots}, width) with unit column stride")
+        if (out.ndim != 2 or out.shape[0] != self.n_slots or out.dtype != np.float32 or out.strides[1] != 4
+                or not out.flags.writeable):  # fmt: skip
+            raise ValueError(f"out must be a writable float32 array (S={self.n_slots}, width) with unit column stride")
         if not 0 <= col <= out.shape[1] - self.size * self.n_features:
             raise ValueError(f"col must leave {self.size * self.n_features} columns, got {col} of {out.shape[1]}")
         p = np.asarray(pos, dtype=np.float64)
