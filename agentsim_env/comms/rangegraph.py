@@ -112,6 +112,17 @@ def _graph_shift(items, lo, hi, start, end, base, src, n, dst):  # type: ignore[
 _W = 6  # entries copied unconditionally per window column and per row list (see _graph_rows)
 
 
+@nb.njit(cache=True, inline="always")
+def _append(dst, n, src, s0, cnt):  # type: ignore[no-untyped-def]
+    # dst[n:n + cnt] = src[s0:s0 + cnt], the first _W entries copied whatever cnt (branch free for short lists;
+    # the caller keeps room for them); the new length
+    for t in range(_W):
+        dst[n + t] = src[s0 + t]
+    for t in range(_W, cnt):
+        dst[n + t] = src[s0 + t]
+    return n + cnt
+
+
 @nb.njit(cache=True, error_model="numpy", nogil=True)
 def _graph_rows(lo, hi, world, cell_start, items, ox, oy, cell, nx, ny, reach, pair_d, near_r,  # type: ignore[no-untyped-def]  # noqa: E501
                 start, end, near, indices, cand, d2c, sp, ok_link):  # fmt: skip
@@ -223,18 +234,8 @@ def _graph_rows(lo, hi, world, cell_start, items, ox, oy, cell, nx, ny, reach, p
                         if d <= near_r and (d < best or (d == best and v < bslot)):
                             best = d
                             bslot = v
-        nbk = nb_ - kb
-        for t in range(_W):
-            indices[n + t] = cand[kb + t]
-        for t in range(_W, nbk):
-            indices[n + t] = cand[kb + t]
-        n += nbk
-        nck = nc - kc
-        for t in range(_W):
-            indices[n + t] = cand[kc + t]
-        for t in range(_W, nck):
-            indices[n + t] = cand[kc + t]
-        n += nck
+        n = _append(indices, n, cand, kb, nb_ - kb)
+        n = _append(indices, n, cand, kc, nc - kc)
         start[u] = row0
         near[u] = bslot
         end[u] = n
