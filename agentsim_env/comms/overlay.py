@@ -511,7 +511,8 @@ class Overlay:
         self._pending_started = 0
         stamp, token, spare, out_r, out_f, out_h = self._scratch
         ranges: list[tuple[int, int]] = []
-        if not self.full_propagation and self.threads.num_threads > 1:  # ranges of equal estimated work
+        if not self.full_propagation and len(self.threads.ranges(self._front_f.shape[0])) > 1:
+            # whole floods per range, ranges of equal estimated work
             cost = hop_cost(self._front_f, self._front_n, start, end, self._hops, self._limit)
             ranges = flood_ranges(self._front_f, self.threads, cost)
         if len(ranges) > 1:  # whole floods per thread, joined in the one-thread order
