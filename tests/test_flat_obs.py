@@ -52,9 +52,14 @@ def test_inbox_features_are_clipped_in_flat_rows_as_in_parts(gnss: bool) -> None
     pay = np.array([[3e6, -5e5, np.nan]], dtype=np.float32)
     world.comms.bus.inbox.push(np.array([0]), 1, np.array([1]), 0, np.array([world.tick - 1]), pay)
     flat = scenario.flat_observation(world)
-    parts = flat_parts(scenario.observation(world), world.state.n_slots)
-    np.testing.assert_array_equal(flat, parts)
+    parts = scenario.observation(world)
+    np.testing.assert_array_equal(flat, flat_parts(parts, world.state.n_slots))
     assert np.nanmax(np.abs(flat)) == INBOX_CLIP and np.isnan(flat).sum() == 1
+    # the kernels clip as np.clip does (NaN kept), in the dict parts and a shard's rows alike
+    raw = world.comms.bus.inbox.observe(world.state.pos, max(world.tick - 1, 0))
+    np.testing.assert_array_equal(parts["inbox"], np.clip(raw, -INBOX_CLIP, INBOX_CLIP))
+    rows = np.array([0, 3])
+    np.testing.assert_array_equal(scenario.observation_rows(world, rows)["inbox"], parts["inbox"][rows])
 
 
 def test_a_scenario_that_adds_parts_in_observation_keeps_them_in_its_flat_rows() -> None:

@@ -240,10 +240,10 @@ def _observe_kernel(lo, hi, valid, kind, sender, hops, created, payload, pos, st
 
 @nb.njit(cache=True, error_model="numpy")
 def _observe_rows_kernel(rows, valid, kind, sender, hops, created, payload, pos, step, pos_scale, age_h, hop_h,  # type: ignore[no-untyped-def]
-                         out):  # fmt: skip
+                         out, lim):  # fmt: skip
     for r in range(rows.shape[0]):
         _observe_row(rows[r], r, valid, kind, sender, hops, created, payload, pos, step, pos_scale, age_h, hop_h,
-                     out, 0, np.inf)  # fmt: skip
+                     out, 0, lim)  # fmt: skip
 
 
 class Inbox:
@@ -438,13 +438,14 @@ class Inbox:
         if s.size:
             self.dropped += np.bincount(s, minlength=self.n_slots)
 
-    def observe(self, pos: np.ndarray, step: int, out: np.ndarray | None = None) -> np.ndarray:
+    def observe(self, pos: np.ndarray, step: int, out: np.ndarray | None = None, clip: float = np.inf) -> np.ndarray:
         """Feature tensor of every inbox (layout in the module docstring).
 
         Args:
             pos: Current positions ``(S, 3)``.
             step: Current step (for the age feature).
             out: Optional preallocated ``(S, M, FEATURES_PER_MESSAGE + D)`` float32 buffer, overwritten.
+            clip: Each feature is clipped to ``[-clip, clip]`` (as ``np.clip``; ``np.inf``: not clipped).
 
         Returns:
             ``out`` (or a new array) of shape ``(S, M, FEATURES_PER_MESSAGE + D)``.
@@ -454,7 +455,7 @@ class Inbox:
             out = np.empty(shape, dtype=np.float32)
         elif out.shape != shape or out.dtype != np.float32 or not out.flags.c_contiguous:
             raise ValueError(f"out must be a C-contiguous float32 array of shape {shape}, got {out.dtype} {out.shape}")
-        self.observe_flat(pos, step, out.reshape(self.n_slots, -1), 0, np.inf)
+        self.observe_flat(pos, step, out.reshape(self.n_slots, -1), 0, clip)
         return out
 
     def observe_flat(self, pos: np.ndarray, step: int, out: np.ndarray, col: int, clip: float) -> None:
@@ -474,15 +475,15 @@ class Inbox:
                 self.pos_scale, self.age_horizon, self.hop_horizon, out, int(col), float(clip))  # fmt: skip
         self.threads.run(lambda lo, hi, _: _observe_kernel(lo, hi, *args), self.n_slots)
 
-    def observe_rows(self, pos: np.ndarray, step: int, rows: np.ndarray) -> np.ndarray:
+    def observe_rows(self, pos: np.ndarray, step: int, rows: np.ndarray, clip: float = np.inf) -> np.ndarray:
         """The features of the inboxes of ``rows`` only: ``(len(rows), M, F)`` float32, a fresh array (the rows
-        ``observe`` gives them; a shard observes its own agents only)."""
+        ``observe`` gives them, clipped alike; a shard observes its own agents only)."""
         p = np.ascontiguousarray(pos, dtype=np.float64)
         r = np.ascontiguousarray(rows, dtype=np.int64)
         out = np.empty((r.shape[0], self.size, self.n_features), dtype=np.float32)
         _observe_rows_kernel(r, self.valid, self.kind, self.sender, self.hops, self.created, self.payload, p,
                              int(step), self.pos_scale, self.age_horizon, self.hop_horizon,
-                             out.reshape(r.shape[0], self.size * self.n_features))  # fmt: skip
+                             out.reshape(r.shape[0], self.size * self.n_features), float(clip))  # fmt: skip
         return out
 
     def clear(self, slots: np.ndarray | None = None) -> None:

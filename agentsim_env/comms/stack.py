@@ -462,13 +462,14 @@ class CommsStack:
         return self.events
 
     # ------------------------------------------------------------------ observation
-    def observe(self, pos: np.ndarray, step: int) -> tuple[np.ndarray, np.ndarray]:
-        """Inbox features ``(S, M, F)`` and per-step counters ``(S, 2)``: received and dropped / inbox size.
+    def observe(self, pos: np.ndarray, step: int, clip: float = np.inf) -> tuple[np.ndarray, np.ndarray]:
+        """Inbox features ``(S, M, F)`` (each clipped to ``[-clip, clip]``) and per-step counters ``(S, 2)``:
+        received and dropped / inbox size.
 
         The inbox features are written into a buffer reused by the next call (copy them to keep them); the
         counters are a fresh array.
         """
-        inbox = self.bus.inbox.observe(pos, step, out=self._inbox_out)
+        inbox = self.bus.inbox.observe(pos, step, out=self._inbox_out, clip=clip)
         return inbox, self._stats(slice(None))
 
     def observe_flat(self, pos: np.ndarray, step: int, out: np.ndarray, col: int, clip: float) -> None:
@@ -477,13 +478,13 @@ class CommsStack:
         inbox = self.bus.inbox
         width = inbox.size * inbox.n_features
         inbox.observe_flat(pos, step, out, col, clip)
-        m = float(self.cfg.inbox_size)
-        for c, (now, before) in enumerate(((inbox.received, self._received0), (inbox.dropped, self._dropped0))):
-            out[:, col + width + c] = np.clip((now - before) / m, 0.0, 1.0)
+        out[:, col + width : col + width + 2] = self._stats(slice(None))
 
-    def observe_rows(self, pos: np.ndarray, step: int, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def observe_rows(
+        self, pos: np.ndarray, step: int, rows: np.ndarray, clip: float = np.inf
+    ) -> tuple[np.ndarray, np.ndarray]:
         """``observe`` for the slots ``rows`` only (fresh arrays): what a shard needs for its own agents."""
-        return self.bus.inbox.observe_rows(pos, step, rows), self._stats(rows)
+        return self.bus.inbox.observe_rows(pos, step, rows, clip), self._stats(rows)
 
     def _stats(self, rows: slice | np.ndarray) -> np.ndarray:
         """Received and dropped this step / inbox size, ``(n, 2)`` float32 in [0, 1]."""

@@ -327,9 +327,7 @@ class Scenario(ABC, Generic[ConfigT]):
             if s.obs_part is not None:
                 out[s.name] = s.observe(world.readings[s.name])
         if world.comms is not None:
-            inbox, stats = world.comms.observe(world.state.pos, max(world.tick - 1, 0))
-            out["inbox"] = np.clip(inbox, -INBOX_CLIP, INBOX_CLIP, out=inbox)
-            out["comms"] = stats
+            out["inbox"], out["comms"] = world.comms.observe(world.state.pos, max(world.tick - 1, 0), INBOX_CLIP)
         return out
 
     def observe_rows(self, world: World, slots: np.ndarray) -> dict[str, np.ndarray]:
@@ -344,9 +342,8 @@ class Scenario(ABC, Generic[ConfigT]):
             if s.obs_part is not None:
                 out[s.name] = s.observe(world.readings[s.name])[slots]
         if world.comms is not None:
-            inbox, stats = world.comms.observe_rows(world.state.pos, max(world.tick - 1, 0), slots)
-            out["inbox"] = np.clip(inbox, -INBOX_CLIP, INBOX_CLIP, out=inbox)
-            out["comms"] = stats
+            out["inbox"], out["comms"] = world.comms.observe_rows(world.state.pos, max(world.tick - 1, 0), slots,
+                                                                  INBOX_CLIP)  # fmt: skip
         return out
 
     def flat_observation(self, world: World, out: np.ndarray | None = None) -> np.ndarray:
