@@ -28,6 +28,7 @@ _install_compile_notice()  # one stderr line when a kernel compiles instead of l
 
 __version__ = "0.1.0"
 
+
 def list_scenarios() -> list[str]:
     """Names of every registered scenario."""
     from agentsim_env.scenarios.registry import list_scenarios as _list

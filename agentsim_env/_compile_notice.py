@@ -153,5 +153,14 @@ def install() -> None:
         sys.meta_path.insert(0, _AfterNumbaImport())
 
 
-__all__ = ["NOTICE", "PACKAGE_PREFIX", "QUIET_ENV", "install", "is_package_function", "mark_shown", "notify",
-           "quiet", "shown"]  # fmt: skip
+__all__ = [
+    "NOTICE",
+    "PACKAGE_PREFIX",
+    "QUIET_ENV",
+    "install",
+    "is_package_function",
+    "mark_shown",
+    "notify",
+    "quiet",
+    "shown",
+]

@@ -30,8 +30,17 @@ from agentsim_env.cli_run import check_record, cmd_run, config_tag
 from agentsim_env.cli_set import parse_set
 from agentsim_env.outdirs import prepare_out, remove_created
 
-__all__ = ["COMPILE_NOTICE", "WARM_MARKER", "announce_compile", "build_parser", "config_tag", "kernels_cold",
-           "main", "mark_warm", "prepare_out"]  # fmt: skip
+__all__ = [
+    "COMPILE_NOTICE",
+    "WARM_MARKER",
+    "announce_compile",
+    "build_parser",
+    "config_tag",
+    "kernels_cold",
+    "main",
+    "mark_warm",
+    "prepare_out",
+]
 
 SET_HELP = (
     "config values, parsed by each field's type: booleans true/false/1/0/yes/no, integers, numbers, "
@@ -56,8 +65,9 @@ class _Formatter(argparse.RawDescriptionHelpFormatter, argparse.ArgumentDefaults
 class _LazyParser(argparse.ArgumentParser):
     """An ArgumentParser whose help texts that need imports are filled in only when help is shown."""
 
-    def __init__(self, *args: Any, lazy: Callable[[argparse.ArgumentParser], None] | None = None,
-                 **kwargs: Any) -> None:  # fmt: skip
+    def __init__(
+        self, *args: Any, lazy: Callable[[argparse.ArgumentParser], None] | None = None, **kwargs: Any
+    ) -> None:
         kwargs.setdefault("formatter_class", _Formatter)
         super().__init__(*args, **kwargs)
         self._lazy = lazy
@@ -90,8 +100,10 @@ def _fill_run(p: argparse.ArgumentParser) -> None:
 
     names = agentsim_env.list_scenarios()
     _action(p, "scenario").help = f"one of: {', '.join(names)}"
-    lines = [_wrap(n, [f"{b} (default)" if i == 0 else b for i, b in enumerate(BASELINES.get(n, []))] or ["-"])
-             for n in names]  # fmt: skip
+    lines = [
+        _wrap(n, [f"{b} (default)" if i == 0 else b for i, b in enumerate(BASELINES.get(n, []))] or ["-"])
+        for n in names
+    ]
     p.epilog = "baselines per scenario (--policy):\n" + "\n".join(lines) + "\n\n" + (p.epilog or "")
 
 
@@ -194,8 +206,9 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
             def record_env(env: Any, label: str) -> Any:
                 return record(env, store, label=label)
 
-            grid = run_grid(args.zones, args.strategies, seeds, overrides, progress=not args.quiet,
-                            record_env=record_env)  # fmt: skip
+            grid = run_grid(
+                args.zones, args.strategies, seeds, overrides, progress=not args.quiet, record_env=record_env
+            )
             with open_store(store) as st:
                 paths, _ = write_outputs(grid, args.out, plots=not args.no_plots, store=st.con)
     except BaseException:
@@ -243,26 +256,58 @@ def build_parser() -> argparse.ArgumentParser:
         lazy=_fill_run,
     )
     r.add_argument("scenario", metavar="SCENARIO", help="a registered scenario ('agentsim scenarios')")
-    r.add_argument("--episodes", type=int, default=None, help="episodes (seeds SEED, SEED+1, ...), >= 1 "
-                   "(default: 5; 1 with --render)")  # fmt: skip
+    r.add_argument(
+        "--episodes",
+        type=int,
+        default=None,
+        help="episodes (seeds SEED, SEED+1, ...), >= 1 (default: 5; 1 with --render)",
+    )
     r.add_argument("--seed", type=int, default=0, help="seed of the first episode, >= 0")
-    r.add_argument("--policy", default=None, help="baseline name (default: the scenario's first; see below) or "
-                   "a trained model (a folder from 'agentsim train', or its .zip)")  # fmt: skip
+    r.add_argument(
+        "--policy",
+        default=None,
+        help="baseline name (default: the scenario's first; see below) or "
+        "a trained model (a folder from 'agentsim train', or its .zip)",
+    )
     r.add_argument("--set", nargs="*", metavar="KEY=VALUE", help=SET_HELP)
-    r.add_argument("--render", action="store_true", help="show a live window, in real time unless --fps is "
-                   "given (needs a display); closing it, Esc, SIGTERM or Ctrl-C end the run")  # fmt: skip
-    r.add_argument("--fps", type=int, default=None, help="frames per second of the live window, > 0 "
-                   "(default: real time)")  # fmt: skip
+    r.add_argument(
+        "--render",
+        action="store_true",
+        help="show a live window, in real time unless --fps is "
+        "given (needs a display); closing it, Esc, SIGTERM or Ctrl-C end the run",
+    )
+    r.add_argument(
+        "--fps", type=int, default=None, help="frames per second of the live window, > 0 (default: real time)"
+    )
     r.add_argument("--out", default="outputs", help="folder for the trajectory PNG ('' for none)")
     r.add_argument("--quiet", action="store_true", help="no progress bar")
-    r.add_argument("--record", default=None, metavar="PATH", help="record every episode to this SQLite store "
-                   "(one run; created when missing; see 'agentsim runs')")  # fmt: skip
-    r.add_argument("--shards", type=int, default=None, metavar="K", help="run the simulation over K shard "
-                   "processes on Ray (navigation, relay; see docs/distributed.md)")  # fmt: skip
-    r.add_argument("--ray-address", default=None, metavar="ADDR", help="with --shards: a Ray cluster's "
-                   "host:port (default: a local cluster on 127.0.0.1)")  # fmt: skip
-    r.add_argument("--threads", type=int, default=1, metavar="N", help="threads for the per-agent kernels "
-                   "(scan, collisions, motion; worth it from tens of thousands of agents; same results)")  # fmt: skip
+    r.add_argument(
+        "--record",
+        default=None,
+        metavar="PATH",
+        help="record every episode to this SQLite store (one run; created when missing; see 'agentsim runs')",
+    )
+    r.add_argument(
+        "--shards",
+        type=int,
+        default=None,
+        metavar="K",
+        help="run the simulation over K shard processes on Ray (navigation, relay; see docs/distributed.md)",
+    )
+    r.add_argument(
+        "--ray-address",
+        default=None,
+        metavar="ADDR",
+        help="with --shards: a Ray cluster's host:port (default: a local cluster on 127.0.0.1)",
+    )
+    r.add_argument(
+        "--threads",
+        type=int,
+        default=1,
+        metavar="N",
+        help="threads for the per-agent kernels "
+        "(scan, collisions, motion; worth it from tens of thousands of agents; same results)",
+    )
     r.set_defaults(func=cmd_run)
     s = sub.add_parser("scenarios", help="list the registered scenarios")
     s.set_defaults(func=cmd_scenarios)
@@ -274,21 +319,41 @@ def build_parser() -> argparse.ArgumentParser:
         epilog=EVALUATE_EPILOG,
         lazy=_fill_evaluate,
     )
-    e.add_argument("--zones", nargs="+", default=["default"], metavar="ZONES",
-                   help="zone files: 'default', 'tiny' or JSON paths (several allowed)")  # fmt: skip
-    e.add_argument("--strategies", nargs="+", default=["all"], metavar="NAME",
-                   help="release strategies (see below), or 'all'")  # fmt: skip
-    e.add_argument("--seeds", nargs="+", default=["3"], metavar="SEED",
-                   help="a count N >= 1 (seeds 0..N-1) or a list: 0,4,9 or 0 4 9 (one seed: 7,)")  # fmt: skip
+    e.add_argument(
+        "--zones",
+        nargs="+",
+        default=["default"],
+        metavar="ZONES",
+        help="zone files: 'default', 'tiny' or JSON paths (several allowed)",
+    )
+    e.add_argument(
+        "--strategies",
+        nargs="+",
+        default=["all"],
+        metavar="NAME",
+        help="release strategies (see below), or 'all'",
+    )
+    e.add_argument(
+        "--seeds",
+        nargs="+",
+        default=["3"],
+        metavar="SEED",
+        help="a count N >= 1 (seeds 0..N-1) or a list: 0,4,9 or 0 4 9 (one seed: 7,)",
+    )
     e.add_argument(
         "--set", nargs="*", metavar="KEY=VALUE", help="uav_release " + SET_HELP + "; for every run"
     )
     e.add_argument("--out", default="outputs/evaluation", help="output folder")
     e.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     e.add_argument("--quiet", action="store_true", help="no progress bar")
-    e.add_argument("--record", default=None, metavar="PATH", help="record every mission to this SQLite store "
-                   "(a run each, labelled zones= strategy= seed=); sensors.csv and runs.csv are then read "
-                   "back from it")  # fmt: skip
+    e.add_argument(
+        "--record",
+        default=None,
+        metavar="PATH",
+        help="record every mission to this SQLite store "
+        "(a run each, labelled zones= strategy= seed=); sensors.csv and runs.csv are then read "
+        "back from it",
+    )
     e.set_defaults(func=cmd_evaluate)
     w = sub.add_parser(
         "warmup",

@@ -17,6 +17,7 @@ from agentsim_env import _compile_notice
 WARM_MARKER = ".agentsim-kernels-warm"
 COMPILE_NOTICE = "agentsim: compiling simulation kernels (first run only, ~30 s)..."
 
+
 def _kernel_cache_dir() -> Path | None:
     """The directory numba caches the package's kernels in (None: no writable one is known)."""
     chosen = os.environ.get("NUMBA_CACHE_DIR")

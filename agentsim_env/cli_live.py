@@ -47,8 +47,10 @@ def check_display(scenario: str) -> None:
 
     reason = display_problem()
     if reason is not None:
-        raise ValueError(f"--render needs a display: {reason}; on this machine use 'agentsim view {scenario}' "
-                         "(the 3D viewer, in a browser) or run without --render")  # fmt: skip
+        raise ValueError(
+            f"--render needs a display: {reason}; on this machine use 'agentsim view {scenario}' "
+            "(the 3D viewer, in a browser) or run without --render"
+        )
 
 
 def _cause(exc: BaseException) -> BaseException | None:

@@ -55,8 +55,16 @@ def cmd_replay(args: argparse.Namespace) -> int:
         raise ValueError(f"--fps must be > 0, got {args.fps}")
     check_out(args.out)
     try:
-        paths = write_replay(args.store, args.out, run=args.run, episode=args.episode, world=args.world,
-                             every=args.every, size=args.size, fps=args.fps)  # fmt: skip
+        paths = write_replay(
+            args.store,
+            args.out,
+            run=args.run,
+            episode=args.episode,
+            world=args.world,
+            every=args.every,
+            size=args.size,
+            fps=args.fps,
+        )
     except ImportError as exc:
         raise ValueError(str(exc)) from None
     if len(paths) == 1:
@@ -84,8 +92,12 @@ def add_replay_command(sub: Any) -> argparse.ArgumentParser:
     )
     p.add_argument("--fps", type=float, default=None, help="video frames per second (default: real time)")
     p.add_argument("--size", type=int, default=512, help="longest side of the map in pixels")
-    p.add_argument("--out", required=True, help="video.mp4, video.gif, or a folder for PNG frames (a name "
-                   "without an extension, or ending in '/'); another extension is an error")  # fmt: skip
+    p.add_argument(
+        "--out",
+        required=True,
+        help="video.mp4, video.gif, or a folder for PNG frames (a name "
+        "without an extension, or ending in '/'); another extension is an error",
+    )
     p.set_defaults(func=cmd_replay)
     return p
 

@@ -99,7 +99,14 @@ def _rollout_row(
             check()
 
     res = env.rollout(policy, env.scenario.max_steps, seed=seed, on_step=on_step)
-    return (seed, res.steps, float(np.mean(res.returns)), res.info_sums, res.steps_per_s, res.agent_steps_per_s)
+    return (
+        seed,
+        res.steps,
+        float(np.mean(res.returns)),
+        res.info_sums,
+        res.steps_per_s,
+        res.agent_steps_per_s,
+    )
 
 
 def check_record(path: str | None) -> None:
@@ -167,11 +174,18 @@ def _run(args: argparse.Namespace, config: dict[str, Any], policy_name: str) -> 
     if getattr(args, "shards", None) is not None:
         from agentsim_env.distributed import make as make_sharded
 
-        env = make_sharded(args.scenario, shards=args.shards, ray_address=args.ray_address, render_mode=mode, **config)
-        print(f"{args.scenario}: {args.shards} shards ({env.coordinator.backend.address}), halo "
-              f"{env.coordinator.strips.halo:.1f} m", flush=True)  # fmt: skip
+        env = make_sharded(
+            args.scenario, shards=args.shards, ray_address=args.ray_address, render_mode=mode, **config
+        )
+        print(
+            f"{args.scenario}: {args.shards} shards ({env.coordinator.backend.address}), halo "
+            f"{env.coordinator.strips.halo:.1f} m",
+            flush=True,
+        )
     else:
-        env = agentsim_env.make(args.scenario, render_mode=mode, num_threads=getattr(args, "threads", 1), **config)
+        env = agentsim_env.make(
+            args.scenario, render_mode=mode, num_threads=getattr(args, "threads", 1), **config
+        )
     if args.fps is not None:
         env.metadata["render_fps"] = args.fps  # the live window paces itself with this rate
     store = getattr(args, "record", None)
@@ -185,10 +199,16 @@ def _run(args: argparse.Namespace, config: dict[str, Any], policy_name: str) -> 
     rows = []
     traj = None
     # large worlds: a bar over steps (an episode of 100,000 agents takes minutes), else over episodes
-    bar = _step_bar(args.episodes * env.scenario.max_steps, args.scenario) if (
-        env.scenario.n_agents >= BIG_WORLD and not args.quiet) else None  # fmt: skip
-    episodes = range(args.episodes) if bar is not None else progress(range(args.episodes), args.episodes,
-                                                                      args.scenario, not args.quiet)  # fmt: skip
+    bar = (
+        _step_bar(args.episodes * env.scenario.max_steps, args.scenario)
+        if (env.scenario.n_agents >= BIG_WORLD and not args.quiet)
+        else None
+    )
+    episodes = (
+        range(args.episodes)
+        if bar is not None
+        else progress(range(args.episodes), args.episodes, args.scenario, not args.quiet)
+    )
     from agentsim_env.cli_live import LiveStop, StopRun, as_stop, is_stop, stop_line
 
     halt: StopRun | None = None
@@ -209,8 +229,16 @@ def _run(args: argparse.Namespace, config: dict[str, Any], policy_name: str) -> 
                 wall = time.perf_counter() - t0
                 if recorder is not None:
                     traj = recorder.result(env)
-                rows.append((ep.seed, ep.steps, float(np.mean(list(ep.returns.values()))), ep.info_sums,
-                             ep.steps / wall, counted.n / wall))  # fmt: skip
+                rows.append(
+                    (
+                        ep.seed,
+                        ep.steps,
+                        float(np.mean(list(ep.returns.values()))),
+                        ep.info_sums,
+                        ep.steps / wall,
+                        counted.n / wall,
+                    )
+                )
     except BaseException as exc:
         if store:
             env.recorder.finish("incomplete")

@@ -29,8 +29,20 @@ examples:
 #: parser does not import the recorder; tests/test_store_read.py checks they agree).
 FORMATS = ("csv", "parquet")
 TABLES = ("meta", "runs", "episodes", "steps", "messages", "events", "sensors", "observations")
-RUNS_COLUMNS = ("run", "scenario", "status", "started", "seconds", "worlds x agents", "episodes", "steps rows",
-                "messages", "events", "sensors", "label")  # fmt: skip
+RUNS_COLUMNS = (
+    "run",
+    "scenario",
+    "status",
+    "started",
+    "seconds",
+    "worlds x agents",
+    "episodes",
+    "steps rows",
+    "messages",
+    "events",
+    "sensors",
+    "label",
+)
 
 
 def add_store_commands(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -44,8 +56,13 @@ def add_store_commands(sub: argparse._SubParsersAction) -> None:  # type: ignore
     x.add_argument("store", metavar="RUN.db", help="the SQLite store")
     x.add_argument("--format", default="csv", metavar="FORMAT", help=f"one of: {', '.join(FORMATS)}")
     x.add_argument("--out", required=True, metavar="DIR", help="output folder (created when missing)")
-    x.add_argument("--tables", nargs="+", default=None, metavar="TABLE",
-                   help=f"tables to export (default: all): {' '.join(TABLES)}")  # fmt: skip
+    x.add_argument(
+        "--tables",
+        nargs="+",
+        default=None,
+        metavar="TABLE",
+        help=f"tables to export (default: all): {' '.join(TABLES)}",
+    )
     x.set_defaults(func=cmd_export)
     r = sub.add_parser(
         "runs",
@@ -102,8 +119,20 @@ def runs_table(rows: list[dict[str, Any]]) -> str:
     for r in rows:
         started = time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(r["started"]))
         seconds = None if r["seconds"] is None else f"{r['seconds']:.1f}"
-        cells = (r["run"], r["scenario"], r["status"], started, seconds, f"{r['n_worlds']} x {r['n_agents']}",
-                 r["episodes"], r["step_rows"], r["messages"], r["events"], r["sensors"], r["label"])  # fmt: skip
+        cells = (
+            r["run"],
+            r["scenario"],
+            r["status"],
+            started,
+            seconds,
+            f"{r['n_worlds']} x {r['n_agents']}",
+            r["episodes"],
+            r["step_rows"],
+            r["messages"],
+            r["events"],
+            r["sensors"],
+            r["label"],
+        )
         lines.append("| " + " | ".join(map(_cell, cells)) + " |")
     return "\n".join(lines)
 

@@ -49,8 +49,10 @@ def cmd_view(args: argparse.Namespace) -> int:
             raise ValueError(f"--speed must be {SPEED_RANGE}, got {args.speed}")
     export = [f"--{n}" for n in ("fps", "size", "every") if getattr(args, n) is not None]
     if (args.out is None or not args.replay) and (export or args.out is not None):
-        raise ValueError(f"{' '.join(export or ['--out'])}: --out exports a replay to a video; give --replay RUN.db "
-                         "--out VIDEO.mp4")  # fmt: skip
+        raise ValueError(
+            f"{' '.join(export or ['--out'])}: --out exports a replay to a video; give --replay RUN.db "
+            "--out VIDEO.mp4"
+        )
     if args.replay:
         if args.scenario or args.policy or args.set:
             raise ValueError("--replay plays a store: give no SCENARIO, --policy or --set with it")
@@ -69,8 +71,15 @@ def cmd_view(args: argparse.Namespace) -> int:
 def _replay(args: argparse.Namespace) -> int:
     from agentsim_env.recorder.web_replay import ReplayViewer
 
-    viewer = ReplayViewer(args.replay, run=args.run, episode=args.episode or 0, world=args.world, host=args.host,
-                          port=args.port, speed=args.speed)  # fmt: skip
+    viewer = ReplayViewer(
+        args.replay,
+        run=args.run,
+        episode=args.episode or 0,
+        world=args.world,
+        host=args.host,
+        port=args.port,
+        speed=args.speed,
+    )
     url = viewer.start()
     _warn_host(args.host)
     if args.open:
@@ -90,10 +99,17 @@ def _export(args: argparse.Namespace) -> int:
     if args.speed is not None:
         raise ValueError("--speed sets the pace of a live page; an exported video's rate is --fps")
     try:
-        path, n = export_replay_video(args.replay, args.out, run=args.run, episode=args.episode or 0, world=args.world,
-                                      fps=args.fps, size=DEFAULT_SIZE if args.size is None else args.size,
-                                      every=1 if args.every is None else args.every,
-                                      progress=True)  # fmt: skip
+        path, n = export_replay_video(
+            args.replay,
+            args.out,
+            run=args.run,
+            episode=args.episode or 0,
+            world=args.world,
+            fps=args.fps,
+            size=DEFAULT_SIZE if args.size is None else args.size,
+            every=1 if args.every is None else args.every,
+            progress=True,
+        )
     except KeyboardInterrupt:
         print("agentsim view: interrupted; no video written", file=sys.stderr)
         return 130
@@ -103,8 +119,11 @@ def _export(args: argparse.Namespace) -> int:
 
 def _warn_host(host: str, what: str = "watch and control the simulation") -> None:
     if host not in ("127.0.0.1", "localhost", "::1"):
-        print(f"agentsim: WARNING: serving on {host}: any machine that reaches it can {what} (there is no "
-              "authentication)", file=sys.stderr)  # fmt: skip
+        print(
+            f"agentsim: WARNING: serving on {host}: any machine that reaches it can {what} (there is no "
+            "authentication)",
+            file=sys.stderr,
+        )
 
 
 def _live(args: argparse.Namespace) -> int:
@@ -121,12 +140,20 @@ def _live(args: argparse.Namespace) -> int:
     env = agentsim_env.make(args.scenario, **config)
     policy = make_policy(args.scenario, env, policy_name)
     speed = args.speed if args.speed is not None else clamp_speed(1.0 / env.world.config.dt)
-    viewer = WebViewer(host=args.host, port=args.port, speed=speed, title=f"{args.scenario} | {policy_name}",
-                       quiet=True, wait=not args.no_wait)  # fmt: skip
+    viewer = WebViewer(
+        host=args.host,
+        port=args.port,
+        speed=speed,
+        title=f"{args.scenario} | {policy_name}",
+        quiet=True,
+        wait=not args.no_wait,
+    )
     url = viewer.attach(env.world, env.scenario)
     waits = "" if args.no_wait else "; it starts when the page opens"
-    print(f"agentsim view: {args.scenario} with policy {policy_name} at {url}  (Ctrl-C stops{waits})",
-          file=sys.stderr)  # fmt: skip
+    print(
+        f"agentsim view: {args.scenario} with policy {policy_name} at {url}  (Ctrl-C stops{waits})",
+        file=sys.stderr,
+    )
     _warn_host(args.host)
     if args.open:
         webbrowser.open(url)
@@ -187,8 +214,10 @@ def cmd_zones_check(args: argparse.Namespace) -> int:
     print("| # | name | centre | radius | sensors | profile | weight |")
     print("|---|---|---|---|---|---|---|")
     for i, z in enumerate(zs.zones):
-        print(f"| {i} | {z.name or ''} | ({z.centre[0]:g}, {z.centre[1]:g}) | {z.radius:g} | {z.n_sensors} | "
-              f"{z.profile} | {z.weight:g} |")  # fmt: skip
+        print(
+            f"| {i} | {z.name or ''} | ({z.centre[0]:g}, {z.centre[1]:g}) | {z.radius:g} | {z.n_sensors} | "
+            f"{z.profile} | {z.weight:g} |"
+        )
     for i, j in overlaps(zs):
         print(f"note: zones {i} and {j} overlap")
     n_uavs, payload = default_fleet()
@@ -203,8 +232,12 @@ def cmd_zones_check(args: argparse.Namespace) -> int:
 
 
 def _network_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--host", default="127.0.0.1", help="address to bind; anything but 127.0.0.1 is reachable "
-                   "from other machines (a warning is printed)")  # fmt: skip
+    p.add_argument(
+        "--host",
+        default="127.0.0.1",
+        help="address to bind; anything but 127.0.0.1 is reachable "
+        "from other machines (a warning is printed)",
+    )
     p.add_argument("--port", type=int, default=0, help="port (0: a free one)")
     p.add_argument("--open", action="store_true", help="open the page in the default browser")
 
@@ -217,43 +250,81 @@ def add_view_commands(sub: Any, set_help: str, announce: Any) -> None:
         set_help: Help text of ``--set``.
         announce: Prints the one-line notice when kernels are about to be compiled (called before a live run).
     """
-    v = sub.add_parser("view", help="the 3D web viewer: a live simulation, or a replay from the store",
-                       description="Run SCENARIO with a policy and show it in 3D in the browser (log stream, pause,\n"
-                       "step, speed, click an agent), or replay a recorded episode with --replay.",
-                       epilog=VIEW_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
-    v.add_argument("scenario", nargs="?", metavar="SCENARIO", help="a registered scenario ('agentsim scenarios')")
-    v.add_argument("--policy", default=None, help="baseline name (default: the scenario's first) or a trained model")
+    v = sub.add_parser(
+        "view",
+        help="the 3D web viewer: a live simulation, or a replay from the store",
+        description="Run SCENARIO with a policy and show it in 3D in the browser (log stream, pause,\n"
+        "step, speed, click an agent), or replay a recorded episode with --replay.",
+        epilog=VIEW_EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    v.add_argument(
+        "scenario", nargs="?", metavar="SCENARIO", help="a registered scenario ('agentsim scenarios')"
+    )
+    v.add_argument(
+        "--policy", default=None, help="baseline name (default: the scenario's first) or a trained model"
+    )
     v.add_argument("--set", nargs="*", metavar="KEY=VALUE", help=set_help)
     v.add_argument("--seed", type=int, default=0, help="seed of the first episode")
-    v.add_argument("--speed", type=float, default=None,
-                   help="steps per second, 0.1..10000 (default: real time; 0: as fast as it runs)")
-    v.add_argument("--episodes", type=int, default=None, help="stop after this many episodes (default: run on)")
+    v.add_argument(
+        "--speed",
+        type=float,
+        default=None,
+        help="steps per second, 0.1..10000 (default: real time; 0: as fast as it runs)",
+    )
+    v.add_argument(
+        "--episodes", type=int, default=None, help="stop after this many episodes (default: run on)"
+    )
     v.add_argument("--steps", type=int, default=None, help="stop after this many steps (default: run on)")
-    v.add_argument("--no-wait", action="store_true", help="start the simulation at once (default: wait for the "
-                   "first page, so that it shows the episode from step 0)")  # fmt: skip
+    v.add_argument(
+        "--no-wait",
+        action="store_true",
+        help="start the simulation at once (default: wait for the "
+        "first page, so that it shows the episode from step 0)",
+    )
     v.add_argument("--replay", default=None, metavar="RUN.db", help="replay an episode of this store instead")
     v.add_argument("--run", type=int, default=None, help="replay: run id (default: the last)")
     v.add_argument("--episode", type=int, default=None, help="replay: episode of the run (default: 0)")
     v.add_argument("--world", type=int, default=0, help="replay: world of a batched run")
-    v.add_argument("--out", default=None, metavar="VIDEO", help="replay: write the 3D view to VIDEO (.mp4 or .gif) "
-                   "through headless Chromium instead of serving it")  # fmt: skip
+    v.add_argument(
+        "--out",
+        default=None,
+        metavar="VIDEO",
+        help="replay: write the 3D view to VIDEO (.mp4 or .gif) "
+        "through headless Chromium instead of serving it",
+    )
     v.add_argument("--fps", type=float, default=None, help="--out: frames per second (default: real time)")
-    v.add_argument("--size", type=int, default=None, help="--out: video width in pixels, 160..1920 (16:9; 960)")
-    v.add_argument("--every", type=int, default=None, help="--out: draw every K-th recorded step (and the last)")
+    v.add_argument(
+        "--size", type=int, default=None, help="--out: video width in pixels, 160..1920 (16:9; 960)"
+    )
+    v.add_argument(
+        "--every", type=int, default=None, help="--out: draw every K-th recorded step (and the last)"
+    )
     _network_options(v)
     v.set_defaults(func=cmd_view, announce=announce)
-    z = sub.add_parser("zones", help="hot-zone files: the designer page, or a check",
-                       description="Design hot zones in the browser, or check a zone file (docs/zones.md).",
-                       epilog=ZONES_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
+    z = sub.add_parser(
+        "zones",
+        help="hot-zone files: the designer page, or a check",
+        description="Design hot zones in the browser, or check a zone file (docs/zones.md).",
+        epilog=ZONES_EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     zsub = z.add_subparsers(dest="zones_command", required=True, metavar="ACTION")
     d = zsub.add_parser("design", help="the hot-zone designer page (saves only to FILE)")
-    d.add_argument("file", nargs="?", default=None, metavar="FILE", help="zone file to edit (created on Save)")
+    d.add_argument(
+        "file", nargs="?", default=None, metavar="FILE", help="zone file to edit (created on Save)"
+    )
     _network_options(d)
     d.set_defaults(func=cmd_zones_design)
     c = zsub.add_parser("check", help="validate a zone file, list its zones and check the fleet carries them")
     c.add_argument("file", metavar="FILE", help="a zone file (JSON)")
-    c.add_argument("--set", nargs="*", metavar="KEY=VALUE", help="uav_release config values for the fleet "
-                   "(n_uavs=6 payload=50 ...; default: the scenario's defaults), checked with these zones")  # fmt: skip
+    c.add_argument(
+        "--set",
+        nargs="*",
+        metavar="KEY=VALUE",
+        help="uav_release config values for the fleet "
+        "(n_uavs=6 payload=50 ...; default: the scenario's defaults), checked with these zones",
+    )
     c.set_defaults(func=cmd_zones_check)
 
 

@@ -30,8 +30,11 @@ from typing import Any
 import numpy as np
 
 #: Small configs per scenario for the warm-up (the kernels' argument types do not depend on the sizes).
-WARMUP_CONFIG: dict[str, dict[str, Any]] = {"navigation": {"n_agents": 2}, "rendezvous": {"n_agents": 2},
-                                            "uav_release": {"zones": "tiny", "n_uavs": 2}}  # fmt: skip
+WARMUP_CONFIG: dict[str, dict[str, Any]] = {
+    "navigation": {"n_agents": 2},
+    "rendezvous": {"n_agents": 2},
+    "uav_release": {"zones": "tiny", "n_uavs": 2},
+}
 #: Steps of each short episode.
 WARMUP_STEPS = 5
 #: Worlds of the warm-up's ``BatchedEnv``.
@@ -53,9 +56,15 @@ class Variant:
 
 #: Extra runs of the default baseline that reach kernels, or kernel signatures, the short episodes do not.
 VARIANTS: dict[str, list[Variant]] = {
-    "navigation": [Variant({"comms": {}}), Variant({"physics": "pymunk", "collisions": False}, needs="pymunk")],
+    "navigation": [
+        Variant({"comms": {}}),
+        Variant({"physics": "pymunk", "collisions": False}, needs="pymunk"),
+    ],
     # direct, flooded and relayed messages (forwarded once the scout has seen its target), for inbox_pair_forms
-    "relay": [Variant({"max_steps": 60}), Variant({"max_steps": 30, "comms": {"loss": 0.1}})],  # lossy: keyed draws
+    "relay": [
+        Variant({"max_steps": 60}),
+        Variant({"max_steps": 30, "comms": {"loss": 0.1}}),
+    ],  # lossy: keyed draws
 }
 #: Scenarios that run over shards (``agentsim run --shards``), with config keys over the warm-up config: relay
 #: long enough for floods to cross from one shard to the other.
@@ -143,8 +152,9 @@ class _StoreTransport:
         self.n_shards = inner.n_shards
         self.address = inner.address
 
-    def call(self, method: str, calls: dict[int, tuple[Any, ...]], timeout_s: float,
-             on_reply: Any = None) -> dict[int, Any]:  # fmt: skip
+    def call(
+        self, method: str, calls: dict[int, tuple[Any, ...]], timeout_s: float, on_reply: Any = None
+    ) -> dict[int, Any]:
         """Run ``method`` on the shards with their arguments and replies passed through ``_through_store``."""
         from agentsim_env.distributed.backends import Failure
 
@@ -225,5 +235,13 @@ def warm_up(report: Callable[[str, float], None] | None = None) -> float:
     return time.perf_counter() - start
 
 
-__all__ = ["SHARDED", "VARIANTS", "WARMUP_CONFIG", "WARMUP_STEPS", "WARMUP_WORLDS", "Variant",
-           "scenario_steps", "warm_up"]  # fmt: skip
+__all__ = [
+    "SHARDED",
+    "VARIANTS",
+    "WARMUP_CONFIG",
+    "WARMUP_STEPS",
+    "WARMUP_WORLDS",
+    "Variant",
+    "scenario_steps",
+    "warm_up",
+]

@@ -139,8 +139,14 @@ def _child_env(cache_dir: str) -> dict[str, str]:
 def run_case(case: ColdCase, cache_dir: str) -> Run:
     """Run ``case`` in a new process on the numba cache ``cache_dir``."""
     t0 = time.perf_counter()
-    res = subprocess.run([sys.executable, "-c", case.script()], cwd=ROOT, env=_child_env(cache_dir),
-                         capture_output=True, text=True, timeout=TIMEOUT_S)  # fmt: skip
+    res = subprocess.run(
+        [sys.executable, "-c", case.script()],
+        cwd=ROOT,
+        env=_child_env(cache_dir),
+        capture_output=True,
+        text=True,
+        timeout=TIMEOUT_S,
+    )
     process_s = time.perf_counter() - t0
     lines = [ln for ln in res.stdout.splitlines() if ln.startswith(MARK)]
     if res.returncode != 0 or not lines:
@@ -152,15 +158,22 @@ def run_case(case: ColdCase, cache_dir: str) -> Run:
 def run_warmup(cache_dir: str) -> float:
     """Wall seconds of ``agentsim warmup --quiet`` filling ``cache_dir``."""
     t0 = time.perf_counter()
-    res = subprocess.run([sys.executable, "-m", "agentsim_env.cli", "warmup", "--quiet"], cwd=ROOT,
-                         env=_child_env(cache_dir), capture_output=True, text=True, timeout=TIMEOUT_S)  # fmt: skip
+    res = subprocess.run(
+        [sys.executable, "-m", "agentsim_env.cli", "warmup", "--quiet"],
+        cwd=ROOT,
+        env=_child_env(cache_dir),
+        capture_output=True,
+        text=True,
+        timeout=TIMEOUT_S,
+    )
     if res.returncode != 0:
         raise RuntimeError(f"agentsim warmup: exit {res.returncode}\n{res.stderr[-3000:]}")
     return time.perf_counter() - t0
 
 
-def coldstart_rows(quick: bool, runs: int | None = None, cold_runs: int | None = None,
-                   whole_quickstart: bool | None = None) -> list[dict[str, Any]]:  # fmt: skip
+def coldstart_rows(
+    quick: bool, runs: int | None = None, cold_runs: int | None = None, whole_quickstart: bool | None = None
+) -> list[dict[str, Any]]:
     """Measure every case (see the module docstring) and return one dict per case.
 
     Args:
@@ -204,37 +217,63 @@ def coldstart_rows(quick: bool, runs: int | None = None, cold_runs: int | None =
         w, k = warm[c.label], cold[c.label]
         warm_s = statistics.median(r.s for r in w)
         target = TARGET_S if c.targeted else None
-        rows.append({
-            "case": c.label,
-            "warm_s": warm_s,
-            "warm_cpu_s": statistics.median(r.cpu for r in w),
-            "warm_process_s": statistics.median(r.process_s for r in w),
-            "warm_runs": len(w),
-            "warm_runs_compiled": sum(r.compiled for r in w),
-            "cold_s": statistics.median(r.s for r in k),
-            "cold_runs": len(k),
-            "warmup_s": warmup_s,
-            "target_s": target,
-            "passed": None if target is None else warm_s <= target,
-        })  # fmt: skip
+        rows.append(
+            {
+                "case": c.label,
+                "warm_s": warm_s,
+                "warm_cpu_s": statistics.median(r.cpu for r in w),
+                "warm_process_s": statistics.median(r.process_s for r in w),
+                "warm_runs": len(w),
+                "warm_runs_compiled": sum(r.compiled for r in w),
+                "cold_s": statistics.median(r.s for r in k),
+                "cold_runs": len(k),
+                "warmup_s": warmup_s,
+                "target_s": target,
+                "passed": None if target is None else warm_s <= target,
+            }
+        )
     return rows
 
 
 def table(rows: list[dict[str, Any]]) -> str:
     """The markdown table of ``coldstart_rows``'s rows, with the warm-up as its last row."""
-    headers = ["case", "warm start s", "warm CPU s", "warm process s", "warm runs compiling", "empty-cache start s",
-               "target", "result"]  # fmt: skip
+    headers = [
+        "case",
+        "warm start s",
+        "warm CPU s",
+        "warm process s",
+        "warm runs compiling",
+        "empty-cache start s",
+        "target",
+        "result",
+    ]
     body = []
     for r in rows:
-        body.append([
-            r["case"], common.fmt_num(r["warm_s"]), common.fmt_num(r["warm_cpu_s"]),
-            common.fmt_num(r["warm_process_s"]), f"{r['warm_runs_compiled']}/{r['warm_runs']}",
-            common.fmt_num(r["cold_s"]), "-" if r["target_s"] is None else f"<= {r['target_s']:g} s",
-            "-" if r["passed"] is None else ("PASS" if r["passed"] else "FAIL"),
-        ])  # fmt: skip
+        body.append(
+            [
+                r["case"],
+                common.fmt_num(r["warm_s"]),
+                common.fmt_num(r["warm_cpu_s"]),
+                common.fmt_num(r["warm_process_s"]),
+                f"{r['warm_runs_compiled']}/{r['warm_runs']}",
+                common.fmt_num(r["cold_s"]),
+                "-" if r["target_s"] is None else f"<= {r['target_s']:g} s",
+                "-" if r["passed"] is None else ("PASS" if r["passed"] else "FAIL"),
+            ]
+        )
     if rows:
-        body.append(["agentsim warmup (empty cache)", "-", "-", "-", "-", common.fmt_num(rows[0]["warmup_s"]), "-",
-                     "-"])  # fmt: skip
+        body.append(
+            [
+                "agentsim warmup (empty cache)",
+                "-",
+                "-",
+                "-",
+                "-",
+                common.fmt_num(rows[0]["warmup_s"]),
+                "-",
+                "-",
+            ]
+        )
     return common.markdown_table(headers, body)
 
 
@@ -254,16 +293,20 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     print(f"machine: {common.machine_description()}")
     print(f"date: {time.strftime('%Y-%m-%d')}")
     rows = coldstart_rows(args.quick, args.runs, args.cold_runs)
-    print(f"mode: {'quick' if args.quick else 'full'}; {rows[0]['warm_runs']} warm runs and {rows[0]['cold_runs']} "
-          "empty-cache run(s) per case, each a new process with its own NUMBA_CACHE_DIR; medians, wall time")  # fmt: skip
+    print(
+        f"mode: {'quick' if args.quick else 'full'}; {rows[0]['warm_runs']} warm runs and {rows[0]['cold_runs']} "
+        "empty-cache run(s) per case, each a new process with its own NUMBA_CACHE_DIR; medians, wall time"
+    )
     print()
     print(table(rows))
     print()
-    print("warm start: wall seconds from before `import agentsim_env` to the end of the first step, in a process "
-          "started after `agentsim warmup` filled its cache; warm CPU s: the process's CPU time at that point "
-          "(interpreter start included); warm process s: the whole process, start to exit; warm runs compiling: "
-          "warm runs that compiled a package kernel (0: the warm-up covers the case); empty-cache start: the "
-          "same without the warm-up (kernels compile).")  # fmt: skip
+    print(
+        "warm start: wall seconds from before `import agentsim_env` to the end of the first step, in a process "
+        "started after `agentsim warmup` filled its cache; warm CPU s: the process's CPU time at that point "
+        "(interpreter start included); warm process s: the whole process, start to exit; warm runs compiling: "
+        "warm runs that compiled a package kernel (0: the warm-up covers the case); empty-cache start: the "
+        "same without the warm-up (kernels compile)."
+    )
     return {"rows": rows}
 
 

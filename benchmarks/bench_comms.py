@@ -36,8 +36,14 @@ CYCLE = 32  # prepared action arrays per case (motion: 16 random draws, then the
 def _config(n: int, comms: bool) -> dict:
     cfg = {"n_agents": n, "n_groups": max(1, n // 8), "collisions": False, "max_steps": 10**9}
     if comms:
-        cfg["comms"] = {"payload_dim": 4, "inbox_size": 4, "overlay_range": 30.0, "max_hops": 2,
-                        "heartbeat_period": 10, "heartbeat_timeout": 20}  # fmt: skip
+        cfg["comms"] = {
+            "payload_dim": 4,
+            "inbox_size": 4,
+            "overlay_range": 30.0,
+            "max_hops": 2,
+            "heartbeat_period": 10,
+            "heartbeat_timeout": 20,
+        }
     return cfg
 
 
@@ -63,8 +69,12 @@ def _make_dict_env(n: int, comms: bool):  # type: ignore[no-untyped-def]
     acts = []
     for a in _actions(n, comms, np.random.default_rng(0)):
         a = a.astype(np.float32)
-        acts.append({ag: ({"motion": a[i, :3], "comm": a[i, 3:]} if comms else {"motion": a[i, :3]})
-                     for i, ag in enumerate(env.possible_agents)})  # fmt: skip
+        acts.append(
+            {
+                ag: ({"motion": a[i, :3], "comm": a[i, 3:]} if comms else {"motion": a[i, :3]})
+                for i, ag in enumerate(env.possible_agents)
+            }
+        )
     return env, acts
 
 
@@ -102,17 +112,25 @@ def array_case(n: int, comms: bool, threads: int = 1) -> Case:
 # every flood; "deliver, rest" the rest of stage 7 (inbox push of the overlay deliveries, events).
 STAGES = {
     "send (1)": [("agentsim_env.comms.stack", "CommsStack", "send_actions")],
-    "groups (6)": [("agentsim_env.groups.controller", "GroupController", "step"),
-                   ("agentsim_env.comms.stack", "CommsStack", "tick_groups")],
-    "range graph": [("agentsim_env.sim.world", "World", "_comm_pairs"),
-                    ("agentsim_env.comms.stack", "CommsStack", "update_graph")],
+    "groups (6)": [
+        ("agentsim_env.groups.controller", "GroupController", "step"),
+        ("agentsim_env.comms.stack", "CommsStack", "tick_groups"),
+    ],
+    "range graph": [
+        ("agentsim_env.sim.world", "World", "_comm_pairs"),
+        ("agentsim_env.comms.stack", "CommsStack", "update_graph"),
+    ],
     "bus": [("agentsim_env.comms.bus", "MessageBus", "deliver")],
-    "overlay": [("agentsim_env.comms.overlay", "Overlay", "advance_graph"),
-                ("agentsim_env.comms.overlay", "Overlay", "advance")],
+    "overlay": [
+        ("agentsim_env.comms.overlay", "Overlay", "advance_graph"),
+        ("agentsim_env.comms.overlay", "Overlay", "advance"),
+    ],
     "deliver (7)": [("agentsim_env.comms.stack", "CommsStack", "deliver")],
-    "observe (9)": [("agentsim_env.comms.stack", "CommsStack", "observe_flat"),  # the array API's flat rows
-                    ("agentsim_env.comms.stack", "CommsStack", "observe")],
-}  # fmt: skip
+    "observe (9)": [
+        ("agentsim_env.comms.stack", "CommsStack", "observe_flat"),  # the array API's flat rows
+        ("agentsim_env.comms.stack", "CommsStack", "observe"),
+    ],
+}
 
 
 def stage_breakdown(n: int, steps: int) -> dict[str, float]:
@@ -221,10 +239,31 @@ def main(argv: list[str] | None = None) -> int:
         eps = {k: 1.0 / v.step_s for k, v in st.items()}
         tgt = targets.get(n)
         ok = "-" if tgt is None else ("yes" if eps["dict+comms"] >= tgt else "no")
-        rows.append([f"1x{n}", fmt_num(eps["dict+comms"]), fmt_num(eps["array+comms"]), fmt_num(eps["array, no comms"]),
-                     f"{eps['array, no comms'] / eps['array+comms']:.2f}", "-" if tgt is None else fmt_num(tgt), ok])  # fmt: skip
-    print(markdown_table(["size", "dict API env-steps/s", "array API env-steps/s", "array, no comms",
-                          "comms cost (x)", "target (dict)", "met"], rows))  # fmt: skip
+        rows.append(
+            [
+                f"1x{n}",
+                fmt_num(eps["dict+comms"]),
+                fmt_num(eps["array+comms"]),
+                fmt_num(eps["array, no comms"]),
+                f"{eps['array, no comms'] / eps['array+comms']:.2f}",
+                "-" if tgt is None else fmt_num(tgt),
+                ok,
+            ]
+        )
+    print(
+        markdown_table(
+            [
+                "size",
+                "dict API env-steps/s",
+                "array API env-steps/s",
+                "array, no comms",
+                "comms cost (x)",
+                "target (dict)",
+                "met",
+            ],
+            rows,
+        )
+    )
     print("\n# Where the comms time goes (array API, ms per step; stage numbers as in DESIGN section 4)\n")
     br = {n: stage_breakdown(n, 40 if args.quick else (400 if n <= 1000 else 60)) for n in sizes}
     keys = list(br[sizes[0]])

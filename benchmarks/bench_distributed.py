@@ -81,8 +81,13 @@ def start_ray() -> Any:
     except ImportError:
         return None
     if not ray.is_initialized():
-        ray.init(num_cpus=max(os.cpu_count() or 1, 2), include_dashboard=False, _node_ip_address="127.0.0.1",
-                 logging_level="ERROR", log_to_driver=False)  # fmt: skip
+        ray.init(
+            num_cpus=max(os.cpu_count() or 1, 2),
+            include_dashboard=False,
+            _node_ip_address="127.0.0.1",
+            logging_level="ERROR",
+            log_to_driver=False,
+        )
     return ray
 
 
@@ -146,8 +151,12 @@ def _shard_times(env: Any) -> dict[str, float]:
     wall = np.array([s[0] for s in steps]) * 1e3
     call = np.array([s[1] for s in steps]) * 1e3
     wait = np.array([s[2] for s in steps]) * 1e3
-    return {"call_wall_ms": float(wall.mean()), "max_call_ms": float(call.max(axis=1).mean()),
-            "busy_ms": float((call - wait).max(axis=1).mean()), "wait_ms": float(wait.mean())}  # fmt: skip
+    return {
+        "call_wall_ms": float(wall.mean()),
+        "max_call_ms": float(call.max(axis=1).mean()),
+        "busy_ms": float((call - wait).max(axis=1).mean()),
+        "wait_ms": float(wait.mean()),
+    }
 
 
 def run_rollout(n: int, shards: int | None, traffic: str, steps: int, backend: str = "ray") -> dict[str, Any]:
@@ -184,8 +193,9 @@ def run_steps(n: int, shards: int | None, traffic: str, steps: int, backend: str
     env = build(n, shards, backend, api="step")
     acts = actions(n, traffic)
     env.step(acts[0])
-    rec: dict[str, list[float]] = {k: [] for k in ("step_ms", "max_call_ms", "busy_ms", "wait_ms", "bytes",
-                                                   "calls_bytes")}  # fmt: skip
+    rec: dict[str, list[float]] = {
+        k: [] for k in ("step_ms", "max_call_ms", "busy_ms", "wait_ms", "bytes", "calls_bytes")
+    }
     for i in range(1, steps + 1):
         t0 = time.perf_counter()
         env.step(acts[i % bc.CYCLE])
@@ -207,11 +217,17 @@ def run_steps(n: int, shards: int | None, traffic: str, steps: int, backend: str
 
 def same_result(a: Any, b: Any) -> bool:
     """Whether two rollouts ended with the same returns, final positions and events."""
-    return bool(np.array_equal(a.returns, b.returns) and np.array_equal(a.final_pos, b.final_pos)
-                and a.events == b.events and a.steps == b.steps)  # fmt: skip
+    return bool(
+        np.array_equal(a.returns, b.returns)
+        and np.array_equal(a.final_pos, b.final_pos)
+        and a.events == b.events
+        and a.steps == b.steps
+    )
 
 
-def speed_table(sizes: list[int], steps: int, ray: Any) -> tuple[str, dict[tuple[int, str, str], dict[str, Any]]]:
+def speed_table(
+    sizes: list[int], steps: int, ray: Any
+) -> tuple[str, dict[tuple[int, str, str], dict[str, Any]]]:
     """Table a and its measurements by (agents, API, system)."""
     res: dict[tuple[int, str, str], dict[str, Any]] = {}
     for n in sizes:
@@ -226,15 +242,39 @@ def speed_table(sizes: list[int], steps: int, ray: Any) -> tuple[str, dict[tuple
         same = "-"
         if api == "rollout" and sharded:
             same = "yes" if same_result(base["result"], r["result"]) else "NO"
-        rows.append([fmt_num(n), api, system, fmt_num(r["step_ms"]), fmt_num(1e3 / r["step_ms"]),
-                     f"{base['step_ms'] / r['step_ms']:.2f}",
-                     fmt_num(r["busy_ms"]) if sharded else "-", fmt_num(r["wait_ms"]) if sharded else "-",
-                     f"{100 * r['coord_ms'] / r.get('call_wall_ms', r['step_ms']):.1f} %" if sharded else "-",
-                     _bytes(r["bytes"]) if sharded else "-", _bytes(r["calls_bytes"]) if sharded else "-",
-                     same])  # fmt: skip
-    table = markdown_table(["agents", "API", "system", "ms/step", "env-steps/s", "speed-up", "slowest shard busy ms",
-                            "exchange ms", "coordinator share", "bytes/step between shards",
-                            "bytes/step coordinator calls", "same results"], rows)  # fmt: skip
+        rows.append(
+            [
+                fmt_num(n),
+                api,
+                system,
+                fmt_num(r["step_ms"]),
+                fmt_num(1e3 / r["step_ms"]),
+                f"{base['step_ms'] / r['step_ms']:.2f}",
+                fmt_num(r["busy_ms"]) if sharded else "-",
+                fmt_num(r["wait_ms"]) if sharded else "-",
+                f"{100 * r['coord_ms'] / r.get('call_wall_ms', r['step_ms']):.1f} %" if sharded else "-",
+                _bytes(r["bytes"]) if sharded else "-",
+                _bytes(r["calls_bytes"]) if sharded else "-",
+                same,
+            ]
+        )
+    table = markdown_table(
+        [
+            "agents",
+            "API",
+            "system",
+            "ms/step",
+            "env-steps/s",
+            "speed-up",
+            "slowest shard busy ms",
+            "exchange ms",
+            "coordinator share",
+            "bytes/step between shards",
+            "bytes/step coordinator calls",
+            "same results",
+        ],
+        rows,
+    )
     return table, res
 
 
@@ -246,8 +286,13 @@ LINK_BYTES_S = 1.25e9
 PAPER_N, PAPER_K = 1_000_000, 16
 
 
-def paper_table(res: dict[tuple[int, str, str], dict[str, Any]], n_ref: int, floor: dict[str, float],
-                by_k: dict[int, dict[str, float]], n_small: int) -> str:  # fmt: skip
+def paper_table(
+    res: dict[tuple[int, str, str], dict[str, Any]],
+    n_ref: int,
+    floor: dict[str, float],
+    by_k: dict[int, dict[str, float]],
+    n_small: int,
+) -> str:
     """Table f: 1,000,000 agents on 16 machines from this run's measurements (see ``main`` for the assumptions)."""
     one = res[n_ref, "rollout", "one process"]
     two = res[n_ref, "rollout", "2 shards (Ray)"]
@@ -266,19 +311,45 @@ def paper_table(res: dict[tuple[int, str, str], dict[str, Any]], n_ref: int, flo
     hub_bytes = edge * np.sqrt(n / n_small) + (b["total"] - edge) * n / n_small
     coord = two["coord_ms"] * k / 2  # the coordinator's calls grow with the number of shards
     rows = []
-    for label, fixed, peer in (("full-length slot arrays, one exchange (today)", FIXED_MS_PER_SLOT * n, False),
-                               ("compact shard worlds, one exchange", 0.0, False),
-                               ("compact shard worlds, shards exchange directly", 0.0, True)):  # fmt: skip
+    for label, fixed, peer in (
+        ("full-length slot arrays, one exchange (today)", FIXED_MS_PER_SLOT * n, False),
+        ("compact shard worlds, one exchange", 0.0, False),
+        ("compact shard worlds, shards exchange directly", 0.0, True),
+    ):
         busy = own + fixed
         # one exchange routes every byte on one CPU and one link; shards exchanging directly split both K ways
         route = hub_bytes * hub_cpu_per_byte / (k if peer else 1)
         link = hub_bytes / LINK_BYTES_S * 1e3 / (k if peer else 1)
         step = busy + barriers + route + link + coord
-        rows.append([label, fmt_num(one_ms), fmt_num(busy), fmt_num(barriers), _bytes(hub_bytes / (k if peer else 1)),
-                     fmt_num(route), fmt_num(link), fmt_num(coord), fmt_num(step), f"{one_ms / step:.1f}x"])  # fmt: skip
-    return markdown_table(["shards hold, exchange", "one process ms", "shard busy ms", "barriers ms",
-                           "bytes / step on the busiest link", "routing ms", "link ms", "coordinator ms",
-                           "step ms", "vs one process"], rows)  # fmt: skip
+        rows.append(
+            [
+                label,
+                fmt_num(one_ms),
+                fmt_num(busy),
+                fmt_num(barriers),
+                _bytes(hub_bytes / (k if peer else 1)),
+                fmt_num(route),
+                fmt_num(link),
+                fmt_num(coord),
+                fmt_num(step),
+                f"{one_ms / step:.1f}x",
+            ]
+        )
+    return markdown_table(
+        [
+            "shards hold, exchange",
+            "one process ms",
+            "shard busy ms",
+            "barriers ms",
+            "bytes / step on the busiest link",
+            "routing ms",
+            "link ms",
+            "coordinator ms",
+            "step ms",
+            "vs one process",
+        ],
+        rows,
+    )
 
 
 def record_posts(n: int, steps: int) -> tuple[Any, dict[int, list[tuple[str, Any]]]]:
@@ -343,7 +414,10 @@ def exchange_floor(ray: Any, n: int, steps: int) -> tuple[str, dict[str, float]]
             return time.process_time()
 
     rows, out = [], {}
-    for label, use_wire in (("TCP connection per shard (today)", True), ("Ray actor call per barrier", False)):
+    for label, use_wire in (
+        ("TCP connection per shard (today)", True),
+        ("Ray actor call per barrier", False),
+    ):
         ex = ray.remote(num_cpus=0)(TimedExchange).remote(bridge, 2, 120.0)
         ray.get(ex.set_slot_owner.remote(bridge.slot_owner))
         token = secrets.token_bytes(32)
@@ -360,8 +434,16 @@ def exchange_floor(ray: Any, n: int, steps: int) -> tuple[str, dict[str, float]]
         rows.append([label, str(per_step), fmt_num(wall), fmt_num(ex_cpu), fmt_num(max(cpu) / steps * 1e3)])
         for a in (*actors, ex):
             ray.kill(a)
-    table = markdown_table(["data path", "barriers / step", "wall ms / step", "exchange CPU ms / step",
-                            "a shard's CPU ms / step"], rows)  # fmt: skip
+    table = markdown_table(
+        [
+            "data path",
+            "barriers / step",
+            "wall ms / step",
+            "exchange CPU ms / step",
+            "a shard's CPU ms / step",
+        ],
+        rows,
+    )
     return table, out
 
 
@@ -370,16 +452,46 @@ def scaling_table(n: int, shard_counts: list[int], steps: int) -> str:
     step without the reset, whether the results equal one process's). For machines with more cores than this one:
     each shard is a process, so K shards need K cores (plus one for the driver and the exchange)."""
     base = run_rollout(n, None, "full", steps)
-    rows = [[fmt_num(n), "one process", fmt_num(base["step_ms"]), fmt_num(1e3 / base["step_ms"]), "1.00", "-", "-",
-             "-"]]  # fmt: skip
+    rows = [
+        [
+            fmt_num(n),
+            "one process",
+            fmt_num(base["step_ms"]),
+            fmt_num(1e3 / base["step_ms"]),
+            "1.00",
+            "-",
+            "-",
+            "-",
+        ]
+    ]
     for k in shard_counts:
         r = run_rollout(n, k, "full", steps)
-        rows.append([fmt_num(n), f"{k} shards (Ray)", fmt_num(r["step_ms"]), fmt_num(1e3 / r["step_ms"]),
-                     f"{base['step_ms'] / r['step_ms']:.2f}", fmt_num(r["busy_ms"]), fmt_num(r["wait_ms"]),
-                     "yes" if same_result(base["result"], r["result"]) else "NO"])  # fmt: skip
+        rows.append(
+            [
+                fmt_num(n),
+                f"{k} shards (Ray)",
+                fmt_num(r["step_ms"]),
+                fmt_num(1e3 / r["step_ms"]),
+                f"{base['step_ms'] / r['step_ms']:.2f}",
+                fmt_num(r["busy_ms"]),
+                fmt_num(r["wait_ms"]),
+                "yes" if same_result(base["result"], r["result"]) else "NO",
+            ]
+        )
         print(f"  {k} shards: {r['step_ms']:.0f} ms/step", file=sys.stderr, flush=True)
-    return markdown_table(["agents", "system", "ms/step", "env-steps/s", "speed-up", "slowest shard busy ms",
-                           "exchange ms", "same results"], rows)  # fmt: skip
+    return markdown_table(
+        [
+            "agents",
+            "system",
+            "ms/step",
+            "env-steps/s",
+            "speed-up",
+            "slowest shard busy ms",
+            "exchange ms",
+            "same results",
+        ],
+        rows,
+    )
 
 
 def border_bytes(
@@ -436,27 +548,63 @@ def bytes_by_shards(n: int, shard_counts: list[int], steps: int) -> dict[int, di
 
 def hub_table(by_k: dict[int, dict[str, float]], n: int) -> str:
     """The exchange's bytes per step by phase and shard count (posted plus routed back)."""
-    rows = [[str(k), *(_bytes(b[f]) for f in ("halo", "handover", "offline", "bus", "positions", "groups", "total")),
-             _bytes(b["total"] / n)] for k, b in by_k.items()]  # fmt: skip
-    return markdown_table(["shards", "halo", "handover", "offline", "bus", "positions", "groups", "total",
-                           "total / agent"], rows)  # fmt: skip
+    rows = [
+        [
+            str(k),
+            *(_bytes(b[f]) for f in ("halo", "handover", "offline", "bus", "positions", "groups", "total")),
+            _bytes(b["total"] / n),
+        ]
+        for k, b in by_k.items()
+    ]
+    return markdown_table(
+        ["shards", "halo", "handover", "offline", "bus", "positions", "groups", "total", "total / agent"],
+        rows,
+    )
 
 
 def border_table(rows: list[dict[str, float]]) -> str:
     """Table c, with halo bytes per agent and per sqrt(agent) (flat when the halo grows as sqrt(N))."""
-    body = [[fmt_num(r["n"]), fmt_num(r["side"]), fmt_num(r["ghosts"]), fmt_num(r["expected"]), _bytes(r["halo"]),
-             fmt_num(r["halo"] / r["n"]), fmt_num(r["halo"] / np.sqrt(r["n"])), _bytes(r["handover"]),
-             _bytes(r["total"])] for r in rows]  # fmt: skip
-    return markdown_table(["agents", "map side m", "ghosts", "expected ghosts", "halo bytes", "halo bytes / agent",
-                           "halo bytes / sqrt(agents)", "handover bytes", "total bytes"], body)  # fmt: skip
+    body = [
+        [
+            fmt_num(r["n"]),
+            fmt_num(r["side"]),
+            fmt_num(r["ghosts"]),
+            fmt_num(r["expected"]),
+            _bytes(r["halo"]),
+            fmt_num(r["halo"] / r["n"]),
+            fmt_num(r["halo"] / np.sqrt(r["n"])),
+            _bytes(r["handover"]),
+            _bytes(r["total"]),
+        ]
+        for r in rows
+    ]
+    return markdown_table(
+        [
+            "agents",
+            "map side m",
+            "ghosts",
+            "expected ghosts",
+            "halo bytes",
+            "halo bytes / agent",
+            "halo bytes / sqrt(agents)",
+            "handover bytes",
+            "total bytes",
+        ],
+        body,
+    )
 
 
 def main(argv: list[str] | None = None) -> int:
     """Print the tables."""
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--quick", action="store_true", help="small sizes and few steps (smoke test)")
-    p.add_argument("--scaling", type=int, metavar="N", default=None,
-                   help="only table e: N agents, one process vs --shards K (a machine with many cores)")
+    p.add_argument(
+        "--scaling",
+        type=int,
+        metavar="N",
+        default=None,
+        help="only table e: N agents, one process vs --shards K (a machine with many cores)",
+    )
     p.add_argument("--shards", type=str, default="2,4,8", help="shard counts of --scaling, comma separated")
     p.add_argument("--steps", type=int, default=None, help="steps of each measured rollout")
     args = p.parse_args(argv)
@@ -480,52 +628,68 @@ def main(argv: list[str] | None = None) -> int:
     if ray is None:
         print("Ray is not installed: the Ray rows are skipped (pip install 'agentsim-env[ray]').\n")
     try:
-        print(f"## Speed-up over one process (full traffic; rollout: per step of a {steps}-step rollout, its reset "
-              f"left out; step API: median of {steps} steps)\n")  # fmt: skip
+        print(
+            f"## Speed-up over one process (full traffic; rollout: per step of a {steps}-step rollout, its reset "
+            f"left out; step API: median of {steps} steps)\n"
+        )
         table, res = speed_table(sizes, steps, ray)
         print(table)
         if ray is not None:
-            print(f"\n## The exchange alone: {sizes[0]:,} agents, 2 shards, the posts of a rollout replayed with no "
-                  f"simulation\n")  # fmt: skip
+            print(
+                f"\n## The exchange alone: {sizes[0]:,} agents, 2 shards, the posts of a rollout replayed with no "
+                f"simulation\n"
+            )
             floor_table, floor = exchange_floor(ray, sizes[0], steps)
             print(floor_table)
             one = res[sizes[0], "rollout", "one process"]["step_ms"]
             wall = floor["TCP connection per shard (today)"]
-            print(f"\nThe floor bounds the rollout's speed-up over 2 shards on this machine: with no other cost than "
-                  f"the exchange, a step takes half of one process's ({one:.0f} / 2 ms) plus the exchange's wall time "
-                  f"({wall:.1f} ms): at most {one / (one / 2 + wall):.2f}x (at most "
-                  f"{one / (one / 2 + floor['Ray actor call per barrier']):.2f}x over Ray actor calls).")  # fmt: skip
+            print(
+                f"\nThe floor bounds the rollout's speed-up over 2 shards on this machine: with no other cost than "
+                f"the exchange, a step takes half of one process's ({one:.0f} / 2 ms) plus the exchange's wall time "
+                f"({wall:.1f} ms): at most {one / (one / 2 + wall):.2f}x (at most "
+                f"{one / (one / 2 + floor['Ray actor call per barrier']):.2f}x over Ray actor calls)."
+            )
             n_small = 5_000 if q else 20_000
             ks = [2, 4] if q else [2, 4, 8, 16]
-            print(f"\n## Bytes through the exchange vs shards ({n_small:,} agents, local backend, full traffic, step "
-                  f"API, mean of 3 steps; posted plus routed back)\n")  # fmt: skip
+            print(
+                f"\n## Bytes through the exchange vs shards ({n_small:,} agents, local backend, full traffic, step "
+                f"API, mean of 3 steps; posted plus routed back)\n"
+            )
             by_k = bytes_by_shards(n_small, ks, 3)
             print(hub_table(by_k, n_small))
-            print("\nThe bus's bytes grow with the agents, not with the strip edge: a quarter of the messages go to "
-                  "a named agent anywhere on the map and a quarter to a group whose members live anywhere (a GROUP "
-                  "message goes to every shard), so with K shards (K - 1) / K of the named ones cross and every "
-                  "GROUP message is sent K times.")  # fmt: skip
+            print(
+                "\nThe bus's bytes grow with the agents, not with the strip edge: a quarter of the messages go to "
+                "a named agent anywhere on the map and a quarter to a group whose members live anywhere (a GROUP "
+                "message goes to every shard), so with K shards (K - 1) / K of the named ones cross and every "
+                "GROUP message is sent K times."
+            )
             print(f"\n## On paper: {PAPER_N:,} agents on {PAPER_K} machines\n")
             print(paper_table(res, sizes[0], floor, by_k, n_small))
-            print(f"\nAssumptions: one shard per machine; its busy time = a part per own agent (measured above at "
-                  f"{sizes[0]:,} agents over 2 shards, minus the fixed part) x ({PAPER_N:,} / {PAPER_K} agents + 8 % "
-                  f"ghosts) + a fixed part per slot of the world ({FIXED_MS_PER_SLOT * 1e6:.0f} ns a slot, from a "
-                  f"shard's profile; 0 with shard worlds sized to their agents); the barriers' latency as measured "
-                  f"above with no simulation; the bytes through the exchange at {max(ks)} shards (table above), "
-                  f"those of the edge phases (halo, hand-overs, offline) times sqrt({PAPER_N:,} / {n_small:,}), the "
-                  f"others (bus, positions, groups) times {PAPER_N:,} / {n_small:,}, routed at the CPU cost per byte measured above and sent over "
-                  f"10 Gb/s links (one exchange: every byte on its one CPU and link; shards exchanging directly: "
-                  f"each carries 1 / {PAPER_K} of them); the coordinator's share linear in the number of shards; "
-                  f"one process linear in N, the choice that favours one process (measured here: worse than linear, "
-                  f"{res[sizes[-1], 'rollout', 'one process']['step_ms'] / res[sizes[0], 'rollout', 'one process']['step_ms']:.2f}x "
-                  f"for {sizes[-1] / sizes[0]:.0f}x the agents).")  # fmt: skip
-        print(f"\n## Bytes per step vs agents near the strip edge (2 shards, local backend, full traffic, step "
-              f"API, mean of {2 if q else 3} steps)\n")  # fmt: skip
+            print(
+                f"\nAssumptions: one shard per machine; its busy time = a part per own agent (measured above at "
+                f"{sizes[0]:,} agents over 2 shards, minus the fixed part) x ({PAPER_N:,} / {PAPER_K} agents + 8 % "
+                f"ghosts) + a fixed part per slot of the world ({FIXED_MS_PER_SLOT * 1e6:.0f} ns a slot, from a "
+                f"shard's profile; 0 with shard worlds sized to their agents); the barriers' latency as measured "
+                f"above with no simulation; the bytes through the exchange at {max(ks)} shards (table above), "
+                f"those of the edge phases (halo, hand-overs, offline) times sqrt({PAPER_N:,} / {n_small:,}), the "
+                f"others (bus, positions, groups) times {PAPER_N:,} / {n_small:,}, routed at the CPU cost per byte measured above and sent over "
+                f"10 Gb/s links (one exchange: every byte on its one CPU and link; shards exchanging directly: "
+                f"each carries 1 / {PAPER_K} of them); the coordinator's share linear in the number of shards; "
+                f"one process linear in N, the choice that favours one process (measured here: worse than linear, "
+                f"{res[sizes[-1], 'rollout', 'one process']['step_ms'] / res[sizes[0], 'rollout', 'one process']['step_ms']:.2f}x "
+                f"for {sizes[-1] / sizes[0]:.0f}x the agents)."
+            )
+        print(
+            f"\n## Bytes per step vs agents near the strip edge (2 shards, local backend, full traffic, step "
+            f"API, mean of {2 if q else 3} steps)\n"
+        )
         rows = border_bytes(border, 2 if q else 3)
         print(border_table(rows))
-        print(f"\nGhosts = halo bytes / {GHOST_BYTES}. Expected ghosts = 2 x halo ({rows[0]['halo_m']:.0f} m) x "
-              f"agents / map side: the agents within a halo of the strip edge at uniform density. The map side "
-              f"grows as sqrt(agents) (fixed area per agent), so the halo grows as sqrt(agents).")  # fmt: skip
+        print(
+            f"\nGhosts = halo bytes / {GHOST_BYTES}. Expected ghosts = 2 x halo ({rows[0]['halo_m']:.0f} m) x "
+            f"agents / map side: the agents within a halo of the strip edge at uniform density. The map side "
+            f"grows as sqrt(agents) (fixed area per agent), so the halo grows as sqrt(agents)."
+        )
     finally:
         if ray is not None and ray.is_initialized():
             ray.shutdown()

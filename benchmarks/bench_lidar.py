@@ -67,8 +67,14 @@ def scan_kdtree(cfg: ProximityConfig, pos, heading, srange, radius, online, worl
     on = np.flatnonzero(online)
     dirs = cfg.ray_directions()
     c, sn = np.cos(heading[on])[:, None], np.sin(heading[on])[:, None]
-    wd = np.stack([c * dirs[:, 0] - sn * dirs[:, 1], sn * dirs[:, 0] + c * dirs[:, 1],
-                   np.broadcast_to(dirs[:, 2], c.shape[:1] + dirs[:, 2].shape)], axis=-1)  # fmt: skip
+    wd = np.stack(
+        [
+            c * dirs[:, 0] - sn * dirs[:, 1],
+            sn * dirs[:, 0] + c * dirs[:, 1],
+            np.broadcast_to(dirs[:, 2], c.shape[:1] + dirs[:, 2].shape),
+        ],
+        axis=-1,
+    )
     sep = np.array([1e7, 0.0, 0.0])  # worlds far apart along x never pair up
     p_on = pos[on] + world[on, None] * sep
     rows_t, rows_o, rows_kind, rows_id = [], [], [], []
@@ -117,8 +123,11 @@ def scan_kdtree(cfg: ProximityConfig, pos, heading, srange, radius, online, worl
     t, owner, kinds, ids = t[order], owner[order], kinds[order], ids[order]
     starts = np.flatnonzero(np.r_[True, owner[1:] != owner[:-1]])
     best = np.minimum.reduceat(t, starts, axis=0)
-    first = np.where(t == best[np.cumsum(np.r_[False, owner[1:] != owner[:-1]])],
-                     np.arange(t.shape[0])[:, None], t.shape[0])  # fmt: skip
+    first = np.where(
+        t == best[np.cumsum(np.r_[False, owner[1:] != owner[:-1]])],
+        np.arange(t.shape[0])[:, None],
+        t.shape[0],
+    )
     arg = np.minimum.reduceat(first, starts, axis=0)
     slots = on[owner[starts]]
     hit = best <= srange[slots, None]
@@ -155,8 +164,10 @@ def main() -> None:
     ap.add_argument("--elevations", type=float, nargs="+", default=[0.0])
     args = ap.parse_args()
     cfg = ProximityConfig(n_azimuth=32, elevations_deg=tuple(args.elevations))
-    print(f"rays/agent K={cfg.n_rays}  range={RANGE} m  grid cell={CELL} m  NUMBA_NUM_THREADS="
-          f"{os.environ['NUMBA_NUM_THREADS']}  load avg at start {os.getloadavg()[0]:.2f}")  # fmt: skip
+    print(
+        f"rays/agent K={cfg.n_rays}  range={RANGE} m  grid cell={CELL} m  NUMBA_NUM_THREADS="
+        f"{os.environ['NUMBA_NUM_THREADS']}  load avg at start {os.getloadavg()[0]:.2f}"
+    )
     head = ("N", "system", "cpu ms", "wall ms", "us/agent", "x numba", "max|dd|", "kind ok")
     print("{:>7} {:<22} {:>9} {:>9} {:>9} {:>8} {:>8} {:>8}".format(*head))
     sensor = ProximitySensor(cfg)
@@ -184,8 +195,10 @@ def main() -> None:
             if isinstance(r, ScanResult) and name != "numba grid (scan)":
                 dd = f"{np.abs(r.distance - base.distance).max():.0e}"
                 ok = f"{np.mean(r.hit_kind == base.hit_kind) * 100:.2f}%"
-            print(f"{n:>7} {name:<22} {med * 1e3:>9.3f} {med_wall * 1e3:>9.3f} {med / n * 1e6:>9.3f} "
-                  f"{med / t_numba:>8.1f} {dd:>8} {ok:>8}")  # fmt: skip
+            print(
+                f"{n:>7} {name:<22} {med * 1e3:>9.3f} {med_wall * 1e3:>9.3f} {med / n * 1e6:>9.3f} "
+                f"{med / t_numba:>8.1f} {dd:>8} {ok:>8}"
+            )
     print(f"load avg at end {os.getloadavg()[0]:.2f} (a shared machine inflates every system alike)")
 
 

@@ -67,13 +67,23 @@ class Row:
         """The table cells: case, result, target, met."""
         op = ">=" if self.higher else "<="
         if self.target is None:
-            return [self.case, "n/a" if self.value is None else f"{fmt_num(self.value)} {self.unit}", "-", "-",
-                    self.note]  # fmt: skip
+            return [
+                self.case,
+                "n/a" if self.value is None else f"{fmt_num(self.value)} {self.unit}",
+                "-",
+                "-",
+                self.note,
+            ]
         if self.value is None:
             return [self.case, "n/a", f"{op} {fmt_num(self.target)} {self.unit}", "n/a", self.note]
         met = self.value >= self.target if self.higher else self.value <= self.target
-        return [self.case, f"{fmt_num(self.value)} {self.unit}", f"{op} {fmt_num(self.target)} {self.unit}",
-                "PASS" if met else "short", self.note]  # fmt: skip
+        return [
+            self.case,
+            f"{fmt_num(self.value)} {self.unit}",
+            f"{op} {fmt_num(self.target)} {self.unit}",
+            "PASS" if met else "short",
+            self.note,
+        ]
 
 
 THREAD_COUNTS = [1, 2, 4, 8, 16]
@@ -110,11 +120,26 @@ def small_worlds(rounds: int, block_s: float) -> tuple[list[Row], dict[str, floa
         Row("navigation 1x64, array API", rates["array 1x64"], "ag-st/s", 1_000_000, note=note["1x64"])
     )
     rows.append(Row("navigation 1x64, dict API", rates["dict 1x64"], "ag-st/s", 700_000, note=note["1x64"]))
-    rows.append(Row("navigation 512x4, array API (1 core)", rates["array 512x4"], "ag-st/s", 4_000_000,
-                    note=note["512x4"]))  # fmt: skip
+    rows.append(
+        Row(
+            "navigation 512x4, array API (1 core)",
+            rates["array 512x4"],
+            "ag-st/s",
+            4_000_000,
+            note=note["512x4"],
+        )
+    )
     cost = (1.0 / rates["dict 1x1000"] - 1.0 / rates["array 1x1000"]) * 1e6
-    rows.append(Row("dict API cost above the array API, 1x1,000", cost, "us/agent-step", 0.4, higher=False,
-                    note=f"dict {fmt_num(rates['dict 1x1000'])}, array {fmt_num(rates['array 1x1000'])} ag-st/s"))  # fmt: skip
+    rows.append(
+        Row(
+            "dict API cost above the array API, 1x1,000",
+            cost,
+            "us/agent-step",
+            0.4,
+            higher=False,
+            note=f"dict {fmt_num(rates['dict 1x1000'])}, array {fmt_num(rates['array 1x1000'])} ag-st/s",
+        )
+    )
     return rows, rates
 
 
@@ -123,16 +148,26 @@ def full_stack(sizes: list[int], rounds: int, block_s: float) -> list[Row]:
     rows: list[Row] = []
     targets = {1000: (1000, 2000), 10_000: (100, 200)}
     for n in sizes:
-        cases = {"dict": bench_comms.dict_case(n, True), "array": bench_comms.array_case(n, True),
-                 "bare": bench_comms.array_case(n, False)}  # fmt: skip
+        cases = {
+            "dict": bench_comms.dict_case(n, True),
+            "array": bench_comms.array_case(n, True),
+            "bare": bench_comms.array_case(n, False),
+        }
         st = measure_interleaved(cases, rounds=rounds, block_s=block_s)
         e = {k: 1.0 / s.step_s for k, s in st.items()}
         td, ta = targets.get(n, (None, None))
         rows.append(Row(f"full stack 1x{n:,}, dict API", e["dict"], "env-steps/s", td))
         rows.append(Row(f"full stack 1x{n:,}, array API", e["array"], "env-steps/s", ta))
-        rows.append(Row(f"comms cost 1x{n:,} (full step / step without comms)", e["bare"] / e["array"], "x",
-                        {1000: 1.5, 10_000: 2.5}.get(n),
-                        higher=False, note=f"without comms {fmt_num(e['bare'])} env-steps/s"))  # fmt: skip
+        rows.append(
+            Row(
+                f"comms cost 1x{n:,} (full step / step without comms)",
+                e["bare"] / e["array"],
+                "x",
+                {1000: 1.5, 10_000: 2.5}.get(n),
+                higher=False,
+                note=f"without comms {fmt_num(e['bare'])} env-steps/s",
+            )
+        )
     return rows
 
 
@@ -155,8 +190,15 @@ def big_world(n: int, rounds: int) -> list[Row]:
         )
     else:
         ratio = st["1"].wall_step_s / st["2"].wall_step_s
-        rows.append(Row(f"1x{n:,}: 2 threads vs 1 (wall)", ratio, "x", tgt,
-                        note=f"{st['1'].wall_step_s * 1e3:.1f} vs {st['2'].wall_step_s * 1e3:.1f} ms/step wall"))  # fmt: skip
+        rows.append(
+            Row(
+                f"1x{n:,}: 2 threads vs 1 (wall)",
+                ratio,
+                "x",
+                tgt,
+                note=f"{st['1'].wall_step_s * 1e3:.1f} vs {st['2'].wall_step_s * 1e3:.1f} ms/step wall",
+            )
+        )
     return rows
 
 
@@ -210,8 +252,16 @@ def cold_start(quick: bool) -> list[Row]:
     for r in bench_coldstart.coldstart_rows(
         quick, runs=3 if quick else 5, cold_runs=1, whole_quickstart=False
     ):
-        rows.append(Row(f"cold start: {r['case']} (warm cache)", r["warm_s"], "s", 3.0, higher=False,
-                        note=f"empty cache {r['cold_s']:.1f} s" if r.get("cold_s") else ""))  # fmt: skip
+        rows.append(
+            Row(
+                f"cold start: {r['case']} (warm cache)",
+                r["warm_s"],
+                "s",
+                3.0,
+                higher=False,
+                note=f"empty cache {r['cold_s']:.1f} s" if r.get("cold_s") else "",
+            )
+        )
     return rows
 
 
@@ -219,8 +269,10 @@ def scaling(sizes: list[int], rounds: int) -> dict[str, dict[int, float]]:
     """CPU microseconds per agent-step, array API, without comms and with the full stack, per size."""
     curve: dict[str, dict[int, float]] = {"no comms": {}, "full stack": {}}
     for n in sizes:
-        cases: dict[str, common.Case] = {"no comms": bench_comms.array_case(n, False),
-                                         "full stack": bench_comms.array_case(n, True)}  # fmt: skip
+        cases: dict[str, common.Case] = {
+            "no comms": bench_comms.array_case(n, False),
+            "full stack": bench_comms.array_case(n, True),
+        }
         st = measure_interleaved(cases, rounds=rounds, block_s=0.2, warmup=1)
         for k, s in st.items():
             curve[k][n] = s.step_s / n * 1e6
@@ -276,8 +328,11 @@ def main(argv: list[str] | None = None) -> int:
     )
     p.add_argument("--plot", default=None, help="write the scaling curve to this PNG")
     p.add_argument("--no-coldstart", action="store_true", help="skip the cold-start rows")
-    p.add_argument("--threads-only", action="store_true",
-                   help="only the full stack's thread rows and the thread scaling curve")  # fmt: skip
+    p.add_argument(
+        "--threads-only",
+        action="store_true",
+        help="only the full stack's thread rows and the thread scaling curve",
+    )
     p.add_argument("--thread-plot", default=None, help="write the thread scaling curve to this PNG")
     args = p.parse_args(argv)
     q = args.quick
@@ -306,8 +361,11 @@ def main(argv: list[str] | None = None) -> int:
     print(f"\n{met} of {len(rows)} rows met.\n")
 
     print("## Per core, 32-ray scan on (navigation, array API, 1 thread)\n")
-    per_core = [["512x4", fmt_num(rates["array 512x4"])], ["1x1,000", fmt_num(rates["array 1x1000"])],
-                ["C++ batched engine (published, no sensing)", fmt_num(CPP_ANCHOR)]]  # fmt: skip
+    per_core = [
+        ["512x4", fmt_num(rates["array 512x4"])],
+        ["1x1,000", fmt_num(rates["array 1x1000"])],
+        ["C++ batched engine (published, no sensing)", fmt_num(CPP_ANCHOR)],
+    ]
     print(markdown_table(["case", "agent-steps/s per core"], per_core))
 
     sizes = [1000, 5000] if q else [1000, 10_000, 100_000]
@@ -327,8 +385,12 @@ def _print_thread_curve(quick: bool, plot: str | None) -> None:
     curve = _timed("thread curve", lambda: thread_curve(n, THREAD_COUNTS, 2 if quick else 4))
     one = curve[min(curve)]
     print(f"\n## Threads: full stack 1x{n:,}, array API, wall ms per step ({available_cores()} cores here)\n")
-    print(markdown_table(["threads", "ms/step", "speed-up"],
-                         [[str(k), f"{v:.1f}", f"{one / v:.2f}"] for k, v in sorted(curve.items())]))  # fmt: skip
+    print(
+        markdown_table(
+            ["threads", "ms/step", "speed-up"],
+            [[str(k), f"{v:.1f}", f"{one / v:.2f}"] for k, v in sorted(curve.items())],
+        )
+    )
     if plot:
         plot_threads(curve, n, plot)
         print(f"\nthread plot: {plot}")
@@ -339,7 +401,9 @@ def threads_report(quick: bool, plot: str | None) -> int:
     print(f"machine: {machine_description()}\n")
     sizes = [1_000, 5_000] if quick else [10_000, 100_000]
     rows = _timed("full stack, threads", lambda: full_stack_threads(sizes, 2 if quick else 7))
-    print(markdown_table(["case", "result", "target", "met", "measured alongside"], [r.cells() for r in rows]))
+    print(
+        markdown_table(["case", "result", "target", "met", "measured alongside"], [r.cells() for r in rows])
+    )
     _print_thread_curve(quick, plot)
     return 0
 

@@ -112,8 +112,14 @@ def dict_case(b: int, n: int, seed: int) -> common.Case:
     rng = np.random.default_rng(seed)
     pools = []
     for env in envs:
-        pools.append(_cycle([{a: {"motion": rng.uniform(-1, 1, 3).astype(np.float32)} for a in env.possible_agents}
-                             for _ in range(POOL)]))  # fmt: skip
+        pools.append(
+            _cycle(
+                [
+                    {a: {"motion": rng.uniform(-1, 1, 3).astype(np.float32)} for a in env.possible_agents}
+                    for _ in range(POOL)
+                ]
+            )
+        )
     seeds = itertools.count(seed * 1_000_003)
 
     def prepare() -> None:
@@ -142,8 +148,17 @@ def vmas_case(b: int, n: int, seed: int) -> common.Case:
     import vmas
 
     side = max(1.0, 0.25 * math.sqrt(n))  # the default 2 x 2 m area cannot fit many agents and goals
-    env = vmas.make_env("navigation", num_envs=b, device="cpu", continuous_actions=True, seed=seed, n_agents=n,
-                        n_lidar_rays=32, world_spawning_x=side, world_spawning_y=side)  # fmt: skip
+    env = vmas.make_env(
+        "navigation",
+        num_envs=b,
+        device="cpu",
+        continuous_actions=True,
+        seed=seed,
+        n_agents=n,
+        n_lidar_rays=32,
+        world_spawning_x=side,
+        world_spawning_y=side,
+    )
     env.reset()
     g = torch.Generator().manual_seed(seed)
     nxt = _cycle([[torch.rand(b, 2, generator=g) * 2 - 1 for _ in range(n)] for _ in range(POOL)])
@@ -248,8 +263,13 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument(
         "--pymunk-size", type=parse_size, default=(1, 64), help="size of the pymunk-vs-kinematic check"
     )
-    ap.add_argument("--ratio-sizes", type=parse_size, nargs=2, default=[(1, 1000), (1, 10000)],
-                    help="two B=1 sizes whose step-time ratio is checked")  # fmt: skip
+    ap.add_argument(
+        "--ratio-sizes",
+        type=parse_size,
+        nargs=2,
+        default=[(1, 1000), (1, 10000)],
+        help="two B=1 sizes whose step-time ratio is checked",
+    )
     ap.add_argument("--seed", type=int, default=0)
     args = ap.parse_args(argv)
     rounds = args.rounds or (3 if args.quick else 15)
@@ -259,8 +279,10 @@ def main(argv: list[str] | None = None) -> dict:
         common.torch_single_thread()
     planner = Planner(max_step_s, args.seed)
     print(f"machine: {common.machine_description()}")
-    print(f"mode: {'quick' if args.quick else 'full'}; {rounds} interleaved rounds of ~{block_s} s blocks per "
-          f"system; medians of agent-steps per CPU second")  # fmt: skip
+    print(
+        f"mode: {'quick' if args.quick else 'full'}; {rounds} interleaved rounds of ~{block_s} s blocks per "
+        f"system; medians of agent-steps per CPU second"
+    )
     results: dict = {"sizes": {}, "checks": []}
     rows = []
     for b, n in args.sizes:
@@ -283,15 +305,35 @@ def main(argv: list[str] | None = None) -> dict:
         results["sizes"][(b, n)] = {"stats": stats, "skipped": skipped}
         target = TARGETS.get((b, n))
         array_ms = common.fmt_num(stats["array"].step_s * 1e3) if "array" in stats else "skipped (not run)"
-        rows.append([
-            f"{b}x{n}", _cell(stats, skipped, "dict"), _cell(stats, skipped, "array"), array_ms,
-            _cell(stats, skipped, "vmas"), _cell(stats, skipped, "mpe2"), _ratio(stats, "array", "vmas"),
-            _ratio(stats, "array", "mpe2"), target.text() if target else "-",
-            _pass(target, stats, skipped, "array"), _pass(target if b == 1 else None, stats, skipped, "dict"),
-        ])  # fmt: skip
+        rows.append(
+            [
+                f"{b}x{n}",
+                _cell(stats, skipped, "dict"),
+                _cell(stats, skipped, "array"),
+                array_ms,
+                _cell(stats, skipped, "vmas"),
+                _cell(stats, skipped, "mpe2"),
+                _ratio(stats, "array", "vmas"),
+                _ratio(stats, "array", "mpe2"),
+                target.text() if target else "-",
+                _pass(target, stats, skipped, "array"),
+                _pass(target if b == 1 else None, stats, skipped, "dict"),
+            ]
+        )
         print(f"  measured {b}x{n}", flush=True)
-    headers = ["size BxN", "dict API ag-st/s", "array API ag-st/s", "array ms/step", "VMAS ag-st/s",
-               "mpe2 ag-st/s", "array/VMAS", "array/mpe2", "target", "array", "dict"]  # fmt: skip
+    headers = [
+        "size BxN",
+        "dict API ag-st/s",
+        "array API ag-st/s",
+        "array ms/step",
+        "VMAS ag-st/s",
+        "mpe2 ag-st/s",
+        "array/VMAS",
+        "array/mpe2",
+        "target",
+        "array",
+        "dict",
+    ]
     print()
     print(common.markdown_table(headers, rows))
     print()
@@ -304,11 +346,23 @@ def main(argv: list[str] | None = None) -> dict:
     limit = RATIO_TARGET * big[1] / small[1]
     if small in res and big in res and "array" in res[small]["stats"] and "array" in res[big]["stats"]:
         r = res[big]["stats"]["array"].step_s / res[small]["stats"]["array"].step_s
-        checks.append([f"step time {big[0]}x{big[1]} / {small[0]}x{small[1]} (array API)", f"{r:.3g}",
-                       f"<= {limit:.3g}", "PASS" if r <= limit else "FAIL"])  # fmt: skip
+        checks.append(
+            [
+                f"step time {big[0]}x{big[1]} / {small[0]}x{small[1]} (array API)",
+                f"{r:.3g}",
+                f"<= {limit:.3g}",
+                "PASS" if r <= limit else "FAIL",
+            ]
+        )
     else:
-        checks.append([f"step time {big[0]}x{big[1]} / {small[0]}x{small[1]} (array API)",
-                       "skipped (sizes not measured)", f"<= {limit:.3g}", "skipped"])  # fmt: skip
+        checks.append(
+            [
+                f"step time {big[0]}x{big[1]} / {small[0]}x{small[1]} (array API)",
+                "skipped (sizes not measured)",
+                f"<= {limit:.3g}",
+                "skipped",
+            ]
+        )
     ps = tuple(args.pymunk_size)
     label = f"pymunk / kinematic step time {ps[0]}x{ps[1]} (array API)"
     if ps in res and "array pymunk" in res[ps]["stats"]:

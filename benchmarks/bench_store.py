@@ -96,8 +96,10 @@ def dict_case(n: int, seed: int, path: Path | None = None, commit_every: int = 1
 
         world.hooks[world.hooks.index(hook)] = timed  # the same hook, timed
     rng = np.random.default_rng(seed)
-    pool = [{a: {"motion": rng.uniform(-1, 1, 3).astype(np.float32)} for a in env.possible_agents}
-            for _ in range(POOL)]  # fmt: skip
+    pool = [
+        {a: {"motion": rng.uniform(-1, 1, 3).astype(np.float32)} for a in env.possible_agents}
+        for _ in range(POOL)
+    ]
     nxt: Callable[[], dict] = itertools.cycle(pool).__next__
     seeds = itertools.count(seed * 1_000_003)
     first = [True]
@@ -138,8 +140,10 @@ def main(argv: list[str] | None = None) -> dict:
     block_s = args.block_s if args.block_s is not None else (0.02 if args.quick else 0.15)
     n = args.agents
     print(f"machine: {common.machine_description()}")
-    print(f"mode: {'quick' if args.quick else 'full'}; navigation 1x{n}, dict API; {rounds} interleaved rounds of "
-          f"~{block_s} s blocks per case; medians over rounds, CPU time")  # fmt: skip
+    print(
+        f"mode: {'quick' if args.quick else 'full'}; navigation 1x{n}, dict API; {rounds} interleaved rounds of "
+        f"~{block_s} s blocks per case; medians over rounds, CPU time"
+    )
     results: dict = {"stats": {}, "rows_per_s": {}, "checks": []}
     with tempfile.TemporaryDirectory(prefix="bench_store_", dir=args.dir) as tmp:
         cases: dict[str, common.Case] = {}
@@ -168,28 +172,56 @@ def main(argv: list[str] | None = None) -> dict:
         rate = float(np.median(clock.rates(rounds))) if clock else float("nan")
         results["stats"][name] = s
         results["rows_per_s"][name] = rate
-        rows.append([
-            name, common.fmt_num(s.step_s * 1e3), common.fmt_num(s.wall_step_s * 1e3),
-            common.fmt_num(s.agent_steps_per_s), common.fmt_num(clock.hook_s(rounds) * 1e3) if clock else "-",
-            common.fmt_num(rate) if clock else "-", f"{s.step_s / plain.step_s:.3g}",
-            common.fmt_num(sizes[name] / 2**20) if clock else "-",
-        ])  # fmt: skip
-    headers = ["case", "ms/step (CPU)", "ms/step (wall)", "agent-steps/s", "hook ms/step", "rows/s written",
-               "x plain", "store MiB"]  # fmt: skip
+        rows.append(
+            [
+                name,
+                common.fmt_num(s.step_s * 1e3),
+                common.fmt_num(s.wall_step_s * 1e3),
+                common.fmt_num(s.agent_steps_per_s),
+                common.fmt_num(clock.hook_s(rounds) * 1e3) if clock else "-",
+                common.fmt_num(rate) if clock else "-",
+                f"{s.step_s / plain.step_s:.3g}",
+                common.fmt_num(sizes[name] / 2**20) if clock else "-",
+            ]
+        )
+    headers = [
+        "case",
+        "ms/step (CPU)",
+        "ms/step (wall)",
+        "agent-steps/s",
+        "hook ms/step",
+        "rows/s written",
+        "x plain",
+        "store MiB",
+    ]
     print()
     print(common.markdown_table(headers, rows))
     print()
-    print("hook ms/step: CPU time in the recorder's stage-10 hook per step (commit included); "
-          "rows/s written: steps rows per CPU second in the hook; x plain: step time over the plain env's.")  # fmt: skip
+    print(
+        "hook ms/step: CPU time in the recorder's stage-10 hook per step (commit included); "
+        "rows/s written: steps rows per CPU second in the hook; x plain: step time over the plain env's."
+    )
     first = f"recorded, commit_every={args.commit_every[0]}"
     checks = []
     if args.commit_every[0] == 1:
         rate = results["rows_per_s"][first]
-        checks.append([f"steps rows/s written, 1x{n}, commit_every=1", common.fmt_num(rate),
-                       f">= {ROWS_TARGET:,}", "PASS" if rate >= ROWS_TARGET else "FAIL"])  # fmt: skip
+        checks.append(
+            [
+                f"steps rows/s written, 1x{n}, commit_every=1",
+                common.fmt_num(rate),
+                f">= {ROWS_TARGET:,}",
+                "PASS" if rate >= ROWS_TARGET else "FAIL",
+            ]
+        )
     ratio = stats[first].step_s / plain.step_s
-    checks.append([f"step time recorded / plain, 1x{n}, dict API ({first.split(', ')[1]})", f"{ratio:.3g}",
-                   f"<= {RATIO_TARGET:g}", "PASS" if ratio <= RATIO_TARGET else "FAIL"])  # fmt: skip
+    checks.append(
+        [
+            f"step time recorded / plain, 1x{n}, dict API ({first.split(', ')[1]})",
+            f"{ratio:.3g}",
+            f"<= {RATIO_TARGET:g}",
+            "PASS" if ratio <= RATIO_TARGET else "FAIL",
+        ]
+    )
     results["checks"] = checks
     print()
     print(common.markdown_table(["check", "value", "target", "result"], checks))

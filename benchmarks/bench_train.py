@@ -104,8 +104,10 @@ def ppo_config(kind: str) -> Any:
 
     cfg = load_config("navigation", {"env": {"n_agents": AGENTS}})
     if kind == "small":
-        cfg = cfg.replace(ppo={k: PPO_KW[k] for k in ("n_steps", "batch_size", "n_epochs")} | {
-            "learning_rate": 3e-4, "gamma": 0.99, "net_arch": [64, 64], "lr_schedule": "constant"})  # fmt: skip
+        cfg = cfg.replace(
+            ppo={k: PPO_KW[k] for k in ("n_steps", "batch_size", "n_epochs")}
+            | {"learning_rate": 3e-4, "gamma": 0.99, "net_arch": [64, 64], "lr_schedule": "constant"}
+        )
     return cfg
 
 
@@ -160,10 +162,15 @@ def summarise(runs: list[LearnRun]) -> Summary:
     """Medians of the per-round numbers."""
     med = lambda f: float(np.median([f(r) for r in runs]))  # noqa: E731
     return Summary(
-        med(lambda r: r.steps / r.cpu_s), med(lambda r: r.steps / r.wall_s), med(lambda r: r.env_s / r.cpu_s),
-        med(lambda r: r.train_s / r.cpu_s), med(lambda r: r.cpu_s), med(lambda r: r.env_s),
-        med(lambda r: (r.cpu_s - r.train_s) / r.steps), runs,
-    )  # fmt: skip
+        med(lambda r: r.steps / r.cpu_s),
+        med(lambda r: r.steps / r.wall_s),
+        med(lambda r: r.env_s / r.cpu_s),
+        med(lambda r: r.train_s / r.cpu_s),
+        med(lambda r: r.cpu_s),
+        med(lambda r: r.env_s),
+        med(lambda r: (r.cpu_s - r.train_s) / r.steps),
+        runs,
+    )
 
 
 def env_case(system: str, slots: int, seed: int) -> common.Case:
@@ -208,8 +215,12 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--slots", type=int, nargs="+", default=list(SLOTS), help="entries (multiples of 4)")
     ap.add_argument("--timesteps", type=int, default=None, help="agent-steps per learn() (default 32768)")
     ap.add_argument("--block-s", type=float, default=None, help="seconds per env-only block (default 0.2)")
-    ap.add_argument("--ppo", choices=["shipped", "small"], default="shipped",
-                    help="PPO settings: the shipped navigation config, or n_steps 64 / batch 512 / 10 epochs")  # fmt: skip
+    ap.add_argument(
+        "--ppo",
+        choices=["shipped", "small"],
+        default="shipped",
+        help="PPO settings: the shipped navigation config, or n_steps 64 / batch 512 / 10 epochs",
+    )
     args = ap.parse_args(argv)
     for s in args.slots:
         if s < AGENTS or s % AGENTS:
@@ -220,11 +231,16 @@ def main(argv: list[str] | None = None) -> dict:
     for line in machine_lines():
         print(line)
     p = ppo_config(args.ppo).ppo
-    budget = {s: args.timesteps or (p.n_steps * s if args.quick else max(65_536, 4 * p.n_steps * s))
-              for s in args.slots}  # fmt: skip
-    print(f"mode: {'quick' if args.quick else 'full'}; PPO ({args.ppo}) MlpPolicy n_steps={p.n_steps} "
-          f"batch_size={p.batch_size} n_epochs={p.n_epochs} net_arch={list(p.net_arch)} cpu, 1 thread; "
-          f"{rounds} interleaved rounds; medians of agent-steps per CPU second", flush=True)  # fmt: skip
+    budget = {
+        s: args.timesteps or (p.n_steps * s if args.quick else max(65_536, 4 * p.n_steps * s))
+        for s in args.slots
+    }
+    print(
+        f"mode: {'quick' if args.quick else 'full'}; PPO ({args.ppo}) MlpPolicy n_steps={p.n_steps} "
+        f"batch_size={p.batch_size} n_epochs={p.n_epochs} net_arch={list(p.net_arch)} cpu, 1 thread; "
+        f"{rounds} interleaved rounds; medians of agent-steps per CPU second",
+        flush=True,
+    )
     for s in args.slots:  # warm-up (numba compilation, torch's first calls): one rollout each, untimed
         for system in SYSTEMS:
             learn_once(system, s, p.n_steps * s, 0, args.ppo)
@@ -245,25 +261,62 @@ def main(argv: list[str] | None = None) -> dict:
         env_nat, env_sus = env_stats[f"native {s}"], env_stats[f"supersuit {s}"]
         env_ratio = env_nat.agent_steps_per_s / env_sus.agent_steps_per_s
         met = "-" if s != TARGET_SLOTS else ("PASS" if ratio >= TARGET_RATIO else "FAIL")
-        results[s] = {"native": nat, "supersuit": sus, "ratio": ratio, "ceiling": ceiling, "rollout_ratio": rollout,
-                      "env_ratio": env_ratio, "env": {"native": env_nat, "supersuit": env_sus}, "result": met}  # fmt: skip
+        results[s] = {
+            "native": nat,
+            "supersuit": sus,
+            "ratio": ratio,
+            "ceiling": ceiling,
+            "rollout_ratio": rollout,
+            "env_ratio": env_ratio,
+            "env": {"native": env_nat, "supersuit": env_sus},
+            "result": met,
+        }
         pct = lambda x: common.fmt_num(100 * x)  # noqa: E731
-        rows.append([
-            f"{s} ({s // AGENTS}x{AGENTS})", common.fmt_num(nat.rate), common.fmt_num(sus.rate), f"{ratio:.3g}",
-            f">= {TARGET_RATIO:g}" if s == TARGET_SLOTS else "-", met, f"{ceiling:.3g}", f"{rollout:.3g}", pct(nat.env_share),
-            pct(nat.train_share), pct(sus.env_share), pct(sus.train_share),
-            common.fmt_num(env_nat.agent_steps_per_s), common.fmt_num(env_sus.agent_steps_per_s), f"{env_ratio:.3g}",
-        ])  # fmt: skip
-    headers = ["slots (WxN)", "native learn ag-st/s", "SuperSuit learn ag-st/s", "native/SuperSuit", "target",
-               "result", "ratio ceiling", "rollout ratio", "native env %", "native update %", "SuperSuit env %",
-               "SuperSuit update %", "native env-only ag-st/s", "SuperSuit env-only ag-st/s", "env-only ratio"]  # fmt: skip
+        rows.append(
+            [
+                f"{s} ({s // AGENTS}x{AGENTS})",
+                common.fmt_num(nat.rate),
+                common.fmt_num(sus.rate),
+                f"{ratio:.3g}",
+                f">= {TARGET_RATIO:g}" if s == TARGET_SLOTS else "-",
+                met,
+                f"{ceiling:.3g}",
+                f"{rollout:.3g}",
+                pct(nat.env_share),
+                pct(nat.train_share),
+                pct(sus.env_share),
+                pct(sus.train_share),
+                common.fmt_num(env_nat.agent_steps_per_s),
+                common.fmt_num(env_sus.agent_steps_per_s),
+                f"{env_ratio:.3g}",
+            ]
+        )
+    headers = [
+        "slots (WxN)",
+        "native learn ag-st/s",
+        "SuperSuit learn ag-st/s",
+        "native/SuperSuit",
+        "target",
+        "result",
+        "ratio ceiling",
+        "rollout ratio",
+        "native env %",
+        "native update %",
+        "SuperSuit env %",
+        "SuperSuit update %",
+        "native env-only ag-st/s",
+        "SuperSuit env-only ag-st/s",
+        "env-only ratio",
+    ]
     print()
     print(common.markdown_table(headers, rows))
     print()
-    print("learn ag-st/s = agent-steps trained per CPU second of PPO.learn(); env % / update % = share of that "
-          "time inside the vec env's reset + step_wait / inside PPO's update (train); the rest is rollout-side "
-          "policy inference and buffer work. ratio ceiling = native/SuperSuit if the native env cost nothing; "
-          "rollout ratio = native/SuperSuit over the rollout phase only (learn() minus the update).")  # fmt: skip
+    print(
+        "learn ag-st/s = agent-steps trained per CPU second of PPO.learn(); env % / update % = share of that "
+        "time inside the vec env's reset + step_wait / inside PPO's update (train); the rest is rollout-side "
+        "policy inference and buffer work. ratio ceiling = native/SuperSuit if the native env cost nothing; "
+        "rollout ratio = native/SuperSuit over the rollout phase only (learn() minus the update)."
+    )
     return results
 
 

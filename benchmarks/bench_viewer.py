@@ -59,8 +59,10 @@ class Sim:
         self.env.reset(seed=0)
         rng = np.random.default_rng(0)
         space = self.env.action_space(self.env.possible_agents[0])
-        self.actions = {a: {k: rng.uniform(-0.3, 0.3, s.shape).astype(np.float32) for k, s in space.items()}
-                        for a in self.env.possible_agents}  # fmt: skip
+        self.actions = {
+            a: {k: rng.uniform(-0.3, 0.3, s.shape).astype(np.float32) for k, s in space.items()}
+            for a in self.env.possible_agents
+        }
 
     def run(self, seconds: float) -> float:
         """Step for ``seconds`` of wall time; return env steps per second."""
@@ -71,7 +73,11 @@ class Sim:
         while time.perf_counter() - t0 < seconds:
             if not env.agents:
                 env.reset()
-            acts = self.actions if len(env.agents) == len(self.actions) else {a: self.actions[a] for a in env.agents}
+            acts = (
+                self.actions
+                if len(env.agents) == len(self.actions)
+                else {a: self.actions[a] for a in env.agents}
+            )
             env.step(acts)
             n += 1
         return n / (time.perf_counter() - t0)
@@ -101,8 +107,14 @@ def measure(n: int, seconds: float, rounds: int, page: object) -> dict[str, floa
     viewer.new_episode()
     world = sim.env.world
     frame_bytes = len(pack_frame(1, 0, 0, state_arrays(world, 0, None, None)))
-    res: dict[str, list[float]] = {"alone": [], "page": [], "slow": [], "updates": [], "drawn": [],
-                                   "slow_updates": []}  # fmt: skip
+    res: dict[str, list[float]] = {
+        "alone": [],
+        "page": [],
+        "slow": [],
+        "updates": [],
+        "drawn": [],
+        "slow_updates": [],
+    }
     try:
         for _ in range(rounds):
             world.hooks = [h for h in world.hooks if h != viewer.hook]
@@ -121,8 +133,9 @@ def measure(n: int, seconds: float, rounds: int, page: object) -> dict[str, floa
             res["updates"].append((r1 - r0) / dt)
             res["drawn"].append((d1 - d0) / dt)
             page.goto("about:blank")  # type: ignore[attr-defined]
-            client = subprocess.Popen([sys.executable, "-c", SLOW_CLIENT, url.replace("http", "ws") + "ws",
-                                       str(seconds + 2.0)])  # fmt: skip
+            client = subprocess.Popen(
+                [sys.executable, "-c", SLOW_CLIENT, url.replace("http", "ws") + "ws", str(seconds + 2.0)]
+            )
             deadline = time.time() + 10
             while viewer.server.n_pages == 0 and time.time() < deadline:
                 time.sleep(0.05)
@@ -159,18 +172,50 @@ def main(argv: list[str] | None = None) -> int:
             slow = 1.0 - r["page"] / r["alone"]
             slow_slow = 1.0 - r["slow"] / r["alone"]
             target = TARGET_UPDATES.get(n)
-            ok = (target is None or r["updates"] >= target) and slow <= MAX_SLOWDOWN and slow_slow <= MAX_SLOWDOWN
-            rows.append([f"{n:,}", f"{r['frame_bytes'] / 1024:,.1f}", common.fmt_num(r["alone"]),
-                         common.fmt_num(r["page"]), f"{100 * slow:+.1f} %", common.fmt_num(r["updates"]),
-                         f">= {target:g}" if target else "-", common.fmt_num(r["drawn"]), common.fmt_num(r["slow"]), f"{100 * slow_slow:+.1f} %",
-                         common.fmt_num(r["slow_updates"]), "PASS" if ok else "FAIL"])  # fmt: skip
+            ok = (
+                (target is None or r["updates"] >= target)
+                and slow <= MAX_SLOWDOWN
+                and slow_slow <= MAX_SLOWDOWN
+            )
+            rows.append(
+                [
+                    f"{n:,}",
+                    f"{r['frame_bytes'] / 1024:,.1f}",
+                    common.fmt_num(r["alone"]),
+                    common.fmt_num(r["page"]),
+                    f"{100 * slow:+.1f} %",
+                    common.fmt_num(r["updates"]),
+                    f">= {target:g}" if target else "-",
+                    common.fmt_num(r["drawn"]),
+                    common.fmt_num(r["slow"]),
+                    f"{100 * slow_slow:+.1f} %",
+                    common.fmt_num(r["slow_updates"]),
+                    "PASS" if ok else "FAIL",
+                ]
+            )
     finally:
         browser.close()  # type: ignore[attr-defined]
         pw.stop()  # type: ignore[attr-defined]
     print()
-    print(common.markdown_table(
-        ["agents", "frame KiB", "env steps/s alone", "with page", "slowdown", "page updates/s", "target",
-         "page draws/s", "slow page: steps/s", "slowdown", "frames/s sent", "result"], rows))  # fmt: skip
+    print(
+        common.markdown_table(
+            [
+                "agents",
+                "frame KiB",
+                "env steps/s alone",
+                "with page",
+                "slowdown",
+                "page updates/s",
+                "target",
+                "page draws/s",
+                "slow page: steps/s",
+                "slowdown",
+                "frames/s sent",
+                "result",
+            ],
+            rows,
+        )
+    )
     print(f"\nslowdown target: <= {MAX_SLOWDOWN:.0%} (positive = slower); {os.cpu_count()} logical CPUs")
     return 0
 

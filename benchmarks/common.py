@@ -145,7 +145,7 @@ def measure_interleaved(
             rounds,
             steps[k],
             per_step[k],
-        )  # fmt: skip
+        )
         for k in cases
     }
 

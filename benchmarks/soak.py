@@ -44,8 +44,18 @@ STEPS, MISSIONS = 1_000_000, 200
 QUICK_STEPS, QUICK_MISSIONS = 20_000, 10
 COMMS = {"heartbeat_period": 5}
 """``navigation``'s comms: the defaults of ``CommsConfig`` plus heartbeats every 5 steps."""
-HEADERS = ["phase", "work", "samples", "RSS warm-up MB", "RSS final MB", "RSS max MB", "growth %",
-           "slope MB/10%", "wall s", "result"]  # fmt: skip
+HEADERS = [
+    "phase",
+    "work",
+    "samples",
+    "RSS warm-up MB",
+    "RSS final MB",
+    "RSS max MB",
+    "growth %",
+    "slope MB/10%",
+    "wall s",
+    "result",
+]
 
 
 # -------------------------------------------------------------------------------------------------- RSS
@@ -98,9 +108,14 @@ class Trace:
         post_at, post = at[w:], rss[w:]
         slope = float(np.polyfit(post_at, post, 1)[0]) * 0.1 * self.total if len(post) >= 3 else 0.0
         return {
-            "warm": warm, "final": final, "max": float(rss.max()), "growth": growth, "slope": slope,
-            "samples": len(rss), "result": "PASS" if growth <= max_growth else "FAIL",
-        }  # fmt: skip
+            "warm": warm,
+            "final": final,
+            "max": float(rss.max()),
+            "growth": growth,
+            "slope": slope,
+            "samples": len(rss),
+            "result": "PASS" if growth <= max_growth else "FAIL",
+        }
 
 
 # ----------------------------------------------------------------------------------------------- phases
@@ -162,10 +177,20 @@ def table(traces: list[Trace], max_growth: float) -> str:
     rows = []
     for t in traces:
         s = t.summary(max_growth)
-        rows.append([t.phase, f"{t.total:,} {t.unit}", str(s["samples"]), common.fmt_num(float(s["warm"])),
-                     common.fmt_num(float(s["final"])), common.fmt_num(float(s["max"])),
-                     f"{float(s['growth']):+.2f}", f"{float(s['slope']):+.2f}", common.fmt_num(t.wall_s),
-                     str(s["result"])])  # fmt: skip
+        rows.append(
+            [
+                t.phase,
+                f"{t.total:,} {t.unit}",
+                str(s["samples"]),
+                common.fmt_num(float(s["warm"])),
+                common.fmt_num(float(s["final"])),
+                common.fmt_num(float(s["max"])),
+                f"{float(s['growth']):+.2f}",
+                f"{float(s['slope']):+.2f}",
+                common.fmt_num(t.wall_s),
+                str(s["result"]),
+            ]
+        )
     return common.markdown_table(HEADERS, rows)
 
 
@@ -222,18 +247,26 @@ def main(argv: list[str] | None = None) -> int:
     every = args.sample_every or max(1, steps // 200)
     progress = not args.no_progress
     print(f"machine: {common.machine_description()}")
-    print(f"mode: {'quick' if args.quick else 'full'}; RSS from {RSS_SOURCE}; warm-up {args.warmup:.0%} of each "
-          f"phase; PASS: growth after warm-up <= {args.max_growth:g} %")  # fmt: skip
+    print(
+        f"mode: {'quick' if args.quick else 'full'}; RSS from {RSS_SOURCE}; warm-up {args.warmup:.0%} of each "
+        f"phase; PASS: growth after warm-up <= {args.max_growth:g} %"
+    )
     traces = []
     if steps:
-        print(f"phase 1: navigation, {args.agents} agents, comms {COMMS} (CommsConfig defaults otherwise), "
-              f"BatchedEnv with 1 world (array API), random actions, RSS every {every:,} steps", flush=True)  # fmt: skip
+        print(
+            f"phase 1: navigation, {args.agents} agents, comms {COMMS} (CommsConfig defaults otherwise), "
+            f"BatchedEnv with 1 world (array API), random actions, RSS every {every:,} steps",
+            flush=True,
+        )
         traces.append(run_steps(steps, args.agents, every, args.seed, args.warmup, progress))
     gc.collect()
     if missions:
-        print(f"phase 2: uav_release on zones={args.zones!r}, default baseline (B5_cvt) via fly_mission, "
-              f"{'a fresh env per mission' if args.fresh_env else 'one env for every mission'}, "
-              f"RSS after each mission", flush=True)  # fmt: skip
+        print(
+            f"phase 2: uav_release on zones={args.zones!r}, default baseline (B5_cvt) via fly_mission, "
+            f"{'a fresh env per mission' if args.fresh_env else 'one env for every mission'}, "
+            f"RSS after each mission",
+            flush=True,
+        )
         traces.append(run_missions(missions, args.zones, args.fresh_env, args.warmup, progress))
     print()
     print(table(traces, args.max_growth))

@@ -24,12 +24,22 @@ from tests.browser import browser_page  # noqa: E402
 OUT = ROOT / "docs" / "images"
 
 
-def live(name: str, policy: str, steps: int, shot: str, select: int | None = None, query: str = "",
-         settle: float = 1.5, **config: object) -> None:  # fmt: skip
+def live(
+    name: str,
+    policy: str,
+    steps: int,
+    shot: str,
+    select: int | None = None,
+    query: str = "",
+    settle: float = 1.5,
+    **config: object,
+) -> None:
     """Run ``steps`` steps of ``name`` with ``policy`` while the page watches; screenshot the last one."""
     from agentsim_env.policies.registry import resolve_policy
 
-    policy, config = resolve_policy(name, policy, dict(config))  # as `agentsim view NAME --policy POLICY` does
+    policy, config = resolve_policy(
+        name, policy, dict(config)
+    )  # as `agentsim view NAME --policy POLICY` does
     env = agentsim_env.make(name, **config)
     pol = make_policy(name, env, policy)
     viewer = WebViewer(quiet=True, title=f"{name} | {policy}")
@@ -57,8 +67,12 @@ def live(name: str, policy: str, steps: int, shot: str, select: int | None = Non
 
 def designer() -> None:
     """The designer with the default zones."""
-    srv = WebServer("designer.html", title="designer", handlers=designer_handlers(None),
-                    on_connect=lambda: designer_hello(None))  # fmt: skip
+    srv = WebServer(
+        "designer.html",
+        title="designer",
+        handlers=designer_handlers(None),
+        on_connect=lambda: designer_hello(None),
+    )
     url = srv.start()
     with browser_page(1300, 800) as (page, _):
         page.goto(url)

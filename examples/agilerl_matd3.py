@@ -55,9 +55,13 @@ import agentsim_env
 def make_env(agents: int, max_steps: int) -> Any:
     """One ``navigation`` ParallelEnv with flat spaces, ended agents kept until the episode ends."""
     return agentsim_env.make(
-        "navigation", n_agents=agents, max_steps=max_steps, obs_format="flat", action_format="flat",
+        "navigation",
+        n_agents=agents,
+        max_steps=max_steps,
+        obs_format="flat",
+        action_format="flat",
         ended_agents="stay",
-    )  # fmt: skip
+    )
 
 
 def train(frames: int, envs: int, agents: int, max_steps: int, pop_size: int, seed: int, out: Path) -> None:

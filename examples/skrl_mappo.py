@@ -79,9 +79,13 @@ def train(frames: int, rollouts: int, agents: int, max_steps: int, seed: int, ou
     """Train MAPPO for ``frames`` environment steps, updating every ``rollouts`` steps."""
     set_seed(seed)
     env = agentsim_env.make(
-        "navigation", n_agents=agents, max_steps=max_steps, obs_format="flat", action_format="flat",
+        "navigation",
+        n_agents=agents,
+        max_steps=max_steps,
+        obs_format="flat",
+        action_format="flat",
         ended_agents="stay",
-    )  # fmt: skip
+    )
     env = wrap_env(env, wrapper="pettingzoo")
     device = env.device
 

@@ -55,8 +55,15 @@ def evaluate(path: Path, agents: int, seeds: list[int]) -> list[dict[str, float]
                 ret[a] += rew[a]
                 arrived += int(infos[a]["arrived"])
                 collided += int(infos[a]["collided"])
-        rows.append({"seed": s, "mean return": float(np.mean(list(ret.values()))), "arrived": arrived,
-                     "collided": collided, "steps": steps})  # fmt: skip
+        rows.append(
+            {
+                "seed": s,
+                "mean return": float(np.mean(list(ret.values()))),
+                "arrived": arrived,
+                "collided": collided,
+                "steps": steps,
+            }
+        )
     env.close()
     return rows
 
@@ -65,11 +72,15 @@ def table(rows: list[dict[str, float]], agents: int) -> str:
     """The evaluation as a Markdown table, with a mean row."""
     lines = ["| seed | mean return | arrived | collided | steps |", "|---:|---:|---:|---:|---:|"]
     for r in rows:
-        lines.append(f"| {r['seed']} | {r['mean return']:.2f} | {r['arrived']}/{agents} | {r['collided']}/{agents} | "
-                     f"{r['steps']} |")  # fmt: skip
+        lines.append(
+            f"| {r['seed']} | {r['mean return']:.2f} | {r['arrived']}/{agents} | {r['collided']}/{agents} | "
+            f"{r['steps']} |"
+        )
     mean = {k: float(np.mean([r[k] for r in rows])) for k in ("mean return", "arrived", "collided", "steps")}
-    lines.append(f"| mean | {mean['mean return']:.2f} | {mean['arrived']:.2f}/{agents} | "
-                 f"{mean['collided']:.2f}/{agents} | {mean['steps']:.0f} |")  # fmt: skip
+    lines.append(
+        f"| mean | {mean['mean return']:.2f} | {mean['arrived']:.2f}/{agents} | "
+        f"{mean['collided']:.2f}/{agents} | {mean['steps']:.0f} |"
+    )
     return "\n".join(lines)
 
 

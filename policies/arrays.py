@@ -59,8 +59,10 @@ def _rows(policy: Any, env: Any) -> ArrayPolicy:
 
 
 def _allowed(scenario: str) -> str:
-    return (f"one of {baseline_names(scenario)} for {scenario!r}, a trained model (a folder with model.zip, or "
-            "a .zip), a Policy or an ArrayPolicy")  # fmt: skip
+    return (
+        f"one of {baseline_names(scenario)} for {scenario!r}, a trained model (a folder with model.zip, or "
+        "a .zip), a Policy or an ArrayPolicy"
+    )
 
 
 def build_policy(
@@ -102,6 +104,8 @@ def build_policy(
         raise ValueError(f"policy must be {_allowed(scenario)}; got {name!r}")
     if env is None:
         if not hasattr(_class_of(scenario, name), "act_rows"):
-            raise ValueError(f"policy {name!r} of {scenario!r} reads the env it drives: pass env= to build it")
+            raise ValueError(
+                f"policy {name!r} of {scenario!r} reads the env it drives: pass env= to build it"
+            )
         env = PolicyEnv(scenario, config)
     return _rows(make_policy(scenario, env, name), env)

@@ -48,8 +48,12 @@ class GoToGoalPolicy:
     def for_env(cls, env: Any) -> GoToGoalPolicy:
         """A policy configured from a navigation env's scenario config."""
         c = env.scenario.config
-        return cls(n_azimuth=c.sensing.n_azimuth, sensor_range=c.sensing.range, map_diagonal=c.side * np.sqrt(2.0),
-                   parts=ActionParts.for_env(env, "GoToGoalPolicy"))  # fmt: skip
+        return cls(
+            n_azimuth=c.sensing.n_azimuth,
+            sensor_range=c.sensing.range,
+            map_diagonal=c.side * np.sqrt(2.0),
+            parts=ActionParts.for_env(env, "GoToGoalPolicy"),
+        )
 
     def reset(self, seed: int | None = None) -> None:
         """No state to reset (the policy is deterministic)."""

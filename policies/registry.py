@@ -82,6 +82,8 @@ def resolve_policy(scenario: str, policy: str | None, config: dict[str, Any]) ->
             raise ValueError(f"--policy {name!r} was trained on {trained_on!r}, not {scenario!r}")
         return name, {**env_config, **config}
     if name not in names:
-        raise ValueError(f"--policy must be one of {names} for {scenario!r} or a trained model "
-                         f"(a folder with model.zip, or a .zip), got {name!r}")  # fmt: skip
+        raise ValueError(
+            f"--policy must be one of {names} for {scenario!r} or a trained model "
+            f"(a folder with model.zip, or a .zip), got {name!r}"
+        )
     return name, config

@@ -29,8 +29,9 @@ _PAYLOAD0 = 11  # first payload column of an inbox row
 _CH = {name: -1.0 + (2 * i + 1) / len(CHANNELS) for i, name in enumerate(CHANNELS)}
 
 
-def _avoidance(lidar: np.ndarray, heading: np.ndarray, n_azimuth: int, sensor_range: float,
-               influence: float) -> np.ndarray:  # fmt: skip
+def _avoidance(
+    lidar: np.ndarray, heading: np.ndarray, n_azimuth: int, sensor_range: float, influence: float
+) -> np.ndarray:
     """Horizontal push away from agents and objects seen by the horizontal ring (as in GoToGoalPolicy).
 
     Returns:
@@ -52,8 +53,17 @@ class _RelayBase(ABC):
     """What both baselines share: the map scale, agent indices and the Dict-observation plumbing; each baseline
     gives ``act_rows``."""
 
-    def __init__(self, agents: list[str], length: float, width: float, n_groups: int, n_azimuth: int,
-                 sensor_range: float, payload_dim: int, parts: ActionParts | None = None) -> None:  # fmt: skip
+    def __init__(
+        self,
+        agents: list[str],
+        length: float,
+        width: float,
+        n_groups: int,
+        n_azimuth: int,
+        sensor_range: float,
+        payload_dim: int,
+        parts: ActionParts | None = None,
+    ) -> None:
         self.index = {a: i for i, a in enumerate(agents)}
         # the env's action parts (default: velocity mode; relay always has comms)
         self.parts = parts if parts is not None else ActionParts({"motion": (3,), "comm": (3 + payload_dim,)})
@@ -68,10 +78,16 @@ class _RelayBase(ABC):
     @staticmethod
     def _env_args(env: Any) -> dict[str, Any]:
         c = env.scenario.config
-        return {"agents": list(env.possible_agents), "length": c.length, "width": c.corridor_width,
-                "n_groups": c.n_groups, "n_azimuth": c.sensing.n_azimuth, "sensor_range": c.sensing.range,
-                "payload_dim": c.comms.payload_dim,
-                "parts": ActionParts.for_env(env, "the relay baselines")}  # fmt: skip
+        return {
+            "agents": list(env.possible_agents),
+            "length": c.length,
+            "width": c.corridor_width,
+            "n_groups": c.n_groups,
+            "n_azimuth": c.sensing.n_azimuth,
+            "sensor_range": c.sensing.range,
+            "payload_dim": c.comms.payload_dim,
+            "parts": ActionParts.for_env(env, "the relay baselines"),
+        }
 
     def act(self, observations: dict[str, Any]) -> dict[str, Any]:
         """``{"motion": (3,), "comm": (3 + D,)}`` for every observed agent (one step: see ``act_rows``)."""
@@ -105,7 +121,6 @@ class _RelayBase(ABC):
         return np.where(norm > 1.0, v / np.maximum(norm, 1e-9), v)
 
 
-
 class FloodPolicy(_RelayBase):
     """Scouts flood their target's position; members go to the newest report and pass it on.
 
@@ -127,9 +142,18 @@ class FloodPolicy(_RelayBase):
             "velocity" primitive, ``policies.parts``).
     """
 
-    def __init__(self, agents: list[str], length: float, width: float, n_groups: int, n_azimuth: int,
-                 sensor_range: float, payload_dim: int, period: int = 6,
-                 parts: ActionParts | None = None) -> None:  # fmt: skip
+    def __init__(
+        self,
+        agents: list[str],
+        length: float,
+        width: float,
+        n_groups: int,
+        n_azimuth: int,
+        sensor_range: float,
+        payload_dim: int,
+        period: int = 6,
+        parts: ActionParts | None = None,
+    ) -> None:
         if payload_dim < 4:
             raise ValueError(f"comms.payload_dim must be >= 4 for the target report, got {payload_dim}")
         super().__init__(agents, length, width, n_groups, n_azimuth, sensor_range, payload_dim, parts)
@@ -215,9 +239,18 @@ class SilentPolicy(_RelayBase):
         parts: The env's action parts (default: velocity mode; see :class:`FloodPolicy`).
     """
 
-    def __init__(self, agents: list[str], length: float, width: float, n_groups: int, n_azimuth: int,
-                 sensor_range: float, payload_dim: int, sweep_deg: float = 35.0,
-                 parts: ActionParts | None = None) -> None:  # fmt: skip
+    def __init__(
+        self,
+        agents: list[str],
+        length: float,
+        width: float,
+        n_groups: int,
+        n_azimuth: int,
+        sensor_range: float,
+        payload_dim: int,
+        sweep_deg: float = 35.0,
+        parts: ActionParts | None = None,
+    ) -> None:
         super().__init__(agents, length, width, n_groups, n_azimuth, sensor_range, payload_dim, parts)
         self.sweep = np.radians(sweep_deg)
         self.direction = np.ones((len(agents), 2))

@@ -31,8 +31,12 @@ class MeetPolicy:
     def for_env(cls, env: Any) -> MeetPolicy:
         """A policy configured from a rendezvous env's scenario config."""
         c = env.scenario.config
-        return cls(side=c.side, max_speed=c.body.max_speed, slow_radius=c.radius / 2,
-                   parts=ActionParts.for_env(env, "MeetPolicy"))  # fmt: skip
+        return cls(
+            side=c.side,
+            max_speed=c.body.max_speed,
+            slow_radius=c.radius / 2,
+            parts=ActionParts.for_env(env, "MeetPolicy"),
+        )
 
     def reset(self, seed: int | None = None) -> None:
         """Stateless: nothing to reset."""

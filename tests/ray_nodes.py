@@ -61,8 +61,14 @@ def free_port() -> int:
 def _node_ports() -> list[str]:
     """``ray start`` options giving each server of a node its own free loopback port."""
     out = []
-    for option in ("--node-manager-port", "--object-manager-port", "--dashboard-agent-listen-port",
-                   "--dashboard-agent-grpc-port", "--runtime-env-agent-port", "--metrics-export-port"):  # fmt: skip
+    for option in (
+        "--node-manager-port",
+        "--object-manager-port",
+        "--dashboard-agent-listen-port",
+        "--dashboard-agent-grpc-port",
+        "--runtime-env-agent-port",
+        "--metrics-export-port",
+    ):
         out += [option, str(free_port())]
     return out
 
@@ -208,9 +214,24 @@ def _start_node(index: int, args: list[str], temp_dir: Path) -> RayNode:
     # token when ~/.ray/auth_token exists, and the nodes then read the same token file
     env.setdefault("RAY_AUTH_MODE", "disabled")
     resources = json.dumps({f"{NODE_RESOURCE}{index}": 8})
-    argv = [sys.executable, "-c", _RAY_START, "start", "--block", "--node-ip-address", "127.0.0.1",
-            "--num-cpus", "2", "--resources", resources, "--disable-usage-stats", "--temp-dir", str(temp_dir),
-            *args, *_node_ports()]  # fmt: skip
+    argv = [
+        sys.executable,
+        "-c",
+        _RAY_START,
+        "start",
+        "--block",
+        "--node-ip-address",
+        "127.0.0.1",
+        "--num-cpus",
+        "2",
+        "--resources",
+        resources,
+        "--disable-usage-stats",
+        "--temp-dir",
+        str(temp_dir),
+        *args,
+        *_node_ports(),
+    ]
     with log.open("wb") as out:
         proc = subprocess.Popen(argv, stdout=out, stderr=subprocess.STDOUT, env=env, start_new_session=True)
     return RayNode(index, proc, log)
@@ -230,9 +251,23 @@ def start_two_nodes(timeout_s: float = START_TIMEOUT_S) -> TwoNodes:
     two = TwoNodes(f"127.0.0.1:{port}", temp_dir=temp_dir)
     t0 = time.perf_counter()
     try:
-        two.nodes.append(_start_node(0, ["--head", "--port", str(port), "--include-dashboard", "false",
-                                         "--dashboard-port", str(free_port()), "--ray-client-server-port",
-                                         str(free_port())], temp_dir))  # fmt: skip
+        two.nodes.append(
+            _start_node(
+                0,
+                [
+                    "--head",
+                    "--port",
+                    str(port),
+                    "--include-dashboard",
+                    "false",
+                    "--dashboard-port",
+                    str(free_port()),
+                    "--ray-client-server-port",
+                    str(free_port()),
+                ],
+                temp_dir,
+            )
+        )
         deadline = time.monotonic() + timeout_s
         while True:  # the second node needs the head's GCS up
             if two.head.proc.poll() is not None or time.monotonic() > deadline:

@@ -51,54 +51,158 @@ Case = tuple[str, Callable[[], Any], type[BaseException], tuple[str, ...]]
 
 CONSTRUCTION: list[Case] = [
     # 1. unbounded sizes
-    ("map_size 1e6", lambda: agentsim_env.make("navigation", map_size=1e6), ValueError, ("map_size", "100000")),
+    (
+        "map_size 1e6",
+        lambda: agentsim_env.make("navigation", map_size=1e6),
+        ValueError,
+        ("map_size", "100000"),
+    ),
     ("map_size 1e12", lambda: agentsim_env.make("navigation", map_size=1e12), ValueError, ("map_size", "<=")),
-    ("n_agents 1e7", lambda: agentsim_env.make("navigation", n_agents=10**7), ValueError, ("n_agents", "1000000")),
+    (
+        "n_agents 1e7",
+        lambda: agentsim_env.make("navigation", n_agents=10**7),
+        ValueError,
+        ("n_agents", "1000000"),
+    ),
     ("n_worlds 1e7", lambda: BatchedEnv("navigation", 10**7), ValueError, ("n_worlds", "1000000")),
-    ("map grows too big", lambda: agentsim_env.make("navigation", n_agents=10**6, area_per_agent=1e6), ValueError,
-     ("area_per_agent", "map_size", "limit")),
-    ("too many obstacles", lambda: agentsim_env.make("navigation", map_size=1e5, obstacle_density=0.01), ValueError,
-     ("obstacle_density", "obstacles per world")),
-    ("pymunk map", lambda: agentsim_env.make("navigation", map_size=5e4, physics="pymunk"), ValueError,
-     ("map_size", "20000")),
-    ("relay corridor", lambda: agentsim_env.make("relay", n_groups=64, group_size=256, gap=(900, 1000)), ValueError,
-     ("corridor", "gap", "limit")),
-    ("uav payload", lambda: agentsim_env.make("uav_release", payload=10**9), ValueError, ("payload", "100000")),
-    ("sensing rings", lambda: agentsim_env.make("navigation", sensing={"elevations_deg": [0.0] * 65}), ValueError,
-     ("sensing.elevations_deg", "1..64")),
+    (
+        "map grows too big",
+        lambda: agentsim_env.make("navigation", n_agents=10**6, area_per_agent=1e6),
+        ValueError,
+        ("area_per_agent", "map_size", "limit"),
+    ),
+    (
+        "too many obstacles",
+        lambda: agentsim_env.make("navigation", map_size=1e5, obstacle_density=0.01),
+        ValueError,
+        ("obstacle_density", "obstacles per world"),
+    ),
+    (
+        "pymunk map",
+        lambda: agentsim_env.make("navigation", map_size=5e4, physics="pymunk"),
+        ValueError,
+        ("map_size", "20000"),
+    ),
+    (
+        "relay corridor",
+        lambda: agentsim_env.make("relay", n_groups=64, group_size=256, gap=(900, 1000)),
+        ValueError,
+        ("corridor", "gap", "limit"),
+    ),
+    (
+        "uav payload",
+        lambda: agentsim_env.make("uav_release", payload=10**9),
+        ValueError,
+        ("payload", "100000"),
+    ),
+    (
+        "sensing rings",
+        lambda: agentsim_env.make("navigation", sensing={"elevations_deg": [0.0] * 65}),
+        ValueError,
+        ("sensing.elevations_deg", "1..64"),
+    ),
     # 2. accepted configs that crashed: now the value works or is rejected at construction
-    ("crowded map", lambda: agentsim_env.make("navigation", n_agents=30, map_size=20), ValueError,
-     ("n_agents", "cannot place 30", "map_size")),
+    (
+        "crowded map",
+        lambda: agentsim_env.make("navigation", n_agents=30, map_size=20),
+        ValueError,
+        ("n_agents", "cannot place 30", "map_size"),
+    ),
     # 3. silent NaN
-    ("altitude flat", lambda: agentsim_env.make("navigation", body={"altitude": (5, 5)}), ValueError,
-     ("body.altitude",)),
-    ("altitude thin", lambda: agentsim_env.make("navigation", body={"altitude": (5, 5.05)}), ValueError,
-     ("body.altitude", "0.1")),
-    ("sigma 1e-3", lambda: agentsim_env.make("uav_release", zones=zones(sigma=0.001)), ValueError,
-     ("zones[0]", "sigma", ">= 0.03")),
-    ("sigma 1e-300", lambda: agentsim_env.make("uav_release", zones=zones(sigma=1e-300)), ValueError,
-     ("zones[0]", "sigma")),
-    ("sigma huge", lambda: agentsim_env.make("uav_release", zones=zones(sigma=1e300)), ValueError,
-     ("zones[0]", "sigma", "<=")),
+    (
+        "altitude flat",
+        lambda: agentsim_env.make("navigation", body={"altitude": (5, 5)}),
+        ValueError,
+        ("body.altitude",),
+    ),
+    (
+        "altitude thin",
+        lambda: agentsim_env.make("navigation", body={"altitude": (5, 5.05)}),
+        ValueError,
+        ("body.altitude", "0.1"),
+    ),
+    (
+        "sigma 1e-3",
+        lambda: agentsim_env.make("uav_release", zones=zones(sigma=0.001)),
+        ValueError,
+        ("zones[0]", "sigma", ">= 0.03"),
+    ),
+    (
+        "sigma 1e-300",
+        lambda: agentsim_env.make("uav_release", zones=zones(sigma=1e-300)),
+        ValueError,
+        ("zones[0]", "sigma"),
+    ),
+    (
+        "sigma huge",
+        lambda: agentsim_env.make("uav_release", zones=zones(sigma=1e300)),
+        ValueError,
+        ("zones[0]", "sigma", "<="),
+    ),
     # 4. wrong behaviour with no error: booleans are booleans
-    ("collisions 'False'", lambda: agentsim_env.make("navigation", collisions="False"), ValueError,
-     ("collisions", "True or False")),
-    ("collisions 0", lambda: agentsim_env.make("navigation", collisions=0), ValueError, ("collisions", "bool")),
-    ("overlay_full 'yes'", lambda: agentsim_env.make("navigation", comms={"overlay_full": "yes"}), ValueError,
-     ("comms.overlay_full", "bool")),
-    ("n_agents 2.0", lambda: agentsim_env.make("navigation", n_agents=2.0), ValueError, ("n_agents", "integer")),
+    (
+        "collisions 'False'",
+        lambda: agentsim_env.make("navigation", collisions="False"),
+        ValueError,
+        ("collisions", "True or False"),
+    ),
+    (
+        "collisions 0",
+        lambda: agentsim_env.make("navigation", collisions=0),
+        ValueError,
+        ("collisions", "bool"),
+    ),
+    (
+        "overlay_full 'yes'",
+        lambda: agentsim_env.make("navigation", comms={"overlay_full": "yes"}),
+        ValueError,
+        ("comms.overlay_full", "bool"),
+    ),
+    (
+        "n_agents 2.0",
+        lambda: agentsim_env.make("navigation", n_agents=2.0),
+        ValueError,
+        ("n_agents", "integer"),
+    ),
     ("dt '0.1'", lambda: agentsim_env.make("navigation", dt="0.1"), ValueError, ("dt", "number")),
-    ("check_finite 1", lambda: agentsim_env.make("navigation", check_finite=1), ValueError, ("check_finite",)),
+    (
+        "check_finite 1",
+        lambda: agentsim_env.make("navigation", check_finite=1),
+        ValueError,
+        ("check_finite",),
+    ),
     # 7. errors that name what is wrong
-    ("altitude 5", lambda: agentsim_env.make("navigation", body={"altitude": 5}), ValueError, ("body.altitude",)),
-    ("altitude triple", lambda: agentsim_env.make("navigation", body={"altitude": (1, 2, 3)}), ValueError,
-     ("body.altitude", "pair")),
-    ("zones ''", lambda: agentsim_env.make("uav_release", zones=""), ValueError, ("zones", "empty", "JSON path")),
+    (
+        "altitude 5",
+        lambda: agentsim_env.make("navigation", body={"altitude": 5}),
+        ValueError,
+        ("body.altitude",),
+    ),
+    (
+        "altitude triple",
+        lambda: agentsim_env.make("navigation", body={"altitude": (1, 2, 3)}),
+        ValueError,
+        ("body.altitude", "pair"),
+    ),
+    (
+        "zones ''",
+        lambda: agentsim_env.make("uav_release", zones=""),
+        ValueError,
+        ("zones", "empty", "JSON path"),
+    ),
     ("zones 42", lambda: agentsim_env.make("uav_release", zones=42), ValueError, ("zones", "int", "dict")),
-    ("zones list", lambda: agentsim_env.make("uav_release", zones=[ZONE]), ValueError,
-     ("zones", "list", "map_size")),
-    ("zones missing file", lambda: agentsim_env.make("uav_release", zones="/nonexistent/z.json"), ValueError,
-     ("zones", "/nonexistent/z.json")),
+    (
+        "zones list",
+        lambda: agentsim_env.make("uav_release", zones=[ZONE]),
+        ValueError,
+        ("zones", "list", "map_size"),
+    ),
+    (
+        "zones missing file",
+        lambda: agentsim_env.make("uav_release", zones="/nonexistent/z.json"),
+        ValueError,
+        ("zones", "/nonexistent/z.json"),
+    ),
     ("BatchedEnv n_worlds 0", lambda: BatchedEnv("navigation", 0), ValueError, ("n_worlds", ">= 1")),
 ]
 
@@ -168,7 +272,9 @@ def test_spaces_are_built_once() -> None:
 
 
 def test_numpy_scalars_are_numbers() -> None:
-    e = agentsim_env.make("navigation", n_agents=np.int64(3), dt=np.float32(0.1), body={"radius": np.float64(0.4)})
+    e = agentsim_env.make(
+        "navigation", n_agents=np.int64(3), dt=np.float32(0.1), body={"radius": np.float64(0.4)}
+    )
     c = e.scenario.config
     assert type(c.n_agents) is int and type(c.dt) is float and type(c.body.radius) is float
     use(e)
@@ -190,8 +296,14 @@ def test_collision_message_with_narrow_payload(payload_dim: int) -> None:
     use(e)
 
 
-@pytest.mark.parametrize("config", [{"gap": (15.0, 15.0)}, {"corridor_width": 20.0, "lateral_spread": 8.0},
-                                    {"lateral_spread": 0.0, "corridor_width": 4.0}])  # fmt: skip
+@pytest.mark.parametrize(
+    "config",
+    [
+        {"gap": (15.0, 15.0)},
+        {"corridor_width": 20.0, "lateral_spread": 8.0},
+        {"lateral_spread": 0.0, "corridor_width": 4.0},
+    ],
+)
 def test_relay_edge_configs_reset_and_run(config: dict[str, Any]) -> None:
     e = agentsim_env.make("relay", **config)
     for seed in range(5):
@@ -285,7 +397,11 @@ ENV_CALLS: list[tuple[str, Callable[[Any], Any], tuple[str, ...]]] = [
     ("action (3, 1)", lambda e: e.step(motion(e, np.zeros((3, 1)))), ("agent_0", "shape (3,)", "(3, 1)")),
     ("action (1, 3)", lambda e: e.step(motion(e, np.zeros((1, 3)))), ("agent_0", "shape (3,)", "(1, 3)")),
     ("action scalar", lambda e: e.step(motion(e, 0.0)), ("agent_0", "shape (3,)")),
-    ("action complex", lambda e: e.step(motion(e, np.array([1j, 0, 0]))), ("agent_0", "real numbers", "complex")),
+    (
+        "action complex",
+        lambda e: e.step(motion(e, np.array([1j, 0, 0]))),
+        ("agent_0", "real numbers", "complex"),
+    ),
     ("action strings", lambda e: e.step(motion(e, ["0.1", "0", "0"])), ("agent_0", "real numbers")),
     ("action bools", lambda e: e.step(motion(e, [True, False, True])), ("agent_0", "real numbers", "bool")),
     ("action ragged", lambda e: e.step(motion(e, [[0.1], 0, 0])), ("agent_0", "real numbers")),

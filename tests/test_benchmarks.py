@@ -41,9 +41,26 @@ def _number_or_skipped(cell: str) -> bool:
 def quick_run() -> str:
     # 1x4 follows 1x2, and --max-step-s is tiny: VMAS and mpe2 are skipped at 1x4 (estimate from 1x2), so the
     # run shows measured cells and skipped cells side by side.
-    cmd = [sys.executable, str(ROOT / "benchmarks" / "bench_step.py"), "--quick", "--sizes", "1x2", "1x4", "2x3",
-           "--pymunk-size", "1x2", "--ratio-sizes", "1x2", "1x4", "--rounds", "2", "--block-s", "0.005",
-           "--max-step-s", "1e-9"]  # fmt: skip
+    cmd = [
+        sys.executable,
+        str(ROOT / "benchmarks" / "bench_step.py"),
+        "--quick",
+        "--sizes",
+        "1x2",
+        "1x4",
+        "2x3",
+        "--pymunk-size",
+        "1x2",
+        "--ratio-sizes",
+        "1x2",
+        "1x4",
+        "--rounds",
+        "2",
+        "--block-s",
+        "0.005",
+        "--max-step-s",
+        "1e-9",
+    ]
     res = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert res.returncode == 0, res.stderr[-3000:]
     return res.stdout
@@ -77,8 +94,15 @@ def test_quick_run_prints_both_tables_with_every_cell_filled(quick_run: str) -> 
 def test_train_benchmark_quick_run_prints_its_table() -> None:
     pytest.importorskip("stable_baselines3")
     pytest.importorskip("supersuit")
-    cmd = [sys.executable, str(ROOT / "benchmarks" / "bench_train.py"), "--quick", "--rounds", "1",
-           "--block-s", "0.005"]  # fmt: skip
+    cmd = [
+        sys.executable,
+        str(ROOT / "benchmarks" / "bench_train.py"),
+        "--quick",
+        "--rounds",
+        "1",
+        "--block-s",
+        "0.005",
+    ]
     res = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert res.returncode == 0, res.stderr[-3000:]
     assert res.stdout.startswith("machine: ") and "\ndate: " in res.stdout
@@ -140,17 +164,33 @@ def test_measure_interleaved_counts_agent_steps() -> None:
 @pytest.mark.slow
 def test_perf_benchmark_quick_run_prints_every_row_with_target_and_result(tmp_path: Path) -> None:
     plot, thread_plot = tmp_path / "scaling.png", tmp_path / "threads.png"
-    cmd = [sys.executable, str(ROOT / "benchmarks" / "bench_perf.py"), "--quick", "--no-coldstart", "--plot",
-           str(plot), "--thread-plot", str(thread_plot)]  # fmt: skip
+    cmd = [
+        sys.executable,
+        str(ROOT / "benchmarks" / "bench_perf.py"),
+        "--quick",
+        "--no-coldstart",
+        "--plot",
+        str(plot),
+        "--thread-plot",
+        str(thread_plot),
+    ]
     res = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert res.returncode == 0, res.stderr[-3000:]
     assert res.stdout.startswith("machine: ")
     (head, rows), (core_head, core_rows), (scale_head, scale_rows), (thr_head, thr_rows) = _tables(res.stdout)
     assert head == ["case", "result", "target", "met", "measured alongside"]
     cases = [r[0] for r in rows]
-    for wanted in ("1x64, array API", "1x64, dict API", "512x4", "dict API cost", "full stack 1x200, dict API",
-                   "comms cost 1x500", "array API, no comms, 1 core", "2 threads vs 1",
-                   "full stack 1x5,000: 2 threads vs 1"):  # fmt: skip
+    for wanted in (
+        "1x64, array API",
+        "1x64, dict API",
+        "512x4",
+        "dict API cost",
+        "full stack 1x200, dict API",
+        "comms cost 1x500",
+        "array API, no comms, 1 core",
+        "2 threads vs 1",
+        "full stack 1x5,000: 2 threads vs 1",
+    ):
         assert any(wanted in c for c in cases), wanted
     for row in rows:
         value = row[1].split(" ")[0]
@@ -158,13 +198,18 @@ def test_perf_benchmark_quick_run_prints_every_row_with_target_and_result(tmp_pa
         assert row[3] in {"PASS", "short", "-", "n/a"}, row
         assert (row[2] == "-") == (row[3] == "-"), row  # a row has a target exactly when it has a verdict
     # the rows of the table carry targets in quick mode too
-    assert {r[0] for r in rows if r[3] != "-"} >= {"navigation 1x64, array API", "navigation 512x4, array API (1 core)"}
+    assert {r[0] for r in rows if r[3] != "-"} >= {
+        "navigation 1x64, array API",
+        "navigation 512x4, array API (1 core)",
+    }
     assert core_head[1] == "agent-steps/s per core" and any("C++" in r[0] for r in core_rows)
     assert scale_head == ["agents", "no comms", "full stack"] and len(scale_rows) == 2
     assert all(_number_or_skipped(c) for r in scale_rows for c in r[1:])
     assert plot.stat().st_size > 1000
     # the thread curve: one thread first (speed-up 1), then as many counts as the machine has cores for
-    assert thr_head == ["threads", "ms/step", "speed-up"] and thr_rows[0][0] == "1" and thr_rows[0][2] == "1.00"
+    assert (
+        thr_head == ["threads", "ms/step", "speed-up"] and thr_rows[0][0] == "1" and thr_rows[0][2] == "1.00"
+    )
     assert [int(r[0]) for r in thr_rows] == [k for k in (1, 2, 4, 8, 16) if k <= available_cores()]
     assert thread_plot.stat().st_size > 1000
 
@@ -234,9 +279,15 @@ def test_navigation_observe_kernel_equals_numpy_statement() -> None:
     c, stt, scan = sc.config, world.state, world.scan
     s, (lo, hi) = c.side, c.body.altitude
     selfp = np.column_stack(
-        [stt.pos[:, 0] / s * 2 - 1, stt.pos[:, 1] / s * 2 - 1, (stt.pos[:, 2] - lo) / (hi - lo) * 2 - 1,
-         stt.vel / c.body.max_speed, np.cos(stt.heading), np.sin(stt.heading)]
-    )  # fmt: skip
+        [
+            stt.pos[:, 0] / s * 2 - 1,
+            stt.pos[:, 1] / s * 2 - 1,
+            (stt.pos[:, 2] - lo) / (hi - lo) * 2 - 1,
+            stt.vel / c.body.max_speed,
+            np.cos(stt.heading),
+            np.sin(stt.heading),
+        ]
+    )
     diag = s * np.sqrt(2.0)
     d = world.task.goal - stt.pos
     expected = {

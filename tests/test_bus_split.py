@@ -31,8 +31,17 @@ def _events(evs: list[DeliveryEvents]) -> tuple[Counter, Counter, Counter]:
         c: Counter = Counter()
         for ev in evs:
             g = getattr(ev, log)
-            c.update(zip(g.kind.tolist(), g.sender.tolist(), g.target.tolist(), g.receiver.tolist(),
-                         g.created.tolist(), g.step.tolist(), g.reason.tolist()))  # fmt: skip
+            c.update(
+                zip(
+                    g.kind.tolist(),
+                    g.sender.tolist(),
+                    g.target.tolist(),
+                    g.receiver.tolist(),
+                    g.created.tolist(),
+                    g.step.tolist(),
+                    g.reason.tolist(),
+                )
+            )
         out.append(c)
     return out[0], out[1], out[2]
 
@@ -62,7 +71,9 @@ def _step_traffic(rng: np.random.Generator, b: int, n: int, grp: np.ndarray, ste
             w = int(rng.integers(0, b))
             g = grp[w * n : (w + 1) * n]
             if (g >= 0).any():
-                calls.append((GROUP, np.array([-1]), np.array([int(rng.choice(g[g >= 0]))]), np.array([w]), pay[:1]))
+                calls.append(
+                    (GROUP, np.array([-1]), np.array([int(rng.choice(g[g >= 0]))]), np.array([w]), pay[:1])
+                )
     return calls
 
 
@@ -119,8 +130,11 @@ def run_split(seed: int, b: int, n: int, k: int, channel: ChannelConfig, steps: 
             for q, bus in enumerate(parts):
                 rows = due[0][q].concat([d[q] for d in due], 2)
                 mine = owner == q
-                evs.append(bus.deliver_rows(rows, step, pos, online, grp, mine=mine,
-                                            seen=_seen(pos, mine, channel.max_range)))  # fmt: skip
+                evs.append(
+                    bus.deliver_rows(
+                        rows, step, pos, online, grp, mine=mine, seen=_seen(pos, mine, channel.max_range)
+                    )
+                )
         for log, a, c in zip(("sent", "delivered", "dropped"), _events([ev_one]), _events(evs)):
             assert a == c, f"step {step}: {log} differs"
         ans = [bus.take_answers() for bus in parts]
@@ -131,8 +145,11 @@ def run_split(seed: int, b: int, n: int, k: int, channel: ChannelConfig, steps: 
         for q, bus in enumerate(parts):
             mine = owner == q
             for f in INBOX_FIELDS:
-                np.testing.assert_array_equal(getattr(bus.inbox, f)[mine], getattr(one.inbox, f)[mine],
-                                              err_msg=f"step {step}: part {q} inbox {f}")  # fmt: skip
+                np.testing.assert_array_equal(
+                    getattr(bus.inbox, f)[mine],
+                    getattr(one.inbox, f)[mine],
+                    err_msg=f"step {step}: part {q} inbox {f}",
+                )
 
 
 @settings(max_examples=25, deadline=None)
@@ -245,21 +262,42 @@ def test_keyed_draws_are_a_function_of_the_pair() -> None:
     rep = np.arange(q)
 
     def draw(**change: np.ndarray) -> np.ndarray:
-        a = {"recv": recv, "keys": keys, "world": world, "created": created, "snd": snd, "seq": seq, "kind": kind}
+        a = {
+            "recv": recv,
+            "keys": keys,
+            "world": world,
+            "created": created,
+            "snd": snd,
+            "seq": seq,
+            "kind": kind,
+        }
         a.update(change)
-        return keyed_draws(rep, a["recv"], a["keys"], a["world"], n, a["created"], a["snd"], a["seq"], a["kind"])
+        return keyed_draws(
+            rep, a["recv"], a["keys"], a["world"], n, a["created"], a["snd"], a["seq"], a["kind"]
+        )
 
     u = draw()
     perm = rng.permutation(q)  # a pair's value does not depend on its place in the batch
-    np.testing.assert_array_equal(keyed_draws(perm, recv[perm], keys, world, n, created, snd, seq, kind), u[perm])
+    np.testing.assert_array_equal(
+        keyed_draws(perm, recv[perm], keys, world, n, created, snd, seq, kind), u[perm]
+    )
     assert ((u >= 0) & (u < 1)).all() and abs(u.mean() - 0.5) < 0.03
     # the world's place in the batch does not matter (slots are indices within the world), its key does
-    shifted = draw(world=world + 1, keys=np.concatenate([[np.uint64(7)], keys]),
-                   snd=np.where(snd >= 0, snd + n, -1), recv=np.where(recv >= 0, recv + n, -1))  # fmt: skip
+    shifted = draw(
+        world=world + 1,
+        keys=np.concatenate([[np.uint64(7)], keys]),
+        snd=np.where(snd >= 0, snd + n, -1),
+        recv=np.where(recv >= 0, recv + n, -1),
+    )
     np.testing.assert_array_equal(shifted, u)
-    for name, changed in (("keys", keys + np.uint64(1)), ("created", created + 1), ("seq", seq + 1),
-                          ("kind", (kind + 1).astype(np.int8)), ("snd", np.where(snd >= 0, snd ^ 1, 0)),
-                          ("recv", np.where(recv >= 0, recv ^ 1, 0))):  # fmt: skip
+    for name, changed in (
+        ("keys", keys + np.uint64(1)),
+        ("created", created + 1),
+        ("seq", seq + 1),
+        ("kind", (kind + 1).astype(np.int8)),
+        ("snd", np.where(snd >= 0, snd ^ 1, 0)),
+        ("recv", np.where(recv >= 0, recv ^ 1, 0)),
+    ):
         assert (draw(**{name: changed}) != u).mean() > 0.99, name
 
 
@@ -295,8 +333,14 @@ def test_a_world_of_a_batch_loses_what_a_single_world_loses() -> None:
         bus.send(AGENT, snd, np.tile(np.arange(6), 6) + 6 * w, np.zeros((36, 2)), 0)
         ev = bus.deliver(0, np.zeros((s, 3)), np.ones(s, dtype=bool), np.zeros(s, dtype=np.int32))
         d = ev.dropped
-        return sorted(zip((d.sender - 6 * w).tolist(), (d.receiver - 6 * w).tolist(), d.reason.tolist(),
-                          d.created.tolist()))  # fmt: skip
+        return sorted(
+            zip(
+                (d.sender - 6 * w).tolist(),
+                (d.receiver - 6 * w).tolist(),
+                d.reason.tolist(),
+                d.created.tolist(),
+            )
+        )
 
     one = fates(1, 0)
     assert one and one == fates(3, 1) == fates(2, 1)
@@ -320,8 +364,13 @@ def _episode_losses(start: int) -> list[tuple[int, ...]]:
         bus.send(HEARTBEAT, np.full(s, -1), np.arange(s), np.zeros((s, 2)), t)
         bus.send_env(np.arange(s), np.zeros((s, 2)), t)
         d = bus.deliver(t, pos, on, grp).dropped
-        out += zip(d.kind.tolist(), d.sender.tolist(), d.receiver.tolist(), (d.created - start).tolist(),
-                   d.reason.tolist())  # fmt: skip
+        out += zip(
+            d.kind.tolist(),
+            d.sender.tolist(),
+            d.receiver.tolist(),
+            (d.created - start).tolist(),
+            d.reason.tolist(),
+        )
     return sorted(out)
 
 
@@ -343,7 +392,10 @@ def test_a_reset_world_keys_its_losses_from_its_own_first_step() -> None:
     """A world reset after other steps loses what the same episode loses in a fresh world (comms stack)."""
     import agentsim_env
 
-    cfg = {"n_agents": 8, "comms": {"heartbeat_period": 2, "heartbeat_timeout": 50, "loss": 0.5, "latency": 1}}
+    cfg = {
+        "n_agents": 8,
+        "comms": {"heartbeat_period": 2, "heartbeat_timeout": 50, "loss": 0.5, "latency": 1},
+    }
 
     def losses(warm: int) -> list[tuple[int, ...]]:
         env = agentsim_env.make("navigation", **cfg)
@@ -358,8 +410,13 @@ def test_a_reset_world_keys_its_losses_from_its_own_first_step() -> None:
         for _ in range(8):
             env.step({a: zero[a] for a in env.agents})
             d = world.comms.events.bus.dropped
-            out += zip(d.kind.tolist(), d.sender.tolist(), d.receiver.tolist(), (d.created - start).tolist(),
-                       d.reason.tolist())  # fmt: skip
+            out += zip(
+                d.kind.tolist(),
+                d.sender.tolist(),
+                d.receiver.tolist(),
+                (d.created - start).tolist(),
+                d.reason.tolist(),
+            )
         return sorted(out)
 
     fresh = losses(0)

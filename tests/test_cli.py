@@ -186,7 +186,7 @@ def test_main_help_is_light() -> None:
             NAV,
             ['body={"radius": 1, "altitude": [1, 5]}', "body.max_speed=3"],
             {"body": {"radius": 1.0, "altitude": (1.0, 5.0), "max_speed": 3.0}},
-        ),  # fmt: skip
+        ),
         (NAV, ["comms=none"], {"comms": None}),
         (NAV, ["comms.max_range=none"], {"comms": {"max_range": None}}),
         (UAV, ["n_uavs=2"], {"n_agents": 2}),

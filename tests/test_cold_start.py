@@ -45,8 +45,9 @@ def _run(code: str, **env: str) -> subprocess.CompletedProcess[str]:
     base = {k: v for k, v in os.environ.items() if k != QUIET_ENV}
     base["PYTHONPATH"] = str(ROOT) + (os.pathsep + base["PYTHONPATH"] if base.get("PYTHONPATH") else "")
     base.setdefault("NUMBA_NUM_THREADS", "1")
-    res = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=base | env, capture_output=True, text=True,
-                         timeout=300)  # fmt: skip
+    res = subprocess.run(
+        [sys.executable, "-c", code], cwd=ROOT, env=base | env, capture_output=True, text=True, timeout=300
+    )
     assert res.returncode == 0, res.stderr[-3000:]
     return res
 
@@ -117,8 +118,9 @@ def test_notify_prints_once_and_only_for_package_functions(
 
 
 @pytest.mark.parametrize(("value", "quiet"), [("1", True), ("yes", True), ("0", False), ("", False)])
-def test_quiet_values(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], value: str,
-                      quiet: bool) -> None:  # fmt: skip
+def test_quiet_values(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], value: str, quiet: bool
+) -> None:
     monkeypatch.setitem(_compile_notice._state, "shown", False)
     monkeypatch.setenv(QUIET_ENV, value)
     assert _compile_notice.quiet() is quiet
@@ -161,10 +163,22 @@ def test_coldstart_benchmark_quick_run_prints_its_table() -> None:
     assert res.returncode in (0, 1), res.stderr[-3000:]  # 1: a case missed the target (no timing checks here)
     assert res.stdout.startswith("machine: ") and "\ndate: " in res.stdout
     ((head, rows),) = _tables(res.stdout)
-    assert head == ["case", "warm start s", "warm CPU s", "warm process s", "warm runs compiling",
-                    "empty-cache start s", "target", "result"]  # fmt: skip
-    assert [r[0] for r in rows] == ["navigation", "relay", "uav_release quickstart (first step)",
-                                    "agentsim warmup (empty cache)"]  # fmt: skip
+    assert head == [
+        "case",
+        "warm start s",
+        "warm CPU s",
+        "warm process s",
+        "warm runs compiling",
+        "empty-cache start s",
+        "target",
+        "result",
+    ]
+    assert [r[0] for r in rows] == [
+        "navigation",
+        "relay",
+        "uav_release quickstart (first step)",
+        "agentsim warmup (empty cache)",
+    ]
     for row in rows[:-1]:
         assert all(_number(c) for c in row[1:4] + row[5:6]), row
         compiled, runs = row[4].split("/")

@@ -34,7 +34,10 @@ def load_yaml_text(text: str, name: str) -> Any:
     from agentsim_env.train import yaml_load
 
     assert (yaml_load.MAX_CONFIG_BYTES, yaml_load.MAX_DEPTH, yaml_load.MAX_NODES) == (
-        MAX_CONFIG_BYTES, MAX_DEPTH, MAX_NODES)  # fmt: skip
+        MAX_CONFIG_BYTES,
+        MAX_DEPTH,
+        MAX_NODES,
+    )
     return yaml_load.load_yaml_text(text, name)
 
 
@@ -100,8 +103,24 @@ def test_short_repr_of_values_repr_cannot_show() -> None:
 def test_short_repr_keeps_small_values_exact() -> None:
     import numpy as np
 
-    values: list[Any] = [None, True, 3, -2.5, "abc", [1, 2], (1,), (), {}, {1, 2} - {2}, frozenset(),
-                         np.float32(1.5), np.arange(3), [[1, [2, [3]]]], b"ab", bytearray(b"x")]  # fmt: skip
+    values: list[Any] = [
+        None,
+        True,
+        3,
+        -2.5,
+        "abc",
+        [1, 2],
+        (1,),
+        (),
+        {},
+        {1, 2} - {2},
+        frozenset(),
+        np.float32(1.5),
+        np.arange(3),
+        [[1, [2, [3]]]],
+        b"ab",
+        bytearray(b"x"),
+    ]
     for value in values:
         assert short_repr(value) == repr(value), value
 
@@ -118,8 +137,13 @@ def test_billion_laughs_config_fails_fast_with_one_line(tmp_path: Path) -> None:
         sys.exit(main(["train", "navigation", "--config", {str(path)!r}, "--out", {str(tmp_path / "out")!r}]))
     """)
     t0 = time.perf_counter()
-    res = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120,
-                         env={**os.environ, "NUMBA_NUM_THREADS": "1"})  # fmt: skip
+    res = subprocess.run(
+        [sys.executable, "-c", script],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env={**os.environ, "NUMBA_NUM_THREADS": "1"},
+    )
     elapsed = time.perf_counter() - t0
     line = one_error_line(res.stderr)
     assert res.returncode == 2, res.stderr[-2000:]
@@ -139,12 +163,23 @@ def test_billion_laughs_config_fails_fast_with_one_line(tmp_path: Path) -> None:
         ("x: &a [*a]\n", ["recursive structure"]),
         (laughs(5, 10), ["aliases", f"{MAX_NODES:,}"]),
         ("x: &a [" + ",".join(["1"] * 9) + "]\n" + "y: [" + ",".join(["*a"] * 1200) + "]\n", ["aliases"]),
-        ("d: &a [[[[[[[[[[[[[[[[[[[[[[[[[[[[[1]]]]]]]]]]]]]]]]]]]]]]]]]]]]]\ne: [[[[[*a]]]]]\n",
-         [f"nested deeper than {MAX_DEPTH}"]),
+        (
+            "d: &a [[[[[[[[[[[[[[[[[[[[[[[[[[[[[1]]]]]]]]]]]]]]]]]]]]]]]]]]]]]\ne: [[[[[*a]]]]]\n",
+            [f"nested deeper than {MAX_DEPTH}"],
+        ),
     ],
-    ids=["top-key", "nested-key", "flow-key", "deep-flow", "deep-block", "self-alias", "laughs", "wide-alias",
-         "deep-alias"],
-)  # fmt: skip
+    ids=[
+        "top-key",
+        "nested-key",
+        "flow-key",
+        "deep-flow",
+        "deep-block",
+        "self-alias",
+        "laughs",
+        "wide-alias",
+        "deep-alias",
+    ],
+)
 def test_yaml_configs_refuse_what_they_cannot_mean(text: str, needles: list[str]) -> None:
     with pytest.raises(ValueError) as err:
         load_yaml_text(text, "my.yaml")
@@ -156,8 +191,13 @@ def test_yaml_configs_refuse_what_they_cannot_mean(text: str, needles: list[str]
 
 def test_yaml_configs_keep_what_they_mean() -> None:
     text = "base: &b {x: 1, y: 2}\nmerged:\n  <<: *b\n  x: 3\nuse: [*b, *b]\n1: one\n'1': string one\n"
-    assert load_yaml_text(text, "ok.yaml") == {"base": {"x": 1, "y": 2}, "merged": {"x": 3, "y": 2},
-                                                "use": [{"x": 1, "y": 2}] * 2, 1: "one", "1": "string one"}  # fmt: skip
+    assert load_yaml_text(text, "ok.yaml") == {
+        "base": {"x": 1, "y": 2},
+        "merged": {"x": 3, "y": 2},
+        "use": [{"x": 1, "y": 2}] * 2,
+        1: "one",
+        "1": "string one",
+    }
     deep = "x: " + "[" * (MAX_DEPTH - 1) + "]" * (MAX_DEPTH - 1) + "\n"
     load_yaml_text(deep, "deep.yaml")  # exactly the documented depth
     assert load_yaml_text("", "empty.yaml") is None
@@ -203,8 +243,9 @@ def test_load_config_names_the_file_and_the_key(tmp_path: Path) -> None:
     ],
     ids=["duplicate", "deep", "long-value", "many-values"],
 )
-def test_agentsim_train_config_errors_are_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str],
-                                                     content: str, needle: str) -> None:  # fmt: skip
+def test_agentsim_train_config_errors_are_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], content: str, needle: str
+) -> None:
     path = tmp_path / "c.yaml"
     path.write_text(content)
     # --eval-only with no model: a config that loads is refused right after, and nothing trains

@@ -52,8 +52,11 @@ def _placed(env, x: list[float], y: float = 40.0):  # type: ignore[no-untyped-de
 
 
 def _toward(env, vx: dict[int, float]):  # type: ignore[no-untyped-def]
-    return {a: {"motion": np.array([vx.get(i, 0.0), 0.0, 0.0], dtype=np.float32)}
-            for i, a in enumerate(env.possible_agents) if a in env.agents}  # fmt: skip
+    return {
+        a: {"motion": np.array([vx.get(i, 0.0), 0.0, 0.0], dtype=np.float32)}
+        for i, a in enumerate(env.possible_agents)
+        if a in env.agents
+    }
 
 
 KW_EMPTY = {"n_agents": 4, "map_size": 120.0, "obstacle_density": 0.0}
@@ -62,8 +65,10 @@ KW_EMPTY = {"n_agents": 4, "map_size": 120.0, "obstacle_density": 0.0}
 def test_a_collision_across_a_strip_edge_is_counted_once() -> None:
     # agents 0 and 1 fly into each other over the edge at x = 60 (agent 0 in strip 0, agent 1 in strip 1)
     results = []
-    for env in (agentsim_env.make("navigation", **KW_EMPTY), make_sharded("navigation", shards=2, backend="local",
-                                                                         **KW_EMPTY)):  # fmt: skip
+    for env in (
+        agentsim_env.make("navigation", **KW_EMPTY),
+        make_sharded("navigation", shards=2, backend="local", **KW_EMPTY),
+    ):
         _placed(env, [59.2, 60.8])
         steps = [env.step(_toward(env, {0: 1.0, 1: -1.0})) for _ in range(3)]
         col = env.world.last_events.collisions
@@ -145,8 +150,10 @@ def test_batched_front_end_equals_one_process() -> None:
 
 # ---------------------------------------------------------------------------------------------- faults
 def test_a_dead_shard_terminates_its_agents_once_and_the_rest_goes_on(tmp_path) -> None:  # type: ignore[no-untyped-def]
-    env = record(make_sharded("navigation", shards=2, backend="local", n_agents=200, collisions=False),
-                 tmp_path / "run.db")  # fmt: skip
+    env = record(
+        make_sharded("navigation", shards=2, backend="local", n_agents=200, collisions=False),
+        tmp_path / "run.db",
+    )
     inner = env.env
     co = inner.coordinator
     rng = np.random.default_rng(0)
@@ -305,8 +312,9 @@ def test_a_local_cluster_off_loopback_warns_naming_what_listens(caplog: pytest.L
 
     flag = constants.ENABLE_RAY_CLUSTER
     for node, warned in (("127.0.0.1", False), ("192.0.2.7", True)):
-        fake = SimpleNamespace(init=init, util=SimpleNamespace(get_node_ip_address=lambda n=node: n),
-                               __version__="9.9")  # fmt: skip
+        fake = SimpleNamespace(
+            init=init, util=SimpleNamespace(get_node_ip_address=lambda n=node: n), __version__="9.9"
+        )
         caplog.clear()
         with caplog.at_level(logging.WARNING, logger="agentsim_env.distributed"):
             assert start_local_cluster(fake, num_cpus=2) == node
@@ -346,7 +354,10 @@ def test_cli_run_shards_bad_options(argv: list[str], match: str, capsys: pytest.
 
 def test_the_mirror_serves_render_state_and_messages_as_one_process() -> None:
     kw = {"n_agents": 40, "comms": {}, "render_mode": "rgb_array"}
-    one, two = agentsim_env.make("navigation", **kw), make_sharded("navigation", shards=2, backend="local", **kw)
+    one, two = (
+        agentsim_env.make("navigation", **kw),
+        make_sharded("navigation", shards=2, backend="local", **kw),
+    )
     got = []
     for env in (one, two):
         env.reset(seed=5)
@@ -368,7 +379,10 @@ def test_sb3_trains_over_shards_as_over_one_process() -> None:
 
     kw = {"n_agents": 16, "max_steps": 40}
     runs = []
-    for batch in (BatchedEnv("navigation", 1, **kw), DistributedBatchedEnv("navigation", 2, backend="local", **kw)):
+    for batch in (
+        BatchedEnv("navigation", 1, **kw),
+        DistributedBatchedEnv("navigation", 2, backend="local", **kw),
+    ):
         venv = AgentSimVecEnv("navigation", 1, seed=0, batch=batch)
         model = PPO("MlpPolicy", venv, n_steps=32, batch_size=64, n_epochs=1, seed=0, device="cpu")
         model.learn(total_timesteps=16 * 64)
@@ -386,7 +400,9 @@ ROLLOUTS = [
 
 @pytest.mark.parametrize("shards", [1, 2, 4])
 @pytest.mark.parametrize(("name", "policy", "config"), ROLLOUTS, ids=[f"{n}-{p}" for n, p, _ in ROLLOUTS])
-def test_a_rollout_inside_the_shards_equals_one_process(name: str, policy: str, config: dict, shards: int) -> None:
+def test_a_rollout_inside_the_shards_equals_one_process(
+    name: str, policy: str, config: dict, shards: int
+) -> None:
     ref = agentsim_env.make(name, **config).rollout(policy, 120, seed=5)
     env = make_sharded(name, shards=shards, backend="local", **config)
     try:
@@ -420,7 +436,10 @@ def test_a_rollout_observer_over_shards_sees_what_it_sees_in_one_process() -> No
 
     got = []
     kw = {"n_agents": 300, "comms": {}, "max_steps": 60}  # to the episode's end: some agents are truncated
-    for env in (agentsim_env.make("navigation", **kw), make_sharded("navigation", shards=2, backend="local", **kw)):
+    for env in (
+        agentsim_env.make("navigation", **kw),
+        make_sharded("navigation", shards=2, backend="local", **kw),
+    ):
         rec = TrajectoryRecorder()
         res = env.rollout("go_to_goal", 60, seed=3, on_step=rec.on_rollout)
         got.append((res, rec.result(env)))
@@ -439,6 +458,8 @@ def test_a_policy_object_is_copied_to_every_shard() -> None:
     ref = agentsim_env.make("relay", **cfg).rollout("flood", 80, seed=2)
     env = make_sharded("relay", shards=2, backend="local", **cfg)
     policy = make_policy("relay", env, "flood")
-    got = env.rollout(policy, 80, seed=2)  # each shard acts with its own copy (its state apart from the other's)
+    got = env.rollout(
+        policy, 80, seed=2
+    )  # each shard acts with its own copy (its state apart from the other's)
     env.close()
     assert np.array_equal(got.returns, ref.returns) and got.events == ref.events

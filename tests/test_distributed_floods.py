@@ -31,8 +31,9 @@ def _links(
     """The range graph over the slots flagged in ``online`` (a part's known slots: own and ghosts)."""
     s = pos.shape[0]
     i, j = np.triu_indices(s, 1)
-    indptr, idx = _links_from_pairs(i.astype(np.int64), j.astype(np.int64), pos, online, np.zeros(s, dtype=np.int64),
-                                    reach, s)  # fmt: skip
+    indptr, idx = _links_from_pairs(
+        i.astype(np.int64), j.astype(np.int64), pos, online, np.zeros(s, dtype=np.int64), reach, s
+    )
     return indptr[:-1], indptr[1:], idx
 
 
@@ -86,8 +87,12 @@ class _Run:
         a = self.ref.advance_graph(*_links(self.pos, online, self.reach))
         ghosts = [self.strips.ghosts(self.pos[:, 0], slots, p) for p in range(self.k)]
         # the exchange before the hop: each part's frontier entries at its neighbours' ghosts
-        received = [FloodEntries.concat([q.frontier_of(g[self.owner[g] == i]) for i, q in enumerate(self.parts)
-                                         if i != p], D) for p, g in enumerate(ghosts)]  # fmt: skip
+        received = [
+            FloodEntries.concat(
+                [q.frontier_of(g[self.owner[g] == i]) for i, q in enumerate(self.parts) if i != p], D
+            )
+            for p, g in enumerate(ghosts)
+        ]
         got = []
         for p, part in enumerate(self.parts):
             own = self.owner == p
@@ -99,8 +104,10 @@ class _Run:
             rows = _rows(d)
             got += rows
             self.kept.append((unread, rows))
-        want = [(r, *self.keys[f], h, tuple(pl))
-                for r, f, h, pl in zip(a.receiver.tolist(), a.flood.tolist(), a.hops.tolist(), a.payload.tolist())]  # fmt: skip
+        want = [
+            (r, *self.keys[f], h, tuple(pl))
+            for r, f, h, pl in zip(a.receiver.tolist(), a.flood.tolist(), a.hops.tolist(), a.payload.tolist())
+        ]
         assert sorted(got) == sorted(want)
         per_got, per_want = defaultdict(list), defaultdict(list)
         for x in got:
@@ -114,13 +121,29 @@ class _Run:
 
 
 def _rows(d) -> list[tuple]:  # type: ignore[no-untyped-def]
-    return list(zip(d.receiver.tolist(), d.created.tolist(), d.origin.tolist(), d.seq.tolist(), d.hops.tolist(),
-                    map(tuple, d.payload.tolist())))  # fmt: skip
+    return list(
+        zip(
+            d.receiver.tolist(),
+            d.created.tolist(),
+            d.origin.tolist(),
+            d.seq.tolist(),
+            d.hops.tolist(),
+            map(tuple, d.payload.tolist()),
+        )
+    )
 
 
 def _where(e: FloodEntries, sel: np.ndarray) -> FloodEntries:
-    return FloodEntries(e.slot[sel], e.created[sel], e.origin[sel], e.seq[sel], e.hops[sel], e.limit[sel],
-                        e.left[sel], e.payload[sel])  # fmt: skip
+    return FloodEntries(
+        e.slot[sel],
+        e.created[sel],
+        e.origin[sel],
+        e.seq[sel],
+        e.hops[sel],
+        e.limit[sel],
+        e.left[sel],
+        e.payload[sel],
+    )
 
 
 @settings(max_examples=60, deadline=None)
@@ -173,8 +196,11 @@ def test_pickled_part_continues_identically() -> None:
 
 
 def test_dropped_world_slots_start_afresh() -> None:
-    links = _links(np.column_stack([np.arange(4) * 5.0, np.zeros(4), np.zeros(4)]), np.ones(4, dtype=bool),
-                   np.full(4, 6.0))  # fmt: skip
+    links = _links(
+        np.column_stack([np.arange(4) * 5.0, np.zeros(4), np.zeros(4)]),
+        np.ones(4, dtype=bool),
+        np.full(4, 6.0),
+    )
     own = np.ones(4, dtype=bool)
     part = PartFloods(4, 0)
     part.start(np.array([0]), 3, None, 0)

@@ -23,7 +23,9 @@ from agentsim_env.distributed.partition import Strips
     k=st.integers(1, 6),
     halo=st.floats(0.5, 15.0),
 )
-def test_every_agent_within_the_halo_of_an_own_agent_is_a_ghost(seed: int, n: int, k: int, halo: float) -> None:
+def test_every_agent_within_the_halo_of_an_own_agent_is_a_ghost(
+    seed: int, n: int, k: int, halo: float
+) -> None:
     side = max(100.0, k * halo)
     strips = Strips.build((0.0, side, 0.0, side), k, halo)
     rng = np.random.default_rng(seed)
@@ -45,6 +47,13 @@ def _csr(pos: np.ndarray, rng_m: float) -> tuple[np.ndarray, np.ndarray, np.ndar
     i, j = np.triu_indices(s, 1)
     d = np.linalg.norm(pos[i] - pos[j], axis=1)
     keep = d <= rng_m
-    indptr, idx = _links_from_pairs(i[keep].astype(np.int64), j[keep].astype(np.int64), pos, np.ones(s, dtype=bool),
-                                    np.zeros(s, dtype=np.int64), np.full(s, rng_m), s)  # fmt: skip
+    indptr, idx = _links_from_pairs(
+        i[keep].astype(np.int64),
+        j[keep].astype(np.int64),
+        pos,
+        np.ones(s, dtype=bool),
+        np.zeros(s, dtype=np.int64),
+        np.full(s, rng_m),
+        s,
+    )
     return indptr[:-1], indptr[1:], idx

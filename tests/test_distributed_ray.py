@@ -30,8 +30,10 @@ pytestmark = pytest.mark.slow
 ray = pytest.importorskip("ray")
 
 SHARDABLE = {
-    "navigation": {"n_agents": 300, "comms": {"loss": 0.1, "latency": 1, "heartbeat_period": 5,
-                                              "heartbeat_timeout": 16}},  # fmt: skip
+    "navigation": {
+        "n_agents": 300,
+        "comms": {"loss": 0.1, "latency": 1, "heartbeat_period": 5, "heartbeat_timeout": 16},
+    },
     "relay": {"n_groups": 4, "group_size": 6},
 }
 
@@ -160,8 +162,10 @@ def test_a_shard_actor_that_raises_is_offline_like_a_dead_one() -> None:
 
 def test_an_unreachable_address_is_one_clear_error() -> None:
     # a fresh process (this one has a cluster already); port 1 on loopback: nothing listens there
-    code = ("from agentsim_env.distributed import make\n"
-            "make('navigation', shards=2, ray_address='127.0.0.1:1', n_agents=10)\n")  # fmt: skip
+    code = (
+        "from agentsim_env.distributed import make\n"
+        "make('navigation', shards=2, ray_address='127.0.0.1:1', n_agents=10)\n"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode != 0
     assert "ConnectionError: cannot reach the Ray cluster at ray_address='127.0.0.1:1'" in out.stderr
@@ -170,8 +174,20 @@ def test_an_unreachable_address_is_one_clear_error() -> None:
 def test_cli_run_over_two_shards(capsys: pytest.CaptureFixture[str]) -> None:
     from agentsim_env.cli import main
 
-    argv = ["run", "navigation", "--shards", "2", "--episodes", "1", "--out", "", "--quiet",
-            "--set", "n_agents=300", "max_steps=30"]  # fmt: skip
+    argv = [
+        "run",
+        "navigation",
+        "--shards",
+        "2",
+        "--episodes",
+        "1",
+        "--out",
+        "",
+        "--quiet",
+        "--set",
+        "n_agents=300",
+        "max_steps=30",
+    ]
     assert main(argv) == 0
     out = capsys.readouterr().out
     assert "2 shards" in out and "navigation: 1 episodes x 300 agents" in out

@@ -91,7 +91,9 @@ def test_every_port_of_the_two_node_cluster_is_on_loopback(two_nodes: TwoNodes) 
         env.close()
     names = [s.process for s in opened]
     # both nodes' servers, the head's GCS, the shard workers and the driver (else the check proves nothing)
-    assert {"gcs_server", "raylet", "ray::RuntimeEnvAgent", "ray::Shard"} <= set(names), sorted(map(str, opened))
+    assert {"gcs_server", "raylet", "ray::RuntimeEnvAgent", "ray::Shard"} <= set(names), sorted(
+        map(str, opened)
+    )
     assert len({s.pid for s in opened if s.process == "raylet"}) == 2, sorted(map(str, opened))
     assert names.count("ray::Shard") == 2 and any(s.pid == os.getpid() for s in opened)
     exposed = [str(s) for s in opened if not s.loopback]
@@ -100,8 +102,14 @@ def test_every_port_of_the_two_node_cluster_is_on_loopback(two_nodes: TwoNodes) 
 
 def test_a_dead_node_ends_only_its_shards_agents(two_nodes: TwoNodes) -> None:  # noqa: F811
     timeout_s = 3.0
-    env = make_sharded("navigation", shards=2, ray_address=two_nodes.address, n_agents=200, collisions=False,
-                       timeout_s=timeout_s)  # fmt: skip
+    env = make_sharded(
+        "navigation",
+        shards=2,
+        ray_address=two_nodes.address,
+        n_agents=200,
+        collisions=False,
+        timeout_s=timeout_s,
+    )
     rng = np.random.default_rng(0)
     try:
         env.reset(seed=0)
@@ -111,7 +119,9 @@ def test_a_dead_node_ends_only_its_shards_agents(two_nodes: TwoNodes) -> None:  
         t0 = time.perf_counter()
         _, _, term, _, _ = env.step(random_actions(env, rng))
         took = time.perf_counter() - t0
-        assert took < timeout_s + 10.0, f"the step waited {took:.1f} s for a dead node (deadline {timeout_s} s)"
+        assert took < timeout_s + 10.0, (
+            f"the step waited {took:.1f} s for a dead node (deadline {timeout_s} s)"
+        )
         ended = {a for a, t in term.items() if t}
         assert ended and len(ended) < 200, len(ended)
         assert not env.shards[doomed_shard].alive and env.shards[1 - doomed_shard].alive
@@ -128,19 +138,23 @@ def test_a_dead_node_ends_only_its_shards_agents(two_nodes: TwoNodes) -> None:  
     finally:
         env.close()
         two_nodes.restart_second()  # the next tests of the module get two nodes again
-    print(f"two nodes started in {two_nodes.start_s:.1f} s; the step after the kill took {took:.2f} s; the "
-          f"reset {reset_s:.1f} s; the cluster marked the node dead {two_nodes.dead_after_s:.1f} s after the kill")
+    print(
+        f"two nodes started in {two_nodes.start_s:.1f} s; the step after the kill took {took:.2f} s; the "
+        f"reset {reset_s:.1f} s; the cluster marked the node dead {two_nodes.dead_after_s:.1f} s after the kill"
+    )
 
 
 def test_a_fresh_process_joins_the_loopback_cluster_by_address(two_nodes: TwoNodes) -> None:  # noqa: F811
     # a new driver: Ray would rewrite 127.0.0.1 to the machine's outward address, where nothing listens
-    code = ("import numpy as np\n"
-            "from agentsim_env.distributed import make\n"
-            "from tests.distributed_helpers import live_steps\n"
-            f"env = make('navigation', shards=2, ray_address={two_nodes.address!r}, n_agents=50)\n"
-            "env.reset(seed=0)\n"
-            "print(len(live_steps(env, 2, np.random.default_rng(0))), sorted(s.alive for s in env.shards))\n"
-            "env.close()\n")  # fmt: skip
+    code = (
+        "import numpy as np\n"
+        "from agentsim_env.distributed import make\n"
+        "from tests.distributed_helpers import live_steps\n"
+        f"env = make('navigation', shards=2, ray_address={two_nodes.address!r}, n_agents=50)\n"
+        "env.reset(seed=0)\n"
+        "print(len(live_steps(env, 2, np.random.default_rng(0))), sorted(s.alive for s in env.shards))\n"
+        "env.close()\n"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=150)
     assert out.returncode == 0, out.stderr[-3000:]
     assert out.stdout.strip().splitlines()[-1] == "2 [True, True]", out.stdout

@@ -129,7 +129,9 @@ TENSOR_FORMS = {
     "float16": lambda v: _tensor(v, dtype=torch.float16),
     "bfloat16": lambda v: _tensor(v, dtype=torch.float32).to(torch.bfloat16),
     "int64": lambda v: _tensor(np.round(v), dtype=torch.int64),
-    "requires_grad view": lambda v: _tensor(np.tile(v, 2), dtype=torch.float32, requires_grad=True)[::2] * 1.0,
+    "requires_grad view": lambda v: (
+        _tensor(np.tile(v, 2), dtype=torch.float32, requires_grad=True)[::2] * 1.0
+    ),
     "device": _DeviceTensor,
 }
 
@@ -143,11 +145,15 @@ def test_tensor_actions_step_like_their_values(fmt: str, who: str, form: str) ->
     for seed in range(3):
         acts = _actions(env, seed)
         # the values the tensor holds, as the env will read them
-        held = {a: {k: _values(make(v)) for k, v in x.items()} if fmt == "dict" else _values(make(x))
-                for a, x in acts.items()}  # fmt: skip
+        held = {
+            a: {k: _values(make(v)) for k, v in x.items()} if fmt == "dict" else _values(make(x))
+            for a, x in acts.items()
+        }
         names = env.agents if who == "all" else ["agent_1"]
-        sent = {a: ({k: make(v) for k, v in x.items()} if fmt == "dict" else make(x)) if a in names else held[a]
-                for a, x in acts.items()}  # fmt: skip
+        sent = {
+            a: ({k: make(v) for k, v in x.items()} if fmt == "dict" else make(x)) if a in names else held[a]
+            for a, x in acts.items()
+        }
         got = env.step(sent)
         want = twin.step(held)
         np.testing.assert_array_equal(env.world.state.pos, twin.world.state.pos)

@@ -74,8 +74,10 @@ def test_stay_live_agents_and_state_match_leave() -> None:
         for d_l, d_s in zip(res_l, res_s):
             assert list(d_l) == [a for a in live if a in d_l] and set(d_l) == set(live)
             for a in live:
-                np.testing.assert_array_equal(_flat(d_l[a]) if isinstance(d_l[a], dict) else d_l[a],
-                                              _flat(d_s[a]) if isinstance(d_s[a], dict) else d_s[a])  # fmt: skip
+                np.testing.assert_array_equal(
+                    _flat(d_l[a]) if isinstance(d_l[a], dict) else d_l[a],
+                    _flat(d_s[a]) if isinstance(d_s[a], dict) else d_s[a],
+                )
 
 
 def test_leave_is_the_default_and_removes_ended_agents() -> None:

@@ -50,7 +50,15 @@ def test_batched_results_are_never_written_later(name: str) -> None:
     for _ in range(12):
         out = batch.step(rng.uniform(-1, 1, (3, batch.n_agents, batch.act_dim)))
         resets += int(out.reset_worlds.sum())
-        held += [out.obs, out.rewards, out.terminated, out.truncated, out.alive, out.final_obs, out.reset_worlds]
+        held += [
+            out.obs,
+            out.rewards,
+            out.terminated,
+            out.truncated,
+            out.alive,
+            out.final_obs,
+            out.reset_worlds,
+        ]
         held += list(out.info.values())
     assert resets >= 3, "the test should cross automatic resets"
     copies = [a.copy() for a in held]

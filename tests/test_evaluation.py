@@ -30,11 +30,31 @@ TINY = ["--set", "n_uavs=2", "payload=10", "max_steps=2500"]
 TINY_OVERRIDES = {"n_uavs": 2, "payload": 10, "max_steps": 2500}
 PAIR = ["B1LD_sunflower", "B2_rings"]
 RUN_KEYS = (
-    "zones", "strategy", "seed", "score", "completed", "mission_time_s", "energy_j", "energy_fraction",
-    "path_length_m", "sensors_released", "sensors_landed", "delivered_fraction", "messages_sent",
-    "messages_dropped", "near_misses", "collisions", "coverage_weighted", "lcc_fraction", "fnd", "w1_mean",
-    "containment", "landing_error_mean", "coverage_weighted_vs_oracle", "fnd_vs_oracle",
-)  # fmt: skip
+    "zones",
+    "strategy",
+    "seed",
+    "score",
+    "completed",
+    "mission_time_s",
+    "energy_j",
+    "energy_fraction",
+    "path_length_m",
+    "sensors_released",
+    "sensors_landed",
+    "delivered_fraction",
+    "messages_sent",
+    "messages_dropped",
+    "near_misses",
+    "collisions",
+    "coverage_weighted",
+    "lcc_fraction",
+    "fnd",
+    "w1_mean",
+    "containment",
+    "landing_error_mean",
+    "coverage_weighted_vs_oracle",
+    "fnd_vs_oracle",
+)
 
 
 def _read_csv(path: Path) -> tuple[list[str], list[dict[str, str]]]:
@@ -232,8 +252,10 @@ def test_zone_labels_and_strategy_expansion(tmp_path: Path) -> None:
 def _fake_env(pos: np.ndarray) -> SimpleNamespace:
     state = SimpleNamespace(pos=pos, online=np.ones(pos.shape[0], dtype=bool))
     events = SimpleNamespace(went_offline=np.zeros(0, dtype=np.int64), comms=None)
-    return SimpleNamespace(scenario=SimpleNamespace(n_agents=pos.shape[0]),
-                           world=SimpleNamespace(state=state, last_events=events, comms=None))  # fmt: skip
+    return SimpleNamespace(
+        scenario=SimpleNamespace(n_agents=pos.shape[0]),
+        world=SimpleNamespace(state=state, last_events=events, comms=None),
+    )
 
 
 def test_mission_log_path_and_near_misses() -> None:
@@ -267,9 +289,18 @@ def test_parse_seeds() -> None:
 
 # ------------------------------------------------------------------------------------------ report
 def _row(strategy: str, seed: int, **kw: float) -> dict:
-    base = {"zones": "z", "strategy": strategy, "seed": seed, "coverage_weighted_vs_oracle": 1.0,
-            "lcc_fraction_vs_oracle": 1.0, "fnd_vs_oracle": 1.0, "w1_mean": 0.0, "containment": 1.0,
-            "delivered_fraction": 1.0, "energy_fraction": 0.0}  # fmt: skip
+    base = {
+        "zones": "z",
+        "strategy": strategy,
+        "seed": seed,
+        "coverage_weighted_vs_oracle": 1.0,
+        "lcc_fraction_vs_oracle": 1.0,
+        "fnd_vs_oracle": 1.0,
+        "w1_mean": 0.0,
+        "containment": 1.0,
+        "delivered_fraction": 1.0,
+        "energy_fraction": 0.0,
+    }
     return {**base, **kw}
 
 
@@ -296,9 +327,16 @@ def test_mean_std_and_formatting() -> None:
 
 
 def test_ranking_order_and_table() -> None:
-    rows = [_row("mid", 0, w1_mean=0.3), _row("mid", 1, w1_mean=0.3), _row("best", 0), _row("best", 1),
-            _row("worst", 0, energy_fraction=0.5), _row("worst", 1, energy_fraction=0.7),
-            _row("aa_tie", 0, w1_mean=0.3), _row("aa_tie", 1, w1_mean=0.3)]  # fmt: skip
+    rows = [
+        _row("mid", 0, w1_mean=0.3),
+        _row("mid", 1, w1_mean=0.3),
+        _row("best", 0),
+        _row("best", 1),
+        _row("worst", 0, energy_fraction=0.5),
+        _row("worst", 1, energy_fraction=0.7),
+        _row("aa_tie", 0, w1_mean=0.3),
+        _row("aa_tie", 1, w1_mean=0.3),
+    ]
     ranked = rank_strategies(rows)
     assert [s.strategy for s in ranked] == ["best", "aa_tie", "mid", "worst"]
     assert ranked[-1].score_mean == pytest.approx(0.4) and ranked[-1].score_std == pytest.approx(
@@ -319,8 +357,23 @@ def test_write_csv_formats_values(tmp_path: Path) -> None:
 @pytest.mark.slow
 def test_default_zone_file_every_strategy(tmp_path: Path) -> None:
     out = tmp_path / "ev"
-    assert main(["evaluate", "--zones", "default", "--strategies", "all", "--seeds", "1", "--out", str(out),
-                 "--quiet"]) == 0  # fmt: skip
+    assert (
+        main(
+            [
+                "evaluate",
+                "--zones",
+                "default",
+                "--strategies",
+                "all",
+                "--seeds",
+                "1",
+                "--out",
+                str(out),
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     _, rows = _read_csv(out / "runs.csv")
     assert {r["strategy"] for r in rows} == {*runner.available_strategies(), TELEPORT}
     flown = [r for r in rows if r["strategy"] != TELEPORT]

@@ -18,8 +18,23 @@ def _one_error_line(capsys: pytest.CaptureFixture[str]) -> str:
 
 def test_fleet_too_small_names_the_config_keys(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "ev"
-    assert main(["evaluate", "--strategies", "B0_uniform", "--seeds", "1", "--set", "n_uavs=1",
-                 "--out", str(out), "--quiet"]) == 2  # fmt: skip
+    assert (
+        main(
+            [
+                "evaluate",
+                "--strategies",
+                "B0_uniform",
+                "--seeds",
+                "1",
+                "--set",
+                "n_uavs=1",
+                "--out",
+                str(out),
+                "--quiet",
+            ]
+        )
+        == 2
+    )
     err = _one_error_line(capsys)
     assert "payload_per_uav" not in err
     # every key the message suggests raising is a real config key

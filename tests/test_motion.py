@@ -287,9 +287,14 @@ def random_setup(rng: np.random.Generator, n: int) -> tuple[MotionState, World]:
     paths = np.flatnonzero(rng.random(n) < 0.15)
     counts = rng.integers(1, 7, paths.size)
     set_path(
-        ms, paths, rng.uniform(-30, 30, (paths.size, 6, 3)), counts,
-        rng.uniform(0, 15, paths.size), rng.uniform(0, 2, paths.size), rng.random(paths.size) < 0.5,
-    )  # fmt: skip
+        ms,
+        paths,
+        rng.uniform(-30, 30, (paths.size, 6, 3)),
+        counts,
+        rng.uniform(0, 15, paths.size),
+        rng.uniform(0, 2, paths.size),
+        rng.random(paths.size) < 0.5,
+    )
     assert len(np.unique(ms.kind)) == 6  # every kind is exercised
     return ms, w
 

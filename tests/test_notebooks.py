@@ -139,9 +139,12 @@ def test_notebook_runs(path: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPat
     monkeypatch.setenv("TMPDIR", str(scratch))  # the notebooks' temporary folders are cleaned with tmp_path
     nb = nbformat.read(path, as_version=4)
     client = nbclient.NotebookClient(
-        nb, km=_kernel_manager(tmp_path / "kernels"), timeout=CELL_TIMEOUT_S, allow_errors=False,
+        nb,
+        km=_kernel_manager(tmp_path / "kernels"),
+        timeout=CELL_TIMEOUT_S,
+        allow_errors=False,
         resources={"metadata": {"path": str(work)}},
-    )  # fmt: skip
+    )
     t0 = time.perf_counter()
     client.execute()
     elapsed = time.perf_counter() - t0

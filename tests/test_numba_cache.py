@@ -58,8 +58,13 @@ class ReadOnlyInstall:
         """Run ``SCRIPT`` with ``env`` on top of a clean environment (no cache settings, home missing)."""
         base = {k: v for k, v in os.environ.items() if k not in ("NUMBA_CACHE_DIR", "XDG_CACHE_HOME")}
         base = {k: v for k, v in base.items() if not k.startswith(("NUMBA_CACHE", "PYTHON"))}
-        base |= {"HOME": str(self.site / "no-home"), "TMPDIR": str(self.tmp), "PYTHONPATH": str(self.site),
-                 "PYTHONWARNINGS": "default", "PYTHONDONTWRITEBYTECODE": "1"}  # fmt: skip
+        base |= {
+            "HOME": str(self.site / "no-home"),
+            "TMPDIR": str(self.tmp),
+            "PYTHONPATH": str(self.site),
+            "PYTHONWARNINGS": "default",
+            "PYTHONDONTWRITEBYTECODE": "1",
+        }
         return subprocess.run(
             [*self.prefix, sys.executable, "-c", SCRIPT, *args],
             env=base | env,

@@ -61,8 +61,12 @@ def test_a_shard_process_that_exits_leaves_the_segment_to_the_driver() -> None:
     seg = ObsSegment(2, 50, 3)
     try:
         # a process of its own, as a Ray worker is (not a multiprocessing child sharing this one's tracker)
-        done = subprocess.run([sys.executable, "-c", _CHILD, seg.name, "1", "2", "50", "3", "20"],
-                              capture_output=True, text=True, timeout=120)  # fmt: skip
+        done = subprocess.run(
+            [sys.executable, "-c", _CHILD, seg.name, "1", "2", "50", "3", "20"],
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
         assert done.returncode == 0, done.stderr
         assert "leaked" not in done.stderr
         assert os.path.exists(_path(seg))  # the child's resource tracker did not unlink it
@@ -76,8 +80,9 @@ def test_a_shard_process_that_exits_leaves_the_segment_to_the_driver() -> None:
     ("region", "n_shards", "n_slots", "obs_dim"),
     [(2, 2, 10, 4), (-1, 2, 10, 4), (0, 3, 10, 4), (0, 2, 11, 4), (0, 2, 10, 5)],
 )
-def test_a_writer_refuses_a_region_the_segment_does_not_hold(region: int, n_shards: int, n_slots: int,
-                                                            obs_dim: int) -> None:  # fmt: skip
+def test_a_writer_refuses_a_region_the_segment_does_not_hold(
+    region: int, n_shards: int, n_slots: int, obs_dim: int
+) -> None:
     seg = ObsSegment(2, 10, 4)
     try:
         with pytest.raises(ValueError, match="observation segment"):
@@ -136,8 +141,9 @@ def test_the_action_segment_is_its_owners_only_and_gone_after_close() -> None:
 
 
 @pytest.mark.parametrize(("region", "n_shards", "n_slots"), [(2, 2, 10), (-1, 2, 10), (0, 3, 10), (0, 2, 11)])
-def test_a_reader_refuses_a_region_the_action_segment_does_not_hold(region: int, n_shards: int,
-                                                                   n_slots: int) -> None:  # fmt: skip
+def test_a_reader_refuses_a_region_the_action_segment_does_not_hold(
+    region: int, n_shards: int, n_slots: int
+) -> None:
     seg = ActionSegment(2, 10, LAYOUT)
     try:
         with pytest.raises(ValueError, match="action segment"):

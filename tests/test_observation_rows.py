@@ -30,7 +30,11 @@ def test_observation_rows_equal_the_rows_of_every_slot(name: str, config: dict) 
         env.step({a: env.action_space(a).sample() for a in env.agents})
     sc, world = env.scenario, env.world
     full = sc.observation(world)
-    for rows in (np.arange(world.state.n_slots), np.arange(1, world.state.n_slots, 3), np.zeros(0, dtype=np.int64)):
+    for rows in (
+        np.arange(world.state.n_slots),
+        np.arange(1, world.state.n_slots, 3),
+        np.zeros(0, dtype=np.int64),
+    ):
         part = sc.observation_rows(world, rows)
         assert list(part) == list(full)  # the flat layout's order
         for k, v in full.items():

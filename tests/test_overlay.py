@@ -415,8 +415,13 @@ def test_pair_links_refuse_ranges_beyond_the_pairs_radius() -> None:
 def test_set_range_above_configured_range_through_the_env() -> None:
     import agentsim_env
 
-    env = agentsim_env.make("navigation", n_agents=4, map_size=100.0, obstacle_density=0.0,
-                            comms={"overlay_range": CONFIGURED, "nearest_range": CONFIGURED})  # fmt: skip
+    env = agentsim_env.make(
+        "navigation",
+        n_agents=4,
+        map_size=100.0,
+        obstacle_density=0.0,
+        comms={"overlay_range": CONFIGURED, "nearest_range": CONFIGURED},
+    )
     env.reset(seed=0)
     pos, ranges = _square()
     env.world.state.pos[:] = pos
@@ -534,8 +539,18 @@ def test_one_hop_kernel_equals_the_general_spread(seed: int) -> None:
             for step in range(6):
                 _start_random(ov, rng, online, int(rng.integers(0, 8)), step)
                 d = ov.advance(pos, online, world, _pairs(pos, world, 25.0), step)
-                out.append((d.receiver, d.flood, d.hops, d.origin, d.payload, ov.stats.duplicates, ov.active_count,
-                            [ov.readers(f).tolist() for f in range(ov.capacity) if ov.is_active(f)]))  # fmt: skip
+                out.append(
+                    (
+                        d.receiver,
+                        d.flood,
+                        d.hops,
+                        d.origin,
+                        d.payload,
+                        ov.stats.duplicates,
+                        ov.active_count,
+                        [ov.readers(f).tolist() for f in range(ov.capacity) if ov.is_active(f)],
+                    )
+                )
                 online = online & (rng.random(n) > 0.05)
             return out
 
@@ -564,11 +579,15 @@ def test_deliveries_read_late_keep_their_values_after_flood_rows_are_reused(thre
             ov.threads = RowThreads(threads)
             kept = []
             for step in range(12):
-                if step % 3 != 1:  # some steps start no flood: older unread deliveries must keep their rows too
+                if (
+                    step % 3 != 1
+                ):  # some steps start no flood: older unread deliveries must keep their rows too
                     _start_random(ov, rng, online, int(rng.integers(1, 30)), step)
                 d = ov.advance(pos, online, world, _pairs(pos, world, 25.0), step)
                 kept.append((d, (d.origin.copy(), d.created.copy(), d.payload.copy()) if read_now else None))
-            return [(d.receiver, d.flood, d.hops, *(now or (d.origin, d.created, d.payload))) for d, now in kept]
+            return [
+                (d.receiver, d.flood, d.hops, *(now or (d.origin, d.created, d.payload))) for d, now in kept
+            ]
 
     now, late = run(True), run(False)
     assert sum(len(x[0]) for x in now) > 100 and any(len(set(x[1].tolist())) < len(x[1]) for x in now)
@@ -577,7 +596,13 @@ def test_deliveries_read_late_keep_their_values_after_flood_rows_are_reused(thre
             np.testing.assert_array_equal(x, y)
     d = Overlay(3, D, 50.0)
     d.start(np.array([0]), 2, np.ones((1, D)), step=0)
-    got = d.advance(np.zeros((3, 3)), np.ones(3, bool), np.zeros(3, int), _pairs(np.zeros((3, 3)), np.zeros(3, int), 25.0), 0)
+    got = d.advance(
+        np.zeros((3, 3)),
+        np.ones(3, bool),
+        np.zeros(3, int),
+        _pairs(np.zeros((3, 3)), np.zeros(3, int), 25.0),
+        0,
+    )
     back = pickle.loads(pickle.dumps(got))
     np.testing.assert_array_equal(back.payload, np.ones((2, D), dtype=np.float32))
     assert back.origin.tolist() == [0, 0] and back.receiver.tolist() == [1, 2]

@@ -86,7 +86,9 @@ def _package_folders() -> set[str]:
 
 def test_pyproject_lists_every_package() -> None:
     tomllib = pytest.importorskip("tomllib")
-    setuptools_cfg = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))["tool"]["setuptools"]
+    setuptools_cfg = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))["tool"][
+        "setuptools"
+    ]
     assert setuptools_cfg["package-dir"] == {v: k for k, v in MOVED.items()}
     listed = set(setuptools_cfg["packages"])
     assert listed == _package_folders(), "add the new package folders to [tool.setuptools] packages"
@@ -100,8 +102,19 @@ def test_wheel_installs_policies_and_train_inside_the_package(tmp_path: Path) ->
     for name in ("pyproject.toml", "README.md"):
         shutil.copy2(ROOT / name, src / name)
     out = tmp_path / "wheel"
-    cmd = [sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "--no-build-isolation", "--no-index",
-           "-w", str(out), str(src)]  # fmt: skip
+    cmd = [
+        sys.executable,
+        "-m",
+        "pip",
+        "wheel",
+        "-q",
+        "--no-deps",
+        "--no-build-isolation",
+        "--no-index",
+        "-w",
+        str(out),
+        str(src),
+    ]
     res = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
     assert res.returncode == 0, res.stderr
     (wheel,) = out.glob("*.whl")

@@ -52,8 +52,13 @@ def test_fall_params() -> None:
     assert BOX.terminal_speed == pytest.approx(24.4, abs=0.05)
     assert SPHERE.terminal_speed == pytest.approx(29.5, abs=0.05)
     assert VACUUM.terminal_speed == math.inf and VACUUM.drag_k == 0.0
-    for kwargs, name in [({"mass": 0.0}, "mass"), ({"cd": -1.0}, "cd"), ({"area": math.nan}, "area"),
-                         ({"rho_air": -1.0}, "rho_air"), ({"g": 0.0}, "g")]:  # fmt: skip
+    for kwargs, name in [
+        ({"mass": 0.0}, "mass"),
+        ({"cd": -1.0}, "cd"),
+        ({"area": math.nan}, "area"),
+        ({"rho_air": -1.0}, "rho_air"),
+        ({"g": 0.0}, "g"),
+    ]:
         with pytest.raises(ValueError, match=name):
             FallParams(**kwargs)
 

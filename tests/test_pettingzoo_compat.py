@@ -47,21 +47,30 @@ for mode in ("web", "human"):  # built (render_test builds "human" to read the l
 
 
 def test_render_modes_list_only_what_can_start_on_a_core_install() -> None:
-    res = subprocess.run([sys.executable, "-c", CORE_INSTALL], capture_output=True, text=True, timeout=120,
-                         env={**os.environ, "SDL_VIDEODRIVER": "dummy"})  # fmt: skip
+    res = subprocess.run(
+        [sys.executable, "-c", CORE_INSTALL],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env={**os.environ, "SDL_VIDEODRIVER": "dummy"},
+    )
     assert res.returncode == 0, res.stderr[-3000:]
     lines = res.stdout.splitlines()
     assert lines[0] == "modes ['rgb_array'] ['rgb_array']"
     assert "render_test passed" in lines
     web = next(line for line in lines if line.startswith("refused web"))
     human = next(line for line in lines if line.startswith("refused human"))
-    assert 'agentsim-env[viewer]' in web and 'agentsim-env[render]' in human
+    assert "agentsim-env[viewer]" in web and "agentsim-env[render]" in human
 
 
 def test_render_modes_with_the_extras_installed() -> None:
     pytest.importorskip("websockets")
     pytest.importorskip("pygame")
-    assert agentsim_env.make("navigation", n_agents=2).metadata["render_modes"] == ["human", "rgb_array", "web"]
+    assert agentsim_env.make("navigation", n_agents=2).metadata["render_modes"] == [
+        "human",
+        "rgb_array",
+        "web",
+    ]
 
 
 def test_aec_constructor_beside_parallel_env() -> None:
@@ -100,8 +109,10 @@ def test_per_scenario_modules_the_pettingzoo_way(name: str) -> None:
     assert isinstance(mod.env(), AECEnv) and isinstance(mod.raw_env(), AECEnv)
     assert mod.raw_env().unwrapped is not None
     # PettingZoo's check drives random actions and wants every agent to reach max_cycles: collisions off
-    collisions_off = types.SimpleNamespace(parallel_env=lambda **kw: mod.parallel_env(collisions=False, **kw),
-                                           env=lambda **kw: mod.env(collisions=False, **kw))  # fmt: skip
+    collisions_off = types.SimpleNamespace(
+        parallel_env=lambda **kw: mod.parallel_env(collisions=False, **kw),
+        env=lambda **kw: mod.env(collisions=False, **kw),
+    )
     max_cycles_test(collisions_off)
 
 

@@ -278,8 +278,12 @@ def _crowd(seed: int, steps: int = 40):
     toggle online every 8 steps and offline rows hold NaN. Yields each step's inputs."""
     rng = np.random.default_rng(seed)
     n, n_w = 90, 3
-    obstacles = ([0, 1, 1], [[4.0, 0.0, 3.0], [-3.0, 2.0, 2.0], [0.0, -3.0, 2.0]],
-                 [[0.2, 3.0, 3.0], [1.0, 1.0, 2.0], [1.0, 1.0, 2.0]], [0, 1, 2])  # fmt: skip
+    obstacles = (
+        [0, 1, 1],
+        [[4.0, 0.0, 3.0], [-3.0, 2.0, 2.0], [0.0, -3.0, 2.0]],
+        [[0.2, 3.0, 3.0], [1.0, 1.0, 2.0], [1.0, 1.0, 2.0]],
+        [0, 1, 2],
+    )
     be_args = (np.full(n, R), np.repeat(np.arange(n_w), n // n_w), n_w, *obstacles)
     pos = np.zeros((n, 3))
     pos[:, :2] = rng.uniform(-8.0, 8.0, (n, 2))

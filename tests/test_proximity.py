@@ -34,16 +34,39 @@ def _scan(sensor, pos, heading, rng, radius, online, world, scene, *, cell=4.0, 
     ag = build_grid(spec, pos, world, online)
     og = build_object_grid(spec, scene.centre, scene.footprint_radius(), scene.world)
     return sensor.scan(
-        pos, heading, rng, radius, online, world, ag, scene.kind, scene.centre, scene.half, scene.world, og,
-        scene.ground, out=out,
-    )  # fmt: skip
+        pos,
+        heading,
+        rng,
+        radius,
+        online,
+        world,
+        ag,
+        scene.kind,
+        scene.centre,
+        scene.half,
+        scene.world,
+        og,
+        scene.ground,
+        out=out,
+    )
 
 
 def _ref(config, pos, heading, rng, radius, online, world, scene, second=None):
     return scan_reference(
-        config, pos, heading, rng, radius, online, world, scene.kind, scene.centre, scene.half, scene.world,
-        scene.ground, second=second,
-    )  # fmt: skip
+        config,
+        pos,
+        heading,
+        rng,
+        radius,
+        online,
+        world,
+        scene.kind,
+        scene.centre,
+        scene.half,
+        scene.world,
+        scene.ground,
+        second=second,
+    )
 
 
 def _random_case(seed: int, n_slots: int = 160):
@@ -63,8 +86,12 @@ def _random_case(seed: int, n_slots: int = 160):
     scene = Scene(ground=bool(g.random() < 0.8))
     n_obj = int(g.integers(20, 60))
     centre = np.column_stack([g.uniform(-8, 48, (n_obj, 2)), g.uniform(-1.0, 10.0, n_obj)])
-    scene.add(g.integers(0, 3, n_obj).astype(np.int8), centre, g.uniform(0.2, 4.0, (n_obj, 3)),
-              g.integers(0, n_worlds, n_obj))  # fmt: skip
+    scene.add(
+        g.integers(0, 3, n_obj).astype(np.int8),
+        centre,
+        g.uniform(0.2, 4.0, (n_obj, 3)),
+        g.integers(0, n_worlds, n_obj),
+    )
     return pos, heading, rng, radius, online, world, scene
 
 
@@ -112,8 +139,18 @@ def test_ranges_change_between_scans_and_buffers_are_reused() -> None:
     # A caller-provided buffer and a different slot count.
     out = ScanResult.empty(50, config.n_rays)
     sub = slice(0, 50)
-    res = _scan(sensor, pos[sub], heading[sub], rng[sub], radius[sub], online[sub], world[sub], scene,
-                n_worlds=3, out=out)  # fmt: skip
+    res = _scan(
+        sensor,
+        pos[sub],
+        heading[sub],
+        rng[sub],
+        radius[sub],
+        online[sub],
+        world[sub],
+        scene,
+        n_worlds=3,
+        out=out,
+    )
     assert res is out
     ref = _ref(config, pos[sub], heading[sub], rng[sub], radius[sub], online[sub], world[sub], scene)
     assert np.abs(out.distance - ref.distance).max() <= 1e-5

@@ -96,8 +96,9 @@ def _flat_offsets(env_cfg: dict[str, Any]) -> tuple[int, int]:
     return 9 + 2 * c.sensing.n_azimuth * len(c.sensing.elevations_deg), 3
 
 
-def test_comm_traffic_tells_an_encoding_payload_from_a_constant(envs: tuple[dict[str, Any], dict[str, Any]],
-                                                                tmp_path: Path) -> None:  # fmt: skip
+def test_comm_traffic_tells_an_encoding_payload_from_a_constant(
+    envs: tuple[dict[str, Any], dict[str, Any]], tmp_path: Path
+) -> None:
     env, _ = envs
     task, comm = _flat_offsets(env)
     d = agentsim_env.make("relay", **env).scenario.config.comms.payload_dim

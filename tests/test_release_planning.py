@@ -224,8 +224,15 @@ def test_bad_input_raises_value_error_naming_the_field(kwargs, field):
     args.update(kwargs)
     with pytest.raises(ValueError, match=field):
         make_plan(
-            args["strategy"], CENTRE, GAUSS, args["n_sensors"], args["altitude"], 8.0,
-            np.random.default_rng(0), sector=args["sector"], options=args["options"],
-        )  # fmt: skip
+            args["strategy"],
+            CENTRE,
+            GAUSS,
+            args["n_sensors"],
+            args["altitude"],
+            8.0,
+            np.random.default_rng(0),
+            sector=args["sector"],
+            options=args["options"],
+        )
     with pytest.raises(ValueError, match="capacities"):
         split_sectors(2, [1.0, -1.0])

@@ -74,10 +74,23 @@ def test_every_strategy_lands_in_its_zone_without_wind(strategy: str) -> None:
 
 
 def test_inverse_cdf_matches_the_radial_profile_with_1000_sensors() -> None:
-    zone = {"centre": [200, 200], "radius": 150, "n_sensors": 1000, "profile": "gauss", "sigma": 60,
-            "floor": 0.05, "altitude": 12}  # fmt: skip
-    env = agentsim_env.make("uav_release", zones={"map_size": [400, 400], "base": [20, 20], "zones": [zone]},
-                            n_uavs=10, payload=100, max_steps=20000, **CALM)  # fmt: skip
+    zone = {
+        "centre": [200, 200],
+        "radius": 150,
+        "n_sensors": 1000,
+        "profile": "gauss",
+        "sigma": 60,
+        "floor": 0.05,
+        "altitude": 12,
+    }
+    env = agentsim_env.make(
+        "uav_release",
+        zones={"map_size": [400, 400], "base": [20, 20], "zones": [zone]},
+        n_uavs=10,
+        payload=100,
+        max_steps=20000,
+        **CALM,
+    )
     fly(env, ReleasePolicy(env, "B1_inverse_cdf", coordinate=False), seed=0, max_steps=20000)
     s = sensors(env)
     assert s["landed"].sum() == 1000
@@ -194,8 +207,12 @@ def test_split_work_chunks_respect_payload_and_cover_every_sensor() -> None:
 
 
 def test_message_round_trip() -> None:
-    msg = np.stack([encode(MSG_RELEASED, 3, (123.25, 45.5), (600.0, 400.0), zone=2, piece=7),
-                    encode(MSG_DONE, 1, (10.0, 20.0), (600.0, 400.0), payload_frac=5 / 40)])  # fmt: skip
+    msg = np.stack(
+        [
+            encode(MSG_RELEASED, 3, (123.25, 45.5), (600.0, 400.0), zone=2, piece=7),
+            encode(MSG_DONE, 1, (10.0, 20.0), (600.0, 400.0), payload_frac=5 / 40),
+        ]
+    )
     assert msg.dtype == np.float32 and np.all(np.abs(msg) <= 1.0)
     d = decode(msg, (600.0, 400.0), 40)
     assert d["kind"].tolist() == [MSG_RELEASED, MSG_DONE] and d["uav"].tolist() == [3, 1]
@@ -230,8 +247,9 @@ def test_a_target_claim_moves_ownership_and_bad_input_names_the_field() -> None:
     env = agentsim_env.make("uav_release", **TINY)
     zs = env.scenario.zones
     pieces = split_work(zs, 2, 12)
-    book = TargetBook(np.array([[90.0, 100.0]]), np.zeros(1, np.int64), np.zeros(1, np.int64), np.zeros(1, np.int64),
-                      pieces)  # fmt: skip
+    book = TargetBook(
+        np.array([[90.0, 100.0]]), np.zeros(1, np.int64), np.zeros(1, np.int64), np.zeros(1, np.int64), pieces
+    )
     view = MissionView(0, book, 2, 12)
     claim = decode(encode(MSG_CLAIM, 1, (90.0, 100.0), zs.map_size, piece=0)[None], zs.map_size, 12)
     view.hear(3, claim, 0, lost_after=10)

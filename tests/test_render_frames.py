@@ -74,12 +74,16 @@ def test_beyond_a_dozen_agents_one_colour_per_group() -> None:
     group = env.world.state.group[env.world.state.slots_of_world(0)]
     centres = _agent_centres(env, frame)
     # agents whose discs overlap no other agent's
-    alone = [i for i, (x, y) in enumerate(centres)
-             if all(np.hypot(x - u, y - v) > 30 for j, (u, v) in enumerate(centres) if j != i)]  # fmt: skip
+    alone = [
+        i
+        for i, (x, y) in enumerate(centres)
+        if all(np.hypot(x - u, y - v) > 30 for j, (u, v) in enumerate(centres) if j != i)
+    ]
     by_group: dict[int, set[tuple[int, ...]]] = {}
     for i in alone:
-        by_group.setdefault(int(group[i]), set()).add(tuple(int(c) for c in frame[int(centres[i][1]),
-                                                                                    int(centres[i][0])]))  # fmt: skip
+        by_group.setdefault(int(group[i]), set()).add(
+            tuple(int(c) for c in frame[int(centres[i][1]), int(centres[i][0])])
+        )
     assert len(by_group) == 3 and all(len(c) == 1 for c in by_group.values()), by_group
     assert len(set().union(*by_group.values())) == 3
 
@@ -122,8 +126,13 @@ def test_replay_frames_show_the_obstacles_and_goals_of_the_episode(tmp_path: Pat
     def at_reset(e: Any, infos: dict[str, Any]) -> None:
         if not seen:  # the scene and the goals right after the reset
             sc = e.world.scene
-            seen.append([(sc.centre[o, 0], sc.centre[o, 1]) for o in np.flatnonzero(sc.world == 0)
-                         if sc.kind[o] == BOX])  # fmt: skip
+            seen.append(
+                [
+                    (sc.centre[o, 0], sc.centre[o, 1])
+                    for o in np.flatnonzero(sc.world == 0)
+                    if sc.kind[o] == BOX
+                ]
+            )
             seen.append([np.array(a) for a in e.scenario.markers(e.world, 0)])
 
     run_episode(env, make_policy("navigation", env), 5, on_step=at_reset)
@@ -133,10 +142,15 @@ def test_replay_frames_show_the_obstacles_and_goals_of_the_episode(tmp_path: Pat
     first = next(iter(replay_frames(path)))
     background = first[-1, -1]
     assert len(boxes) >= 3
-    drawn = [not (first[int(cy), int(cx)] == background).all() for cx, cy in (info.canvas.px(x, y) for x, y in boxes)]
+    drawn = [
+        not (first[int(cy), int(cx)] == background).all()
+        for cx, cy in (info.canvas.px(x, y) for x, y in boxes)
+    ]
     assert sum(drawn) >= len(boxes) - 1, f"{sum(drawn)} of {len(boxes)} obstacles drawn"
-    hits = [(first[int(cy), int(cx)] == c).all() for (cx, cy), c in
-            zip((info.canvas.px(x, y) for x, y in goals), goal_rgb)]  # fmt: skip
+    hits = [
+        (first[int(cy), int(cx)] == c).all()
+        for (cx, cy), c in zip((info.canvas.px(x, y) for x, y in goals), goal_rgb)
+    ]
     assert sum(hits) >= 2, f"{sum(hits)} of {len(goals)} goals drawn in their colour"
 
 
@@ -157,8 +171,12 @@ def test_replay_frames_colour_agents_by_group_beyond_a_dozen(tmp_path: Path) -> 
     from agentsim_env.recorder.replay import agent_color
 
     path = tmp_path / "run.db"
-    env = record(agentsim_env.make("navigation", n_agents=16, n_groups=2, max_steps=2, map_size=400.0,
-                                   obstacle_density=0.0), path)  # fmt: skip
+    env = record(
+        agentsim_env.make(
+            "navigation", n_agents=16, n_groups=2, max_steps=2, map_size=400.0, obstacle_density=0.0
+        ),
+        path,
+    )
     run_episode(env, make_policy("navigation", env), 0)
     group = np.array(env.world.state.group[env.world.state.slots_of_world(0)])
     env.close()
@@ -177,8 +195,9 @@ def test_replay_frames_colour_agents_by_group_beyond_a_dozen(tmp_path: Path) -> 
     assert len(seen) == 2
 
 
-def test_a_goal_per_agent_of_a_big_world_leaves_the_paths_visible(tmp_path: Path,
-                                                                  monkeypatch: pytest.MonkeyPatch) -> None:  # fmt: skip
+def test_a_goal_per_agent_of_a_big_world_leaves_the_paths_visible(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     # 12,000 agents with a goal each on a 1 km map: an even sample of the goals is drawn, small enough that they
     # cover a few percent of the map, and the legend says how many of them
     import matplotlib.axes
@@ -189,9 +208,20 @@ def test_a_goal_per_agent_of_a_big_world_leaves_the_paths_visible(tmp_path: Path
     n, side = 12_000, 1_000.0
     rng = np.random.default_rng(0)
     xy = rng.uniform(0, side, (2, n, 2))
-    markers = (rng.uniform(0, side, (n, 2)), np.tile(np.array([[40, 170, 60]], np.uint8), (n, 1)), np.full(n, 1.0))
-    traj = tr.Trajectories([f"agent_{i}" for i in range(n)], xy, np.ones(n, np.int64), ["active"] * n,
-                           (0.0, side, 0.0, side), markers=markers, steps=1)  # fmt: skip
+    markers = (
+        rng.uniform(0, side, (n, 2)),
+        np.tile(np.array([[40, 170, 60]], np.uint8), (n, 1)),
+        np.full(n, 1.0),
+    )
+    traj = tr.Trajectories(
+        [f"agent_{i}" for i in range(n)],
+        xy,
+        np.ones(n, np.int64),
+        ["active"] * n,
+        (0.0, side, 0.0, side),
+        markers=markers,
+        steps=1,
+    )
     drawn: list[Any] = []
     real = matplotlib.collections.PatchCollection
 

@@ -27,21 +27,40 @@ ROOT = Path(__file__).resolve().parents[1]
 # ------------------------------------------------------------------------------------------ no display
 @pytest.mark.parametrize(
     ("env", "named"),
-    [({"SDL_VIDEODRIVER": "dummy", "DISPLAY": ":0"}, "SDL_VIDEODRIVER=dummy"),
-     ({"SDL_VIDEODRIVER": None, "DISPLAY": None, "WAYLAND_DISPLAY": None}, "DISPLAY")],
-)  # fmt: skip
+    [
+        ({"SDL_VIDEODRIVER": "dummy", "DISPLAY": ":0"}, "SDL_VIDEODRIVER=dummy"),
+        ({"SDL_VIDEODRIVER": None, "DISPLAY": None, "WAYLAND_DISPLAY": None}, "DISPLAY"),
+    ],
+)
 def test_render_without_display_is_one_error_line(
-    env: dict[str, str | None], named: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+    env: dict[str, str | None],
+    named: str,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
     capsys: pytest.CaptureFixture[str],
-) -> None:  # fmt: skip
+) -> None:
     for key, value in env.items():
         if value is None:
             monkeypatch.delenv(key, raising=False)
         else:
             monkeypatch.setenv(key, value)
     out = tmp_path / "out"
-    rc = main(["run", "navigation", "--render", "--fps", "1000", "--episodes", "1", "--quiet",
-               "--out", str(out), "--set", "n_agents=2"])  # fmt: skip
+    rc = main(
+        [
+            "run",
+            "navigation",
+            "--render",
+            "--fps",
+            "1000",
+            "--episodes",
+            "1",
+            "--quiet",
+            "--out",
+            str(out),
+            "--set",
+            "n_agents=2",
+        ]
+    )
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2
     assert len(err) == 1 and err[0].startswith("agentsim: error: --render"), err
@@ -77,8 +96,12 @@ def xdisplay() -> Iterator[str]:
         pytest.skip("Xvfb is not installed (make browser installs it)")
     pytest.importorskip("pygame")
     r, w = os.pipe()
-    proc = subprocess.Popen(["Xvfb", "-displayfd", str(w), "-screen", "0", "800x700x24", "-nolisten", "tcp"],
-                            pass_fds=(w,), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)  # fmt: skip
+    proc = subprocess.Popen(
+        ["Xvfb", "-displayfd", str(w), "-screen", "0", "800x700x24", "-nolisten", "tcp"],
+        pass_fds=(w,),
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     os.close(w)
     with os.fdopen(r) as f:
         number = f.readline().strip()
@@ -91,15 +114,25 @@ def xdisplay() -> Iterator[str]:
 
 def _env(display: str | None) -> dict[str, str]:
     env = {k: v for k, v in os.environ.items() if k not in ("SDL_VIDEODRIVER", "WAYLAND_DISPLAY", "DISPLAY")}
-    return {**env, **({"DISPLAY": display} if display else {}), "AGENTSIM_QUIET_COMPILE": "1",
-            "NUMBA_NUM_THREADS": "1"}  # fmt: skip
+    return {
+        **env,
+        **({"DISPLAY": display} if display else {}),
+        "AGENTSIM_QUIET_COMPILE": "1",
+        "NUMBA_NUM_THREADS": "1",
+    }
 
 
 def _start(display: str | None, args: list[str], code: str | None = None) -> subprocess.Popen[str]:
     """``agentsim ARGS`` in a subprocess (``code`` runs first, in the same process)."""
     prog = (code or "") + "\nimport sys\nfrom agentsim_env.cli import main\nsys.exit(main(sys.argv[1:]))"
-    return subprocess.Popen([sys.executable, "-c", prog, *args], cwd=ROOT, env=_env(display), text=True,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)  # fmt: skip
+    return subprocess.Popen(
+        [sys.executable, "-c", prog, *args],
+        cwd=ROOT,
+        env=_env(display),
+        text=True,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
 
 
 def _count(db: Path, sql: str) -> int:
@@ -135,8 +168,23 @@ def _run_row(db: Path) -> tuple[str, int, int]:
 )
 def test_signal_ends_live_run_cleanly(xdisplay: str, tmp_path: Path, sig: int, code: int, word: str) -> None:
     db = tmp_path / "run.db"
-    proc = _start(xdisplay, ["run", "navigation", "--render", "--episodes", "3", "--quiet", "--record", str(db),
-                             "--out", str(tmp_path / "out"), "--set", "n_agents=3"])  # fmt: skip
+    proc = _start(
+        xdisplay,
+        [
+            "run",
+            "navigation",
+            "--render",
+            "--episodes",
+            "3",
+            "--quiet",
+            "--record",
+            str(db),
+            "--out",
+            str(tmp_path / "out"),
+            "--set",
+            "n_agents=3",
+        ],
+    )
     try:
         _wait_for_steps(proc, db, 5)
         proc.send_signal(sig)
@@ -159,8 +207,9 @@ def test_signal_ends_live_run_cleanly(xdisplay: str, tmp_path: Path, sig: int, c
 def test_signal_ends_batch_run_cleanly(tmp_path: Path, sig: int, code: int, word: str) -> None:
     # without --render too: the run stops between steps (a Ctrl-C inside a kernel came out as a SystemError)
     db, out = tmp_path / "run.db", tmp_path / "out"
-    proc = _start(None, ["run", "navigation", "--episodes", "100000", "--quiet", "--record", str(db),
-                         "--out", str(out)])  # fmt: skip
+    proc = _start(
+        None, ["run", "navigation", "--episodes", "100000", "--quiet", "--record", str(db), "--out", str(out)]
+    )
     try:
         _wait_for_steps(proc, db, 3, "SELECT count(*) FROM episodes")
         proc.send_signal(sig)
@@ -191,8 +240,27 @@ def counted(self, frame):
 window.Window.show = counted
 """
     db, out = tmp_path / "run.db", tmp_path / "out"
-    proc = _start(xdisplay, ["run", "navigation", "--render", "--episodes", "3", "--fps", "1000", "--quiet",
-                             "--record", str(db), "--out", str(out), "--set", "n_agents=2", "max_steps=30"], code)  # fmt: skip
+    proc = _start(
+        xdisplay,
+        [
+            "run",
+            "navigation",
+            "--render",
+            "--episodes",
+            "3",
+            "--fps",
+            "1000",
+            "--quiet",
+            "--record",
+            str(db),
+            "--out",
+            str(out),
+            "--set",
+            "n_agents=2",
+            "max_steps=30",
+        ],
+        code,
+    )
     try:
         stdout, err = proc.communicate(timeout=120)
     finally:
@@ -208,8 +276,10 @@ window.Window.show = counted
 
 @pytest.mark.slow
 def test_render_plays_one_episode_by_default(xdisplay: str, tmp_path: Path) -> None:
-    proc = _start(xdisplay, ["run", "navigation", "--render", "--fps", "1000", "--quiet", "--out", "",
-                             "--set", "n_agents=2"])  # fmt: skip
+    proc = _start(
+        xdisplay,
+        ["run", "navigation", "--render", "--fps", "1000", "--quiet", "--out", "", "--set", "n_agents=2"],
+    )
     try:
         stdout, err = proc.communicate(timeout=120)
     finally:

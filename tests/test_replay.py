@@ -52,8 +52,10 @@ def store(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def _rows(path: Path, episode: int, step: int) -> dict[int, tuple[float, float, int]]:
     con = sqlite3.connect(path)
     try:
-        rows = con.execute("SELECT agent, x, y, online FROM steps WHERE run = 1 AND episode = ? AND world = 0 "
-                           "AND step = ?", (episode, step)).fetchall()  # fmt: skip
+        rows = con.execute(
+            "SELECT agent, x, y, online FROM steps WHERE run = 1 AND episode = ? AND world = 0 AND step = ?",
+            (episode, step),
+        ).fetchall()
     finally:
         con.close()
     return {int(a): (x, y, int(o)) for a, x, y, o in rows}
@@ -216,8 +218,23 @@ def test_cli_replay(store: Path, tmp_path: Path, capsys: pytest.CaptureFixture[s
     assert f"written: {out}" in capsys.readouterr().out
     with Image.open(out) as im:
         assert im.n_frames == 4
-    assert main(["replay", str(store), "--run", "1", "--episode", "0", "--size", "64",
-                 "--out", str(tmp_path / "pngs")]) == 0  # fmt: skip
+    assert (
+        main(
+            [
+                "replay",
+                str(store),
+                "--run",
+                "1",
+                "--episode",
+                "0",
+                "--size",
+                "64",
+                "--out",
+                str(tmp_path / "pngs"),
+            ]
+        )
+        == 0
+    )
     assert len(list((tmp_path / "pngs").glob("frame_*.png"))) == STEPS + 1
 
 

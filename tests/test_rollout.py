@@ -19,8 +19,14 @@ WORLDS: dict[str, dict[str, Any]] = {
     "relay": {"n_groups": 2, "group_size": 3, "max_steps": 60},
     "rendezvous": {"n_agents": 6, "max_steps": 60},
 }
-CASES = [("navigation", "go_to_goal"), ("navigation", "random"), ("relay", "flood"), ("relay", "silent"),
-         ("rendezvous", "meet"), ("rendezvous", "random")]  # fmt: skip
+CASES = [
+    ("navigation", "go_to_goal"),
+    ("navigation", "random"),
+    ("relay", "flood"),
+    ("relay", "silent"),
+    ("rendezvous", "meet"),
+    ("rendezvous", "random"),
+]
 
 
 def step_loop(env: Any, policy: Any, steps: int, seed: int) -> dict[str, Any]:
@@ -38,8 +44,13 @@ def step_loop(env: Any, policy: Any, steps: int, seed: int) -> dict[str, Any]:
             returns[index[a]] += r
         for k, v in count_events(env.world.last_events).items():
             events[k] += v
-    return {"steps": taken, "returns": returns, "pos": np.array(env.world.state.pos[: len(returns)]),
-            "events": events, "agents": list(env.agents)}  # fmt: skip
+    return {
+        "steps": taken,
+        "returns": returns,
+        "pos": np.array(env.world.state.pos[: len(returns)]),
+        "events": events,
+        "agents": list(env.agents),
+    }
 
 
 @pytest.mark.parametrize("steps", [25, 10_000])
@@ -56,7 +67,10 @@ def test_rollout_equals_the_step_loop(scenario: str, name: str, steps: int) -> N
     np.testing.assert_array_equal(got.final_pos, want["pos"])
     assert got.events == want["events"]
     assert env2.agents == want["agents"]  # the env is left where step() leaves it
-    assert got.returns.shape == (len(env.possible_agents),) and got.final_pos.shape == (len(env.possible_agents), 3)
+    assert got.returns.shape == (len(env.possible_agents),) and got.final_pos.shape == (
+        len(env.possible_agents),
+        3,
+    )
     assert got.wall_s > 0 and got.steps_per_s > 0 and "env-steps/s" in got.summary()
     if scenario == "relay" and name == "flood":
         assert got.events["delivered"] > 0  # the comparison covers traffic
@@ -223,8 +237,23 @@ def test_a_policy_returning_nan_is_named() -> None:
 def test_run_prints_steps_per_second(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     from agentsim_env.cli import main
 
-    assert main(["run", "navigation", "--episodes", "2", "--quiet", "--out", "", "--set", "n_agents=4",
-                 "max_steps=10"]) == 0  # fmt: skip
+    assert (
+        main(
+            [
+                "run",
+                "navigation",
+                "--episodes",
+                "2",
+                "--quiet",
+                "--out",
+                "",
+                "--set",
+                "n_agents=4",
+                "max_steps=10",
+            ]
+        )
+        == 0
+    )
     out = capsys.readouterr().out
     assert "| env-steps/s |" in out and "| agent-steps/s |" in out, out
 
@@ -284,7 +313,9 @@ def test_a_recorded_env_rolls_out_through_its_step(tmp_path: Path) -> None:
         assert steps.nunique() == want.steps + 1  # every step written, the reset's included
 
 
-@pytest.mark.parametrize("env_keys", [{"obs_format": "flat", "action_format": "flat"}, {"ended_agents": "stay"}])
+@pytest.mark.parametrize(
+    "env_keys", [{"obs_format": "flat", "action_format": "flat"}, {"ended_agents": "stay"}]
+)
 def test_rollout_is_the_same_in_every_env_format(env_keys: dict[str, Any]) -> None:
     config = WORLDS["navigation"]
     want = agentsim_env.make("navigation", **config).rollout("go_to_goal", 10_000, seed=6)

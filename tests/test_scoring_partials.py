@@ -52,7 +52,15 @@ def test_group_sums_do_not_depend_on_the_split_or_the_order(seed: int, n_parts: 
     parts = [task_partials(task, group, world, acting & m, g, b) for m in _split(labels)]
     rng.shuffle(parts)
     totals = combine_partials(parts)
-    assert set(totals) == {"task_hi", "task_lo", "task_count", "task_nan", "task_pinf", "task_ninf", "task_big"}
+    assert set(totals) == {
+        "task_hi",
+        "task_lo",
+        "task_count",
+        "task_nan",
+        "task_pinf",
+        "task_ninf",
+        "task_big",
+    }
     for k, v in whole.items():
         assert v.dtype == (np.float64 if k == "task_big" else np.int64) and b * g <= v.shape[0] <= b * (g + 2)
         np.testing.assert_array_equal(totals[k], v)
@@ -94,7 +102,11 @@ def test_a_task_value_out_of_the_fixed_point_range_is_summed_as_a_float(big: flo
     assert group_means(out)[0] == (3.0 + big) / 3.0
     # a slot outside the mask does not enter the sums
     out = task_partials(task, zeros, zeros, np.array([1, 0, 1], bool), 1, 1)
-    assert out["task_count"].tolist() == [2] and out["task_hi"].tolist() == [3] and out["task_big"].tolist() == [0]
+    assert (
+        out["task_count"].tolist() == [2]
+        and out["task_hi"].tolist() == [3]
+        and out["task_big"].tolist() == [0]
+    )
 
 
 def test_non_finite_task_values_give_the_float_mean() -> None:
@@ -150,7 +162,9 @@ def test_any_split_of_the_slots_scores_like_the_whole(name: str, seed: int, n_pa
     sb, wb = _world(name, seed)
     rng = np.random.default_rng(seed)
     labels = rng.integers(0, n_parts, wa.state.n_slots)
-    if name == "navigation":  # a few agents in groups past n_groups (assign_group allows ids up to n_agents - 1)
+    if (
+        name == "navigation"
+    ):  # a few agents in groups past n_groups (assign_group allows ids up to n_agents - 1)
         some = rng.choice(wa.state.n_slots, 3, replace=False)
         wa.state.group[some] = wb.state.group[some] = rng.integers(-1, wa.n_agents, 3)
     if name == "relay":  # end every non-scout of group 0 but one now and then, so scouts end too
@@ -179,8 +193,10 @@ def test_group_partials_change_no_state_and_have_the_documented_shape(name: str)
     before = {k: getattr(world.task, k).copy() for k in ("prev_dist", "arrived")}
     energy = world.state.energy.copy()
     out = scenario.group_partials(world, events, acting, np.ones(world.state.n_slots, dtype=bool))
-    assert out and all(v.dtype == (np.float64 if k == "task_big" else np.int64) and v.shape == (scenario.n_groups,)
-                       for k, v in out.items())  # fmt: skip
+    assert out and all(
+        v.dtype == (np.float64 if k == "task_big" else np.int64) and v.shape == (scenario.n_groups,)
+        for k, v in out.items()
+    )
     for k, v in before.items():
         np.testing.assert_array_equal(getattr(world.task, k), v)
     np.testing.assert_array_equal(world.state.energy, energy)
@@ -244,8 +260,15 @@ def test_group_sums_and_rewards_do_not_depend_on_the_thread_count(seed: int, k: 
     world = rng.integers(0, b, s)
     acting = rng.random(s) < 0.8
     cfg = RewardConfig(group_share=0.5, collision_penalty=0.3, energy_weight=0.01)
-    kw = dict(group=group, world=world, acting=acting, n_groups=g, n_worlds=b, collided=(odd < 0.3) * 1.0,
-              energy=rng.random(s))  # fmt: skip
+    kw = dict(
+        group=group,
+        world=world,
+        acting=acting,
+        n_groups=g,
+        n_worlds=b,
+        collided=(odd < 0.3) * 1.0,
+        energy=rng.random(s),
+    )
     one_sums = task_partials(task, group, world, acting, g, b)
     one = compose_rewards(cfg, task, **kw)
     with pytest.MonkeyPatch.context() as mp:

@@ -33,9 +33,13 @@ def noisy_config(name: str) -> dict[str, Any]:
 
 
 CRASH_CONFIG: dict[str, Any] = {
-    "n_agents": 4, "comms": NOISY_COMMS, "max_steps": 45, "map_size": 60.0, "obstacle_density": 0.005,
+    "n_agents": 4,
+    "comms": NOISY_COMMS,
+    "max_steps": 45,
+    "map_size": 60.0,
+    "obstacle_density": 0.005,
     "obstacle_height": (20.0, 30.0),
-}  # fmt: skip
+}
 """Navigation with tall obstacles, flown into by ``crash_actions``: agents of every world hit objects."""
 
 
@@ -80,8 +84,9 @@ def test_world_of_a_batch_equals_a_single_env(name: str, cfg: dict[str, Any], po
         for w in range(len(seeds)):
             for i, a in enumerate(agents):
                 if a in obs_s[w]:
-                    np.testing.assert_array_equal(obs_b[w, i], obs_s[w][a],
-                                                  err_msg=f"{name}: world {w}, obs of {a} at step {step}")  # fmt: skip
+                    np.testing.assert_array_equal(
+                        obs_b[w, i], obs_s[w][a], err_msg=f"{name}: world {w}, obs of {a} at step {step}"
+                    )
         acts = policy(batch, rng)
         out = batch.step(acts)
         col = batch.world.last_events.collisions
@@ -99,7 +104,9 @@ def test_world_of_a_batch_equals_a_single_env(name: str, cfg: dict[str, Any], po
                 assert got == info[a], f"{where}: infos of {a} (reset {bool(out.reset_worlds[w])})"
             if out.reset_worlds[w]:
                 for a in live:
-                    np.testing.assert_array_equal(out.final_obs[w, agents.index(a)], obs_s[w][a], err_msg=where)
+                    np.testing.assert_array_equal(
+                        out.final_obs[w, agents.index(a)], obs_s[w][a], err_msg=where
+                    )
                 assert not single.agents
                 obs_s[w], _ = single.reset()  # the next episode of the same seed
                 episodes[w] += 1

@@ -28,8 +28,21 @@ CONFIGS: dict[str, tuple[str, dict[str, Any]]] = {
 }
 # Arrays a brute-force walk of the world finds that are not an agent's state: scratch buffers, state rebuilt from
 # positions every step, constants, and tables whose rows are not slots (see the module docstring).
-NOT_STATE = {"agent_grid", "graph", "_inbox_out", "_no_near", "_newest", "_taken", "_scratch", "directions", "_out",
-             "last_events", "events", "_box", "_obs"}  # fmt: skip
+NOT_STATE = {
+    "agent_grid",
+    "graph",
+    "_inbox_out",
+    "_no_near",
+    "_newest",
+    "_taken",
+    "_scratch",
+    "directions",
+    "_out",
+    "last_events",
+    "events",
+    "_box",
+    "_obs",
+}
 
 
 def _every_slot_array(world: Any) -> dict[str, np.ndarray]:
@@ -104,9 +117,19 @@ def test_copied_slots_carry_every_per_slot_array(key: str) -> None:
 def test_the_generic_walk_finds_the_known_owners_and_skips_scratch() -> None:
     _, world = _world("navigation-comms")
     paths = set(slot_arrays(world))
-    for want in ("state.pos", "state.online", "motion.state.waypoints", "task.goal", "task.prev_dist",
-                 "groups.last_answer", "comms.bus.inbox.payload", "comms.bus.inbox.received", "comms.sent",
-                 "sensors.gnss._reading", "readings.proximity.distance"):  # fmt: skip
+    for want in (
+        "state.pos",
+        "state.online",
+        "motion.state.waypoints",
+        "task.goal",
+        "task.prev_dist",
+        "groups.last_answer",
+        "comms.bus.inbox.payload",
+        "comms.bus.inbox.received",
+        "comms.sent",
+        "sensors.gnss._reading",
+        "readings.proximity.distance",
+    ):
         assert want in paths, want
     assert not {"comms._inbox_out", "comms.bus.inbox._newest", "groups.group"} & paths  # group is state.group
 

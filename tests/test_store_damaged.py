@@ -93,12 +93,12 @@ CASES = {
         "ALTER TABLE steps DROP COLUMN heading;",
         {"runs", "export", "replay", "view"},
         "steps.heading is missing",
-    ),  # fmt: skip
+    ),
     "text in steps.x": (
         "UPDATE steps SET x = 'abc' WHERE step = 2 AND agent = 1;",
         {"export", "replay", "view"},
         "steps.x",
-    ),  # fmt: skip
+    ),
     "inf in steps.x": (
         "UPDATE steps SET x = 9e999 WHERE step = 2 AND agent = 1;",
         {"replay", "view"},
@@ -108,17 +108,17 @@ CASES = {
         "UPDATE steps SET x = 1e308 WHERE step = 2 AND agent = 1;",
         {"replay", "view"},
         "steps.x",
-    ),  # fmt: skip
+    ),
     "agent out of range": (
         "UPDATE steps SET agent = 7 WHERE step = 2 AND agent = 1;",
         {"replay", "view"},
         "steps.agent",
-    ),  # fmt: skip
+    ),
     "body.radius=1e308": (
         "UPDATE runs SET config = json_set(config, '$.body.radius', 1e308);",
         {"replay", "view"},
         "runs.config of run 1: body.radius",
-    ),  # fmt: skip
+    ),
     "config not JSON": (
         "UPDATE runs SET config = '{\"body\": ';",
         {"replay", "view"},
@@ -129,7 +129,7 @@ CASES = {
         "UPDATE runs SET started = 'yesterday';",
         {"runs", "export", "replay", "view"},
         "runs.started",
-    ),  # fmt: skip
+    ),
     "started 1e308": ("UPDATE runs SET started = 1e308;", {"runs", "replay", "view"}, "runs.started"),
     "seed as text": ("UPDATE episodes SET seed = 'abc';", {"replay", "view"}, "episodes.seed"),
     "sender as text": (
@@ -137,7 +137,7 @@ CASES = {
         "VALUES (1, 0, 0, 1, 'delivered', 1, 'x', 0);",
         {"export", "view"},
         "messages.sender",
-    ),  # fmt: skip
+    ),
 }
 
 
@@ -179,8 +179,11 @@ def test_the_python_api_raises_store_errors(base: Path, tmp_path: Path) -> None:
 
 def test_export_refuses_before_writing_any_file(base: Path, tmp_path: Path) -> None:
     """The bad value sits in the last table exported: no earlier table's file is written either."""
-    db = _damaged(base, tmp_path, "INSERT INTO observations (run, episode, world, step, agent, obs) "
-                                  "VALUES (1, 0, 0, 1, 'one', '[]');")  # fmt: skip
+    db = _damaged(
+        base,
+        tmp_path,
+        "INSERT INTO observations (run, episode, world, step, agent, obs) VALUES (1, 0, 0, 1, 'one', '[]');",
+    )
     out = tmp_path / "out"
     out.mkdir()
     with pytest.raises(StoreError, match=r"observations\.agent holds text 'one'"):

@@ -92,8 +92,13 @@ def _read_in_child(folder: Path, prefix: list[str], db: Path, out: Path) -> tupl
     script = out / "reader.py"
     script.write_text(READER, encoding="utf-8")
     env = {**os.environ, "NUMBA_NUM_THREADS": "1", "PYTHONPATH": str(ROOT)}
-    proc = subprocess.run([*prefix, sys.executable, str(script), str(db), str(out)], capture_output=True,
-                          text=True, env=env, timeout=CHILD_TIMEOUT_S)  # fmt: skip
+    proc = subprocess.run(
+        [*prefix, sys.executable, str(script), str(db), str(out)],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=CHILD_TIMEOUT_S,
+    )
     assert proc.returncode == 0, proc.stderr
     return json.loads(proc.stdout.strip().splitlines()[-1]), proc.stderr
 

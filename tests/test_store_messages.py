@@ -16,9 +16,13 @@ from agentsim_env.recorder import record
 
 AGE_HORIZON = 100  # the inbox's age feature: age / 100 (episodes here are shorter, so never clipped)
 CONFIG: dict[str, Any] = {
-    "n_agents": 6, "max_steps": 40, "map_size": 60.0, "obstacle_density": 0.005, "obstacle_height": (20.0, 30.0),
+    "n_agents": 6,
+    "max_steps": 40,
+    "map_size": 60.0,
+    "obstacle_density": 0.005,
+    "obstacle_height": (20.0, 30.0),
     "comms": {"latency": 1, "heartbeat_period": 4, "heartbeat_timeout": 12, "inbox_size": 6},
-}  # fmt: skip
+}
 
 
 def _toward_nearest_object(env: Any, rng: np.random.Generator) -> dict[str, dict[str, np.ndarray]]:
@@ -72,7 +76,9 @@ def test_every_observed_inbox_row_has_its_stored_message(tmp_path: Path) -> None
         i = agents.index(agent)
         stored = Counter((k, c) for e, s, r, k, c in rows if e == episode and s <= step and r == i)
         missing = inbox - stored
-        assert not missing, f"episode {episode}, step {step}, {agent}: inbox rows without a stored row {missing}"
+        assert not missing, (
+            f"episode {episode}, step {step}, {agent}: inbox rows without a stored row {missing}"
+        )
         for kind, _ in inbox.elements():
             checked[kind] += 1
     assert checked[ENV] > 0 and checked[OVERLAY] + checked[1] + checked[2] > 0, checked
@@ -86,7 +92,9 @@ def test_a_batched_world_stores_the_events_of_its_single_env(tmp_path: Path) -> 
 
     w, seeds = 1, [21, 7, 1234]
     batch = record(BatchedEnv("navigation", len(seeds), **CRASH_CONFIG), tmp_path / "batch.db")
-    single = record(agentsim_env.make("navigation", action_format="flat", **CRASH_CONFIG), tmp_path / "one.db")
+    single = record(
+        agentsim_env.make("navigation", action_format="flat", **CRASH_CONFIG), tmp_path / "one.db"
+    )
     batch.reset(seed=seeds)
     single.reset(seed=seeds[w])
     rng = np.random.default_rng(5)

@@ -44,9 +44,17 @@ STATE = ("x", "y", "z", "vx", "vy", "vz", "heading", "online", "grp")
 # ------------------------------------------------------------------------------------------ recording
 def _state(env: Any, idx: int) -> dict[str, float]:
     st = env.world.state
-    return {"x": st.pos[idx, 0], "y": st.pos[idx, 1], "z": st.pos[idx, 2], "vx": st.vel[idx, 0],
-            "vy": st.vel[idx, 1], "vz": st.vel[idx, 2], "heading": st.heading[idx],
-            "online": bool(st.online[idx]), "grp": int(st.group[idx])}  # fmt: skip
+    return {
+        "x": st.pos[idx, 0],
+        "y": st.pos[idx, 1],
+        "z": st.pos[idx, 2],
+        "vx": st.vel[idx, 0],
+        "vy": st.vel[idx, 1],
+        "vz": st.vel[idx, 2],
+        "heading": st.heading[idx],
+        "online": bool(st.online[idx]),
+        "grp": int(st.group[idx]),
+    }
 
 
 def _record_episode(name: str, path: Path) -> list[dict[str, dict[str, Any]]]:
@@ -67,9 +75,19 @@ def _record_episode(name: str, path: Path) -> list[dict[str, dict[str, Any]]]:
         else:
             actions = {a: env.action_space(a).sample() for a in live}
         obs, rew, term, trunc, infos = env.step(actions)
-        kept.append({a: {**_state(env, index[a]), "reward": rew[a], "terminated": term[a], "truncated": trunc[a],
-                         "info": infos[a], "obs": _flat(obs[a]) if a in obs else None}
-                     for a in rew})  # fmt: skip
+        kept.append(
+            {
+                a: {
+                    **_state(env, index[a]),
+                    "reward": rew[a],
+                    "terminated": term[a],
+                    "truncated": trunc[a],
+                    "info": infos[a],
+                    "obs": _flat(obs[a]) if a in obs else None,
+                }
+                for a in rew
+            }
+        )
     env.close()
     return kept
 
@@ -84,8 +102,13 @@ def doc_store(tmp_path_factory: pytest.TempPathFactory) -> Path:
     (collisions, drops of every reason, offline events); run 2: uav_release (sensors released and landed)."""
     path = tmp_path_factory.mktemp("store") / "run.db"
     comms = {"heartbeat_period": 3, "loss": 0.2, "bandwidth": 1, "max_range": 15.0, "latency": 1}
-    env = record(agentsim_env.make("navigation", n_agents=8, map_size=30, max_steps=40, comms=comms,
-                                   body={"altitude": (5.0, 5.2)}), path, label="doc example")  # fmt: skip
+    env = record(
+        agentsim_env.make(
+            "navigation", n_agents=8, map_size=30, max_steps=40, comms=comms, body={"altitude": (5.0, 5.2)}
+        ),
+        path,
+        label="doc example",
+    )
     for ep in range(2):
         env.reset(seed=ep)
         for i, a in enumerate(env.possible_agents):
@@ -224,8 +247,13 @@ def test_frames_are_typed_indexed_and_filtered(doc_store: Path) -> None:
         assert len(store.sensors(run=2)) == 20 and store.sensors(run=2)["land_step"].notna().all()
         runs = store.runs()
         assert list(runs.index) == [1, 2] and runs.loc[1, "label"] == "doc example"
-        for name, table in (("episodes", "episodes"), ("step_rows", "steps"), ("messages", "messages"),
-                            ("events", "events"), ("sensors", "sensors")):  # fmt: skip
+        for name, table in (
+            ("episodes", "episodes"),
+            ("step_rows", "steps"),
+            ("messages", "messages"),
+            ("events", "events"),
+            ("sensors", "sensors"),
+        ):
             counts = store.table(table).groupby("run").size()
             assert runs[name].tolist() == [int(counts.get(r, 0)) for r in runs.index], name
         assert (runs["seconds"] >= 0).all()
@@ -360,8 +388,11 @@ def test_bad_stores(doc_store: Path, tmp_path: Path, capsys: pytest.CaptureFixtu
     junk = tmp_path / "junk.db"
     junk.write_bytes(b"not an sqlite file, just text " * 40)
     other = _other_version(doc_store, tmp_path / "v99.db")
-    cases = [(missing, "no such store"), (junk, "not a database"),
-             (other, f"schema version 99, but this agentsim-env reads and writes version {SCHEMA_VERSION}")]  # fmt: skip
+    cases = [
+        (missing, "no such store"),
+        (junk, "not a database"),
+        (other, f"schema version 99, but this agentsim-env reads and writes version {SCHEMA_VERSION}"),
+    ]
     for path, needle in cases:
         with pytest.raises(StoreError, match=re.escape(needle)):
             open_store(path)
@@ -476,14 +507,25 @@ def test_events_of_one_step_come_in_index_order_keeping_each_agents_recording_or
     path = small_store(tmp_path / "run.db")
     con = sqlite3.connect(path)
     con.execute("DELETE FROM events")
-    rows = [("collision", 2, 1, None, None), ("collision", 1, 2, None, None), ("offline", 0, None, None, None),
-            ("group", 2, None, 0, 1)]  # fmt: skip
-    con.executemany("INSERT INTO events (run, episode, world, step, event, agent, other_agent, object, old, new) "
-                    "VALUES (1, 0, 0, 3, ?, ?, ?, -1, ?, ?)", rows)  # fmt: skip
+    rows = [
+        ("collision", 2, 1, None, None),
+        ("collision", 1, 2, None, None),
+        ("offline", 0, None, None, None),
+        ("group", 2, None, 0, 1),
+    ]
+    con.executemany(
+        "INSERT INTO events (run, episode, world, step, event, agent, other_agent, object, old, new) "
+        "VALUES (1, 0, 0, 3, ?, ?, ?, -1, ?, ?)",
+        rows,
+    )
     con.commit()
     con.close()
     with open_store(path) as store:
         ev = store.events()
     assert ev.index.is_monotonic_increasing
     assert list(zip(ev.index.get_level_values("agent"), ev["event"])) == [
-        (0, "offline"), (1, "collision"), (2, "collision"), (2, "group")]
+        (0, "offline"),
+        (1, "collision"),
+        (2, "collision"),
+        (2, "group"),
+    ]

@@ -18,16 +18,42 @@ from tests.test_store_robust import _full
 
 # ------------------------------------------------------------------------------------------ --record
 TINY_OVERRIDES = {"n_uavs": 2, "payload": 10, "max_steps": 2500}
-TINY_EVAL = ["--zones", "tiny", "--strategies", "B2_rings", "--seeds", "2", "--set", "n_uavs=2", "payload=10",
-             "max_steps=2500", "--no-plots", "--quiet"]  # fmt: skip
+TINY_EVAL = [
+    "--zones",
+    "tiny",
+    "--strategies",
+    "B2_rings",
+    "--seeds",
+    "2",
+    "--set",
+    "n_uavs=2",
+    "payload=10",
+    "max_steps=2500",
+    "--no-plots",
+    "--quiet",
+]
 
 
 def test_cli_run_records_every_episode_in_one_run(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     from agentsim_env.cli import main
 
     db = tmp_path / "run.db"
-    argv = ["run", "navigation", "--episodes", "3", "--seed", "5", "--set", "n_agents=3", "max_steps=15",
-            "--out", "", "--quiet", "--record", str(db)]  # fmt: skip
+    argv = [
+        "run",
+        "navigation",
+        "--episodes",
+        "3",
+        "--seed",
+        "5",
+        "--set",
+        "n_agents=3",
+        "max_steps=15",
+        "--out",
+        "",
+        "--quiet",
+        "--record",
+        str(db),
+    ]
     assert main(argv) == 0
     assert f"recorded to {db} (run 1)" in capsys.readouterr().out
     assert main(argv) == 0  # a second rollout: a second run of the same store
@@ -39,8 +65,10 @@ def test_cli_run_records_every_episode_in_one_run(tmp_path: Path, capsys: pytest
         )
         assert runs == [(1, "navigation", "complete", 3, label), (2, "navigation", "complete", 3, label)]
         assert con.execute("SELECT episode, seed FROM episodes WHERE run = 1").fetchall() == [
-            (0, "5"), (1, "6"), (2, "7")
-        ]  # fmt: skip
+            (0, "5"),
+            (1, "6"),
+            (2, "7"),
+        ]
         assert (
             con.execute("SELECT MAX(step) FROM steps WHERE run = 1 GROUP BY episode").fetchall()
             == [(15,)] * 3
@@ -65,8 +93,10 @@ def test_cli_evaluate_writes_the_csvs_from_the_store(
     con = connect(db)
     try:
         runs = con.execute("SELECT run, scenario, status, label FROM runs").fetchall()
-        assert runs == [(1, "uav_release", "complete", "zones=tiny strategy=B2_rings seed=0"),
-                        (2, "uav_release", "complete", "zones=tiny strategy=B2_rings seed=1")]  # fmt: skip
+        assert runs == [
+            (1, "uav_release", "complete", "zones=tiny strategy=B2_rings seed=0"),
+            (2, "uav_release", "complete", "zones=tiny strategy=B2_rings seed=1"),
+        ]
         # every flown sensor of sensors.csv is a row of the store's sensors table
         (n_sensors,) = con.execute("SELECT COUNT(*) FROM sensors").fetchone()
     finally:
@@ -165,14 +195,22 @@ def test_training_records_the_training_env(tmp_path: Path) -> None:
     from agentsim_env.train.runner import train
 
     db = tmp_path / "train.db"
-    cfg = load_config("navigation", {"timesteps": 256, "worlds": 2, "seed": 3, "env": {"n_agents": 2, "max_steps": 40},
-                                     "ppo": {"n_steps": 64, "batch_size": 64, "n_epochs": 1}})  # fmt: skip
+    cfg = load_config(
+        "navigation",
+        {
+            "timesteps": 256,
+            "worlds": 2,
+            "seed": 3,
+            "env": {"n_agents": 2, "max_steps": 40},
+            "ppo": {"n_steps": 64, "batch_size": 64, "n_epochs": 1},
+        },
+    )
     train(cfg, None, record=db)
     con = connect(db)
     try:
         assert con.execute("SELECT status, n_worlds, n_agents, label FROM runs").fetchall() == [
             ("complete", 2, 2, "agentsim train navigation worlds=2 seed=3")
-        ]  # fmt: skip
+        ]
         # 256 agent-steps / (2 worlds x 2 agents) = 64 steps: the worlds ran through their 40-step episodes and
         # were reset automatically, each reset a new recorded episode
         assert con.execute("SELECT world, COUNT(*) FROM episodes GROUP BY world").fetchall() == [

@@ -285,8 +285,9 @@ def test_threads_record_to_one_file_at_once(tmp_path: Path) -> None:
     try:
         _integrity_ok(con)
         assert con.execute("SELECT label, status FROM runs ORDER BY label").fetchall() == [
-            ("t0", "complete"), ("t1", "complete")
-        ]  # fmt: skip
+            ("t0", "complete"),
+            ("t1", "complete"),
+        ]
         for run in runs.values():
             _steps_complete(con, run, steps)
     finally:

@@ -131,8 +131,18 @@ def test_equals_native_vec_env_under_same_seed_and_actions() -> None:
 
 
 def test_example_runs(tmp_path: Path) -> None:
-    cmd = [sys.executable, str(ROOT / "examples" / "supersuit_sb3.py"), "--timesteps", "256", "--envs", "1",
-           "--episodes", "2", "--out", str(tmp_path / "run")]  # fmt: skip
+    cmd = [
+        sys.executable,
+        str(ROOT / "examples" / "supersuit_sb3.py"),
+        "--timesteps",
+        "256",
+        "--envs",
+        "1",
+        "--episodes",
+        "2",
+        "--out",
+        str(tmp_path / "run"),
+    ]
     res = subprocess.run(cmd, cwd=tmp_path, capture_output=True, text=True, timeout=300)
     assert res.returncode == 0, res.stderr[-3000:]
     assert (tmp_path / "run" / "model.zip").is_file()

@@ -56,10 +56,15 @@ def test_run_uses_other_threads_and_raises_their_errors() -> None:
 
 @pytest.mark.parametrize(
     ("value", "message"),
-    [(0, "num_threads must be >= 1"), (257, "num_threads must be <= 256"), ("2", "num_threads must be an integer"),
-     (2.5, "num_threads must be an integer"), (True, "num_threads must be an integer"),
-     (None, "num_threads must be an integer")],
-)  # fmt: skip
+    [
+        (0, "num_threads must be >= 1"),
+        (257, "num_threads must be <= 256"),
+        ("2", "num_threads must be an integer"),
+        (2.5, "num_threads must be an integer"),
+        (True, "num_threads must be an integer"),
+        (None, "num_threads must be an integer"),
+    ],
+)
 def test_bad_num_threads_is_refused_by_name(value: Any, message: str) -> None:
     with pytest.raises(ValueError, match=message):
         check_num_threads(value)
@@ -109,8 +114,12 @@ def test_collision_events_and_scans_do_not_depend_on_the_thread_count(seed: int,
     online = rng.random(s) < 0.9
     world = rng.integers(0, n_worlds, s)
     scene = Scene()
-    scene.add(rng.integers(0, 3, 12), np.column_stack([rng.uniform(0, 20, (12, 2)), rng.uniform(0, 4, 12)]),
-              rng.uniform(0.5, 3.0, (12, 3)), rng.integers(0, n_worlds, 12))  # fmt: skip
+    scene.add(
+        rng.integers(0, 3, 12),
+        np.column_stack([rng.uniform(0, 20, (12, 2)), rng.uniform(0, 4, 12)]),
+        rng.uniform(0.5, 3.0, (12, 3)),
+        rng.integers(0, n_worlds, 12),
+    )
     spec = GridSpec.for_bounds((0, 20, 0, 20), 3.0, n_worlds)
     grid = build_grid(spec, pos, world, online)
     og = build_object_grid(spec, scene.centre, scene.footprint_radius(), scene.world)
@@ -124,8 +133,21 @@ def test_collision_events_and_scans_do_not_depend_on_the_thread_count(seed: int,
         np.testing.assert_array_equal(getattr(one, name), getattr(many, name))
     sensor = ProximitySensor(ProximityConfig(n_azimuth=16, elevations_deg=(-20.0, 0.0)))
     heading, srange = rng.uniform(-3, 3, s), rng.uniform(2, 8, s)
-    scan_args = (pos, heading, srange, radius, online, world, grid, scene.kind, scene.centre, scene.half,
-                 scene.world, og, True)  # fmt: skip
+    scan_args = (
+        pos,
+        heading,
+        srange,
+        radius,
+        online,
+        world,
+        grid,
+        scene.kind,
+        scene.centre,
+        scene.half,
+        scene.world,
+        og,
+        True,
+    )
     ref = sensor.scan(*scan_args)
     ref = (ref.distance.copy(), ref.hit_kind.copy(), ref.hit_id.copy())
     sensor.threads = RowThreads(k)
@@ -175,7 +197,9 @@ def test_overlay_hops_and_inbox_pushes_do_not_depend_on_the_thread_count(seed: i
     online = rng.random(s) < 0.9
     world = np.zeros(s, dtype=np.int64)
     grid = build_grid(GridSpec.for_bounds((0, 30, 0, 30), 5.0, 1), pos, world, online)
-    starts = [(rng.choice(np.flatnonzero(online), rng.integers(1, 30)), rng.integers(1, 5, 30)) for _ in range(6)]
+    starts = [
+        (rng.choice(np.flatnonzero(online), rng.integers(1, 30)), rng.integers(1, 5, 30)) for _ in range(6)
+    ]
 
     def run(threads: int) -> list[np.ndarray]:
         ov = Overlay(s, d, 7.0)
@@ -190,13 +214,34 @@ def test_overlay_hops_and_inbox_pushes_do_not_depend_on_the_thread_count(seed: i
                 ov.start(origin, limit[: origin.size], np.full((origin.size, d), step, np.float32), step)
                 graph.set_grid(grid, pos, online, world, ov.link_range, True)
                 got = ov.advance_graph(*graph.links(ov.link_range))
-                inbox.push_rows(got.receiver, np.full(len(got), 3, np.int8), got.origin, got.hops, got.created,
-                                got.payload, np.zeros(0, dtype=np.int64))  # fmt: skip
+                inbox.push_rows(
+                    got.receiver,
+                    np.full(len(got), 3, np.int8),
+                    got.origin,
+                    got.hops,
+                    got.created,
+                    got.payload,
+                    np.zeros(0, dtype=np.int64),
+                )
                 st_ = ov.stats
-                out += [got.receiver, got.flood, got.origin, got.hops, got.created, got.payload,
-                        np.array([st_.started, st_.delivered, st_.duplicates, st_.finished, ov.frontier_size])]
-            out += [inbox.valid, inbox.sender, inbox.hops, inbox.created, inbox.payload, inbox.received,
-                    inbox.observe(pos, len(starts))]  # fmt: skip
+                out += [
+                    got.receiver,
+                    got.flood,
+                    got.origin,
+                    got.hops,
+                    got.created,
+                    got.payload,
+                    np.array([st_.started, st_.delivered, st_.duplicates, st_.finished, ov.frontier_size]),
+                ]
+            out += [
+                inbox.valid,
+                inbox.sender,
+                inbox.hops,
+                inbox.created,
+                inbox.payload,
+                inbox.received,
+                inbox.observe(pos, len(starts)),
+            ]
         return out
 
     one, many = run(1), run(k)
@@ -205,12 +250,16 @@ def test_overlay_hops_and_inbox_pushes_do_not_depend_on_the_thread_count(seed: i
         np.testing.assert_array_equal(a, b, err_msg=f"array {i} differs with {k} threads")
 
 
-@given(sizes=st.lists(st.integers(1, 40), min_size=0, max_size=60), k=st.integers(1, 6),
-       min_rows=st.integers(1, 50), weights=st.one_of(st.none(), st.lists(st.integers(1, 100), min_size=2400,
-                                                                            max_size=2400)))  # fmt: skip
+@given(
+    sizes=st.lists(st.integers(1, 40), min_size=0, max_size=60),
+    k=st.integers(1, 6),
+    min_rows=st.integers(1, 50),
+    weights=st.one_of(st.none(), st.lists(st.integers(1, 100), min_size=2400, max_size=2400)),
+)
 @settings(max_examples=200, deadline=None)
-def test_flood_ranges_cut_the_frontier_only_between_floods(sizes: list[int], k: int, min_rows: int,
-                                                           weights: list[int] | None) -> None:  # fmt: skip
+def test_flood_ranges_cut_the_frontier_only_between_floods(
+    sizes: list[int], k: int, min_rows: int, weights: list[int] | None
+) -> None:
     # a frontier grouped by flood (runs of one flood id): contiguous ranges over every entry, at most one per
     # thread, each boundary at the first entry of a flood; by entries, or by a cumulative cost per entry
     cur_f = np.repeat(np.arange(len(sizes)) * 3 + 1, sizes).astype(np.int64)
@@ -236,9 +285,11 @@ def test_make_and_batched_env_take_the_thread_count() -> None:
 
 @pytest.mark.parametrize(
     ("argv", "match"),
-    [(["--threads", "0"], "--threads must be an integer in [1, 256]"),
-     (["--threads", "2", "--shards", "2"], "--threads applies to one process")],
-)  # fmt: skip
+    [
+        (["--threads", "0"], "--threads must be an integer in [1, 256]"),
+        (["--threads", "2", "--shards", "2"], "--threads applies to one process"),
+    ],
+)
 def test_cli_run_threads_bad_options(argv: list[str], match: str, capsys: pytest.CaptureFixture[str]) -> None:
     from agentsim_env.cli import main
 

@@ -49,8 +49,19 @@ def test_default_is_the_scenarios_default_baseline() -> None:
 def test_eval_baselines_flag_and_the_cost_line(
     model_dir: Path, capsys: pytest.CaptureFixture[str], profile: str, policies: list[str]
 ) -> None:
-    argv = ["train", "navigation", "--out", str(model_dir), "--eval-only", "--quiet", "--eval-baselines", profile,
-            "--set", "eval.seeds=2", *[f"env.{k}={v}" for k, v in ENV.items()]]  # fmt: skip
+    argv = [
+        "train",
+        "navigation",
+        "--out",
+        str(model_dir),
+        "--eval-only",
+        "--quiet",
+        "--eval-baselines",
+        profile,
+        "--set",
+        "eval.seeds=2",
+        *[f"env.{k}={v}" for k, v in ENV.items()],
+    ]
     assert main(argv) == 0
     out = capsys.readouterr().out
     with open(model_dir / "eval.csv", encoding="utf-8") as f:

@@ -21,11 +21,29 @@ pytest.importorskip("stable_baselines3")
 
 from agentsim_env.train.config import TrainConfig, load_config  # noqa: E402
 
-TINY = {"timesteps": 1024, "worlds": 2, "checkpoint_every": 512, "env": {"n_agents": 2},
-        "ppo": {"n_steps": 64, "batch_size": 128}, "eval": {"seeds": 1}}  # fmt: skip
+TINY = {
+    "timesteps": 1024,
+    "worlds": 2,
+    "checkpoint_every": 512,
+    "env": {"n_agents": 2},
+    "ppo": {"n_steps": 64, "batch_size": 128},
+    "eval": {"seeds": 1},
+}
 #: The same run as ``TINY`` on the command line.
-CLI = ["--timesteps", "1024", "--worlds", "2", "--quiet", "--no-eval", "--set", "checkpoint_every=512",
-       "env.n_agents=2", "ppo.n_steps=64", "ppo.batch_size=128", "eval.seeds=1"]  # fmt: skip
+CLI = [
+    "--timesteps",
+    "1024",
+    "--worlds",
+    "2",
+    "--quiet",
+    "--no-eval",
+    "--set",
+    "checkpoint_every=512",
+    "env.n_agents=2",
+    "ppo.n_steps=64",
+    "ppo.batch_size=128",
+    "eval.seeds=1",
+]
 
 
 def _cfg() -> TrainConfig:
@@ -40,7 +58,11 @@ def trained(tmp_path_factory: pytest.TempPathFactory) -> Path:
     out = tmp_path_factory.mktemp("run") / "run"
     train(_cfg(), out)
     assert sorted(p.name for p in (out / "checkpoints").iterdir()) == [
-        "step_1024.json", "step_1024.zip", "step_512.json", "step_512.zip"]  # fmt: skip
+        "step_1024.json",
+        "step_1024.zip",
+        "step_512.json",
+        "step_512.zip",
+    ]
     return out
 
 
@@ -85,7 +107,9 @@ def test_resume_skips_a_truncated_checkpoint_and_says_so(run: Path, capsys: pyte
     assert PPO.load(run / "checkpoints" / "step_1024.zip").num_timesteps == 1024  # written again, whole
 
 
-def test_folders_and_temp_files_named_like_checkpoints_are_ignored(run: Path, capsys: pytest.CaptureFixture) -> None:
+def test_folders_and_temp_files_named_like_checkpoints_are_ignored(
+    run: Path, capsys: pytest.CaptureFixture
+) -> None:
     from agentsim_env.train.runner import latest_checkpoint, train
 
     ckpts = run / "checkpoints"
@@ -101,8 +125,9 @@ def test_folders_and_temp_files_named_like_checkpoints_are_ignored(run: Path, ca
     assert (ckpts / "step_4096.zip").is_dir() and (ckpts / "step_8192.zip.tmp").is_file()  # not ours: kept
 
 
-def test_a_checkpoint_with_a_garbage_policy_is_skipped_naming_the_part(run: Path,
-                                                                       capsys: pytest.CaptureFixture) -> None:  # fmt: skip
+def test_a_checkpoint_with_a_garbage_policy_is_skipped_naming_the_part(
+    run: Path, capsys: pytest.CaptureFixture
+) -> None:
     from agentsim_env.train.runner import train
 
     _replace_member(run / "checkpoints" / "step_1024.zip", "policy.pth", b"garbage" * 50)
@@ -126,10 +151,14 @@ def test_a_curve_row_cut_short_by_a_kill_is_dropped(run: Path) -> None:
 
     curve = run / "curve.csv"
     data = curve.read_bytes()
-    curve.write_bytes(data[: data.rindex(b"\n", 0, len(data) - 1) + 1] + b"1024,1")  # the last row's append, killed
+    curve.write_bytes(
+        data[: data.rindex(b"\n", 0, len(data) - 1) + 1] + b"1024,1"
+    )  # the last row's append, killed
     res = train(_cfg().replace(timesteps=1536), run, resume=True)
     assert [r["timesteps"] for r in res.curve] == [256, 512, 768, 1280, 1536]
-    assert curve.read_bytes().startswith(data[: data.rindex(b"\n", 0, len(data) - 1) + 1])  # kept rows as written
+    assert curve.read_bytes().startswith(
+        data[: data.rindex(b"\n", 0, len(data) - 1) + 1]
+    )  # kept rows as written
 
 
 # ------------------------------------------------------------------------------------ failure changes nothing
@@ -141,7 +170,16 @@ def test_a_resume_that_cannot_work_changes_nothing(run: Path, capsys: pytest.Cap
     _replace_member(ckpts / "step_512.zip", "policy.pth", b"garbage")
     (ckpts / "step_2048.zip").mkdir()
     before = _snapshot(run)
-    args = ["train", "navigation", "--out", str(run), "--resume", *CLI, "--record-training", str(run / "t.db")]
+    args = [
+        "train",
+        "navigation",
+        "--out",
+        str(run),
+        "--resume",
+        *CLI,
+        "--record-training",
+        str(run / "t.db"),
+    ]
     assert main(args) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("agentsim: error: --resume: no checkpoint in"), err
@@ -167,7 +205,9 @@ def _crash_mid_write(target: Any) -> None:
     raise OSError(28, "No space left on device")
 
 
-def test_a_failed_checkpoint_write_leaves_no_checkpoint(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_a_failed_checkpoint_write_leaves_no_checkpoint(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     from stable_baselines3.common.base_class import BaseAlgorithm
 
     from agentsim_env.train.runner import train
@@ -245,8 +285,12 @@ def test_kill_9_during_a_checkpoint_write_leaves_only_complete_checkpoints(tmp_p
 
     from agentsim_env.train.runner import train
 
-    proc = subprocess.Popen([sys.executable, "-c", KILLED % (TINY,)], cwd=tmp_path, stdout=subprocess.DEVNULL,
-                            stderr=subprocess.DEVNULL)  # fmt: skip
+    proc = subprocess.Popen(
+        [sys.executable, "-c", KILLED % (TINY,)],
+        cwd=tmp_path,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     try:
         deadline = time.monotonic() + 240
         while not (tmp_path / "half_written").exists():
@@ -263,4 +307,8 @@ def test_kill_9_during_a_checkpoint_write_leaves_only_complete_checkpoints(tmp_p
     res = train(_cfg(), tmp_path / "run", resume=True)
     assert res.resumed_from == zips[0] and res.timesteps == 1024
     assert sorted(p.name for p in ckpts.iterdir()) == [
-        "step_1024.json", "step_1024.zip", "step_512.json", "step_512.zip"]  # fmt: skip
+        "step_1024.json",
+        "step_1024.zip",
+        "step_512.json",
+        "step_512.zip",
+    ]

@@ -15,8 +15,13 @@ pytest.importorskip("stable_baselines3")
 
 from agentsim_env.train.config import TrainConfig, load_config, save_config, shipped_configs  # noqa: E402
 
-TINY = {"timesteps": 2048, "worlds": 2, "checkpoint_every": 1024, "ppo": {"n_steps": 64, "batch_size": 256},
-        "eval": {"seeds": 2}}  # fmt: skip
+TINY = {
+    "timesteps": 2048,
+    "worlds": 2,
+    "checkpoint_every": 1024,
+    "ppo": {"n_steps": 64, "batch_size": 256},
+    "eval": {"seeds": 2},
+}
 
 
 def test_sb3_vecenv_shapes_and_dones() -> None:
@@ -95,10 +100,16 @@ def test_bad_config_files(tmp_path: Path) -> None:
 def test_set_pairs_are_typed_by_their_config() -> None:
     from agentsim_env.train.cli import parse_overrides
 
-    got = parse_overrides("relay", ["timesteps=5000", "ppo.learning_rate=1e-4", "env.comms.loss=0.5",
-                                    "env.gap=12,20", "eval.seeds=3"])  # fmt: skip
-    assert got == {"timesteps": 5000, "ppo": {"learning_rate": 1e-4}, "eval": {"seeds": 3},
-                   "env": {"comms": {"loss": 0.5}, "gap": (12.0, 20.0)}}  # fmt: skip
+    got = parse_overrides(
+        "relay",
+        ["timesteps=5000", "ppo.learning_rate=1e-4", "env.comms.loss=0.5", "env.gap=12,20", "eval.seeds=3"],
+    )
+    assert got == {
+        "timesteps": 5000,
+        "ppo": {"learning_rate": 1e-4},
+        "eval": {"seeds": 3},
+        "env": {"comms": {"loss": 0.5}, "gap": (12.0, 20.0)},
+    }
     with pytest.raises(ValueError, match="timesteps"):
         parse_overrides("relay", ["timesteps=2e6"])
     cfg = load_config({"scenario": "relay"}, got)
@@ -118,7 +129,9 @@ def test_runner_writes_the_run_folder_and_reproduces(tmp_path: Path) -> None:
     for name in ("model.zip", "config.json", "config.yaml", "curve.csv", "checkpoints/step_1024.zip"):
         assert (tmp_path / "a" / name).exists(), name
     meta = json.loads((tmp_path / "a" / "config.json").read_text())
-    assert meta["scenario"] == "navigation" and meta["timesteps_done"] == 2048 and meta["train"] == cfg.to_dict()
+    assert (
+        meta["scenario"] == "navigation" and meta["timesteps_done"] == 2048 and meta["train"] == cfg.to_dict()
+    )
     assert len(a.curve) == 2048 // (64 * 2 * 4) and a.curve[-1]["timesteps"] == 2048
     b = train(cfg, None)
     assert all(np.array_equal(x, y) for x, y in zip(_params(a.model), _params(b.model)))
@@ -189,10 +202,24 @@ def test_learned_policy_errors(model_dir: Path, tmp_path: Path) -> None:
         load_policy(tmp_path / "x.zip", agentsim_env.make("navigation"))
 
 
-def test_agentsim_run_takes_a_trained_model(model_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+def test_agentsim_run_takes_a_trained_model(
+    model_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
     from agentsim_env.cli import main
 
-    rc = main(["run", "navigation", "--policy", str(model_dir), "--episodes", "2", "--quiet", "--out", str(tmp_path)])
+    rc = main(
+        [
+            "run",
+            "navigation",
+            "--policy",
+            str(model_dir),
+            "--episodes",
+            "2",
+            "--quiet",
+            "--out",
+            str(tmp_path),
+        ]
+    )
     assert rc == 0
     out = capsys.readouterr().out
     assert "policy=" in out and "arrived per agent" in out
@@ -207,8 +234,22 @@ def test_agentsim_train_end_to_end(tmp_path: Path, capsys: pytest.CaptureFixture
     from agentsim_env.recorder.read import open_store
 
     out, db = tmp_path / "run", tmp_path / "eval.db"
-    args = ["train", "navigation", "--timesteps", "1024", "--worlds", "2", "--out", str(out), "--quiet",
-            "--set", "eval.seeds=2", "checkpoint_every=512", "env.n_agents=2", "ppo.batch_size=128"]  # fmt: skip
+    args = [
+        "train",
+        "navigation",
+        "--timesteps",
+        "1024",
+        "--worlds",
+        "2",
+        "--out",
+        str(out),
+        "--quiet",
+        "--set",
+        "eval.seeds=2",
+        "checkpoint_every=512",
+        "env.n_agents=2",
+        "ppo.batch_size=128",
+    ]
     assert main(args + ["--record", str(db)]) == 0
     text = capsys.readouterr().out
     assert "| run | learned | 2 |" in text and "| go_to_goal | baseline | 2 |" in text, text
@@ -219,12 +260,30 @@ def test_agentsim_train_end_to_end(tmp_path: Path, capsys: pytest.CaptureFixture
         assert len(st.runs()) == 3  # the model and the two navigation baselines
     assert main(args) == 2  # the folder holds a run already
     assert "already holds a run" in capsys.readouterr().err
-    assert main(["train", "navigation", "--out", str(out), "--eval-only", "--quiet", "--set", "eval.seeds=1",
-                 "env.n_agents=2", "eval.baselines=go_to_goal"]) == 0  # fmt: skip
+    assert (
+        main(
+            [
+                "train",
+                "navigation",
+                "--out",
+                str(out),
+                "--eval-only",
+                "--quiet",
+                "--set",
+                "eval.seeds=1",
+                "env.n_agents=2",
+                "eval.baselines=go_to_goal",
+            ]
+        )
+        == 0
+    )
     assert "| go_to_goal | baseline | 1 |" in capsys.readouterr().out
     assert main(["train", "navigation", "--set", "ppo.gamma=2", "--out", str(tmp_path / "x")]) == 2
     assert "ppo.gamma" in capsys.readouterr().err and not (tmp_path / "x").exists()
-    assert main(["train", "navigation", "--record", str(tmp_path / "no" / "db"), "--out", str(tmp_path / "y")]) == 2
+    assert (
+        main(["train", "navigation", "--record", str(tmp_path / "no" / "db"), "--out", str(tmp_path / "y")])
+        == 2
+    )
     assert not (tmp_path / "y").exists()
 
 
@@ -237,7 +296,9 @@ sys.argv = ["train", "navigation", "--timesteps", "256", "--worlds", "1", "--out
             "--set", "ppo.n_steps=64", "ppo.batch_size=64"]
 runpy.run_module("agentsim_env.train", run_name="__main__", alter_sys=True)
 """
-    res = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    res = subprocess.run(
+        [sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True, timeout=300
+    )
     assert res.returncode == 0, res.stderr
     assert "navigation: 100%" in res.stderr and "256/256" in res.stderr and "return" in res.stderr, res.stderr
     assert (tmp_path / "run" / "model.zip").is_file() and (tmp_path / "run" / "curve.png").is_file()
@@ -249,8 +310,14 @@ def test_ppo_learns_navigation(tmp_path: Path) -> None:
     from agentsim_env.train.runner import train
 
     # a small budget with PPOConfig's defaults (the shipped config is tuned for 10M agent-steps)
-    cfg = load_config({"scenario": "navigation", "timesteps": 150_000, "worlds": 16,
-                       "eval": {"seeds": 10, "baselines": "random"}})  # fmt: skip
+    cfg = load_config(
+        {
+            "scenario": "navigation",
+            "timesteps": 150_000,
+            "worlds": 16,
+            "eval": {"seeds": 10, "baselines": "random"},
+        }
+    )
     res = train(cfg, tmp_path)
     learned, random_ = evaluate_policies(cfg, res.model)
     assert learned["mean_return"] > random_["mean_return"] + 10.0, (learned, random_)

@@ -27,8 +27,10 @@ def _fly(env, trigger, motion: float = 0.0, seed: int = 3, max_steps: int = 5000
     for _ in range(max_steps):
         if not env.agents:
             break
-        acts = {a: {"motion": np.full(3, motion), "release": np.array([trigger(obs[a]), 0.0, 0.0])}
-                for a in env.agents}  # fmt: skip
+        acts = {
+            a: {"motion": np.full(3, motion), "release": np.array([trigger(obs[a]), 0.0, 0.0])}
+            for a in env.agents
+        }
         obs, rew, *_ = env.step(acts)
         log.append((env.world.state.pos[: env.scenario.n_agents].copy(), dict(rew), env.world.task.wp.copy()))
     return log
@@ -45,9 +47,14 @@ def test_defaults_keep_the_old_mode() -> None:
 
 @pytest.mark.parametrize(
     "bad",
-    [{"autopilot": 1}, {"autopilot_speed": 0.0}, {"autopilot_altitude": 100.0}, {"autopilot_lane": 0.1},
-     {"release_cost": -1.0}],
-)  # fmt: skip
+    [
+        {"autopilot": 1},
+        {"autopilot_speed": 0.0},
+        {"autopilot_altitude": 100.0},
+        {"autopilot_lane": 0.1},
+        {"release_cost": -1.0},
+    ],
+)
 def test_autopilot_fields_are_validated(bad: dict) -> None:
     with pytest.raises(ValueError, match=next(iter(bad))):
         agentsim_env.make("uav_release", **TINY, **bad)

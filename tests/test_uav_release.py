@@ -23,7 +23,14 @@ def _idle(env, release=None):  # type: ignore[no-untyped-def]
 
 
 def _tiny(**kw):  # type: ignore[no-untyped-def]
-    cfg = {"zones": "tiny", "n_uavs": 2, "payload": 12, "wind": {"mean_speed": 0.0}, "scatter": {"sigma_gnss": 0.0, "sigma_timing": 0.0, "sigma_bounce": 0.0}, **kw}
+    cfg = {
+        "zones": "tiny",
+        "n_uavs": 2,
+        "payload": 12,
+        "wind": {"mean_speed": 0.0},
+        "scatter": {"sigma_gnss": 0.0, "sigma_timing": 0.0, "sigma_bounce": 0.0},
+        **kw,
+    }
     env = agentsim_env.make("uav_release", **cfg)
     env.reset(seed=0)
     return env

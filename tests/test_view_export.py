@@ -58,7 +58,7 @@ def test_bad_export_arguments_give_one_line(
         ["navigation", "--fps", "5"],
         ["navigation", "--every", "2"],
         ["--replay", "run.db", "--size", "320"],
-    ],  # fmt: skip
+    ],
 )
 def test_export_options_need_replay_and_out(capsys: pytest.CaptureFixture[str], argv: list[str]) -> None:
     assert main(["view", *argv]) == 2
@@ -121,8 +121,25 @@ def test_export_has_one_frame_per_chosen_step_and_shows_the_agents_moving(tmp_pa
     from agentsim_env.recorder.replay import replay_info
 
     db = tmp_path / "run.db"
-    assert main(["run", "navigation", "--episodes", "1", "--set", "n_agents=4", "map_size=60", "--record", str(db),
-                 "--out", "", "--quiet"]) == 0  # fmt: skip
+    assert (
+        main(
+            [
+                "run",
+                "navigation",
+                "--episodes",
+                "1",
+                "--set",
+                "n_agents=4",
+                "map_size=60",
+                "--record",
+                str(db),
+                "--out",
+                "",
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     expected = len(replay_info(db).frame_steps(10))
     out = tmp_path / "videos" / "nav.mp4"
     assert (

@@ -59,10 +59,11 @@ for command in json.loads(sys.argv[1]):
 print("COMPILED " + json.dumps(compiled))
 """
 
+
 def readme_quickstart() -> str:
     """The README's quickstart code, as a newcomer copies it (the first Python block of its Quickstart)."""
     text = (ROOT / "README.md").read_text(encoding="utf-8")
-    section = text[text.index("## Quickstart"):]
+    section = text[text.index("## Quickstart") :]
     start = section.index("```python\n") + len("```python\n")
     return section[start : section.index("```", start)]
 
@@ -76,50 +77,137 @@ def _commands(out: Path) -> list[list[str]]:
         # the README's command lines, at small sizes (a live window replaced by a batch run)
         ["run", "navigation", "--episodes", "2", *o],
         ["run", "navigation", "--episodes", "1", "--set", "comms={}", *o],
-        ["run", "navigation", "--set", "n_agents=32", "physics=pymunk", "collisions=false", "body.radius=0.8",
-         "--policy", "go_to_goal", "--episodes", "1", *o],
-        ["run", "navigation", "--policy", "random", "--set", "n_agents=8", "collisions=false", "body.max_speed=8",
-         "--episodes", "1", *o],
+        [
+            "run",
+            "navigation",
+            "--set",
+            "n_agents=32",
+            "physics=pymunk",
+            "collisions=false",
+            "body.radius=0.8",
+            "--policy",
+            "go_to_goal",
+            "--episodes",
+            "1",
+            *o,
+        ],
+        [
+            "run",
+            "navigation",
+            "--policy",
+            "random",
+            "--set",
+            "n_agents=8",
+            "collisions=false",
+            "body.max_speed=8",
+            "--episodes",
+            "1",
+            *o,
+        ],
         ["run", "navigation", "--threads", "2", "--set", "n_agents=64", "--episodes", "1", *o],
         ["run", "relay", "--episodes", "3", *o],
         ["run", "relay", "--set", "gap=12,20", "comms.loss=0.1", "--episodes", "1", *o],
         ["run", "uav_release", "--set", *tiny_uav, "--episodes", "1", *o],
-        ["evaluate", "--zones", "tiny", "--strategies", "all", "--seeds", "1", "--no-plots", "--quiet",
-         "--out", str(out / "evaluation")],
+        [
+            "evaluate",
+            "--zones",
+            "tiny",
+            "--strategies",
+            "all",
+            "--seeds",
+            "1",
+            "--no-plots",
+            "--quiet",
+            "--out",
+            str(out / "evaluation"),
+        ],
         ["run", "navigation", "--episodes", "1", "--record", str(out / "run.db"), *o],
-        ["replay", str(out / "run.db"), "--episode", "0", "--every", "100", "--out", str(out / "frames") + "/"],
+        [
+            "replay",
+            str(out / "run.db"),
+            "--episode",
+            "0",
+            "--every",
+            "100",
+            "--out",
+            str(out / "frames") + "/",
+        ],
         ["python", readme_quickstart()],
     ]
     for scenario, baselines in BASELINES.items():  # every scenario x every baseline
         sets = ["--set", *tiny_uav] if scenario == "uav_release" else []
         commands += [["run", scenario, "--policy", b, "--episodes", "1", *sets, *o] for b in baselines]
     for scenario in ("navigation", "relay"):  # training's vector env, then its quick evaluation
-        commands.append(["train", scenario, "--timesteps", "256", "--worlds", "2", "--quiet", "--set",
-                         "eval.seeds=1", "--out", str(out / "train" / scenario)])  # fmt: skip
-    commands.append(["train", "uav_release", "--timesteps", "256", "--worlds", "2", "--quiet", "--no-eval",
-                     "--set", *[f"env.{s}" for s in tiny_uav], "--out", str(out / "train" / "uav_release")])  # fmt: skip
+        commands.append(
+            [
+                "train",
+                scenario,
+                "--timesteps",
+                "256",
+                "--worlds",
+                "2",
+                "--quiet",
+                "--set",
+                "eval.seeds=1",
+                "--out",
+                str(out / "train" / scenario),
+            ]
+        )
+    commands.append(
+        [
+            "train",
+            "uav_release",
+            "--timesteps",
+            "256",
+            "--worlds",
+            "2",
+            "--quiet",
+            "--no-eval",
+            "--set",
+            *[f"env.{s}" for s in tiny_uav],
+            "--out",
+            str(out / "train" / "uav_release"),
+        ]
+    )
     return commands
 
 
 def _env(cache: Path) -> dict[str, str]:
     env = {k: v for k, v in os.environ.items() if k != "AGENTSIM_QUIET_COMPILE"}
     env["PYTHONPATH"] = str(ROOT) + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
-    env |= {"NUMBA_CACHE_DIR": str(cache), "NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1",
-            "SDL_VIDEODRIVER": "dummy", "MPLBACKEND": "Agg"}  # fmt: skip
+    env |= {
+        "NUMBA_CACHE_DIR": str(cache),
+        "NUMBA_NUM_THREADS": "1",
+        "OMP_NUM_THREADS": "1",
+        "SDL_VIDEODRIVER": "dummy",
+        "MPLBACKEND": "Agg",
+    }
     return env
 
 
 @pytest.mark.slow
 def test_after_warmup_no_shipped_command_compiles_a_kernel(tmp_path: Path) -> None:
     env = _env(tmp_path / "numba-cache")
-    warm = subprocess.run([sys.executable, "-m", "agentsim_env.cli", "warmup", "--quiet"], cwd=ROOT, env=env,
-                          capture_output=True, text=True, timeout=600)  # fmt: skip
+    warm = subprocess.run(
+        [sys.executable, "-m", "agentsim_env.cli", "warmup", "--quiet"],
+        cwd=ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     assert warm.returncode == 0, warm.stderr[-3000:]
-    res = subprocess.run([sys.executable, "-c", DRIVER, json.dumps(_commands(tmp_path))], cwd=tmp_path, env=env,
-                         capture_output=True, text=True, timeout=900)  # fmt: skip
+    res = subprocess.run(
+        [sys.executable, "-c", DRIVER, json.dumps(_commands(tmp_path))],
+        cwd=tmp_path,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=900,
+    )
     assert res.returncode == 0, res.stderr[-3000:]
     line = next(x for x in res.stdout.splitlines() if x.startswith("COMPILED "))
-    compiled = json.loads(line[len("COMPILED "):])
+    compiled = json.loads(line[len("COMPILED ") :])
     assert compiled == {}, "compiled after 'agentsim warmup':\n" + json.dumps(compiled, indent=1)[:6000]
     assert "compiling simulation kernels" not in res.stderr
     if importlib.util.find_spec("ray") is None:
@@ -127,12 +215,32 @@ def test_after_warmup_no_shipped_command_compiles_a_kernel(tmp_path: Path) -> No
     # shards on Ray compile in the worker processes, out of the listener's sight: a kernel compiled there adds a
     # signature to the cache's index files
     before = _cache_index(tmp_path / "numba-cache")
-    ray = subprocess.run([sys.executable, "-m", "agentsim_env.cli", "run", "relay", "--shards", "2", "--episodes", "1",
-                          "--quiet", "--out", str(tmp_path / "ray")], cwd=tmp_path, env=env, capture_output=True,
-                         text=True, timeout=600)  # fmt: skip
+    ray = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "agentsim_env.cli",
+            "run",
+            "relay",
+            "--shards",
+            "2",
+            "--episodes",
+            "1",
+            "--quiet",
+            "--out",
+            str(tmp_path / "ray"),
+        ],
+        cwd=tmp_path,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     assert ray.returncode == 0, ray.stderr[-3000:]
     after = _cache_index(tmp_path / "numba-cache")
-    assert after == before, f"compiled by the Ray shards: {sorted(k for k in after if after[k] != before.get(k))}"
+    assert after == before, (
+        f"compiled by the Ray shards: {sorted(k for k in after if after[k] != before.get(k))}"
+    )
 
 
 def _cache_index(cache: Path) -> dict[str, bytes]:
@@ -152,15 +260,42 @@ def test_the_inbox_push_kernel_has_one_signature_whatever_producers_hand_it() ->
     frozen = ids.copy()
     frozen.flags.writeable = False
     forms = [
-        (ids, np.ones(3, dtype=np.int8), ids, np.broadcast_to(np.zeros(1, dtype=np.int16), (3,)), ids,
-         np.zeros((3, 2), dtype=np.float32), ids[:0]),
-        (ids[:1], np.broadcast_to(np.ones(1, dtype=np.int8), (1,)), ids[:1], np.zeros(1, dtype=np.int32), ids[:1],
-         np.zeros((1, 2), dtype=np.float32), ids[:0]),
-        (frozen, np.ones(3, dtype=np.int8), frozen, frozen, frozen, np.zeros((3, 2), dtype=np.float64), frozen[:0]),
-    ]  # fmt: skip
+        (
+            ids,
+            np.ones(3, dtype=np.int8),
+            ids,
+            np.broadcast_to(np.zeros(1, dtype=np.int16), (3,)),
+            ids,
+            np.zeros((3, 2), dtype=np.float32),
+            ids[:0],
+        ),
+        (
+            ids[:1],
+            np.broadcast_to(np.ones(1, dtype=np.int8), (1,)),
+            ids[:1],
+            np.zeros(1, dtype=np.int32),
+            ids[:1],
+            np.zeros((1, 2), dtype=np.float32),
+            ids[:0],
+        ),
+        (
+            frozen,
+            np.ones(3, dtype=np.int8),
+            frozen,
+            frozen,
+            frozen,
+            np.zeros((3, 2), dtype=np.float64),
+            frozen[:0],
+        ),
+    ]
     for a in forms:
         for b in forms:
             inbox.push_batches([a, b])
         inbox.push_batches([a])
     assert len(_push_kernel.signatures) == 1, _push_kernel.signatures
-    assert inbox.received.tolist() == [21, 14, 14, 0]  # 21 batches reach slot 0, the 14 of three messages 1 and 2
+    assert inbox.received.tolist() == [
+        21,
+        14,
+        14,
+        0,
+    ]  # 21 batches reach slot 0, the 14 of three messages 1 and 2

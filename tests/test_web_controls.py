@@ -26,12 +26,14 @@ from tests.web_client import talk  # noqa: E402
 BAD_SPEEDS = [5e-324, 1e-6, MIN_SPEED / 2, -1, MAX_SPEED * 1.01, float("inf"), float("nan"), True, "5", None]
 
 
-
 @pytest.mark.parametrize("value", BAD_SPEEDS, ids=repr)
 def test_a_speed_outside_the_documented_range_is_refused(value: Any) -> None:
     c = Controls(5.0)
-    with pytest.raises(ClientError, match=rf"speed: 'value' must be 0 .* or a number of steps per second in "
-                                          rf"{MIN_SPEED:g}\.\.{MAX_SPEED:g}"):  # fmt: skip
+    with pytest.raises(
+        ClientError,
+        match=rf"speed: 'value' must be 0 .* or a number of steps per second in "
+        rf"{MIN_SPEED:g}\.\.{MAX_SPEED:g}",
+    ):
         c._speed({"cmd": "speed", "value": value})
     assert c.speed == 5.0  # unchanged
     c.pace()  # and pacing goes on at the old speed
@@ -121,8 +123,24 @@ def test_render_mode_web_steps_on_whatever_speed_a_page_sends() -> None:
 def recorded(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A store with one short navigation episode."""
     db = tmp_path_factory.mktemp("replay") / "r.db"
-    assert main(["run", "navigation", "--episodes", "1", "--set", "n_agents=3", "--record", str(db), "--out", "",
-                 "--quiet"]) == 0  # fmt: skip
+    assert (
+        main(
+            [
+                "run",
+                "navigation",
+                "--episodes",
+                "1",
+                "--set",
+                "n_agents=3",
+                "--record",
+                str(db),
+                "--out",
+                "",
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     return db
 
 
@@ -146,8 +164,12 @@ def test_replay_playback_survives_any_speed_and_wakes_for_a_new_one(recorded: Pa
 
 
 @pytest.mark.parametrize("speed", ["0.01", "1e-300", "20000", "nan"])
-def test_view_refuses_a_speed_outside_the_range_in_one_line(speed: str, capsys: pytest.CaptureFixture[str]) -> None:
+def test_view_refuses_a_speed_outside_the_range_in_one_line(
+    speed: str, capsys: pytest.CaptureFixture[str]
+) -> None:
     assert main(["view", "navigation", "--set", "n_agents=2", "--steps", "1", "--speed", speed]) == 2
     err = capsys.readouterr().err
-    assert err.startswith("agentsim: error: --speed must be 0") and f"{MIN_SPEED:g}..{MAX_SPEED:g}" in err, err
+    assert err.startswith("agentsim: error: --speed must be 0") and f"{MIN_SPEED:g}..{MAX_SPEED:g}" in err, (
+        err
+    )
     assert err.count("\n") == 1

@@ -295,8 +295,12 @@ def test_run_designer_refuses_an_invalid_file(tmp_path: Path) -> None:
 # ------------------------------------------------------------------------------------------ browser
 def serve(path: Path | None) -> WebServer:
     """A started designer server for ``path``."""
-    srv = WebServer(page="designer.html", title="Hot-zone designer", handlers=designer_handlers(path),
-                    on_connect=lambda: designer_hello(path))  # fmt: skip
+    srv = WebServer(
+        page="designer.html",
+        title="Hot-zone designer",
+        handlers=designer_handlers(path),
+        on_connect=lambda: designer_hello(path),
+    )
     srv.start()
     return srv
 

@@ -21,14 +21,19 @@ from agentsim_env.render.web.server import ClientError  # noqa: E402
 from agentsim_env.scenarios.uav_zones import load_zones, zones_from_dict  # noqa: E402
 
 NOBODY = 65534
-ZONES = {"version": 1, "map_size": [600, 400], "zones": [{"name": "z", "centre": [300, 200], "radius": 80,
-                                                          "n_sensors": 100}]}  # fmt: skip
+ZONES = {
+    "version": 1,
+    "map_size": [600, 400],
+    "zones": [{"name": "z", "centre": [300, 200], "radius": 80, "n_sensors": 100}],
+}
 OLD = '{"map_size": [100, 100], "zones": [{"centre": [50, 50], "radius": 10, "n_sensors": 1}]}\n'
 
 
 def save(path: Path) -> dict[str, Any]:
     """The Save handler's reply for ``ZONES`` written to ``path``."""
-    reply = designer_handlers(path)["zones.save"]({"cmd": "zones.save", "zones": json.loads(json.dumps(ZONES))})
+    reply = designer_handlers(path)["zones.save"](
+        {"cmd": "zones.save", "zones": json.loads(json.dumps(ZONES))}
+    )
     assert reply is not None
     return reply
 
@@ -189,7 +194,6 @@ def test_a_file_the_user_may_not_write_is_refused(shared_folder: Path) -> None:
     assert only(shared_folder) == ["zones.json"]
 
 
-
 @pytest.mark.skipif(not hasattr(os, "geteuid") or os.geteuid() != 0, reason="runs the save as another user")
 def test_a_file_whose_owner_a_replacement_cannot_keep_is_refused(shared_folder: Path) -> None:
     path = shared_folder / "zones.json"
@@ -201,4 +205,6 @@ def test_a_file_whose_owner_a_replacement_cannot_keep_is_refused(shared_folder: 
     assert only(shared_folder) == ["zones.json"]
     os.chown(path, NOBODY, NOBODY)  # nobody's own file: saved, still nobody's and 0666
     assert _save_as_nobody(path).startswith("saved ")
-    assert os.stat(path).st_uid == NOBODY and mode(path) == 0o666 and load_zones(path) == zones_from_dict(ZONES)
+    assert (
+        os.stat(path).st_uid == NOBODY and mode(path) == 0o666 and load_zones(path) == zones_from_dict(ZONES)
+    )

@@ -10,8 +10,22 @@ import pytest
 
 STATIC = Path(__file__).resolve().parents[1] / "agentsim_env" / "render" / "web" / "static"
 PAGE_FILES = ["viewer.html", "viewer.js", "scene3d.js", "protocol.js", "viewer.css"]
-IDS = ["canvas", "log", "log-pause", "sim-pause", "sim-step", "speed", "status", "agent-panel", "error-banner",
-       "replay-bar", "replay-slider", "replay-play", "replay-step", "filters"]  # fmt: skip
+IDS = [
+    "canvas",
+    "log",
+    "log-pause",
+    "sim-pause",
+    "sim-step",
+    "speed",
+    "status",
+    "agent-panel",
+    "error-banner",
+    "replay-bar",
+    "replay-slider",
+    "replay-play",
+    "replay-step",
+    "filters",
+]
 HOOKS = ["ready", "framesDrawn", "lastStep", "lastSeq", "episode", "logLines", "project", "send", "selected"]
 
 

@@ -38,12 +38,15 @@ def _get(url: str) -> tuple[int, bytes]:
         return exc.code, b""
 
 
-
 @given(n=st.integers(0, 50), m=st.integers(0, 7), seq=st.integers(0, 10**9), step=st.integers(0, 10**6))
 def test_frame_round_trip_keeps_every_array_aligned(n: int, m: int, seq: int, step: int) -> None:
     rng = np.random.default_rng(n + m)
-    arrays = {"pos": rng.normal(size=(n, 3)).astype(np.float32), "group": rng.integers(-1, 5, n).astype(np.int16),
-              "online": rng.integers(0, 2, n).astype(np.uint8), "msg": rng.integers(-1, n + 1, (m, 2)).astype(np.int32)}  # fmt: skip
+    arrays = {
+        "pos": rng.normal(size=(n, 3)).astype(np.float32),
+        "group": rng.integers(-1, 5, n).astype(np.int16),
+        "online": rng.integers(0, 2, n).astype(np.uint8),
+        "msg": rng.integers(-1, n + 1, (m, 2)).astype(np.int32),
+    }
     frame = pack_frame(seq, step, 3, arrays)
     header, back = unpack_frame(frame)
     assert (header["seq"], header["step"], header["episode"]) == (seq, step, 3)
@@ -87,9 +90,19 @@ def test_static_files_only_by_exact_name(tmp_path: Any) -> None:
         assert status == 200 and b"<html" in body.lower()
         for path in static_files():
             assert _get(url.rstrip("/") + path)[0] == 200, path
-        for bad in ["/static/../server.py", "/static/%2e%2e/server.py", "/static/..%2fserver.py", "/../pyproject.toml",
-                    "/etc/passwd", "/static/vendor/../../frames.py", "/static//etc/passwd", "/static/", "/favicon.ico",
-                    "/static/%2Fetc%2Fpasswd", "//etc/passwd"]:  # fmt: skip
+        for bad in [
+            "/static/../server.py",
+            "/static/%2e%2e/server.py",
+            "/static/..%2fserver.py",
+            "/../pyproject.toml",
+            "/etc/passwd",
+            "/static/vendor/../../frames.py",
+            "/static//etc/passwd",
+            "/static/",
+            "/favicon.ico",
+            "/static/%2Fetc%2Fpasswd",
+            "//etc/passwd",
+        ]:
             assert _get(url.rstrip("/") + bad)[0] == 404, bad
     finally:
         srv.stop()
@@ -101,6 +114,7 @@ def test_a_page_from_another_origin_cannot_connect() -> None:
     srv = WebServer("viewer.html")
     url = srv.start()
     try:
+
         async def attempt(origin: str) -> None:
             async with connect(url.replace("http", "ws") + "ws", origin=origin):  # type: ignore[arg-type]
                 pass
@@ -114,12 +128,22 @@ def test_a_page_from_another_origin_cannot_connect() -> None:
 
 
 def test_bad_messages_get_an_error_and_the_server_goes_on() -> None:
-    srv = WebServer("viewer.html", handlers={"echo": lambda m: {"type": "echo", "x": m.get("x")},
-                                             "boom": lambda m: 1 / 0})  # fmt: skip
+    srv = WebServer(
+        "viewer.html", handlers={"echo": lambda m: {"type": "echo", "x": m.get("x")}, "boom": lambda m: 1 / 0}
+    )
     url = srv.start()
     try:
-        bad = ["not json", "[1, 2]", "3", json.dumps({"cmd": 5}), json.dumps({"cmd": "nope"}), b"\x00\x01",
-               json.dumps({"cmd": "ack", "seq": "x"}), json.dumps({"cmd": "boom"}), json.dumps({"cmd": "echo", "x": 7})]  # fmt: skip
+        bad = [
+            "not json",
+            "[1, 2]",
+            "3",
+            json.dumps({"cmd": 5}),
+            json.dumps({"cmd": "nope"}),
+            b"\x00\x01",
+            json.dumps({"cmd": "ack", "seq": "x"}),
+            json.dumps({"cmd": "boom"}),
+            json.dumps({"cmd": "echo", "x": 7}),
+        ]
         texts, _ = talk(url, bad, seconds=0.8)
         errors = [t["message"] for t in texts if t["type"] == "error"]
         assert len(errors) == 8, errors
@@ -140,7 +164,9 @@ def test_every_log_line_reaches_the_page_once_in_order() -> None:
         while srv.n_pages == 0:
             time.sleep(0.01)
         for k in range(300):
-            srv.publish_log([{"step": k, "kind": "message", "text": f"line {k}.{j}", "slots": []} for j in range(3)])
+            srv.publish_log(
+                [{"step": k, "kind": "message", "text": f"line {k}.{j}", "slots": []} for j in range(3)]
+            )
         t.join()
     finally:
         srv.stop()
@@ -200,8 +226,11 @@ def test_render_mode_web_streams_steps_and_obeys_pause_and_step() -> None:
         assert env.world.tick == s0  # paused: the env waits in its step hook
         talk(url, [{"cmd": "step"}, {"cmd": "step"}], seconds=0.5)
         assert env.world.tick == s0 + 2
-        texts, _ = talk(url, [{"cmd": "speed", "value": -1}, {"cmd": "select", "slot": 99}, {"cmd": "resume"}],
-                         seconds=0.4)  # fmt: skip
+        texts, _ = talk(
+            url,
+            [{"cmd": "speed", "value": -1}, {"cmd": "select", "slot": 99}, {"cmd": "resume"}],
+            seconds=0.4,
+        )
         errors = [t["message"] for t in texts if t["type"] == "error"]
         assert any("speed" in e and "0.1..10000" in e for e in errors) and any("0..3" in e for e in errors)
         time.sleep(0.2)
@@ -260,13 +289,30 @@ def test_replay_serves_the_recorded_positions(tmp_path: Any) -> None:
     from agentsim_env.recorder.web_replay import ReplayViewer
 
     db = tmp_path / "r.db"
-    assert main(["run", "navigation", "--episodes", "1", "--set", "n_agents=3", "--record", str(db), "--out", "",
-                 "--quiet"]) == 0  # fmt: skip
+    assert (
+        main(
+            [
+                "run",
+                "navigation",
+                "--episodes",
+                "1",
+                "--set",
+                "n_agents=3",
+                "--record",
+                str(db),
+                "--out",
+                "",
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     v = ReplayViewer(db, episode=0, quiet=True)
     url = v.start()
     try:
-        texts, frames = talk(url, [{"cmd": "pause"}, {"cmd": "seek", "step": 5}, {"cmd": "seek", "step": 10**6}],
-                              seconds=0.8)  # fmt: skip
+        texts, frames = talk(
+            url, [{"cmd": "pause"}, {"cmd": "seek", "step": 5}, {"cmd": "seek", "step": 10**6}], seconds=0.8
+        )
         _, stepped = talk(url, [{"cmd": "step"}], seconds=0.5)  # paused at 5: one step shows 6, no more
         _, played = talk(url, [{"cmd": "play"}], seconds=0.5)
     finally:
@@ -274,14 +320,18 @@ def test_replay_serves_the_recorded_positions(tmp_path: Any) -> None:
     assert unpack_frame(stepped[-1])[0]["step"] == 6
     assert unpack_frame(played[-1])[0]["step"] > 6
     scene = next(t for t in texts if t["type"] == "scene")
-    assert scene["mode"] == "replay" and scene["replay"]["first_step"] == 0 and len(scene["objects"]["kind"]) > 0
+    assert (
+        scene["mode"] == "replay" and scene["replay"]["first_step"] == 0 and len(scene["objects"]["kind"]) > 0
+    )
     errors = [t["message"] for t in texts if t["type"] == "error"]
     assert len(errors) == 1 and "seek: 'step' must be an integer in 0.." in errors[0]
     header, arrays = unpack_frame(frames[-1])
     assert header["step"] == 5
     steps = open_store(db).table("steps")
     rows = steps[(steps.step == 5)].sort_values("agent")
-    np.testing.assert_allclose(arrays["pos"][rows.agent.to_numpy()], rows[["x", "y", "z"]].to_numpy(), atol=1e-4)
+    np.testing.assert_allclose(
+        arrays["pos"][rows.agent.to_numpy()], rows[["x", "y", "z"]].to_numpy(), atol=1e-4
+    )
     # the rebuilt static scene is the recorded episode's (same seed)
     env = agentsim_env.make("navigation", n_agents=3)
     env.reset(seed=0)
@@ -317,7 +367,9 @@ def test_zones_check_lists_the_zones(capsys: Any) -> None:
 
 
 def test_view_runs_a_few_steps_and_stops(capsys: Any) -> None:
-    assert main(["view", "navigation", "--set", "n_agents=3", "--steps", "15", "--speed", "0", "--no-wait"]) == 0
+    assert (
+        main(["view", "navigation", "--set", "n_agents=3", "--steps", "15", "--speed", "0", "--no-wait"]) == 0
+    )
     assert "http://127.0.0.1:" in capsys.readouterr().err
 
 

@@ -53,8 +53,10 @@ def _status(response: bytes) -> int:
 
 def _upgrade(path: str = "/ws", extra: str = "") -> bytes:
     key = base64.b64encode(os.urandom(16)).decode()
-    return (f"GET {path} HTTP/1.1\r\nHost: 127.0.0.1\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
-            f"Sec-WebSocket-Key: {key}\r\nSec-WebSocket-Version: 13\r\n{extra}\r\n").encode()  # fmt: skip
+    return (
+        f"GET {path} HTTP/1.1\r\nHost: 127.0.0.1\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+        f"Sec-WebSocket-Key: {key}\r\nSec-WebSocket-Version: 13\r\n{extra}\r\n"
+    ).encode()
 
 
 def _loop_tasks(s: WebServer) -> int:
@@ -81,8 +83,9 @@ def _deaf_page(port: int) -> socket.socket:
     return s
 
 
-def test_a_page_that_never_reads_holds_one_send_and_is_dropped(srv: WebServer,
-                                                                monkeypatch: pytest.MonkeyPatch) -> None:  # fmt: skip
+def test_a_page_that_never_reads_holds_one_send_and_is_dropped(
+    srv: WebServer, monkeypatch: pytest.MonkeyPatch
+) -> None:
     monkeypatch.setattr(server, "SEND_TIMEOUT_S", 1.0)
     deaf = _deaf_page(srv.port)
     try:
@@ -106,7 +109,9 @@ def test_a_page_that_never_reads_holds_one_send_and_is_dropped(srv: WebServer,
                 buffered.append(conn.transport.get_write_buffer_size())
         assert i > 50 and tasks, i
         assert max(tasks) <= base + 2, tasks  # nothing piles up per broadcast
-        assert max(buffered) < 1_000_000, buffered  # at most one message waits beyond the socket's own buffers
+        assert max(buffered) < 1_000_000, (
+            buffered
+        )  # at most one message waits beyond the socket's own buffers
         assert srv.n_pages == 0, "a page that stayed unwritable was not dropped"
         assert time.monotonic() - t0 < 5
     finally:
@@ -176,7 +181,9 @@ def quiet_terminal(caplog: pytest.LogCaptureFixture, capfd: pytest.CaptureFixtur
 
 
 @pytest.mark.parametrize("method", ["POST", "PUT", "DELETE", "OPTIONS", "PATCH", "TRACE", "CONNECT", "BREW"])
-def test_methods_other_than_get_and_head_are_refused(srv: WebServer, method: str, quiet_terminal: None) -> None:
+def test_methods_other_than_get_and_head_are_refused(
+    srv: WebServer, method: str, quiet_terminal: None
+) -> None:
     for path in ("/", "/static/viewer.js", "/ws", "/nope"):
         r = _exchange(srv.port, f"{method} {path} HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n".encode())
         assert _status(r) == 405, (method, path, r[:120])
@@ -233,8 +240,12 @@ def test_two_origin_headers_get_a_400(srv: WebServer, quiet_terminal: None) -> N
 
 
 def test_the_server_still_serves_after_all_that(srv: WebServer, quiet_terminal: None) -> None:
-    for bad in (b"DELETE / HTTP/1.1\r\n\r\n", b"GET / HTTP/1.1\r\nContent-Length: 9\r\n\r\n",
-                b"GET / HTTP/1.1\r\n\r\nGET / HTTP/1.1\r\n\r\n", _upgrade(extra="Origin: a\r\nOrigin: b\r\n")):  # fmt: skip
+    for bad in (
+        b"DELETE / HTTP/1.1\r\n\r\n",
+        b"GET / HTTP/1.1\r\nContent-Length: 9\r\n\r\n",
+        b"GET / HTTP/1.1\r\n\r\nGET / HTTP/1.1\r\n\r\n",
+        _upgrade(extra="Origin: a\r\nOrigin: b\r\n"),
+    ):
         _exchange(srv.port, bad)
     r = _exchange(srv.port, b"GET /static/viewer.js HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n")
     assert _status(r) == 200 and b"Connection: close" in r

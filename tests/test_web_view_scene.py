@@ -58,7 +58,9 @@ def test_uav_release_scene_marks_its_zones_with_density_profiles() -> None:
 
 def test_frames_asks_the_scenario_and_never_checks_its_type() -> None:
     tree = ast.parse(inspect.getsource(frames))
-    calls = [n for n in ast.walk(tree) if isinstance(n, ast.Call) and getattr(n.func, "id", "") == "isinstance"]
+    calls = [
+        n for n in ast.walk(tree) if isinstance(n, ast.Call) and getattr(n.func, "id", "") == "isinstance"
+    ]
     imports = [n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)]
     assert not calls, "frames.py checks types"
     assert not any("scenarios" in (m or "") for m in imports), imports
@@ -114,7 +116,9 @@ def test_overlay_hop_summaries_are_their_own_log_kind_hidden_by_default() -> Non
         obs, *_ = env.step(pol.act({a: obs[a] for a in env.agents}))
         lines += log_lines(env.world, env.scenario, env.world.last_events, 0, 0)
     overlay = [ln for ln in lines if ln["text"].startswith("OVERLAY:")]
-    assert overlay and {ln["kind"] for ln in overlay} == {"overlay"}  # one summary a step, not a plain message
+    assert overlay and {ln["kind"] for ln in overlay} == {
+        "overlay"
+    }  # one summary a step, not a plain message
     assert "overlay" in frames.LOG_HIDDEN
 
 
@@ -190,8 +194,10 @@ def test_replay_keeps_one_status_per_agent_and_its_replies_carry_steps_per_secon
     from agentsim_env.recorder import record
     from agentsim_env.recorder.web_replay import ReplayViewer
 
-    env = record(agentsim_env.make("navigation", n_agents=3, max_steps=4, map_size=60.0, obstacle_density=0.0),
-                 tmp_path / "r.db")  # fmt: skip
+    env = record(
+        agentsim_env.make("navigation", n_agents=3, max_steps=4, map_size=60.0, obstacle_density=0.0),
+        tmp_path / "r.db",
+    )
     env.reset(seed=0)
     st = env.unwrapped.world.state if hasattr(env, "unwrapped") else env.world.state
     st.pos[1] = st.pos[0] + np.array([0.1, 0.0, 0.0])  # 0 and 1 collide at the first step
@@ -214,8 +220,9 @@ def test_replay_keeps_one_status_per_agent_and_its_replies_carry_steps_per_secon
 
 
 @pytest.mark.parametrize(("flags", "waits"), [([], True), (["--no-wait"], False)])
-def test_agentsim_view_waits_for_a_page_unless_no_wait(monkeypatch: pytest.MonkeyPatch, flags: list[str],
-                                                       waits: bool) -> None:  # fmt: skip
+def test_agentsim_view_waits_for_a_page_unless_no_wait(
+    monkeypatch: pytest.MonkeyPatch, flags: list[str], waits: bool
+) -> None:
     from agentsim_env.cli import main
 
     calls: list[int] = []

@@ -74,8 +74,10 @@ def test_page_draws_agents_and_obstacles_where_they_are_with_no_console_errors()
             full = _image(page)
             st, sc = env.world.state, env.world.scene
             agents = [_project(page, st.pos[i]) for i in range(6)]
-            objects = [_project(page, np.r_[sc.centre[o, :2], sc.centre[o, 2] + sc.half[o, 2]])
-                       for o in range(sc.n_objects)]  # fmt: skip
+            objects = [
+                _project(page, np.r_[sc.centre[o, :2], sc.centre[o, 2] + sc.half[o, 2]])
+                for o in range(sc.n_objects)
+            ]
             # the empty scene: the same map, no objects, the agents moved far off the map
             env.world.scene = Scene()
             st.pos[:6] = [1e4, 1e4, 1.0]
@@ -93,8 +95,11 @@ def test_page_draws_agents_and_obstacles_where_they_are_with_no_console_errors()
     assert len(objects) >= 3
     assert sum(_differs(full, empty, xy) for xy in objects) >= len(objects) - 1  # one may hide under an agent
     # the ground far from every agent and object looks the same in both
-    far = [(x, y) for x, y in [(w * 0.02, h * 0.5), (w * 0.5, h * 0.98)]
-           if min(np.hypot(x - a, y - b) for a, b in agents + objects) > 30]  # fmt: skip
+    far = [
+        (x, y)
+        for x, y in [(w * 0.02, h * 0.5), (w * 0.5, h * 0.98)]
+        if min(np.hypot(x - a, y - b) for a, b in agents + objects) > 30
+    ]
     assert all(not _differs(full, empty, xy) for xy in far)
 
 
@@ -108,7 +113,9 @@ def test_log_stream_shows_the_collision_and_its_pause_holds_lines_while_steps_go
             st.pos[1] = st.pos[0] + np.array([0.1, 0.0, 0.0])  # agents 0 and 1 overlap: a collision this step
             _, _, term, _, infos = env.step({a: acts[a] for a in env.agents})
             assert env.world.last_events.collisions.agent.size > 0  # the env reported it
-            page.wait_for_function("window.agentsim.logLines().some(l => l.includes('collided'))", timeout=15000)
+            page.wait_for_function(
+                "window.agentsim.logLines().some(l => l.includes('collided'))", timeout=15000
+            )
             line = next(ln for ln in page.evaluate("window.agentsim.logLines()") if "collided" in ln)
             assert "agent_0" in line and "agent_1" in line
             page.click("#log-pause")
@@ -120,11 +127,17 @@ def test_log_stream_shows_the_collision_and_its_pause_holds_lines_while_steps_go
                 st.pos[3] = st.pos[2]
                 for _ in range(5):
                     env.step({a: acts[a] for a in env.agents})
-            page.wait_for_function("window.agentsim.episode > 0 && window.agentsim.lastStep >= 1 && "
-                                   "window.agentsim.framesDrawn > 2", timeout=15000)  # fmt: skip
+            page.wait_for_function(
+                "window.agentsim.episode > 0 && window.agentsim.lastStep >= 1 && "
+                "window.agentsim.framesDrawn > 2",
+                timeout=15000,
+            )
             time.sleep(0.5)
             assert page.evaluate("window.agentsim.logLines().length") == held  # paused: no new lines
-            assert page.evaluate("window.agentsim.episode") == 4 or page.evaluate("window.agentsim.lastStep") != step0
+            assert (
+                page.evaluate("window.agentsim.episode") == 4
+                or page.evaluate("window.agentsim.lastStep") != step0
+            )
             page.click("#log-pause")  # resume: the held lines appear
             page.wait_for_function(f"window.agentsim.logLines().length > {held}", timeout=10000)
             assert not errors, errors
@@ -141,8 +154,9 @@ def test_clicking_an_agent_shows_its_state() -> None:
             x, y = _project(page, env.world.state.pos[2])
             page.mouse.click(x, y)
             page.wait_for_function("window.agentsim.selected === 2", timeout=10000)
-            page.wait_for_function("document.querySelector('#agent-panel').textContent.includes('agent_2')",
-                                   timeout=10000)  # fmt: skip
+            page.wait_for_function(
+                "document.querySelector('#agent-panel').textContent.includes('agent_2')", timeout=10000
+            )
             assert not errors, errors
     finally:
         viewer.close()
@@ -154,8 +168,25 @@ def test_replay_shows_the_recorded_positions_at_the_chosen_step(tmp_path: Path) 
     from agentsim_env.recorder.web_replay import ReplayViewer
 
     db = tmp_path / "run.db"
-    assert main(["run", "navigation", "--episodes", "1", "--set", "n_agents=4", "map_size=60", "--record", str(db),
-                 "--out", "", "--quiet"]) == 0  # fmt: skip
+    assert (
+        main(
+            [
+                "run",
+                "navigation",
+                "--episodes",
+                "1",
+                "--set",
+                "n_agents=4",
+                "map_size=60",
+                "--record",
+                str(db),
+                "--out",
+                "",
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     steps = open_store(db).table("steps")
     viewer = ReplayViewer(db, episode=0, quiet=True)
     url = viewer.start()
@@ -169,7 +200,9 @@ def test_replay_shows_the_recorded_positions_at_the_chosen_step(tmp_path: Path) 
                 _wait_step(page, k)
                 shots[k] = _image(page)
             assert not errors, errors
-            pos = {k: steps[steps.step == k].sort_values("agent")[["x", "y", "z"]].to_numpy() for k in (0, 30)}
+            pos = {
+                k: steps[steps.step == k].sort_values("agent")[["x", "y", "z"]].to_numpy() for k in (0, 30)
+            }
             px = {k: [_project(page, p) for p in pos[k]] for k in (0, 30)}
     finally:
         viewer.close()
@@ -185,8 +218,19 @@ def test_agentsim_view_shows_uavs_releasing_sensors(tmp_path: Path) -> None:
     import subprocess
     import sys
 
-    cmd = [sys.executable, "-m", "agentsim_env.cli", "view", "uav_release", "--policy", "B5_cvt", "--set",
-           "zones=tiny", "--speed", "100"]  # fmt: skip
+    cmd = [
+        sys.executable,
+        "-m",
+        "agentsim_env.cli",
+        "view",
+        "uav_release",
+        "--policy",
+        "B5_cvt",
+        "--set",
+        "zones=tiny",
+        "--speed",
+        "100",
+    ]
     proc = subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True)
     try:
         url = None
@@ -200,8 +244,11 @@ def test_agentsim_view_shows_uavs_releasing_sensors(tmp_path: Path) -> None:
         with browser_page() as (page, errors):
             page.goto(url)
             page.wait_for_function("window.agentsim && window.agentsim.ready", timeout=30000)
-            page.wait_for_function("window.agentsim.logLines().some(l => l.includes('released')) && "
-                                   "window.agentsim.logLines().some(l => l.includes('landed'))", timeout=60000)  # fmt: skip
+            page.wait_for_function(
+                "window.agentsim.logLines().some(l => l.includes('released')) && "
+                "window.agentsim.logLines().some(l => l.includes('landed'))",
+                timeout=60000,
+            )
             assert not errors, errors
     finally:
         proc.terminate()

@@ -32,7 +32,10 @@ def _project(page: Any, p: Any) -> tuple[float, float]:
 def _changed(a: np.ndarray, b: np.ndarray, xy: tuple[float, float], r: int) -> int:
     """Pixels within ``r`` of ``xy`` that differ between two screenshots."""
     x, y = int(round(xy[0])), int(round(xy[1]))
-    pa, pb = a[max(y - r, 0) : y + r + 1, max(x - r, 0) : x + r + 1], b[max(y - r, 0) : y + r + 1, max(x - r, 0) : x + r + 1]
+    pa, pb = (
+        a[max(y - r, 0) : y + r + 1, max(x - r, 0) : x + r + 1],
+        b[max(y - r, 0) : y + r + 1, max(x - r, 0) : x + r + 1],
+    )
     return int((np.abs(pa - pb).max(axis=2) > 0.08).sum())
 
 
@@ -47,8 +50,9 @@ def test_default_navigation_view_draws_readable_agents_and_the_goals_where_the_e
     try:
         with browser_page(1200, 800) as (page, errors):
             page.goto(url)  # the default (orbit) camera, framed by the page itself
-            page.wait_for_function("window.agentsim && window.agentsim.ready && window.agentsim.lastStep === 0",
-                                   timeout=60000)  # fmt: skip
+            page.wait_for_function(
+                "window.agentsim && window.agentsim.ready && window.agentsim.lastStep === 0", timeout=60000
+            )
             time.sleep(0.5)
             full = _image(page)
             agents = [_project(page, st.pos[i]) for i in range(n)]
@@ -73,7 +77,9 @@ def test_default_navigation_view_draws_readable_agents_and_the_goals_where_the_e
     got = sorted((m["slot"], m["x"], m["y"]) for m in drawn if m["kind"] == "goal")
     assert [g[0] for g in got] == list(range(n))
     assert np.allclose([g[1:] for g in got], goals, atol=1.0)
-    assert all(_changed(full, empty, xy, 2) >= 4 for xy in goals), "a goal is not drawn at its projected position"
+    assert all(_changed(full, empty, xy, 2) >= 4 for xy in goals), (
+        "a goal is not drawn at its projected position"
+    )
     for word in ("arrived", "collided", "offline", "goal"):
         assert word in legend, legend
 
@@ -89,10 +95,14 @@ def test_follow_keeps_the_selected_agent_centred_and_the_view_options_work() -> 
     try:
         with browser_page(1000, 700) as (page, errors):
             page.goto(url)
-            page.wait_for_function("window.agentsim && window.agentsim.ready && window.agentsim.lastStep === 0",
-                                   timeout=60000)  # fmt: skip
-            box = page.eval_on_selector("#canvas", "c => { const r = c.getBoundingClientRect(); "
-                                        "return [r.left + r.width / 2, r.top + r.height / 2]; }")  # fmt: skip
+            page.wait_for_function(
+                "window.agentsim && window.agentsim.ready && window.agentsim.lastStep === 0", timeout=60000
+            )
+            box = page.eval_on_selector(
+                "#canvas",
+                "c => { const r = c.getBoundingClientRect(); "
+                "return [r.left + r.width / 2, r.top + r.height / 2]; }",
+            )
             far = np.hypot(*np.subtract(_project(page, st.pos[2]), box))
             page.evaluate("window.agentsim.send({cmd: 'select', slot: 2})")
             page.check("#opt-follow")

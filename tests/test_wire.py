@@ -90,8 +90,10 @@ def test_a_barrier_over_the_wire_gives_every_shard_every_post(two: Loop) -> None
     b = {"slots": np.zeros(0, dtype=np.int64), "pos": np.zeros((0, 3)), "n": 4}
     clients = [WireClient("127.0.0.1", two.port, TOKEN, k, 10.0) for k in (0, 1)]
     out: dict[int, Any] = {}
-    threads = [threading.Thread(target=lambda k=k, p=p: out.__setitem__(k, clients[k].swap((1, "x"), k, p)))
-               for k, p in ((0, a), (1, b))]  # fmt: skip
+    threads = [
+        threading.Thread(target=lambda k=k, p=p: out.__setitem__(k, clients[k].swap((1, "x"), k, p)))
+        for k, p in ((0, a), (1, b))
+    ]
     for t in threads:
         t.start()
     for t in threads:
@@ -105,8 +107,13 @@ def test_a_barrier_over_the_wire_gives_every_shard_every_post(two: Loop) -> None
 
 
 def test_frames_round_trip_arrays_of_every_dtype_without_copying_them_into_the_pickle() -> None:
-    obj = {"f32": np.arange(6, dtype=np.float32).reshape(2, 3), "i8": np.array([-1, 2], np.int8),
-           "b": np.array([True, False]), "big": np.arange(1 << 16, dtype=np.int64), "s": "text"}  # fmt: skip
+    obj = {
+        "f32": np.arange(6, dtype=np.float32).reshape(2, 3),
+        "i8": np.array([-1, 2], np.int8),
+        "b": np.array([True, False]),
+        "big": np.arange(1 << 16, dtype=np.int64),
+        "s": "text",
+    }
     chunks = wire.encode(obj)
     assert len(chunks[1]) < 2000  # the arrays are buffers of their own, not inside the pickle
     left, right = socket.socketpair()
@@ -155,12 +162,15 @@ def test_posting_under_another_shards_index_closes_the_connection(two: Loop) -> 
         c.swap((0, "x"), 1, {"a": 1})
 
 
-@pytest.mark.parametrize("head", [
-    struct.pack("!4sIQ", b"NOPE", 0, 10),  # bad magic
-    struct.pack("!4sIQ", wire.MAGIC, wire.MAX_BUFFERS + 1, 10),  # too many buffers
-    struct.pack("!4sIQ", wire.MAGIC, 0, 1 << 40),  # a pickle over the bound
-    struct.pack("!4sIQ", wire.MAGIC, 1, 10) + struct.pack("!Q", 1 << 40),  # a buffer over the bound
-])  # fmt: skip
+@pytest.mark.parametrize(
+    "head",
+    [
+        struct.pack("!4sIQ", b"NOPE", 0, 10),  # bad magic
+        struct.pack("!4sIQ", wire.MAGIC, wire.MAX_BUFFERS + 1, 10),  # too many buffers
+        struct.pack("!4sIQ", wire.MAGIC, 0, 1 << 40),  # a pickle over the bound
+        struct.pack("!4sIQ", wire.MAGIC, 1, 10) + struct.pack("!Q", 1 << 40),  # a buffer over the bound
+    ],
+)
 def test_a_frame_over_the_bounds_closes_the_connection_before_any_allocation(two: Loop, head: bytes) -> None:
     with socket.create_connection(("127.0.0.1", two.port)) as s:
         s.sendall(struct.pack(f"!4s{TOKEN_BYTES}sI", wire.AUTH_MAGIC, TOKEN, 0))
@@ -178,7 +188,9 @@ def test_a_frame_that_is_not_a_post_closes_the_connection(two: Loop) -> None:
         assert _closed_unanswered(s)
 
 
-def test_too_many_peers_waiting_to_authenticate_are_closed_at_once(two: Loop, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_too_many_peers_waiting_to_authenticate_are_closed_at_once(
+    two: Loop, monkeypatch: pytest.MonkeyPatch
+) -> None:
     monkeypatch.setattr(wire, "MAX_PENDING_AUTH", 2)
     idle = [socket.create_connection(("127.0.0.1", two.port)) for _ in range(2)]
     try:
@@ -204,6 +216,7 @@ def test_a_silent_exchange_times_out_the_shard() -> None:
     srv.bind(("127.0.0.1", 0))
     srv.listen(1)
     try:
+
         def accept() -> None:
             conn, _ = srv.accept()
             conn.recv(64)

@@ -25,8 +25,16 @@ def test_fleet_capacity_numbers() -> None:
     zs = load_zones(default_zones_path())
     assert default_fleet() == (4, 40)
     cap = fleet_capacity(zs, 4, 40)
-    assert cap == {"n_uavs": 4, "payload": 40, "capacity": 160, "needed": 150, "carried": True, "spare": 10,
-                   "n_uavs_needed": 4, "payload_needed": 38}  # fmt: skip
+    assert cap == {
+        "n_uavs": 4,
+        "payload": 40,
+        "capacity": 160,
+        "needed": 150,
+        "carried": True,
+        "spare": 10,
+        "n_uavs_needed": 4,
+        "payload_needed": 38,
+    }
     short = fleet_capacity(zs, 3, 40)
     assert short["carried"] is False and short["spare"] == -30 and short["n_uavs_needed"] == 4
     assert short["payload_needed"] == 50

@@ -28,7 +28,9 @@ CURVE_FIELDS = ("timesteps", "episodes", "mean_return", "mean_length", "wall_s",
 def read_curve(path: str | Path) -> list[dict[str, float]]:
     """Rows of a ``curve.csv`` (numbers as floats; ``mean_return`` is NaN before the first finished episode)."""
     with open(path, newline="", encoding="utf-8") as f:
-        return [{k: float(v) if v != "" else float("nan") for k, v in row.items()} for row in csv.DictReader(f)]
+        return [
+            {k: float(v) if v != "" else float("nan") for k, v in row.items()} for row in csv.DictReader(f)
+        ]
 
 
 class TrainMonitor(BaseCallback):
@@ -44,9 +46,17 @@ class TrainMonitor(BaseCallback):
         episodes_done: Agent-episodes finished before (a resumed run).
     """
 
-    def __init__(self, out: str | Path | None, *, checkpoint_every: int = 0, progress: bool = True,
-                 desc: str = "train", start_wall: float = 0.0, start_cpu: float = 0.0,
-                 episodes_done: int = 0) -> None:  # fmt: skip
+    def __init__(
+        self,
+        out: str | Path | None,
+        *,
+        checkpoint_every: int = 0,
+        progress: bool = True,
+        desc: str = "train",
+        start_wall: float = 0.0,
+        start_cpu: float = 0.0,
+        episodes_done: int = 0,
+    ) -> None:
         super().__init__()
         self.out = None if out is None else Path(out)
         self.checkpoint_every = int(checkpoint_every)
@@ -111,8 +121,14 @@ class TrainMonitor(BaseCallback):
             self.bar.set_postfix_str(f"return {ret:.2f}  episodes {self.episodes}", refresh=False)
         if self.out is not None:
             lens = [e["l"] for e in self.model.ep_info_buffer or ()]
-            row = (self.num_timesteps, self.episodes, "" if np.isnan(ret) else f"{ret:.6g}",
-                   f"{np.mean(lens):.6g}" if lens else "", f"{self.wall_s():.3f}", f"{self.cpu_s():.3f}")  # fmt: skip
+            row = (
+                self.num_timesteps,
+                self.episodes,
+                "" if np.isnan(ret) else f"{ret:.6g}",
+                f"{np.mean(lens):.6g}" if lens else "",
+                f"{self.wall_s():.3f}",
+                f"{self.cpu_s():.3f}",
+            )
             with open(self.out / "curve.csv", "a", newline="", encoding="utf-8") as f:
                 csv.writer(f).writerow(row)
 
@@ -145,4 +161,3 @@ class TrainMonitor(BaseCallback):
         write_model_atomic(self.model, path)
         self.checkpoints.append(path)
         return path
-

@@ -23,8 +23,17 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-__all__ = ["Resumed", "checkpoints", "find_resumable", "latest_checkpoint", "read_clocks", "remove_stale_temps",
-           "write_atomic", "write_json_atomic", "write_model_atomic"]  # fmt: skip
+__all__ = [
+    "Resumed",
+    "checkpoints",
+    "find_resumable",
+    "latest_checkpoint",
+    "read_clocks",
+    "remove_stale_temps",
+    "write_atomic",
+    "write_json_atomic",
+    "write_model_atomic",
+]
 
 _NAME = re.compile(r"step_(\d+)\.zip")
 #: The temporary files of ``write_atomic`` for the files a run writes (anything else in the folder is not ours).

@@ -48,11 +48,15 @@ def parse_overrides(scenario: str, pairs: list[str]) -> dict[str, Any]:
 
 def add_train_command(sub: Any) -> argparse.ArgumentParser:
     """Add ``train`` to the ``agentsim`` subcommands (``sub`` is the parser's subparsers object)."""
-    t = sub.add_parser("train", help="train a PPO policy (parameter sharing) and evaluate it against the baselines",
-                       description="Train PPO with parameter sharing on a scenario from a YAML config; write the "
-                       "model,\ncheckpoints, TensorBoard logs, the learning curve and the evaluation against every "
-                       "scripted baseline.", formatter_class=argparse.RawDescriptionHelpFormatter,
-                       epilog=_epilog())  # fmt: skip
+    t = sub.add_parser(
+        "train",
+        help="train a PPO policy (parameter sharing) and evaluate it against the baselines",
+        description="Train PPO with parameter sharing on a scenario from a YAML config; write the "
+        "model,\ncheckpoints, TensorBoard logs, the learning curve and the evaluation against every "
+        "scripted baseline.",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog=_epilog(),
+    )
     _arguments(t)
     t.set_defaults(func=cmd_train)
     return t
@@ -66,25 +70,44 @@ def _epilog() -> str:
 
 def _arguments(t: argparse.ArgumentParser) -> None:
     t.add_argument("scenario", metavar="SCENARIO", help="a registered scenario ('agentsim scenarios')")
-    t.add_argument("--config", default=None, metavar="FILE",
-                   help="YAML config or shipped config name (default: the scenario's shipped config)")  # fmt: skip
+    t.add_argument(
+        "--config",
+        default=None,
+        metavar="FILE",
+        help="YAML config or shipped config name (default: the scenario's shipped config)",
+    )
     t.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE", help="config keys over the file's")
     t.add_argument("--timesteps", type=int, default=None, help="agent-steps to train (over the config's)")
     t.add_argument("--seed", type=int, default=None, help="seed of envs and network (over the config's)")
     t.add_argument("--worlds", type=int, default=None, help="worlds stepped together (over the config's)")
     t.add_argument("--vec", choices=["native", "supersuit"], default=None, help="vector-env path")
     t.add_argument("--out", default=None, help="run folder (default outputs/train/SCENARIO)")
-    t.add_argument("--resume", action="store_true",
-                   help="continue the run in --out from its newest checkpoint that loads")  # fmt: skip
+    t.add_argument(
+        "--resume",
+        action="store_true",
+        help="continue the run in --out from its newest checkpoint that loads",
+    )
     t.add_argument("--eval-only", action="store_true", help="evaluate the model in --out, do not train")
     t.add_argument("--no-eval", action="store_true", help="skip the evaluation against the baselines")
-    t.add_argument("--eval-baselines", choices=["none", "default", "all"], default=None,
-                   help="baselines the evaluation plays beside the model: none, the scenario's default one, or all "
-                   "(over the config's eval.baselines; all can take far longer than a short training run)")  # fmt: skip
-    t.add_argument("--record", default=None, metavar="PATH",
-                   help="record the evaluation episodes to this SQLite store (one run per policy)")  # fmt: skip
-    t.add_argument("--record-training", default=None, metavar="PATH",
-                   help="record the training env (every world and step) to this SQLite store")  # fmt: skip
+    t.add_argument(
+        "--eval-baselines",
+        choices=["none", "default", "all"],
+        default=None,
+        help="baselines the evaluation plays beside the model: none, the scenario's default one, or all "
+        "(over the config's eval.baselines; all can take far longer than a short training run)",
+    )
+    t.add_argument(
+        "--record",
+        default=None,
+        metavar="PATH",
+        help="record the evaluation episodes to this SQLite store (one run per policy)",
+    )
+    t.add_argument(
+        "--record-training",
+        default=None,
+        metavar="PATH",
+        help="record the training env (every world and step) to this SQLite store",
+    )
     t.add_argument("--quiet", action="store_true", help="no progress bars")
 
 
@@ -113,8 +136,10 @@ def cmd_train(args: argparse.Namespace) -> int:
     if args.eval_only and not (out / "model.zip").exists():
         raise ValueError(f"--eval-only: no model.zip in {str(out)!r}")
     if has_run and not (args.resume or args.eval_only):
-        raise ValueError(f"--out {str(out)!r} already holds a run: pass --resume to continue it, --eval-only to "
-                         "evaluate it, or choose another --out")  # fmt: skip
+        raise ValueError(
+            f"--out {str(out)!r} already holds a run: pass --resume to continue it, --eval-only to "
+            "evaluate it, or choose another --out"
+        )
     for option, value in (("--record", args.record), ("--record-training", args.record_training)):
         if value:
             from agentsim_env.recorder.schema import StoreError, check_store_path
@@ -146,25 +171,39 @@ def _train_and_report(args: argparse.Namespace, cfg: Any, out: Path) -> int:
 
         res = train(cfg, out, resume=args.resume, progress=progress, record=args.record_training)
         model, curve = res.model, res.curve
-        summary = (f"trained {res.timesteps:,} agent-steps in {res.wall_s:.0f} s wall / {res.cpu_s:.0f} s CPU "
-                   f"-> {out / 'model.zip'}")  # fmt: skip
+        summary = (
+            f"trained {res.timesteps:,} agent-steps in {res.wall_s:.0f} s wall / {res.cpu_s:.0f} s CPU "
+            f"-> {out / 'model.zip'}"
+        )
     print(f"\n{cfg.scenario}: {summary}")
     rows: list[dict[str, Any]] = []
     if not args.no_eval:
         from tqdm.auto import tqdm
 
         # the cost lines go through tqdm so that they do not break its progress bar
-        rows = evaluate_policies(cfg, model, name=out.name, record=args.record, progress=progress,
-                                 report=lambda line: tqdm.write(line, file=sys.stdout))  # fmt: skip
+        rows = evaluate_policies(
+            cfg,
+            model,
+            name=out.name,
+            record=args.record,
+            progress=progress,
+            report=lambda line: tqdm.write(line, file=sys.stdout),
+        )
         csv_path, md_path = write_table(rows, out)
         seeds = cfg.eval.seed_list()
         print(f"\nevaluation over seeds {seeds[0]}..{seeds[-1]} ({len(seeds)} episodes per policy):\n")
         print(format_table(rows))
         print(f"\nwritten: {csv_path}, {md_path}")
     if curve:
-        png = plot_learning_curve(curve, out / "curve.png", eval_rows=rows,
-                                  title=f"{cfg.scenario}: PPO, {cfg.worlds} worlds, seed {cfg.seed}")  # fmt: skip
-        print(f"learning curve: {png} (CSV: {out / 'curve.csv'}; TensorBoard: tensorboard --logdir {out / 'tb'})")
+        png = plot_learning_curve(
+            curve,
+            out / "curve.png",
+            eval_rows=rows,
+            title=f"{cfg.scenario}: PPO, {cfg.worlds} worlds, seed {cfg.seed}",
+        )
+        print(
+            f"learning curve: {png} (CSV: {out / 'curve.csv'}; TensorBoard: tensorboard --logdir {out / 'tb'})"
+        )
     if args.record:
         print(f"evaluation episodes recorded to {args.record}")
     return 0
@@ -172,9 +211,12 @@ def _train_and_report(args: argparse.Namespace, cfg: Any, out: Path) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     """``python -m agentsim_env.train``: the same command as ``agentsim train``."""
-    p = argparse.ArgumentParser(prog="python -m agentsim_env.train", epilog=_epilog(),
-                                description=__doc__.splitlines()[0],
-                                formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
+    p = argparse.ArgumentParser(
+        prog="python -m agentsim_env.train",
+        epilog=_epilog(),
+        description=__doc__.splitlines()[0],
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     _arguments(p)
     args = p.parse_args(argv)
     try:

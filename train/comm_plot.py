@@ -138,13 +138,26 @@ def record_comm_traffic(policy: Any, scenario_config: Mapping[str, Any], seeds: 
             t += 1
     out = {k: np.concatenate(v) if v else np.zeros(0) for k, v in cols.items()}
     d = cfg.comms.payload_dim
-    return CommTraffic(out["step"].astype(int), out["episode"].astype(int), out["scout"].astype(bool),
-                       out["channel"].astype(int), out["sent"].astype(int), out["payload"].reshape(-1, d),
-                       out["target"].reshape(-1, 2), int(cfg.max_steps))  # fmt: skip
+    return CommTraffic(
+        out["step"].astype(int),
+        out["episode"].astype(int),
+        out["scout"].astype(bool),
+        out["channel"].astype(int),
+        out["sent"].astype(int),
+        out["payload"].reshape(-1, d),
+        out["target"].reshape(-1, 2),
+        int(cfg.max_steps),
+    )
 
 
-def plot_comm_traffic(policy: Any, scenario_config: Mapping[str, Any], seeds: Iterable[int], path: str | Path,
-                      *, title: str = "") -> Path:  # fmt: skip
+def plot_comm_traffic(
+    policy: Any,
+    scenario_config: Mapping[str, Any],
+    seeds: Iterable[int],
+    path: str | Path,
+    *,
+    title: str = "",
+) -> Path:
     """Record the comm traffic of ``policy`` (see :func:`record_comm_traffic`) and draw it to a PNG.
 
     Args:
@@ -175,8 +188,12 @@ def plot_comm_traffic(policy: Any, scenario_config: Mapping[str, Any], seeds: It
         sent = np.bincount(tr.step[mask], weights=tr.sent[mask], minlength=steps.size)
         rate = np.where(live > 0, sent / np.maximum(live, 1), np.nan)
         ax.plot(steps, rate, color=colour, lw=1.4, label=f"{role} ({sent.sum():.0f} messages)")
-    ax.set(xlabel="step", ylabel="messages sent per live agent", ylim=(-0.05, 1.05),
-           title="messages per step (mean over episodes)")  # fmt: skip
+    ax.set(
+        xlabel="step",
+        ylabel="messages sent per live agent",
+        ylim=(-0.05, 1.05),
+        title="messages per step (mean over episodes)",
+    )
     ax.legend(fontsize=8)
     ax = axes[1]
     x = np.arange(len(CHANNELS))
@@ -197,11 +214,19 @@ def plot_comm_traffic(policy: Any, scenario_config: Mapping[str, Any], seeds: It
                 abs(np.corrcoef(pay[:, q], tgt[:, j])[0, 1]) if pay[:, q].std() > 0 else 0.0 for j in range(2)
             ]
             j = int(np.nanargmax(c))
-            ax.scatter(tgt[:, j], pay[:, q], s=4, alpha=0.35,
-                       label=f"payload[{q}] vs target {'xy'[j]} (|r| = {np.nan_to_num(c[j]):.2f})")  # fmt: skip
+            ax.scatter(
+                tgt[:, j],
+                pay[:, q],
+                s=4,
+                alpha=0.35,
+                label=f"payload[{q}] vs target {'xy'[j]} (|r| = {np.nan_to_num(c[j]):.2f})",
+            )
         ax.legend(fontsize=7, markerscale=3)
-    ax.set(xlabel="scout's target vector component (m)", ylabel="payload value sent",
-           title="scouts' payload values vs their target")  # fmt: skip
+    ax.set(
+        xlabel="scout's target vector component (m)",
+        ylabel="payload value sent",
+        title="scouts' payload values vs their target",
+    )
     ax = axes[3]
     true, fit = tr.decode()
     for j, colour in enumerate(("tab:purple", "tab:green")):
@@ -210,8 +235,11 @@ def plot_comm_traffic(policy: Any, scenario_config: Mapping[str, Any], seeds: It
         lim = float(np.abs(true).max()) * 1.05 + 1e-9
         ax.plot([-lim, lim], [-lim, lim], color="grey", lw=0.8, ls="--")
     ax.legend(fontsize=8, markerscale=3)
-    ax.set(xlabel="scout's target vector (m)", ylabel="linearly decoded from the payload (m)",
-           title=f"target decoded from the payload (R$^2$ = {tr.decoding_r2():.2f})")  # fmt: skip
+    ax.set(
+        xlabel="scout's target vector (m)",
+        ylabel="linearly decoded from the payload (m)",
+        title=f"target decoded from the payload (R$^2$ = {tr.decoding_r2():.2f})",
+    )
     if title:
         fig.suptitle(title)
     fig.tight_layout()

@@ -170,7 +170,9 @@ class TrainConfig:
             if isinstance(value, dict):
                 object.__setattr__(self, name, _build(cls, value, name + "."))
             elif not isinstance(value, cls):
-                raise ValueError(f"{name} must be a mapping of {cls.__name__} fields, got {type(value).__name__}")
+                raise ValueError(
+                    f"{name} must be a mapping of {cls.__name__} fields, got {type(value).__name__}"
+                )
         coerce_fields(self)
         from agentsim_env.scenarios.registry import list_scenarios, make_scenario
 
@@ -183,8 +185,11 @@ class TrainConfig:
         _choice("vec", self.vec, VEC_KINDS)
         check_int("checkpoint_every", self.checkpoint_every, 0, 10_000_000_000)
         checked: list[dict[str, Any]] = []
-        for where, keys in (("env", self.env), ("eval.env", self.eval_env()),
-                            ("eval.baseline_env", self.eval_env(baseline=True))):  # fmt: skip
+        for where, keys in (
+            ("env", self.env),
+            ("eval.env", self.eval_env()),
+            ("eval.baseline_env", self.eval_env(baseline=True)),
+        ):
             if keys in checked:  # the evaluation adds nothing: already built once
                 continue
             checked.append(keys)
@@ -229,16 +234,23 @@ def _plain(value: Any) -> Any:
 def _build(cls: type, data: Any, where: str) -> Any:
     """``cls(**data)`` with unknown keys and non-mappings reported by name."""
     if not isinstance(data, dict):
-        raise ValueError(f"{where.rstrip('.') or 'the config'} must be a mapping of keys, "
-                         f"got {type(data).__name__}")  # fmt: skip
+        raise ValueError(
+            f"{where.rstrip('.') or 'the config'} must be a mapping of keys, got {type(data).__name__}"
+        )
     allowed = [f.name for f in dataclasses.fields(cls)]
     unknown = sorted(set(data) - set(allowed), key=repr)  # YAML keys may mix types (1 and "a")
     if unknown:
-        first = unknown[0] if isinstance(unknown[0], str) and len(unknown[0]) <= 60 else short_repr(unknown[0], 60)
+        first = (
+            unknown[0]
+            if isinstance(unknown[0], str) and len(unknown[0]) <= 60
+            else short_repr(unknown[0], 60)
+        )
         raise ValueError(f"unknown key {where}{first}; allowed: {allowed}")
     for key, value in data.items():
         if key in ("env", "baseline_env") and not isinstance(value, dict):
-            raise ValueError(f"{where}{key} must be a mapping of scenario config keys, got {type(value).__name__}")
+            raise ValueError(
+                f"{where}{key} must be a mapping of scenario config keys, got {type(value).__name__}"
+            )
     return cls(**data)
 
 
@@ -247,8 +259,12 @@ def shipped_configs() -> dict[str, Path]:
     return {p.stem: p for p in sorted(CONFIG_DIR.glob("*.yaml"))}
 
 
-def load_config(source: str | Path | dict[str, Any] | None = None, overrides: dict[str, Any] | None = None,
-                *, scenario: str | None = None) -> TrainConfig:  # fmt: skip
+def load_config(
+    source: str | Path | dict[str, Any] | None = None,
+    overrides: dict[str, Any] | None = None,
+    *,
+    scenario: str | None = None,
+) -> TrainConfig:
     """Load a training config.
 
     Args:
@@ -280,8 +296,9 @@ def load_config(source: str | Path | dict[str, Any] | None = None, overrides: di
         except OSError as exc:  # e.g. a name too long for the file system
             raise ValueError(f"config file {short_repr(str(source))}: {exc.strerror}") from None
         if not found:
-            raise ValueError(f"config file {short_repr(str(source))} not found; shipped configs: "
-                             f"{list(shipped_configs())}")  # fmt: skip
+            raise ValueError(
+                f"config file {short_repr(str(source))} not found; shipped configs: {list(shipped_configs())}"
+            )
         from agentsim_env.train.yaml_load import load_yaml_file
 
         # bounded: size, depth, aliases expanded, duplicate keys (a device or FIFO is refused, never read)
@@ -292,7 +309,9 @@ def load_config(source: str | Path | dict[str, Any] | None = None, overrides: di
         if loaded is None:
             loaded = {}
         if not isinstance(loaded, dict):
-            raise ValueError(f"config file {str(path)!r} must hold a mapping of keys, got {type(loaded).__name__}")
+            raise ValueError(
+                f"config file {str(path)!r} must hold a mapping of keys, got {type(loaded).__name__}"
+            )
         data = loaded
     if scenario is not None:
         if data.get("scenario", scenario) != scenario:

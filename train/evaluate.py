@@ -40,8 +40,10 @@ def baselines_of(cfg: TrainConfig) -> list[str]:
     names = [s.strip() for s in sel.split(",") if s.strip()]
     bad = [n for n in names if n not in known]
     if bad:
-        raise ValueError(f"eval.baselines: {bad[0]!r} is not a baseline of {cfg.scenario!r}; "
-                         f"choose 'all', 'default', 'none' or from {known}")  # fmt: skip
+        raise ValueError(
+            f"eval.baselines: {bad[0]!r} is not a baseline of {cfg.scenario!r}; "
+            f"choose 'all', 'default', 'none' or from {known}"
+        )
     return names
 
 
@@ -54,8 +56,15 @@ def _episode_extras(env: Any) -> dict[str, float]:
     return {}
 
 
-def _play(env: Any, policy: Any, name: str, kind: str, seeds: Sequence[int], bar: Any,
-          first: Callable[[float], None] | None = None) -> dict[str, Any]:  # fmt: skip
+def _play(
+    env: Any,
+    policy: Any,
+    name: str,
+    kind: str,
+    seeds: Sequence[int],
+    bar: Any,
+    first: Callable[[float], None] | None = None,
+) -> dict[str, Any]:
     """Play ``seeds``; ``first`` is told the first episode's wall time (s)."""
     from agentsim_env.policies.rollout import run_episode
 
@@ -82,8 +91,13 @@ def _play(env: Any, policy: Any, name: str, kind: str, seeds: Sequence[int], bar
         extras.append({**last, **_episode_extras(env)})
         if bar is not None:
             bar.update(1)
-    row: dict[str, Any] = {"policy": name, "kind": kind, "episodes": len(seeds),
-                           "mean_return": float(np.mean(returns)), "std_return": float(np.std(returns))}  # fmt: skip
+    row: dict[str, Any] = {
+        "policy": name,
+        "kind": kind,
+        "episodes": len(seeds),
+        "mean_return": float(np.mean(returns)),
+        "std_return": float(np.std(returns)),
+    }
     for key in sorted({k for d in sums for k in d}):
         row[f"{key}_per_agent"] = float(np.mean([d.get(key, 0.0) for d in sums]))
     for key in sorted({k for d in extras for k in d}):
@@ -107,9 +121,15 @@ def _cost_line(cfg: TrainConfig, with_model: bool, n_baselines: int, n_seeds: in
     return line + ("; --eval-baselines default or none for a quicker one" if n_baselines > 1 else "")
 
 
-def evaluate_policies(cfg: TrainConfig, model: Any = None, *, name: str = "learned",
-                      record: str | Path | None = None, progress: bool = False,
-                      report: Callable[[str], None] | None = None) -> list[dict[str, Any]]:  # fmt: skip
+def evaluate_policies(
+    cfg: TrainConfig,
+    model: Any = None,
+    *,
+    name: str = "learned",
+    record: str | Path | None = None,
+    progress: bool = False,
+    report: Callable[[str], None] | None = None,
+) -> list[dict[str, Any]]:
     """Play the trained model (if given) and the selected baselines over ``cfg.eval``'s seeds.
 
     Args:
@@ -151,7 +171,9 @@ def evaluate_policies(cfg: TrainConfig, model: Any = None, *, name: str = "learn
             if record is not None:
                 from agentsim_env.recorder import record as record_env
 
-                env = record_env(env, record, label=f"agentsim train evaluation: {label} seeds {seeds[0]}-{seeds[-1]}")
+                env = record_env(
+                    env, record, label=f"agentsim train evaluation: {label} seeds {seeds[0]}-{seeds[-1]}"
+                )
             if kind == "baseline":
                 policy = make_policy(cfg.scenario, env, what)
             elif isinstance(what, (str, Path)):
@@ -159,8 +181,11 @@ def evaluate_policies(cfg: TrainConfig, model: Any = None, *, name: str = "learn
             else:
                 policy = LearnedPolicy(what, env, name=label)
             try:
-                first = (lambda t: say(f"~{_secs(t * total)} s in all at the first episode's pace ({t:.2f} s)")) if (
-                    i == 0) else None  # fmt: skip
+                first = (
+                    (lambda t: say(f"~{_secs(t * total)} s in all at the first episode's pace ({t:.2f} s)"))
+                    if (i == 0)
+                    else None
+                )
                 rows.append(_play(env, policy, label, kind, seeds, bar, first))
             except BaseException:
                 if record is not None:

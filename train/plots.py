@@ -10,8 +10,13 @@ from typing import Any
 __all__ = ["plot_learning_curve"]
 
 
-def plot_learning_curve(curve: Sequence[dict[str, float]], path: str | Path, *, title: str = "",
-                        eval_rows: Sequence[dict[str, Any]] = ()) -> Path:  # fmt: skip
+def plot_learning_curve(
+    curve: Sequence[dict[str, float]],
+    path: str | Path,
+    *,
+    title: str = "",
+    eval_rows: Sequence[dict[str, Any]] = (),
+) -> Path:
     """Draw the learning curve and, as horizontal lines, each evaluated policy's mean return.
 
     Args:
@@ -31,17 +36,32 @@ def plot_learning_curve(curve: Sequence[dict[str, float]], path: str | Path, *, 
         xs, ys = zip(*pts)
         ax.plot(xs, ys, color="tab:blue", lw=1.6, label="training (stochastic policy, last 100 episodes)")
     styles = ["--", ":", "-."]
-    others = ["tab:green", "tab:purple", "tab:orange", "tab:brown", "tab:pink", "tab:gray", "tab:olive", "tab:cyan"]
+    others = [
+        "tab:green",
+        "tab:purple",
+        "tab:orange",
+        "tab:brown",
+        "tab:pink",
+        "tab:gray",
+        "tab:olive",
+        "tab:cyan",
+    ]
     for i, r in enumerate(eval_rows):
         colour = "tab:red" if r.get("kind") == "learned" else others[i % len(others)]
-        ax.axhline(float(r["mean_return"]), color=colour, ls=styles[i % 3], lw=1.2,
-                   label=f"{r['policy']} ({r.get('kind', '')}, evaluation): {float(r['mean_return']):.2f}")  # fmt: skip
+        ax.axhline(
+            float(r["mean_return"]),
+            color=colour,
+            ls=styles[i % 3],
+            lw=1.2,
+            label=f"{r['policy']} ({r.get('kind', '')}, evaluation): {float(r['mean_return']):.2f}",
+        )
     ax.set_xlabel("agent-steps")
     ax.set_ylabel("mean episode return per agent")
     if pts and curve:
         last = curve[-1]
-        budget = (f"{int(last['timesteps']):,} agent-steps, {last['wall_s']:.0f} s wall, "
-                  f"{last['cpu_s']:.0f} s CPU")  # fmt: skip
+        budget = (
+            f"{int(last['timesteps']):,} agent-steps, {last['wall_s']:.0f} s wall, {last['cpu_s']:.0f} s CPU"
+        )
         title = f"{title}\n{budget}" if title else budget
     if title:
         ax.set_title(title, fontsize=10)

@@ -97,12 +97,29 @@ def make_model(cfg: TrainConfig, vec: Any, tensorboard: str | None = None) -> An
         lr = _Linear(p.learning_rate)
     activation = {"tanh": torch.nn.Tanh, "relu": torch.nn.ReLU}[p.activation]
     return PPO(
-        "MlpPolicy", vec, seed=cfg.seed, device="cpu", verbose=0, tensorboard_log=tensorboard,
-        n_steps=p.n_steps, batch_size=p.batch_size, n_epochs=p.n_epochs, learning_rate=lr, gamma=p.gamma,
-        gae_lambda=p.gae_lambda, clip_range=p.clip_range, ent_coef=p.ent_coef, vf_coef=p.vf_coef,
-        max_grad_norm=p.max_grad_norm, target_kl=p.target_kl,
-        policy_kwargs={"net_arch": list(p.net_arch), "activation_fn": activation, "log_std_init": p.log_std_init},
-    )  # fmt: skip
+        "MlpPolicy",
+        vec,
+        seed=cfg.seed,
+        device="cpu",
+        verbose=0,
+        tensorboard_log=tensorboard,
+        n_steps=p.n_steps,
+        batch_size=p.batch_size,
+        n_epochs=p.n_epochs,
+        learning_rate=lr,
+        gamma=p.gamma,
+        gae_lambda=p.gae_lambda,
+        clip_range=p.clip_range,
+        ent_coef=p.ent_coef,
+        vf_coef=p.vf_coef,
+        max_grad_norm=p.max_grad_norm,
+        target_kl=p.target_kl,
+        policy_kwargs={
+            "net_arch": list(p.net_arch),
+            "activation_fn": activation,
+            "log_std_init": p.log_std_init,
+        },
+    )
 
 
 class _Linear:
@@ -131,8 +148,12 @@ def _versions() -> dict[str, str]:
 
     import agentsim_env
 
-    return {"agentsim_env": agentsim_env.__version__, "stable_baselines3": stable_baselines3.__version__,
-            "torch": torch.__version__, "python": platform.python_version()}  # fmt: skip
+    return {
+        "agentsim_env": agentsim_env.__version__,
+        "stable_baselines3": stable_baselines3.__version__,
+        "torch": torch.__version__,
+        "python": platform.python_version(),
+    }
 
 
 #: Files of a run folder that must be files (a folder of that name would fail only at the end of training).
@@ -158,8 +179,10 @@ def _check_same_config(cfg: TrainConfig, out: Path) -> None:
     now.pop("timesteps")
     if before != now:
         changed = sorted(k for k in now if now[k] != before.get(k))
-        raise ValueError(f"--resume: the config differs from the one the run in {str(out)!r} started "
-                         f"with (config.yaml there) in {changed}; only timesteps may change")  # fmt: skip
+        raise ValueError(
+            f"--resume: the config differs from the one the run in {str(out)!r} started "
+            f"with (config.yaml there) in {changed}; only timesteps may change"
+        )
 
 
 def _curve_upto(out: Path, timesteps: int) -> tuple[bytes | None, dict[str, float]]:
@@ -185,8 +208,10 @@ def _curve_upto(out: Path, timesteps: int) -> tuple[bytes | None, dict[str, floa
         try:
             step = int(row.split(",", 1)[0])
         except ValueError:
-            raise ValueError(f"--resume: {str(path)!r} line {line} is not a curve row ({row.strip()[:60]!r}); "
-                             "nothing was changed") from None  # fmt: skip
+            raise ValueError(
+                f"--resume: {str(path)!r} line {line} is not a curve row ({row.strip()[:60]!r}); "
+                "nothing was changed"
+            ) from None
         if step <= timesteps:
             kept.append(row)
     if kept:
@@ -203,10 +228,15 @@ def _say_resumed(resumed: Resumed, clocks_from_curve: bool) -> None:
     for p, reason in resumed.skipped:
         print(f"--resume: skipped {p.name}: {reason}", file=sys.stderr)
     if clocks_from_curve:
-        print(f"--resume: {resumed.path.with_suffix('.json').name} is missing or not valid: the clocks and "
-              "episode count continue from curve.csv", file=sys.stderr)  # fmt: skip
-    print(f"--resume: continuing from {resumed.path.name} ({int(resumed.model.num_timesteps):,} agent-steps)",
-          file=sys.stderr)
+        print(
+            f"--resume: {resumed.path.with_suffix('.json').name} is missing or not valid: the clocks and "
+            "episode count continue from curve.csv",
+            file=sys.stderr,
+        )
+    print(
+        f"--resume: continuing from {resumed.path.name} ({int(resumed.model.num_timesteps):,} agent-steps)",
+        file=sys.stderr,
+    )
 
 
 def _resume(cfg: TrainConfig, path: Path, vec: Any) -> tuple[Resumed, bytes | None, dict[str, float]]:
@@ -215,13 +245,22 @@ def _resume(cfg: TrainConfig, path: Path, vec: Any) -> tuple[Resumed, bytes | No
 
     _check_same_config(cfg, path)
     tensorboard = _tensorboard_dir(path)
-    resumed = find_resumable(path, lambda p: load_model(p, env=vec, device="cpu", tensorboard_log=tensorboard))
+    resumed = find_resumable(
+        path, lambda p: load_model(p, env=vec, device="cpu", tensorboard_log=tensorboard)
+    )
     curve, curve_clocks = _curve_upto(path, int(resumed.model.num_timesteps))
     return resumed, curve, resumed.clocks or curve_clocks
 
 
-def train(cfg: TrainConfig, out: str | Path | None = None, *, resume: bool = False, progress: bool = False,
-          desc: str | None = None, record: str | Path | None = None) -> TrainResult:  # fmt: skip
+def train(
+    cfg: TrainConfig,
+    out: str | Path | None = None,
+    *,
+    resume: bool = False,
+    progress: bool = False,
+    desc: str | None = None,
+    record: str | Path | None = None,
+) -> TrainResult:
     """Train PPO as ``cfg`` says.
 
     Args:
@@ -260,8 +299,16 @@ def train(cfg: TrainConfig, out: str | Path | None = None, *, resume: bool = Fal
         raise
 
 
-def _train(cfg: TrainConfig, path: Path | None, vec: Any, *, resume: bool, progress: bool, desc: str | None,
-           record: str | Path | None) -> TrainResult:  # fmt: skip
+def _train(
+    cfg: TrainConfig,
+    path: Path | None,
+    vec: Any,
+    *,
+    resume: bool,
+    progress: bool,
+    desc: str | None,
+    record: str | Path | None,
+) -> TrainResult:
     clocks = {"wall_s": 0.0, "cpu_s": 0.0, "episodes": 0.0}
     resumed: Resumed | None = None
     if resume:
@@ -290,14 +337,22 @@ def _train(cfg: TrainConfig, path: Path | None, vec: Any, *, resume: bool, progr
         recorded = vec.batch = record_env(vec.batch, record, label=label)  # the VecEnv steps the recorded env
     if path is not None:
         write_atomic(path / "config.yaml", lambda tmp: save_config(cfg, tmp))
-    monitor = TrainMonitor(path, checkpoint_every=cfg.checkpoint_every, progress=progress,
-                           desc=desc or cfg.scenario, start_wall=clocks["wall_s"], start_cpu=clocks["cpu_s"],
-                           episodes_done=int(clocks["episodes"]))  # fmt: skip
+    monitor = TrainMonitor(
+        path,
+        checkpoint_every=cfg.checkpoint_every,
+        progress=progress,
+        desc=desc or cfg.scenario,
+        start_wall=clocks["wall_s"],
+        start_cpu=clocks["cpu_s"],
+        episodes_done=int(clocks["episodes"]),
+    )
     left = max(cfg.timesteps - int(model.num_timesteps), 0)
     t0 = time.perf_counter()
     try:
         if left > 0:
-            model.learn(total_timesteps=left, callback=monitor, reset_num_timesteps=not resume, tb_log_name="ppo")
+            model.learn(
+                total_timesteps=left, callback=monitor, reset_num_timesteps=not resume, tb_log_name="ppo"
+            )
     except BaseException:
         if recorded is not None:
             recorded.recorder.finish("incomplete")
@@ -309,13 +364,29 @@ def _train(cfg: TrainConfig, path: Path | None, vec: Any, *, resume: bool, progr
     curve: list[dict[str, float]] = []
     if path is not None:
         write_model_atomic(model, path / "model.zip")
-        meta = {"scenario": cfg.scenario, "env": cfg.env, "train": cfg.to_dict(), "versions": _versions(),
-                "timesteps_done": int(model.num_timesteps), "wall_s": round(wall, 3), "cpu_s": round(cpu, 3),
-                "machine": platform.processor() or platform.machine()}  # fmt: skip
+        meta = {
+            "scenario": cfg.scenario,
+            "env": cfg.env,
+            "train": cfg.to_dict(),
+            "versions": _versions(),
+            "timesteps_done": int(model.num_timesteps),
+            "wall_s": round(wall, 3),
+            "cpu_s": round(cpu, 3),
+            "machine": platform.processor() or platform.machine(),
+        }
         write_json_atomic(path / "config.json", meta)
         if (path / "curve.csv").exists():
             curve = read_curve(path / "curve.csv")
     vec.close()
-    return TrainResult(model, cfg, path, curve, int(model.num_timesteps), wall, cpu, monitor.checkpoints,
-                       resumed_from=None if resumed is None else resumed.path,
-                       skipped=[] if resumed is None else resumed.skipped)  # fmt: skip
+    return TrainResult(
+        model,
+        cfg,
+        path,
+        curve,
+        int(model.num_timesteps),
+        wall,
+        cpu,
+        monitor.checkpoints,
+        resumed_from=None if resumed is None else resumed.path,
+        skipped=[] if resumed is None else resumed.skipped,
+    )

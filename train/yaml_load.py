@@ -78,8 +78,10 @@ def load_yaml_file(path: str | os.PathLike[str], name: str | None = None) -> Any
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError as exc:
-        raise YAMLConfigError(f"{label}: not UTF-8 text (byte {data[exc.start]:#04x} at position {exc.start:,}); "
-                              "re-save the file as UTF-8") from None  # fmt: skip
+        raise YAMLConfigError(
+            f"{label}: not UTF-8 text (byte {data[exc.start]:#04x} at position {exc.start:,}); "
+            "re-save the file as UTF-8"
+        ) from None
     return load_yaml_text(text, label)
 
 
@@ -139,8 +141,10 @@ class _BoundedLoader(yaml.SafeLoader):
         event = self.peek_event()
         self.composed += 1
         if self.composed > MAX_NODES:  # before the graph pass: a flat list of 10**6 items is never composed
-            raise YAMLConfigError(f"{self.name}: more than {MAX_NODES:,} values (line {_line(event)}); a config "
-                                  f"holds at most {MAX_NODES:,}, aliases expanded")  # fmt: skip
+            raise YAMLConfigError(
+                f"{self.name}: more than {MAX_NODES:,} values (line {_line(event)}); a config "
+                f"holds at most {MAX_NODES:,}, aliases expanded"
+            )
         nested = isinstance(event, (SequenceStartEvent, MappingStartEvent))
         if nested and self.depth >= MAX_DEPTH:  # before Python's recursion limit: three frames per level
             raise _too_deep(self.name, event)
@@ -163,16 +167,20 @@ class _BoundedLoader(yaml.SafeLoader):
             return super().construct_yaml_int(node)  # type: ignore[no-any-return]
         except ValueError:
             digits = sum(c.isdigit() for c in str(node.value))
-            raise YAMLConfigError(f"{self.name}: the integer at line {_line(node)} has {digits:,} digits; at "
-                                  f"most {sys.get_int_max_str_digits():,} are allowed") from None  # fmt: skip
+            raise YAMLConfigError(
+                f"{self.name}: the integer at line {_line(node)} has {digits:,} digits; at "
+                f"most {sys.get_int_max_str_digits():,} are allowed"
+            ) from None
 
 
 _BoundedLoader.add_constructor("tag:yaml.org,2002:int", _BoundedLoader.construct_yaml_int)
 
 
 def _too_deep(name: str, where: Any) -> YAMLConfigError:
-    return YAMLConfigError(f"{name}: nested deeper than {MAX_DEPTH} levels (line {_line(where)}); a config is "
-                           f"at most {MAX_DEPTH} levels of lists and mappings deep, aliases expanded")  # fmt: skip
+    return YAMLConfigError(
+        f"{name}: nested deeper than {MAX_DEPTH} levels (line {_line(where)}); a config is "
+        f"at most {MAX_DEPTH} levels of lists and mappings deep, aliases expanded"
+    )
 
 
 class _Graph:
@@ -196,8 +204,10 @@ class _Graph:
         """Size and height of ``node``, met below ``depth`` levels of lists and mappings."""
         key = id(node)
         if key in self.on_path:
-            raise YAMLConfigError(f"{self.loader.name}: the alias to the node at line {_line(node)} is inside that "
-                                  "node (a recursive structure); a config is a tree")  # fmt: skip
+            raise YAMLConfigError(
+                f"{self.loader.name}: the alias to the node at line {_line(node)} is inside that "
+                "node (a recursive structure); a config is a tree"
+            )
         if key not in self.size:
             if isinstance(node, ScalarNode):
                 self.size[key], self.height[key] = 1, 0
@@ -212,9 +222,11 @@ class _Graph:
                     size += self.size[id(child)]
                     height = max(height, self.height[id(child)])
                     if size > MAX_NODES:
-                        raise YAMLConfigError(f"{self.loader.name}: aliases expand the node at line {_line(node)} "
-                                              f"to more than {MAX_NODES:,} values; a config holds at most "
-                                              f"{MAX_NODES:,}, aliases expanded")  # fmt: skip
+                        raise YAMLConfigError(
+                            f"{self.loader.name}: aliases expand the node at line {_line(node)} "
+                            f"to more than {MAX_NODES:,} values; a config holds at most "
+                            f"{MAX_NODES:,}, aliases expanded"
+                        )
                 if isinstance(node, MappingNode):
                     self.check_keys(node)
                 self.size[key], self.height[key] = size, height + 1
@@ -240,6 +252,8 @@ class _Graph:
             except TypeError:  # unhashable: the constructor reports it
                 continue
             if first is not key_node:
-                raise YAMLConfigError(f"{self.loader.name}: duplicate key {short_repr(key, 60)} at line "
-                                      f"{_line(key_node)} (first at line {_line(first)}); each key may be given "
-                                      "once")  # fmt: skip
+                raise YAMLConfigError(
+                    f"{self.loader.name}: duplicate key {short_repr(key, 60)} at line "
+                    f"{_line(key_node)} (first at line {_line(first)}); each key may be given "
+                    "once"
+                )

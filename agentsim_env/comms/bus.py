@@ -184,8 +184,9 @@ class MessageBus:
         self.n_worlds, self.n_agents = int(n_worlds), int(n_agents)
         self.payload_dim, self.channel = int(payload_dim), channel
         s = self.n_worlds * self.n_agents
-        self.inbox = Inbox(s, inbox_size, payload_dim, age_horizon=age_horizon, hop_horizon=hop_horizon,
-                           pos_scale=pos_scale)  # fmt: skip
+        self.inbox = Inbox(
+            s, inbox_size, payload_dim, age_horizon=age_horizon, hop_horizon=hop_horizon, pos_scale=pos_scale
+        )
         self.group: np.ndarray | None = None
         if group is not None:
             self.bind_groups(group)
@@ -257,7 +258,9 @@ class MessageBus:
         """
         a = np.asarray(starts)
         if a.shape != (self.n_worlds,) or not np.issubdtype(a.dtype, np.integer):
-            raise ValueError(f"starts must be an integer array of shape ({self.n_worlds},), got {a.dtype} {a.shape}")
+            raise ValueError(
+                f"starts must be an integer array of shape ({self.n_worlds},), got {a.dtype} {a.shape}"
+            )
         self.starts[:] = a
 
     def reset_world(self, world: int, rng: np.random.Generator) -> None:
@@ -345,9 +348,14 @@ class MessageBus:
         return self.enqueue(np.full(k, kind, dtype=np.int8), snd, tgt, wld, pay, step)
 
     def enqueue(
-        self, kind: np.ndarray, sender: np.ndarray, target: np.ndarray, world: np.ndarray, payload: np.ndarray,
+        self,
+        kind: np.ndarray,
+        sender: np.ndarray,
+        target: np.ndarray,
+        world: np.ndarray,
+        payload: np.ndarray,
         step: int,
-    ) -> np.ndarray:  # fmt: skip
+    ) -> np.ndarray:
         """Unchecked ``send`` for producers whose rows are valid by construction (the comms stack).
 
         Rows may mix kinds; they are accepted (bandwidth), logged and queued in the given order, exactly as
@@ -368,19 +376,46 @@ class MessageBus:
         seq = self._seq.number(kind, sender, target, world, step)
         acc = self._bandwidth(sender, step)
         created = np.full(k, step, dtype=np.int64)
-        log = MessageLog(self._new_ids(k), kind, sender, target, np.where(kind == GROUP, -1, target), created,
-                         created.copy(), np.zeros(k, dtype=np.int8))  # fmt: skip
+        log = MessageLog(
+            self._new_ids(k),
+            kind,
+            sender,
+            target,
+            np.where(kind == GROUP, -1, target),
+            created,
+            created.copy(),
+            np.zeros(k, dtype=np.int8),
+        )
         self._sent_log.append(log)
         if acc.all():
             a, pay, wld, sq = log, payload, world, seq
         else:
             d = log.take(~acc)
-            self._drop_log.append(MessageLog(d.msg, d.kind, d.sender, d.target, d.receiver, d.created, d.step,
-                                             np.full(len(d), DROP_BANDWIDTH, dtype=np.int8)))  # fmt: skip
+            self._drop_log.append(
+                MessageLog(
+                    d.msg,
+                    d.kind,
+                    d.sender,
+                    d.target,
+                    d.receiver,
+                    d.created,
+                    d.step,
+                    np.full(len(d), DROP_BANDWIDTH, dtype=np.int8),
+                )
+            )
             self.inbox.add_dropped(d.sender)
             a, pay, wld, sq = log.take(acc), payload[acc], world[acc], seq[acc]
-        self._queue.append(pay, msg=a.msg, kind=a.kind, sender=a.sender, target=a.target, world=wld,
-                           created=a.created, seq=sq, due=a.created + self.channel.latency)  # fmt: skip
+        self._queue.append(
+            pay,
+            msg=a.msg,
+            kind=a.kind,
+            sender=a.sender,
+            target=a.target,
+            world=wld,
+            created=a.created,
+            seq=sq,
+            due=a.created + self.channel.latency,
+        )
         return acc
 
     def send_env(self, receiver: np.ndarray, payload: np.ndarray, step: int) -> np.ndarray:
@@ -439,8 +474,9 @@ class MessageBus:
         b = self._queue.pop_due(int(step))
         if b is None:
             return DueRows.empty(self.payload_dim)
-        return DueRows(b["msg"], b["kind"], b["sender"], b["target"], b["world"], b["created"], b["seq"],
-                       b["payload"])  # fmt: skip
+        return DueRows(
+            b["msg"], b["kind"], b["sender"], b["target"], b["world"], b["created"], b["seq"], b["payload"]
+        )
 
     def deliver_rows(
         self,
@@ -480,7 +516,9 @@ class MessageBus:
         pos, online, group = world_arrays(self.n_slots, pos, online, group)
         own, known = bool_mask(mine, "mine", self.n_slots), bool_mask(seen, "seen", self.n_slots)
         n0 = len(self._pushes)
-        delivered = self._deliver_rows(rows, step, pos, online, group, own, _ALL_SEEN if known is None else known)
+        delivered = self._deliver_rows(
+            rows, step, pos, online, group, own, _ALL_SEEN if known is None else known
+        )
         if push:
             new, self._pushes = self._pushes[n0:], self._pushes[:n0]
             self.inbox.push_batches(new)
@@ -517,8 +555,9 @@ class MessageBus:
         if grp.any():
             n_g = int(max(group.max(initial=-1), tgt[grp].max())) + 1
             members = online if mine is None else online & mine
-            kid, offsets, slots = group_members(members, group, self._world_of, self.n_worlds, n_g,
-                                                rows.world * n_g + tgt)  # fmt: skip
+            kid, offsets, slots = group_members(
+                members, group, self._world_of, self.n_worlds, n_g, rows.world * n_g + tgt
+            )
         rep, recv = expand(kind, snd, tgt, kid, offsets, slots, order)
         if mine is not None and rep.shape[0]:
             own = mine[np.where(recv >= 0, recv, snd[rep])]  # an answer belongs to the bus owning its sender
@@ -531,9 +570,22 @@ class MessageBus:
             when = rows.created - self.starts[rows.world]  # the step within the world's episode
             u = keyed_draws(rep, recv, self.keys, rows.world, self.n_agents, when, snd, rows.seq, kind)
         r_max = self.channel.max_range
-        ok, dr, n_hb, n_ans = filter_pairs(rep, recv, rows.msg, kind, snd, tgt, rows.created, online, seen, pos,
-                                           -1.0 if r_max is None else r_max * r_max, u, loss,
-                                           self.inbox.dropped)  # fmt: skip
+        ok, dr, n_hb, n_ans = filter_pairs(
+            rep,
+            recv,
+            rows.msg,
+            kind,
+            snd,
+            tgt,
+            rows.created,
+            online,
+            seen,
+            pos,
+            -1.0 if r_max is None else r_max * r_max,
+            u,
+            loss,
+            self.inbox.dropped,
+        )
         if dr[0].shape[0]:
             when = np.full(dr[0].shape[0], step, dtype=np.int64)
             self._drop_log.append(MessageLog(dr[0], dr[1], dr[2], dr[3], dr[4], dr[5], when, dr[6]))
@@ -548,8 +600,16 @@ class MessageBus:
             self._ans_step.append(np.full(n_ans, step, dtype=np.int64))
         if n_hb:  # each member that got a heartbeat answers the controller through the channel
             self._answer(d_rcv[(d_rcv >= 0) & (d_kind == HEARTBEAT)], step)
-        return MessageLog(d_msg, d_kind, d_snd, d_tgt, d_rcv, d_cre, np.full(n_ok, step, dtype=np.int64),
-                          np.zeros(n_ok, dtype=np.int8))  # fmt: skip
+        return MessageLog(
+            d_msg,
+            d_kind,
+            d_snd,
+            d_tgt,
+            d_rcv,
+            d_cre,
+            np.full(n_ok, step, dtype=np.int64),
+            np.zeros(n_ok, dtype=np.int8),
+        )
 
     def _answer(self, hb: np.ndarray, step: int) -> None:
         """Queue the heartbeat answers of slots ``hb`` (created now, numbered after their other messages)."""
@@ -559,8 +619,19 @@ class MessageBus:
         minus = np.full(n_hb, -1, dtype=np.int64)
         seq = self._seq.slots(hb, step)
         kind = np.full(n_hb, HEARTBEAT, dtype=np.int8)
-        self._sent_log.append(MessageLog(ids, kind, hb, minus, minus.copy(), created, created.copy(),
-                                         np.zeros(n_hb, dtype=np.int8)))  # fmt: skip
-        self._queue.append(np.zeros((n_hb, self.payload_dim), dtype=np.float32), msg=ids, kind=kind.copy(),
-                           sender=hb, target=minus, world=self._world_of[hb], created=created, seq=seq,
-                           due=created + self.channel.latency)  # fmt: skip
+        self._sent_log.append(
+            MessageLog(
+                ids, kind, hb, minus, minus.copy(), created, created.copy(), np.zeros(n_hb, dtype=np.int8)
+            )
+        )
+        self._queue.append(
+            np.zeros((n_hb, self.payload_dim), dtype=np.float32),
+            msg=ids,
+            kind=kind.copy(),
+            sender=hb,
+            target=minus,
+            world=self._world_of[hb],
+            created=created,
+            seq=seq,
+            due=created + self.channel.latency,
+        )

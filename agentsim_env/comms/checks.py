@@ -94,8 +94,10 @@ def world_arrays(
     pos = np.ascontiguousarray(pos, dtype=np.float64)
     online, group = np.ascontiguousarray(online, dtype=bool), np.asarray(group)
     if pos.shape != (s_n, 3) or online.shape != (s_n,) or group.shape != (s_n,):
-        raise ValueError(f"pos must be ({s_n}, 3), online and group ({s_n},); got {pos.shape}, "
-                         f"{online.shape}, {group.shape}")  # fmt: skip
+        raise ValueError(
+            f"pos must be ({s_n}, 3), online and group ({s_n},); got {pos.shape}, "
+            f"{online.shape}, {group.shape}"
+        )
     return pos, online, group
 
 

@@ -24,8 +24,25 @@ from agentsim_env.core.threads import RowThreads
 
 
 @nb.njit(cache=True, nogil=True)
-def _place(cur_f, a0, b0, rd_start, pool_base, src_pool, n_pool, dst_pool, shift, out_base, n_out, src_r, src_f,  # type: ignore[no-untyped-def]  # noqa: E501
-           src_h, r, f, h):  # fmt: skip
+def _place(
+    cur_f,
+    a0,
+    b0,
+    rd_start,
+    pool_base,
+    src_pool,
+    n_pool,
+    dst_pool,
+    shift,
+    out_base,
+    n_out,
+    src_r,
+    src_f,  # type: ignore[no-untyped-def]  # noqa: E501
+    src_h,
+    r,
+    f,
+    h,
+):
     # A range's part of the join: its reader lists behind the earlier ranges' (its floods' rd_start shifted with
     # them; range 0's are in place already), and its deliveries as rows [out_base, out_base + n_out) of the fresh
     # delivery arrays.
@@ -58,7 +75,9 @@ def hop_cost(cur_f, cur_n, start, end, hops, limit):  # type: ignore[no-untyped-
     return out
 
 
-def flood_ranges(cur_f: np.ndarray, threads: RowThreads, cost: np.ndarray | None = None) -> list[tuple[int, int]]:
+def flood_ranges(
+    cur_f: np.ndarray, threads: RowThreads, cost: np.ndarray | None = None
+) -> list[tuple[int, int]]:
     """The frontier entries ``[0, n)`` cut into the pool's row ranges, each boundary moved to a flood's start.
 
     With ``cost`` (``hop_cost``'s cumulative cost per entry) the ranges hold equal shares of it instead of equal
@@ -84,10 +103,23 @@ def flood_ranges(cur_f: np.ndarray, threads: RowThreads, cost: np.ndarray | None
     return list(zip(cuts[:-1], cuts[1:]))
 
 
-def spread_threads(start: np.ndarray, end: np.ndarray, indices: np.ndarray, hops: np.ndarray, limit: np.ndarray,
-                   active: np.ndarray, rd_start: np.ndarray, rd_len: np.ndarray, pool: np.ndarray,
-                   cur_f: np.ndarray, cur_n: np.ndarray, threads: RowThreads, ranges: list[tuple[int, int]],
-                   scratch: list[list[Any]], new_pool: np.ndarray) -> tuple[Any, ...]:  # fmt: skip
+def spread_threads(
+    start: np.ndarray,
+    end: np.ndarray,
+    indices: np.ndarray,
+    hops: np.ndarray,
+    limit: np.ndarray,
+    active: np.ndarray,
+    rd_start: np.ndarray,
+    rd_len: np.ndarray,
+    pool: np.ndarray,
+    cur_f: np.ndarray,
+    cur_n: np.ndarray,
+    threads: RowThreads,
+    ranges: list[tuple[int, int]],
+    scratch: list[list[Any]],
+    new_pool: np.ndarray,
+) -> tuple[Any, ...]:
     """``flooding.spread`` in one-hop mode over ``ranges`` (``flood_ranges``'s; same values as ``spread``), the
     deliveries as fresh arrays.
 
@@ -102,8 +134,19 @@ def spread_threads(start: np.ndarray, end: np.ndarray, indices: np.ndarray, hops
     seen = np.zeros(active.shape[0], dtype=np.bool_)
     e = np.zeros(0, dtype=np.int64)
     while len(scratch) < len(ranges):
-        scratch.append([np.zeros(start.shape[0], dtype=np.int32), 0, e, e.copy(), np.zeros(0, dtype=np.int32),
-                        e.copy(), e.copy(), e.copy(), e.copy()])  # fmt: skip
+        scratch.append(
+            [
+                np.zeros(start.shape[0], dtype=np.int32),
+                0,
+                e,
+                e.copy(),
+                np.zeros(0, dtype=np.int32),
+                e.copy(),
+                e.copy(),
+                e.copy(),
+                e.copy(),
+            ]
+        )
     scratch[0][5] = new_pool
     got: list[tuple[int, ...]] = [(0, 0, 0, 0, 0)] * len(ranges)
 
@@ -113,9 +156,29 @@ def spread_threads(start: np.ndarray, end: np.ndarray, indices: np.ndarray, hops
             sc[0] = np.zeros(start.shape[0], dtype=np.int32)
         a0, b0 = ranges[part]
         nd, npool, nn, nfin, dups, sc[1], sc[5], sc[2], sc[3], sc[4], sc[6], sc[7], sc[8] = hop_range(
-            start, end, indices, hops, limit, rd_start, rd_len, pool, cur_f, cur_n, a0, b0, sc[0], sc[1], seen,
-            sc[5], sc[2], sc[3], sc[4], sc[6], sc[7], sc[8],
-        )  # fmt: skip
+            start,
+            end,
+            indices,
+            hops,
+            limit,
+            rd_start,
+            rd_len,
+            pool,
+            cur_f,
+            cur_n,
+            a0,
+            b0,
+            sc[0],
+            sc[1],
+            seen,
+            sc[5],
+            sc[2],
+            sc[3],
+            sc[4],
+            sc[6],
+            sc[7],
+            sc[8],
+        )
         got[part] = (nd, npool, nn, nfin, dups)
 
     threads.run(run, len(ranges), 1)
@@ -125,8 +188,9 @@ def spread_threads(start: np.ndarray, end: np.ndarray, indices: np.ndarray, hops
     nd, npool = int(out_base[-1]), int(pool_base[-1])
     # the active floods without a frontier entry keep their readers behind every range's (range 0's pool is the
     # one returned; the later ranges' lists are placed below, at offsets keep_rest does not touch)
-    new_pool, npool = keep_rest(active, seen, rd_start, rd_len, pool, _room(scratch[0][5], npool, int(pools[0])),
-                                npool)  # fmt: skip
+    new_pool, npool = keep_rest(
+        active, seen, rd_start, rd_len, pool, _room(scratch[0][5], npool, int(pools[0])), npool
+    )
     scratch[0][5] = new_pool
     r, f = np.empty(nd, dtype=np.int64), np.empty(nd, dtype=np.int64)
     h = np.empty(nd, dtype=scratch[0][4].dtype)
@@ -134,8 +198,25 @@ def spread_threads(start: np.ndarray, end: np.ndarray, indices: np.ndarray, hops
     def place(lo: int, hi: int, _: int) -> None:  # each range on a thread: its pool part and its deliveries
         for p in range(lo, hi):
             sc = scratch[p]
-            _place(cur_f, ranges[p][0], ranges[p][1], rd_start, int(pool_base[p]), sc[5], int(pools[p]), new_pool,
-                   p > 0, int(out_base[p]), int(nds[p]), sc[2], sc[3], sc[4], r, f, h)  # fmt: skip
+            _place(
+                cur_f,
+                ranges[p][0],
+                ranges[p][1],
+                rd_start,
+                int(pool_base[p]),
+                sc[5],
+                int(pools[p]),
+                new_pool,
+                p > 0,
+                int(out_base[p]),
+                int(nds[p]),
+                sc[2],
+                sc[3],
+                sc[4],
+                r,
+                f,
+                h,
+            )
 
     threads.run(place, len(ranges), 1)
     # the next frontier and the floods that ended, in range order (fresh arrays: the frontier is kept)

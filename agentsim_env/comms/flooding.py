@@ -100,8 +100,26 @@ def _hop(
 
 
 @nb.njit(cache=True)
-def spread(start, end, indices, hops, limit, active, rd_start, rd_len, pool, cur_f, cur_n, full, stamp, token,  # type: ignore[no-untyped-def]  # noqa: E501
-           new_pool, out_r, out_f, out_h):  # fmt: skip
+def spread(
+    start,
+    end,
+    indices,
+    hops,
+    limit,
+    active,
+    rd_start,
+    rd_len,
+    pool,
+    cur_f,
+    cur_n,
+    full,
+    stamp,
+    token,  # type: ignore[no-untyped-def]  # noqa: E501
+    new_pool,
+    out_r,
+    out_f,
+    out_h,
+):
     """Spread the floods of the frontier ``(cur_f, cur_n)`` (grouped by flood) over the links.
 
     Returns:
@@ -166,11 +184,45 @@ def spread(start, end, indices, hops, limit, active, rd_start, rd_len, pool, cur
             h = hops[f] + 1
             first = nd
             if rnd == 0:
-                nd, npool, d = _hop(start, end, indices, cur_n, a, b, f, h, stamp, tok, out_r, out_f, out_h, nd,
-                                    new_pool, npool, h < limit[f])  # fmt: skip
+                nd, npool, d = _hop(
+                    start,
+                    end,
+                    indices,
+                    cur_n,
+                    a,
+                    b,
+                    f,
+                    h,
+                    stamp,
+                    tok,
+                    out_r,
+                    out_f,
+                    out_h,
+                    nd,
+                    new_pool,
+                    npool,
+                    h < limit[f],
+                )
             else:
-                nd, npool, d = _hop(start, end, indices, out_r, lo, hi, f, h, stamp, tok, out_r, out_f, out_h, nd,
-                                    new_pool, npool, h < limit[f])  # fmt: skip
+                nd, npool, d = _hop(
+                    start,
+                    end,
+                    indices,
+                    out_r,
+                    lo,
+                    hi,
+                    f,
+                    h,
+                    stamp,
+                    tok,
+                    out_r,
+                    out_f,
+                    out_h,
+                    nd,
+                    new_pool,
+                    npool,
+                    h < limit[f],
+                )
             dups += d
             hops[f] = h
             if n_seg == seg.shape[0]:
@@ -248,8 +300,30 @@ def spread(start, end, indices, hops, limit, active, rd_start, rd_len, pool, cur
 
 
 @nb.njit(cache=True, nogil=True)
-def hop_range(start, end, indices, hops, limit, rd_start, rd_len, pool, cur_f, cur_n, a0, b0, stamp, token,  # type: ignore[no-untyped-def]  # noqa: E501
-              seen, new_pool, out_r, out_f, out_h, nxt_f, nxt_n, fin):  # fmt: skip
+def hop_range(
+    start,
+    end,
+    indices,
+    hops,
+    limit,
+    rd_start,
+    rd_len,
+    pool,
+    cur_f,
+    cur_n,
+    a0,
+    b0,
+    stamp,
+    token,  # type: ignore[no-untyped-def]  # noqa: E501
+    seen,
+    new_pool,
+    out_r,
+    out_f,
+    out_h,
+    nxt_f,
+    nxt_n,
+    fin,
+):
     """One hop of the floods of the frontier entries ``[a0, b0)`` (whole floods, grouped by flood), one-hop mode.
 
     Per flood, in frontier order: its readers are copied to ``new_pool`` and stamped, the edges leaving its
@@ -327,15 +401,53 @@ def hop_range(start, end, indices, hops, limit, rd_start, rd_len, pool, cur_f, c
 
 
 @nb.njit(cache=True)
-def spread_hop(start, end, indices, hops, limit, active, rd_start, rd_len, pool, cur_f, cur_n, stamp, token,  # type: ignore[no-untyped-def]  # noqa: E501
-               new_pool, out_r, out_f, out_h):  # fmt: skip
+def spread_hop(
+    start,
+    end,
+    indices,
+    hops,
+    limit,
+    active,
+    rd_start,
+    rd_len,
+    pool,
+    cur_f,
+    cur_n,
+    stamp,
+    token,  # type: ignore[no-untyped-def]  # noqa: E501
+    new_pool,
+    out_r,
+    out_f,
+    out_h,
+):
     """``spread`` in one-hop mode (the same results and return values) through ``hop_range``: the comms stack's
     hop on one thread."""
     ncur = cur_f.shape[0]
     seen = np.zeros(active.shape[0], dtype=np.bool_)
     e = np.empty(0, dtype=np.int64)
     nd, npool, nn, nfin, dups, token, new_pool, out_r, out_f, out_h, nxt_f, nxt_n, fin = hop_range(
-        start, end, indices, hops, limit, rd_start, rd_len, pool, cur_f, cur_n, 0, ncur, stamp, token, seen,
-        new_pool, out_r, out_f, out_h, e, e.copy(), e.copy())
+        start,
+        end,
+        indices,
+        hops,
+        limit,
+        rd_start,
+        rd_len,
+        pool,
+        cur_f,
+        cur_n,
+        0,
+        ncur,
+        stamp,
+        token,
+        seen,
+        new_pool,
+        out_r,
+        out_f,
+        out_h,
+        e,
+        e.copy(),
+        e.copy(),
+    )
     new_pool, npool = keep_rest(active, seen, rd_start, rd_len, pool, new_pool, npool)
     return nxt_f[:nn], nxt_n[:nn], nd, fin[:nfin], dups, token, npool, new_pool, out_r, out_f, out_h

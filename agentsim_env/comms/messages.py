@@ -55,8 +55,16 @@ KIND_NAMES = {AGENT: "AGENT", GROUP: "GROUP", ENV: "ENV", OVERLAY: "OVERLAY", HE
 _SAME_ROWS = np.zeros(0, dtype=np.int64)  # push_rows: message j takes payload row j
 #: The push kernel's one signature: receiver, kind, sender, hops, created, payload, rows of each batch.
 _BATCH_DTYPES = (np.int64, np.int8, np.int64, np.int64, np.int64, np.float32, np.int64)
-_EMPTY_BATCH = (_SAME_ROWS, np.zeros(0, dtype=np.int8), _SAME_ROWS, _SAME_ROWS, _SAME_ROWS,
-                np.zeros((0, 0), dtype=np.float32), _SAME_ROWS, False)  # fmt: skip
+_EMPTY_BATCH = (
+    _SAME_ROWS,
+    np.zeros(0, dtype=np.int8),
+    _SAME_ROWS,
+    _SAME_ROWS,
+    _SAME_ROWS,
+    np.zeros((0, 0), dtype=np.float32),
+    _SAME_ROWS,
+    False,
+)
 
 
 def _kernel_batch(batch: tuple[Any, ...]) -> tuple[Any, ...]:
@@ -75,6 +83,7 @@ def _kernel_batch(batch: tuple[Any, ...]) -> tuple[Any, ...]:
         out.append(a)
     out.append(bool(batch[7]) if len(batch) > 7 else False)
     return tuple(out)
+
 
 FEATURES_PER_MESSAGE = 11
 """Observation features of one message before its payload; a row has ``FEATURES_PER_MESSAGE + D`` values."""
@@ -146,8 +155,35 @@ def _push_count(newest, taken, ra, rb):  # type: ignore[no-untyped-def]
 
 
 @nb.njit(cache=True, nogil=True)
-def _push_kernel(lo, hi, valid, kind, sender, hops, created, payload, received, newest, taken,  # type: ignore[no-untyped-def]
-                 ra, ka, sa, ha, ca, pa, qa, ta, rb, kb, sb, hb, cb, pb, qb, tb):  # fmt: skip
+def _push_kernel(
+    lo,
+    hi,
+    valid,
+    kind,
+    sender,
+    hops,
+    created,
+    payload,
+    received,
+    newest,
+    taken,  # type: ignore[no-untyped-def]
+    ra,
+    ka,
+    sa,
+    ha,
+    ca,
+    pa,
+    qa,
+    ta,
+    rb,
+    kb,
+    sb,
+    hb,
+    cb,
+    pb,
+    qb,
+    tb,
+):
     # Pass 2 of a push (after ``_push_count``) into the inboxes of slots [lo, hi): ranges on different threads
     # touch different inboxes. Message j of a batch goes to slot r[j] with payload row p[q[j]] (row j when q is
     # empty) and hops clipped to [0, 32767]; its sender and created step are s[j] and c[j], or s[q[j]] and
@@ -204,8 +240,24 @@ def _bound(v, lim):  # type: ignore[no-untyped-def]
 
 
 @nb.njit(cache=True, inline="always", error_model="numpy")
-def _observe_row(s, r, valid, kind, sender, hops, created, payload, pos, step, pos_scale, age_h, hop_h, out, c0,  # type: ignore[no-untyped-def]  # noqa: E501
-                 lim):  # fmt: skip
+def _observe_row(
+    s,
+    r,
+    valid,
+    kind,
+    sender,
+    hops,
+    created,
+    payload,
+    pos,
+    step,
+    pos_scale,
+    age_h,
+    hop_h,
+    out,
+    c0,  # type: ignore[no-untyped-def]  # noqa: E501
+    lim,
+):
     # Slot s's inbox into row r of the 2D ``out`` from column c0 (message i at c0 + i F), each value clipped to
     # [-lim, lim]; every output value is written once (the buffer may be reused).
     m = valid.shape[1]
@@ -231,19 +283,81 @@ def _observe_row(s, r, valid, kind, sender, hops, created, payload, pos, step, p
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")  # no zero-division checks: every divisor is >= 1 or > 0
-def _observe_kernel(lo, hi, valid, kind, sender, hops, created, payload, pos, step, pos_scale, age_h, hop_h, out,  # type: ignore[no-untyped-def]  # noqa: E501
-                    c0, lim):  # fmt: skip
+def _observe_kernel(
+    lo,
+    hi,
+    valid,
+    kind,
+    sender,
+    hops,
+    created,
+    payload,
+    pos,
+    step,
+    pos_scale,
+    age_h,
+    hop_h,
+    out,  # type: ignore[no-untyped-def]  # noqa: E501
+    c0,
+    lim,
+):
     for s in range(lo, hi):
-        _observe_row(s, s, valid, kind, sender, hops, created, payload, pos, step, pos_scale, age_h, hop_h, out, c0,
-                     lim)  # fmt: skip
+        _observe_row(
+            s,
+            s,
+            valid,
+            kind,
+            sender,
+            hops,
+            created,
+            payload,
+            pos,
+            step,
+            pos_scale,
+            age_h,
+            hop_h,
+            out,
+            c0,
+            lim,
+        )
 
 
 @nb.njit(cache=True, error_model="numpy")
-def _observe_rows_kernel(rows, valid, kind, sender, hops, created, payload, pos, step, pos_scale, age_h, hop_h,  # type: ignore[no-untyped-def]
-                         out, lim):  # fmt: skip
+def _observe_rows_kernel(
+    rows,
+    valid,
+    kind,
+    sender,
+    hops,
+    created,
+    payload,
+    pos,
+    step,
+    pos_scale,
+    age_h,
+    hop_h,  # type: ignore[no-untyped-def]
+    out,
+    lim,
+):
     for r in range(rows.shape[0]):
-        _observe_row(rows[r], r, valid, kind, sender, hops, created, payload, pos, step, pos_scale, age_h, hop_h,
-                     out, 0, lim)  # fmt: skip
+        _observe_row(
+            rows[r],
+            r,
+            valid,
+            kind,
+            sender,
+            hops,
+            created,
+            payload,
+            pos,
+            step,
+            pos_scale,
+            age_h,
+            hop_h,
+            out,
+            0,
+            lim,
+        )
 
 
 class Inbox:
@@ -424,8 +538,20 @@ class Inbox:
 
     def _push_range(self, batches: tuple[Any, ...], lo: int, hi: int, _part: int) -> None:
         # one pair of batches (``_kernel_batch`` form, a then b) into the inboxes of slots [lo, hi)
-        _push_kernel(lo, hi, self.valid, self.kind, self.sender, self.hops, self.created, self.payload,
-                     self.received, self._newest, self._taken, *batches)  # fmt: skip
+        _push_kernel(
+            lo,
+            hi,
+            self.valid,
+            self.kind,
+            self.sender,
+            self.hops,
+            self.created,
+            self.payload,
+            self.received,
+            self._newest,
+            self._taken,
+            *batches,
+        )
 
     def add_dropped(self, slots: np.ndarray) -> None:
         """Count one lost message per entry of ``slots`` (repeats count several times).
@@ -438,7 +564,9 @@ class Inbox:
         if s.size:
             self.dropped += np.bincount(s, minlength=self.n_slots)
 
-    def observe(self, pos: np.ndarray, step: int, out: np.ndarray | None = None, clip: float = np.inf) -> np.ndarray:
+    def observe(
+        self, pos: np.ndarray, step: int, out: np.ndarray | None = None, clip: float = np.inf
+    ) -> np.ndarray:
         """Feature tensor of every inbox (layout in the module docstring).
 
         Args:
@@ -454,7 +582,9 @@ class Inbox:
         if out is None:
             out = np.empty(shape, dtype=np.float32)
         elif out.shape != shape or out.dtype != np.float32 or not out.flags.c_contiguous:
-            raise ValueError(f"out must be a C-contiguous float32 array of shape {shape}, got {out.dtype} {out.shape}")
+            raise ValueError(
+                f"out must be a C-contiguous float32 array of shape {shape}, got {out.dtype} {out.shape}"
+            )
         self.observe_flat(pos, step, out.reshape(self.n_slots, -1), 0, clip)
         return out
 
@@ -463,16 +593,39 @@ class Inbox:
         (message ``i`` of a slot at ``col + i F``; any row stride), each value clipped to ``[-clip, clip]``
         (``np.inf``: none): a flat observation row gets its inbox part without a copy.
         """
-        if (out.ndim != 2 or out.shape[0] != self.n_slots or out.dtype != np.float32 or out.strides[1] != 4
-                or not out.flags.writeable):  # fmt: skip
-            raise ValueError(f"out must be a writable float32 array (S={self.n_slots}, width) with unit column stride")
+        if (
+            out.ndim != 2
+            or out.shape[0] != self.n_slots
+            or out.dtype != np.float32
+            or out.strides[1] != 4
+            or not out.flags.writeable
+        ):
+            raise ValueError(
+                f"out must be a writable float32 array (S={self.n_slots}, width) with unit column stride"
+            )
         if not 0 <= col <= out.shape[1] - self.size * self.n_features:
-            raise ValueError(f"col must leave {self.size * self.n_features} columns, got {col} of {out.shape[1]}")
+            raise ValueError(
+                f"col must leave {self.size * self.n_features} columns, got {col} of {out.shape[1]}"
+            )
         p = np.asarray(pos, dtype=np.float64)
         if p.shape != (self.n_slots, 3):
             raise ValueError(f"pos must have shape ({self.n_slots}, 3), got {p.shape}")
-        args = (self.valid, self.kind, self.sender, self.hops, self.created, self.payload, p, int(step),
-                self.pos_scale, self.age_horizon, self.hop_horizon, out, int(col), float(clip))  # fmt: skip
+        args = (
+            self.valid,
+            self.kind,
+            self.sender,
+            self.hops,
+            self.created,
+            self.payload,
+            p,
+            int(step),
+            self.pos_scale,
+            self.age_horizon,
+            self.hop_horizon,
+            out,
+            int(col),
+            float(clip),
+        )
         self.threads.run(lambda lo, hi, _: _observe_kernel(lo, hi, *args), self.n_slots)
 
     def observe_rows(self, pos: np.ndarray, step: int, rows: np.ndarray, clip: float = np.inf) -> np.ndarray:
@@ -481,9 +634,22 @@ class Inbox:
         p = np.ascontiguousarray(pos, dtype=np.float64)
         r = np.ascontiguousarray(rows, dtype=np.int64)
         out = np.empty((r.shape[0], self.size, self.n_features), dtype=np.float32)
-        _observe_rows_kernel(r, self.valid, self.kind, self.sender, self.hops, self.created, self.payload, p,
-                             int(step), self.pos_scale, self.age_horizon, self.hop_horizon,
-                             out.reshape(r.shape[0], self.size * self.n_features), float(clip))  # fmt: skip
+        _observe_rows_kernel(
+            r,
+            self.valid,
+            self.kind,
+            self.sender,
+            self.hops,
+            self.created,
+            self.payload,
+            p,
+            int(step),
+            self.pos_scale,
+            self.age_horizon,
+            self.hop_horizon,
+            out.reshape(r.shape[0], self.size * self.n_features),
+            float(clip),
+        )
         return out
 
     def clear(self, slots: np.ndarray | None = None) -> None:

@@ -57,7 +57,17 @@ class Deliveries:
     deliveries it has not yet read a copy of the rows they need, so the values never change.
     """
 
-    __slots__ = ("receiver", "flood", "hops", "_origin", "_created", "_payload", "_table", "_rows", "__weakref__")
+    __slots__ = (
+        "receiver",
+        "flood",
+        "hops",
+        "_origin",
+        "_created",
+        "_payload",
+        "_table",
+        "_rows",
+        "__weakref__",
+    )
     receiver: np.ndarray
     flood: np.ndarray
     hops: np.ndarray
@@ -67,16 +77,36 @@ class Deliveries:
     _table: tuple[np.ndarray, np.ndarray, np.ndarray] | None
     _rows: np.ndarray | None
 
-    def __init__(self, receiver: np.ndarray, flood: np.ndarray, origin: np.ndarray, hops: np.ndarray,
-                 created: np.ndarray, payload: np.ndarray) -> None:  # fmt: skip
-        for name, value in (("receiver", receiver), ("flood", flood), ("hops", hops), ("_origin", origin),
-                            ("_created", created), ("_payload", payload), ("_table", None),
-                            ("_rows", None)):  # fmt: skip
+    def __init__(
+        self,
+        receiver: np.ndarray,
+        flood: np.ndarray,
+        origin: np.ndarray,
+        hops: np.ndarray,
+        created: np.ndarray,
+        payload: np.ndarray,
+    ) -> None:
+        for name, value in (
+            ("receiver", receiver),
+            ("flood", flood),
+            ("hops", hops),
+            ("_origin", origin),
+            ("_created", created),
+            ("_payload", payload),
+            ("_table", None),
+            ("_rows", None),
+        ):
             object.__setattr__(self, name, value)
 
     @classmethod
-    def by_flood(cls, receiver: np.ndarray, flood: np.ndarray, hops: np.ndarray,
-                 table: tuple[np.ndarray, np.ndarray, np.ndarray], rows: np.ndarray | None = None) -> Deliveries:  # fmt: skip
+    def by_flood(
+        cls,
+        receiver: np.ndarray,
+        flood: np.ndarray,
+        hops: np.ndarray,
+        table: tuple[np.ndarray, np.ndarray, np.ndarray],
+        rows: np.ndarray | None = None,
+    ) -> Deliveries:
         """Deliveries whose ``origin``, ``created`` and ``payload`` are ``table``'s rows (``(origin, created,
         payload)`` columns of a flood table), looked up when read: rows ``rows``, or ``flood`` when None. The
         caller keeps the table's rows unchanged, or calls :meth:`keep_rows` before it changes them."""
@@ -120,7 +150,9 @@ class Deliveries:
         """Take what is still to be looked up out of the flood table, which is about to change: the rows
         themselves for a few deliveries, else a copy of the table."""
         t = self._table
-        if t is None or (self._origin is not None and self._created is not None and self._payload is not None):
+        if t is None or (
+            self._origin is not None and self._created is not None and self._payload is not None
+        ):
             return
         if 2 * len(self) < t[0].shape[0]:
             self.origin, self.created, self.payload  # noqa: B018  (looked up now)
@@ -136,8 +168,14 @@ class Deliveries:
 
     def __getstate__(self) -> dict[str, np.ndarray]:
         """Pickle every column (looked up now)."""
-        return {"receiver": self.receiver, "flood": self.flood, "origin": self.origin, "hops": self.hops,
-                "created": self.created, "payload": self.payload}  # fmt: skip
+        return {
+            "receiver": self.receiver,
+            "flood": self.flood,
+            "origin": self.origin,
+            "hops": self.hops,
+            "created": self.created,
+            "payload": self.payload,
+        }
 
     def __setstate__(self, state: dict[str, np.ndarray]) -> None:
         """Restore a pickled state."""
@@ -182,7 +220,11 @@ def _new_scratch(n_slots: int) -> tuple:
 
 
 def check_flood_starts(
-    origin: np.ndarray, hop_limit: np.ndarray | int, payload: np.ndarray | None, n_slots: int, payload_dim: int
+    origin: np.ndarray,
+    hop_limit: np.ndarray | int,
+    payload: np.ndarray | None,
+    n_slots: int,
+    payload_dim: int,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The arguments of a flood start checked and in kernel form: origins ``(k,)`` int64, hop limits ``(k,)``
     int64, payloads ``(k, D)`` float32 (zeros for ``None``; one ``(D,)`` row for all).
@@ -222,10 +264,32 @@ class Overlay:
     """
 
     __slots__ = (
-        "n_slots", "payload_dim", "full_propagation", "_range", "_rd_start", "_rd_len", "_pool", "_n_pool",
-        "_origin", "_limit", "_hops", "_created", "_payload", "_active", "_free", "_n_free", "_front_f",
-        "_front_n", "_pending_started", "_last", "_totals", "_scratch", "_tscratch", "threads", "_unread",
-    )  # fmt: skip
+        "n_slots",
+        "payload_dim",
+        "full_propagation",
+        "_range",
+        "_rd_start",
+        "_rd_len",
+        "_pool",
+        "_n_pool",
+        "_origin",
+        "_limit",
+        "_hops",
+        "_created",
+        "_payload",
+        "_active",
+        "_free",
+        "_n_free",
+        "_front_f",
+        "_front_n",
+        "_pending_started",
+        "_last",
+        "_totals",
+        "_scratch",
+        "_tscratch",
+        "threads",
+        "_unread",
+    )
 
     def __init__(
         self,
@@ -425,7 +489,9 @@ class Overlay:
         k = origin.shape[0]
         if k == 0:
             return np.empty(0, dtype=np.int64)
-        for d in list(self._unread):  # the table's rows are about to change: deliveries still alive keep theirs
+        for d in list(
+            self._unread
+        ):  # the table's rows are about to change: deliveries still alive keep theirs
             d.keep_rows()
         self._unread.clear()
         if self._n_free < k:
@@ -517,25 +583,73 @@ class Overlay:
             ranges = flood_ranges(self._front_f, self.threads, cost)
         if len(ranges) > 1:  # whole floods per thread, joined in the one-thread order
             nf, nn, fin, dups, n_pool, pool, (r, fl, h) = spread_threads(
-                start, end, indices, self._hops, self._limit, self._active, self._rd_start, self._rd_len,
-                self._pool, self._front_f, self._front_n, self.threads, ranges, self._tscratch, spare,
-            )  # fmt: skip
+                start,
+                end,
+                indices,
+                self._hops,
+                self._limit,
+                self._active,
+                self._rd_start,
+                self._rd_len,
+                self._pool,
+                self._front_f,
+                self._front_n,
+                self.threads,
+                ranges,
+                self._tscratch,
+                spare,
+            )
             self._scratch = (stamp, token, self._pool, *self._scratch[3:])
             out = Deliveries.by_flood(r, fl, h, (self._origin, self._created, self._payload))
         else:
             if self.full_propagation:
                 nf, nn, nd, fin, dups, token, n_pool, pool, out_r, out_f, out_h = spread(
-                    start, end, indices, self._hops, self._limit, self._active, self._rd_start, self._rd_len,
-                    self._pool, self._front_f, self._front_n, True, stamp, token, spare, out_r, out_f, out_h,
-                )  # fmt: skip
+                    start,
+                    end,
+                    indices,
+                    self._hops,
+                    self._limit,
+                    self._active,
+                    self._rd_start,
+                    self._rd_len,
+                    self._pool,
+                    self._front_f,
+                    self._front_n,
+                    True,
+                    stamp,
+                    token,
+                    spare,
+                    out_r,
+                    out_f,
+                    out_h,
+                )
             else:
                 nf, nn, nd, fin, dups, token, n_pool, pool, out_r, out_f, out_h = spread_hop(
-                    start, end, indices, self._hops, self._limit, self._active, self._rd_start, self._rd_len,
-                    self._pool, self._front_f, self._front_n, stamp, token, spare, out_r, out_f, out_h,
-                )  # fmt: skip
+                    start,
+                    end,
+                    indices,
+                    self._hops,
+                    self._limit,
+                    self._active,
+                    self._rd_start,
+                    self._rd_len,
+                    self._pool,
+                    self._front_f,
+                    self._front_n,
+                    stamp,
+                    token,
+                    spare,
+                    out_r,
+                    out_f,
+                    out_h,
+                )
             self._scratch = (stamp, token, self._pool, out_r, out_f, out_h)  # the old pool is the next spare
-            out = Deliveries.by_flood(out_r[:nd].copy(), out_f[:nd].copy(), out_h[:nd].copy(),
-                                      (self._origin, self._created, self._payload))  # fmt: skip
+            out = Deliveries.by_flood(
+                out_r[:nd].copy(),
+                out_f[:nd].copy(),
+                out_h[:nd].copy(),
+                (self._origin, self._created, self._payload),
+            )
         self._unread.add(out)
         self._pool, self._n_pool = pool, n_pool
         self._front_f, self._front_n = nf, nn

@@ -124,8 +124,29 @@ def _append(dst, n, src, s0, cnt):  # type: ignore[no-untyped-def]
 
 
 @nb.njit(cache=True, error_model="numpy", nogil=True)
-def _graph_rows(lo, hi, world, cell_start, items, ox, oy, cell, nx, ny, reach, pair_d, near_r,  # type: ignore[no-untyped-def]  # noqa: E501
-                start, end, near, indices, cand, d2c, sp, ok_link):  # fmt: skip
+def _graph_rows(
+    lo,
+    hi,
+    world,
+    cell_start,
+    items,
+    ox,
+    oy,
+    cell,
+    nx,
+    ny,
+    reach,
+    pair_d,
+    near_r,  # type: ignore[no-untyped-def]  # noqa: E501
+    start,
+    end,
+    near,
+    indices,
+    cand,
+    d2c,
+    sp,
+    ok_link,
+):
     # One window scan per indexed slot u at grid positions [lo, hi) (every pair is seen from both ends), in two
     # phases. Phase 1 lists the window's grid positions column by column, then keeps those within reach. Both
     # are branch free where the data decide: a column holds 0 to a few candidates (at 10,000 agents ~2), so a
@@ -156,7 +177,7 @@ def _graph_rows(lo, hi, world, cell_start, items, ox, oy, cell, nx, ny, reach, p
         cand = _grown(cand, need, 0)
     if d2c.shape[0] < m + 1:  # squared distance of each kept candidate
         d2c = np.empty(m + 1)
-    qs = cand[3 * (m + _W) + 4:]
+    qs = cand[3 * (m + _W) + 4 :]
     n = 0
     for idx in range(lo, hi):
         u = items[idx]
@@ -253,8 +274,23 @@ class RangeGraph:
         nearest_range: Largest distance of a nearest neighbour in metres (<= ``max_dist`` to matter).
     """
 
-    __slots__ = ("n_slots", "max_dist", "nearest_range", "_grid", "_pairs", "_pos", "_online", "_world",
-                 "_near", "_near_ok", "_links", "_links_ok", "_buf", "_parts", "threads")  # fmt: skip
+    __slots__ = (
+        "n_slots",
+        "max_dist",
+        "nearest_range",
+        "_grid",
+        "_pairs",
+        "_pos",
+        "_online",
+        "_world",
+        "_near",
+        "_near_ok",
+        "_links",
+        "_links_ok",
+        "_buf",
+        "_parts",
+        "threads",
+    )
 
     def __init__(self, n_slots: int, max_dist: float, nearest_range: float) -> None:
         self.n_slots = int(n_slots)
@@ -269,8 +305,14 @@ class RangeGraph:
         # (x, y, z, range) and of the link eligibility; per range of rows (a thread each): its rows, the two
         # row scratch lists and the candidates' squared distances
         s = self.n_slots
-        self._buf = (np.zeros(s, dtype=np.int64), np.zeros(s, dtype=np.int64), np.full(s, -1, dtype=np.int64),
-                     empty, np.zeros((s, 4)), np.zeros(s, dtype=bool))  # fmt: skip
+        self._buf = (
+            np.zeros(s, dtype=np.int64),
+            np.zeros(s, dtype=np.int64),
+            np.full(s, -1, dtype=np.int64),
+            empty,
+            np.zeros((s, 4)),
+            np.zeros(s, dtype=bool),
+        )
         self._parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
         self._near_ok = self._links_ok = False
         self.threads = RowThreads(1)
@@ -292,9 +334,14 @@ class RangeGraph:
         self._near_ok = self._links_ok = False
 
     def set_grid(
-        self, grid: Grid, pos: np.ndarray, online: np.ndarray, world: np.ndarray, link_range: np.ndarray,
+        self,
+        grid: Grid,
+        pos: np.ndarray,
+        online: np.ndarray,
+        world: np.ndarray,
+        link_range: np.ndarray,
         links: bool,
-    ) -> None:  # fmt: skip
+    ) -> None:
         """Scan the step's grid (built from ``pos`` over the online slots): nearest now, links if ``links``.
 
         The links follow ``link_range`` whatever ``max_dist`` is: the scan reaches the largest link range when
@@ -328,9 +375,28 @@ class RangeGraph:
         def rows(lo: int, hi: int, part: int) -> int:
             out, cand, d2c = parts[part]
             out, cand, d2c, n = _graph_rows(
-                lo, hi, world, g.cell_start, items, sp.origin_x, sp.origin_y, sp.cell, sp.nx, sp.ny, reach,
-                self.max_dist, self.nearest_range, start, end, near, out, cand, d2c, sp4, ok_link,
-            )  # fmt: skip
+                lo,
+                hi,
+                world,
+                g.cell_start,
+                items,
+                sp.origin_x,
+                sp.origin_y,
+                sp.cell,
+                sp.nx,
+                sp.ny,
+                reach,
+                self.max_dist,
+                self.nearest_range,
+                start,
+                end,
+                near,
+                out,
+                cand,
+                d2c,
+                sp4,
+                ok_link,
+            )
             parts[part] = (out, cand, d2c)
             return int(n)
 
@@ -347,8 +413,17 @@ class RangeGraph:
 
             def move(lo: int, hi: int, _: int) -> None:
                 for p in range(1 + lo, 1 + hi):
-                    _graph_shift(items, ranges[p][0], ranges[p][1], start, end, int(base[p]), parts[p][0],
-                                 counts[p], indices)  # fmt: skip
+                    _graph_shift(
+                        items,
+                        ranges[p][0],
+                        ranges[p][1],
+                        start,
+                        end,
+                        int(base[p]),
+                        parts[p][0],
+                        counts[p],
+                        indices,
+                    )
 
             self.threads.run(move, len(ranges) - 1, 1)
         self._buf = (start, end, near, indices, sp4, ok_link)
@@ -389,9 +464,12 @@ class RangeGraph:
                     )
                 indptr, indices = _links_from_pairs(
                     np.ascontiguousarray(self._pairs[0], dtype=np.int64),
-                    np.ascontiguousarray(self._pairs[1], dtype=np.int64), np.ascontiguousarray(self._pos),
+                    np.ascontiguousarray(self._pairs[1], dtype=np.int64),
+                    np.ascontiguousarray(self._pos),
                     np.ascontiguousarray(self._online, dtype=np.bool_),
-                    np.ascontiguousarray(self._world, dtype=np.int64), link_range, self.n_slots,
-                )  # fmt: skip
+                    np.ascontiguousarray(self._world, dtype=np.int64),
+                    link_range,
+                    self.n_slots,
+                )
                 self._links, self._links_ok = (indptr[:-1], indptr[1:], indices), True
         return self._links

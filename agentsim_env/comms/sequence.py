@@ -66,7 +66,9 @@ class Sequencer:
         sequence_kernel(snd, step, self.used, self.stamp, seq)
         return seq
 
-    def number(self, kind: np.ndarray, snd: np.ndarray, tgt: np.ndarray, wld: np.ndarray, step: int) -> np.ndarray:
+    def number(
+        self, kind: np.ndarray, snd: np.ndarray, tgt: np.ndarray, wld: np.ndarray, step: int
+    ) -> np.ndarray:
         """Number messages created at ``step`` (rows in creation order), advancing the counters.
 
         Args:
@@ -89,7 +91,11 @@ class Sequencer:
             return seq
         # sorted codes (world, kind, group) and their counts
         if self._ctl_step != step:
-            self._ctl_step, self._ctl_codes, self._ctl_counts = step, self._ctl_codes[:0], self._ctl_counts[:0]
+            self._ctl_step, self._ctl_codes, self._ctl_counts = (
+                step,
+                self._ctl_codes[:0],
+                self._ctl_counts[:0],
+            )
         codes = ((wld[ctl] * _CTL_KINDS + kind[ctl].astype(np.int64)) << _CTL_SHIFT) + tgt[ctl]
         order = np.argsort(codes, kind="stable")
         uniq, first, count = np.unique(codes[order], return_index=True, return_counts=True)

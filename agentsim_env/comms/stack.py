@@ -228,8 +228,9 @@ _NO_ROWS = np.zeros(0, dtype=np.int64)  # push_rows: delivery j takes payload ro
 class BusRouter(Protocol):
     """Delivers a shard's due bus messages together with the other shards' (``MessageBus.deliver``'s contract)."""
 
-    def deliver(self, bus: MessageBus, step: int, pos: np.ndarray, online: np.ndarray,
-                group: np.ndarray) -> DeliveryEvents:  # fmt: skip
+    def deliver(
+        self, bus: MessageBus, step: int, pos: np.ndarray, online: np.ndarray, group: np.ndarray
+    ) -> DeliveryEvents:
         """Deliver the messages due at ``step`` into the own slots (pushes left to ``bus.take_pushes``)."""
 
 
@@ -250,8 +251,16 @@ class CommsStack:
         self.n_agents = n_agents
         s = n_worlds * n_agents
         # each world's loss generator comes with its reset_world
-        self.bus = MessageBus(n_worlds, n_agents, cfg.payload_dim, cfg.channel(), cfg.inbox_size, None,
-                              group=group, pos_scale=cfg.overlay_range)  # fmt: skip
+        self.bus = MessageBus(
+            n_worlds,
+            n_agents,
+            cfg.payload_dim,
+            cfg.channel(),
+            cfg.inbox_size,
+            None,
+            group=group,
+            pos_scale=cfg.overlay_range,
+        )
         self.overlay = Overlay(s, cfg.payload_dim, cfg.overlay_range, full_propagation=cfg.overlay_full)
         self.sent = np.zeros(s, dtype=np.int64)
         self._received0 = np.zeros(s, dtype=np.int64)
@@ -393,8 +402,13 @@ class CommsStack:
         ping = getattr(groups, "ping", None)
         if ping is not None and ping.size:
             k = ping.size
-            self.bus.send(HEARTBEAT, np.full(k, -1, dtype=np.int64), ping,
-                          np.zeros((k, self.cfg.payload_dim), dtype=np.float32), tick)  # fmt: skip
+            self.bus.send(
+                HEARTBEAT,
+                np.full(k, -1, dtype=np.int64),
+                ping,
+                np.zeros((k, self.cfg.payload_dim), dtype=np.float32),
+                tick,
+            )
         # the tick each world's episode began: loss draws are keyed by the step within the episode, so a world
         # reset at any tick loses what the same episode loses in a fresh run
         self.bus.set_starts(tick - ctx.step_count)
@@ -417,12 +431,22 @@ class CommsStack:
         k = agent.size
         receiver = np.asarray(agent, dtype=np.int64)
         created = np.full(k, step, np.int64)
-        self.bus.inbox.push(receiver, np.full(k, ENV, np.int8), np.full(k, -1, np.int64), np.zeros(k, np.int16),
-                            created, pay)  # fmt: skip
+        self.bus.inbox.push(
+            receiver, np.full(k, ENV, np.int8), np.full(k, -1, np.int64), np.zeros(k, np.int16), created, pay
+        )
         # ids from the bus's counter: a notice is a message of the run like any other (unique id)
-        self._notices.append(MessageLog(self.bus._new_ids(k), np.full(k, ENV, np.int8), np.full(k, -1, np.int64),
-                                        receiver.copy(), receiver.copy(), created, created.copy(),
-                                        np.zeros(k, np.int8)))  # fmt: skip
+        self._notices.append(
+            MessageLog(
+                self.bus._new_ids(k),
+                np.full(k, ENV, np.int8),
+                np.full(k, -1, np.int64),
+                receiver.copy(),
+                receiver.copy(),
+                created,
+                created.copy(),
+                np.zeros(k, np.int8),
+            )
+        )
 
     def deliver(
         self,
@@ -445,8 +469,12 @@ class CommsStack:
         if self._notices:  # the collision notices already in the inboxes: sent and delivered this step
             env = MessageLog.concat(self._notices)
             self._notices = []
-            bus_ev = DeliveryEvents(bus_ev.step, MessageLog.concat([env, bus_ev.sent]),
-                                    MessageLog.concat([env, bus_ev.delivered]), bus_ev.dropped)  # fmt: skip
+            bus_ev = DeliveryEvents(
+                bus_ev.step,
+                MessageLog.concat([env, bus_ev.sent]),
+                MessageLog.concat([env, bus_ev.delivered]),
+                bus_ev.dropped,
+            )
         pushes = self.bus.take_pushes()
         if self.overlay.frontier_size:
             ov = self.overlay.advance_graph(*self.graph.links(self.overlay.link_range))
@@ -456,7 +484,9 @@ class CommsStack:
         if k:
             # sender, created step and payload read from the flood table by flood id where the overlay has one
             snd, cre, pay, rows, by_rows = ov.push_columns()
-            pushes.append((ov.receiver, np.broadcast_to(_OVERLAY_KIND, (k,)), snd, ov.hops, cre, pay, rows, by_rows))
+            pushes.append(
+                (ov.receiver, np.broadcast_to(_OVERLAY_KIND, (k,)), snd, ov.hops, cre, pay, rows, by_rows)
+            )
         self.bus.inbox.push_batches(pushes)  # bus deliveries, then the overlay's: one pass over the inboxes
         self.events = CommsEvents(bus_ev, ov, self.sent.copy(), self.bus.take_answers())
         return self.events

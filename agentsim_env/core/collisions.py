@@ -227,16 +227,58 @@ def find_collisions(
     i = j = a_obj = o_obj = _EMPTY
     if rmax >= 0.0:
         cs, items = agent_grid.cell_start, agent_grid.items
-        i, j = _joined(threads.run(lambda lo, hi, _: _agent_agent(lo, hi, rmax, pos, radius, world, cs, items,
-                       sp.origin_x, sp.origin_y, sp.cell, sp.nx, sp.ny, m), items.shape[0]))  # fmt: skip
+        i, j = _joined(
+            threads.run(
+                lambda lo, hi, _: _agent_agent(
+                    lo,
+                    hi,
+                    rmax,
+                    pos,
+                    radius,
+                    world,
+                    cs,
+                    items,
+                    sp.origin_x,
+                    sp.origin_y,
+                    sp.cell,
+                    sp.nx,
+                    sp.ny,
+                    m,
+                ),
+                items.shape[0],
+            )
+        )
     if object_grid is not None and scene_kind.shape[0] > 0:
         og, so = object_grid, object_grid.spec
-        a_obj, o_obj = _joined(threads.run(lambda lo, hi, _: _agent_object(lo, hi, pos, radius, online, world,
-                               scene_kind, scene_centre, scene_half, scene_world, og.cell_start, og.items,
-                               so.origin_x, so.origin_y, so.cell, so.nx, so.ny, m), pos.shape[0]))  # fmt: skip
+        a_obj, o_obj = _joined(
+            threads.run(
+                lambda lo, hi, _: _agent_object(
+                    lo,
+                    hi,
+                    pos,
+                    radius,
+                    online,
+                    world,
+                    scene_kind,
+                    scene_centre,
+                    scene_half,
+                    scene_world,
+                    og.cell_start,
+                    og.items,
+                    so.origin_x,
+                    so.origin_y,
+                    so.cell,
+                    so.nx,
+                    so.ny,
+                    m,
+                ),
+                pos.shape[0],
+            )
+        )
     if not i.size and not a_obj.size:  # the common step: nothing hit, no concatenation
         return CollisionEvents.empty()
     none_a = np.full(i.shape[0] * 2, -1, dtype=np.int64)
     none_o = np.full(a_obj.shape[0], -1, dtype=np.int64)
-    return CollisionEvents(np.concatenate([i, j, a_obj]), np.concatenate([j, i, none_o]),
-                           np.concatenate([none_a, o_obj]))  # fmt: skip
+    return CollisionEvents(
+        np.concatenate([i, j, a_obj]), np.concatenate([j, i, none_o]), np.concatenate([none_a, o_obj])
+    )

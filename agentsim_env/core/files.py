@@ -158,17 +158,27 @@ def _checked_target(path: Path) -> tuple[Path, os.stat_result | None]:
     folder = target.parent
     if st is not None:
         if not stat.S_ISREG(st.st_mode):
-            raise _refuse(errno.EINVAL, f"{target} is {file_kind(st.st_mode)}, not a regular file; "
-                          "nothing was written", target)  # fmt: skip
+            raise _refuse(
+                errno.EINVAL,
+                f"{target} is {file_kind(st.st_mode)}, not a regular file; nothing was written",
+                target,
+            )
         if not _may(target, os.W_OK):
             how = f"mode {stat.S_IMODE(st.st_mode):04o}, owner uid {st.st_uid}"
-            raise _refuse(errno.EACCES, f"permission denied: this process may not write {target} ({how}); "
-                          "nothing was written", target)  # fmt: skip
+            raise _refuse(
+                errno.EACCES,
+                f"permission denied: this process may not write {target} ({how}); nothing was written",
+                target,
+            )
     elif not folder.is_dir():
         raise _refuse(errno.ENOENT, f"the folder {folder} does not exist; nothing was written", target)
     if not _may(folder, os.W_OK | os.X_OK):
-        raise _refuse(errno.EACCES, f"permission denied: this process may not create files in {folder} (a file "
-                      "is replaced through a temporary file beside it); nothing was written", target)  # fmt: skip
+        raise _refuse(
+            errno.EACCES,
+            f"permission denied: this process may not create files in {folder} (a file "
+            "is replaced through a temporary file beside it); nothing was written",
+            target,
+        )
     return target, st
 
 
@@ -206,8 +216,11 @@ def write_atomically(path: str | os.PathLike[str], data: bytes) -> Path:
                     os.fchown(fd, st.st_uid, st.st_gid)
                 except PermissionError:
                     owner = f"uid {st.st_uid}, gid {st.st_gid}"
-                    raise _refuse(errno.EPERM, f"cannot keep the owner of {target} ({owner}) on a replacement; "
-                                  "nothing was written", target) from None  # fmt: skip
+                    raise _refuse(
+                        errno.EPERM,
+                        f"cannot keep the owner of {target} ({owner}) on a replacement; nothing was written",
+                        target,
+                    ) from None
             os.fchmod(fd, stat.S_IMODE(st.st_mode))  # after the chown, which may clear set-id bits
         with os.fdopen(fd, "wb") as fh:
             fd = -1  # owned by fh now

@@ -27,8 +27,13 @@ MAX_INT_BITS = 1000
 MAX_ARRAY_SIZE = 1000
 MAX_ARRAY_DIMS = 4
 
-_BRACKETS: dict[type, tuple[str, str]] = {list: ("[", "]"), tuple: ("(", ")"), set: ("{", "}"),
-                                          frozenset: ("frozenset({", "})"), dict: ("{", "}")}  # fmt: skip
+_BRACKETS: dict[type, tuple[str, str]] = {
+    list: ("[", "]"),
+    tuple: ("(", ")"),
+    set: ("{", "}"),
+    frozenset: ("frozenset({", "})"),
+    dict: ("{", "}"),
+}
 _EMPTY: dict[type, str] = {list: "[]", tuple: "()", set: "set()", frozenset: "frozenset()", dict: "{}"}
 
 

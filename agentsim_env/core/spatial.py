@@ -135,9 +135,18 @@ def build_grid(spec: GridSpec, pos: np.ndarray, world: np.ndarray, active: np.nd
         The grid; items are slot indices in ascending order within each cell.
     """
     if world.shape[0] and (int(world.min()) < 0 or int(world.max()) >= spec.n_worlds):
-        raise ValueError(f"world ids must be in [0, {spec.n_worlds}), got {int(world.min())}..{int(world.max())}")
+        raise ValueError(
+            f"world ids must be in [0, {spec.n_worlds}), got {int(world.min())}..{int(world.max())}"
+        )
     cs, items = _build(
-        np.ascontiguousarray(pos), world, active, spec.origin_x, spec.origin_y, spec.cell, spec.nx, spec.ny,
+        np.ascontiguousarray(pos),
+        world,
+        active,
+        spec.origin_x,
+        spec.origin_y,
+        spec.cell,
+        spec.nx,
+        spec.ny,
         spec.n_cells,
     )
     return Grid(spec, cs, items)
@@ -167,7 +176,9 @@ def _build_objects(cx, cy, rad, world, ox, oy, cell, nx, ny, n_cells):  # type: 
     return counts, items
 
 
-def build_object_grid(spec: GridSpec, centre: np.ndarray, footprint_radius: np.ndarray, world: np.ndarray) -> Grid:
+def build_object_grid(
+    spec: GridSpec, centre: np.ndarray, footprint_radius: np.ndarray, world: np.ndarray
+) -> Grid:
     """Register every object in all cells its footprint's bounding square touches.
 
     Args:
@@ -180,9 +191,16 @@ def build_object_grid(spec: GridSpec, centre: np.ndarray, footprint_radius: np.n
         The object grid (an object may appear in several cells, at most once per cell).
     """
     cs, items = _build_objects(
-        np.ascontiguousarray(centre[:, 0]), np.ascontiguousarray(centre[:, 1]),
-        np.ascontiguousarray(footprint_radius, dtype=np.float64), world.astype(np.int64),
-        spec.origin_x, spec.origin_y, spec.cell, spec.nx, spec.ny, spec.n_cells,
+        np.ascontiguousarray(centre[:, 0]),
+        np.ascontiguousarray(centre[:, 1]),
+        np.ascontiguousarray(footprint_radius, dtype=np.float64),
+        world.astype(np.int64),
+        spec.origin_x,
+        spec.origin_y,
+        spec.cell,
+        spec.nx,
+        spec.ny,
+        spec.n_cells,
     )
     return Grid(spec, cs, items)
 
@@ -242,6 +260,18 @@ def neighbor_pairs(
     """
     sp = grid.spec
     cap = max(16, grid.items.shape[0])
-    return _pairs(np.ascontiguousarray(pos), world, grid.cell_start, grid.items, sp.origin_x, sp.origin_y, sp.cell,
-                  sp.nx, sp.ny, float(max_dist), np.empty(cap, dtype=np.int64), np.empty(cap, dtype=np.int64),
-                  np.empty(cap))  # fmt: skip
+    return _pairs(
+        np.ascontiguousarray(pos),
+        world,
+        grid.cell_start,
+        grid.items,
+        sp.origin_x,
+        sp.origin_y,
+        sp.cell,
+        sp.nx,
+        sp.ny,
+        float(max_dist),
+        np.empty(cap, dtype=np.int64),
+        np.empty(cap, dtype=np.int64),
+        np.empty(cap),
+    )

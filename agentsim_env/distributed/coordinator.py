@@ -94,9 +94,15 @@ class Traffic:
 
     def add_exchange(self, counts: dict[str, int], scale: float = 1.0) -> None:
         """Add the exchange's byte counts by phase (``Bridge.take_bytes``), times ``scale``."""
-        for phase, field_name in (("halo", "halo"), ("handover", "handover"), ("offline", "offline"),
-                                  ("bus", "bus"), ("want", "positions"), ("have", "positions"),
-                                  ("groups", "groups")):  # fmt: skip
+        for phase, field_name in (
+            ("halo", "halo"),
+            ("handover", "handover"),
+            ("offline", "offline"),
+            ("bus", "bus"),
+            ("want", "positions"),
+            ("have", "positions"),
+            ("groups", "groups"),
+        ):
             setattr(self, field_name, getattr(self, field_name) + int(counts.get(phase, 0) * scale))
 
 
@@ -163,14 +169,23 @@ class Coordinator:
         self.lost = np.union1d(self.lost, slots)
         if not self.alive.any():
             reasons = "; ".join(f"shard {i.index}: {i.reason}" for i in self.shards)
-            raise RuntimeError(f"every shard is offline ({reasons}): the simulation cannot go on (reset() restarts "
-                               f"them)") from failure.error  # fmt: skip
+            raise RuntimeError(
+                f"every shard is offline ({reasons}): the simulation cannot go on (reset() restarts them)"
+            ) from failure.error
         self.strips.reassign(k, self.alive)
         self.backend.set_owner(self.strips.owner)
-        log.warning("shard %d (%s) is offline: %s; its %d agents terminate, the simulation goes on",
-                    k, info.address, failure.reason, slots.size, exc_info=failure.error)  # fmt: skip
+        log.warning(
+            "shard %d (%s) is offline: %s; its %d agents terminate, the simulation goes on",
+            k,
+            info.address,
+            failure.reason,
+            slots.size,
+            exc_info=failure.error,
+        )
 
-    def _call(self, method: str, calls: dict[int, tuple[Any, ...]], on_reply: Any = None) -> dict[int, Packed]:
+    def _call(
+        self, method: str, calls: dict[int, tuple[Any, ...]], on_reply: Any = None
+    ) -> dict[int, Packed]:
         # ``on_reply(k, reply)``: called with each shard's reply as it comes in (the Ray backend), while the
         # others still run
         calls = {k: a for k, a in calls.items() if self.shards[k].alive}
@@ -229,7 +244,9 @@ class Coordinator:
         assert out is not None
         out[r["slots"]] = r["obs"] if "obs" in r else self.backend.obs_rows(k, int(r["obs_n"]))
 
-    def _take(self, replies: dict[int, Packed], obs: bool, taken: set[int] | frozenset[int] = frozenset()) -> None:
+    def _take(
+        self, replies: dict[int, Packed], obs: bool, taken: set[int] | frozenset[int] = frozenset()
+    ) -> None:
         # ``taken``: shards whose observation rows were scattered as their reply came in
         st = self.world.state
         for k, r in replies.items():
@@ -242,7 +259,11 @@ class Coordinator:
             if "pos" in r:
                 mine = r["own"]
                 st.pos[mine], st.vel[mine], st.heading[mine], st.online[mine] = (
-                    r["pos"], r["vel"], r["heading"], r["online"])  # fmt: skip
+                    r["pos"],
+                    r["vel"],
+                    r["heading"],
+                    r["online"],
+                )
 
     # ------------------------------------------------------------------ episode
     def reset(self, seed: np.random.SeedSequence, gather: bool = True) -> None:
@@ -259,17 +280,32 @@ class Coordinator:
         s = world.state.n_slots
         self.obs = np.zeros((s, _obs_dim(sc)), np.float32)
         if gather:  # shards beside the driver take their actions and send their rows through shared memory
-            self.backend.share_rows(s, _obs_dim(sc), tuple((k, p.size, "<f8") for k, p in sc.act_parts().items()))
-        replies = self._call("reset", {k: (seed, self.strips.owner, gather, self.kinematics and gather,
-                                           int(world.tick)) for k in range(len(self.shards))})  # fmt: skip
+            self.backend.share_rows(
+                s, _obs_dim(sc), tuple((k, p.size, "<f8") for k, p in sc.act_parts().items())
+            )
+        replies = self._call(
+            "reset",
+            {
+                k: (seed, self.strips.owner, gather, self.kinematics and gather, int(world.tick))
+                for k in range(len(self.shards))
+            },
+        )
         self._take(replies, obs=gather)
         self.backend.set_slot_owner(self.owner)
         if not self.alive.all():  # a shard that failed its reset loses its agents at once
             self.lost = np.flatnonzero(world.state.online & (self.owner < 0))
             world.set_offline(self.lost)
 
-    def rollout(self, policy: Any, steps: int, seed: np.random.SeedSequence, policy_seed: int | None,
-                done: int, max_steps: int, on_step: Any = None) -> dict[str, Any]:  # fmt: skip
+    def rollout(
+        self,
+        policy: Any,
+        steps: int,
+        seed: np.random.SeedSequence,
+        policy_seed: int | None,
+        done: int,
+        max_steps: int,
+        on_step: Any = None,
+    ) -> dict[str, Any]:
         """``env.rollout`` over the shards: the policy runs inside them; only counts come back each step.
 
         Args:
@@ -303,9 +339,14 @@ class Coordinator:
         t_start = time.perf_counter()
         while taken < steps and live:
             self.lost = _NONE
-            control: Packed = {"ended": self._ended, "objects": self._objects, "owner": self.strips.owner,
-                               "taken": taken, "over": done + taken + 1 >= max_steps,
-                               "gather": on_step is not None}  # fmt: skip
+            control: Packed = {
+                "ended": self._ended,
+                "objects": self._objects,
+                "owner": self.strips.owner,
+                "taken": taken,
+                "over": done + taken + 1 >= max_steps,
+                "gather": on_step is not None,
+            }
             self._objects = []
             t_step = time.perf_counter()
             replies = self._call("act", dict.fromkeys(range(n), (control,)))
@@ -345,8 +386,15 @@ class Coordinator:
             self.owner[r["own"]] = k
             self.obs[r["live"]] = r["obs"]
         self.world.state.pos[:] = pos
-        return {"steps": taken, "agent_steps": agent_steps, "events": dict(zip(EVENT_KEYS, events.tolist())),
-                "returns": returns, "final_pos": pos, "sums": sums, "live": alive}  # fmt: skip
+        return {
+            "steps": taken,
+            "agent_steps": agent_steps,
+            "events": dict(zip(EVENT_KEYS, events.tolist())),
+            "returns": returns,
+            "final_pos": pos,
+            "sums": sums,
+            "live": alive,
+        }
 
     def _step_view(self, replies: dict[int, Packed]) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
         """A rollout step's masks and info arrays over every slot, positions into the mirror."""
@@ -379,8 +427,14 @@ class Coordinator:
         self.lost = _NONE
         tr = self._traffic = Traffic()
         events_wanted = self.gather_events or bool(world.hooks)
-        control: Packed = {"ended": self._ended, "objects": self._objects, "owner": self.strips.owner,
-                           "obs": True, "kinematics": self.kinematics, "events": events_wanted}  # fmt: skip
+        control: Packed = {
+            "ended": self._ended,
+            "objects": self._objects,
+            "owner": self.strips.owner,
+            "obs": True,
+            "kinematics": self.kinematics,
+            "events": events_wanted,
+        }
         calls: dict[int, tuple[Any, ...]] = {}
         for k in range(len(self.shards)):
             slots = np.flatnonzero(acting & (self.owner == k))
@@ -412,7 +466,9 @@ class Coordinator:
                 if key not in info:
                     info[key] = np.zeros(s, dtype=v.dtype)
                 info[key][sl] = v
-            tr.replies += nbytes(r) + 4 * int(r.get("obs_n", 0)) * _obs_dim(self.scenario)  # shared rows: float32
+            tr.replies += nbytes(r) + 4 * int(r.get("obs_n", 0)) * _obs_dim(
+                self.scenario
+            )  # shared rows: float32
         for key in keys:
             info.setdefault(key, np.zeros(s))
         self._take(replies, obs=True, taken=taken)
@@ -461,13 +517,18 @@ def _rollout_rows(
 
 def _merge_comms(replies: list[Packed], step: int) -> CommsEvents:
     """The shards' message events of one step as one process's (bus logs and overlay deliveries)."""
+
     def logs(key: str) -> MessageLog:
         return MessageLog.concat([r[key] for r in replies if key in r])
 
     bus = DeliveryEvents(step, logs("bus.sent"), logs("bus.delivered"), logs("bus.dropped"))
     got = [r["overlay"] for r in replies if "overlay" in r]
-    ov = Deliveries(*(np.concatenate([getattr(d, f) for d in got]) for f in
-                      ("receiver", "flood", "origin", "hops", "created", "payload")))  # fmt: skip
+    ov = Deliveries(
+        *(
+            np.concatenate([getattr(d, f) for d in got])
+            for f in ("receiver", "flood", "origin", "hops", "created", "payload")
+        )
+    )
     sent = np.sum([r["sent"] for r in replies if "sent" in r], axis=0)
     return CommsEvents(bus, ov, sent)
 

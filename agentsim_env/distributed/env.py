@@ -44,15 +44,21 @@ def check_shardable(scenario: Scenario, shards: int) -> None:
     c = scenario.config
     if not scenario.shardable:
         ok = [n for n in list_scenarios() if scenario_class(n).shardable]
-        raise ValueError(f"scenario {scenario.name!r} cannot run over shards (shards={shards}); the scenarios that "
-                         f"can are {ok}; use shards=None for one process")  # fmt: skip
+        raise ValueError(
+            f"scenario {scenario.name!r} cannot run over shards (shards={shards}); the scenarios that "
+            f"can are {ok}; use shards=None for one process"
+        )
     if getattr(c, "physics", "kinematic") == "pymunk":
-        raise ValueError(f"physics='pymunk' cannot run over shards (shards={shards}): its contact solver needs every "
-                         f"body in one space; use physics='kinematic', or shards=None")  # fmt: skip
+        raise ValueError(
+            f"physics='pymunk' cannot run over shards (shards={shards}): its contact solver needs every "
+            f"body in one space; use physics='kinematic', or shards=None"
+        )
     comms = getattr(c, "comms", None)
     if comms is not None and comms.overlay_full:
-        raise ValueError(f"comms.overlay_full=True cannot run over shards (shards={shards}): a flood would cross "
-                         f"every shard within one step; use overlay_full=False, or shards=None")  # fmt: skip
+        raise ValueError(
+            f"comms.overlay_full=True cannot run over shards (shards={shards}): a flood would cross "
+            f"every shard within one step; use overlay_full=False, or shards=None"
+        )
 
 
 def check_options(shards: Any, backend: Any, ray_address: Any, timeout_s: Any) -> None:
@@ -176,7 +182,9 @@ class DistributedParallelEnv(AgentSimParallelEnv):
         if self.world.hooks or self.render_mode or self._stay:
             return super().rollout(policy, steps, seed, on_step=on_step)
         steps, pseed = check_steps(steps), check_seed(seed)
-        if isinstance(policy, (str, os.PathLike)):  # a bad name is one error here, not a failure in every shard
+        if isinstance(
+            policy, (str, os.PathLike)
+        ):  # a bad name is one error here, not a failure in every shard
             build_policy(self.scenario.name, _config_fields(self.scenario), policy)
         if seed is not None:
             self._seeds.reset(seed)
@@ -184,7 +192,9 @@ class DistributedParallelEnv(AgentSimParallelEnv):
         try:
             t0 = time.perf_counter()
             watch = None
-            if on_step is not None:  # the observer reads the masks, infos and env.world's positions of each step
+            if (
+                on_step is not None
+            ):  # the observer reads the masks, infos and env.world's positions of each step
 
                 def watch(taken: int, acted: Any, live: Any, info: Any) -> bool:
                     if acted is None:  # right after the reset
@@ -200,10 +210,15 @@ class DistributedParallelEnv(AgentSimParallelEnv):
             self._guard.exit()
         n = len(self.possible_agents)
         return RolloutResult(
-            steps=out["steps"], returns=out["returns"][:n].copy(), final_pos=out["final_pos"][:n].copy(),
-            events=out["events"], info_sums={k: float(v.sum()) for k, v in out["sums"].items()},
-            agent_steps=out["agent_steps"], wall_s=wall, steps_per_s=out["steps"] / wall if wall > 0 else 0.0,
-        )  # fmt: skip
+            steps=out["steps"],
+            returns=out["returns"][:n].copy(),
+            final_pos=out["final_pos"][:n].copy(),
+            events=out["events"],
+            info_sums={k: float(v.sum()) for k, v in out["sums"].items()},
+            agent_steps=out["agent_steps"],
+            wall_s=wall,
+            steps_per_s=out["steps"] / wall if wall > 0 else 0.0,
+        )
 
     def close(self) -> None:
         """Stop the shards (and the viewer or window, if any)."""
@@ -302,5 +317,11 @@ def make(
         ImportError: With the install hint, when ``backend="ray"`` and Ray is not installed.
     """
     env_kw = {k: config.pop(k) for k in ENV_KEYS if k in config}
-    return DistributedParallelEnv(make_scenario(name, **config), shards=shards, backend=backend,
-                                  ray_address=ray_address, timeout_s=timeout_s, **env_kw)  # fmt: skip
+    return DistributedParallelEnv(
+        make_scenario(name, **config),
+        shards=shards,
+        backend=backend,
+        ray_address=ray_address,
+        timeout_s=timeout_s,
+        **env_kw,
+    )

@@ -100,8 +100,10 @@ class LocalExchange:
                 self._cond.notify_all()
             if not self._cond.wait_for(lambda: key in self._b.results, timeout=self.wait_s):
                 self._b.waiting.discard(k)
-                raise TimeoutError(f"exchange {key[1]!r} of step {key[0]}: the other shards did not post within "
-                                   f"{self.wait_s:g} s")  # fmt: skip
+                raise TimeoutError(
+                    f"exchange {key[1]!r} of step {key[0]}: the other shards did not post within "
+                    f"{self.wait_s:g} s"
+                )
             return self._b.take(key, k)
 
     def waiting(self) -> set[int]:
@@ -180,8 +182,10 @@ class ExchangeActor:
                 await asyncio.wait_for(event.wait(), timeout=self.wait_s)
             except asyncio.TimeoutError:
                 self._b.waiting.discard(k)
-                raise TimeoutError(f"exchange {key[1]!r} of step {key[0]}: the other shards did not post within "
-                                   f"{self.wait_s:g} s") from None  # fmt: skip
+                raise TimeoutError(
+                    f"exchange {key[1]!r} of step {key[0]}: the other shards did not post within "
+                    f"{self.wait_s:g} s"
+                ) from None
         return self._b.take(key, k)
 
     async def waiting(self) -> set[int]:

@@ -85,8 +85,28 @@ def _room(a, need):  # type: ignore[no-untyped-def]
 
 
 @nb.njit(cache=True)
-def hop_kernel(start, end, indices, own, e_row, e_slot, e_own, e_hops, rd_start, rd_len, pool, add_start, add_len,  # type: ignore[no-untyped-def]  # noqa: E501
-               add_v, stamp, token, new_pool, out_v, out_f, out_h):  # fmt: skip
+def hop_kernel(
+    start,
+    end,
+    indices,
+    own,
+    e_row,
+    e_slot,
+    e_own,
+    e_hops,
+    rd_start,
+    rd_len,
+    pool,
+    add_start,
+    add_len,  # type: ignore[no-untyped-def]  # noqa: E501
+    add_v,
+    stamp,
+    token,
+    new_pool,
+    out_v,
+    out_f,
+    out_h,
+):
     """One hop of the frontier entries ``(e_row, e_slot)`` (grouped by row, rows in key order) into own slots.
 
     An own slot ``v`` reads row ``f`` when a frontier entry of ``f`` links to it and ``v`` is not among ``f``'s
@@ -156,8 +176,20 @@ def hop_kernel(start, end, indices, own, e_row, e_slot, e_own, e_hops, rd_start,
     for f in range(n_rows):  # rows without a frontier entry here keep their own readers
         if row_h[f] < 0:
             p0 = npool
-            npool = _copy_readers(f, rd_start, rd_len, pool, add_start, add_len, add_v, own, new_pool, npool, stamp,
-                                  np.int32(-1))  # fmt: skip
+            npool = _copy_readers(
+                f,
+                rd_start,
+                rd_len,
+                pool,
+                add_start,
+                add_len,
+                add_v,
+                own,
+                new_pool,
+                npool,
+                stamp,
+                np.int32(-1),
+            )
             new_start[f] = p0
             new_len[f] = npool - p0
     return new_pool, npool, new_start, new_len, out_v, out_f, out_h, nd, row_h, edges, token

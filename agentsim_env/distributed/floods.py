@@ -119,8 +119,13 @@ class FloodDeliveries:
 
     __slots__ = ("receiver", "hops", "rows", "table", "_cols")
 
-    def __init__(self, receiver: np.ndarray, hops: np.ndarray, rows: np.ndarray,
-                 table: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]) -> None:  # fmt: skip
+    def __init__(
+        self,
+        receiver: np.ndarray,
+        hops: np.ndarray,
+        rows: np.ndarray,
+        table: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+    ) -> None:
         self.receiver, self.hops, self.rows, self.table = receiver, hops, rows, table
         self._cols: dict[int, np.ndarray] = {}
 
@@ -284,8 +289,9 @@ class PartFloods:
         return np.column_stack([self._c, self._o, self._q])
 
     # ------------------------------------------------------------------ rows
-    def _rows_for(self, c: np.ndarray, o: np.ndarray, q: np.ndarray, limit: np.ndarray, pay: np.ndarray,
-                  end: np.ndarray) -> np.ndarray:  # fmt: skip
+    def _rows_for(
+        self, c: np.ndarray, o: np.ndarray, q: np.ndarray, limit: np.ndarray, pay: np.ndarray, end: np.ndarray
+    ) -> np.ndarray:
         # The row of each key, adding rows for keys not kept yet (vectorized: one stable sort of the keys).
         n = self._c.shape[0]
         if c.shape[0] == 0:
@@ -304,8 +310,11 @@ class PartFloods:
         src = first[new] - n  # the entries that define the new rows
         if src.shape[0]:
             m = src.shape[0]
-            self._c, self._o, self._q = (np.concatenate([self._c, c[src]]), np.concatenate([self._o, o[src]]),
-                                         np.concatenate([self._q, q[src]]))  # fmt: skip
+            self._c, self._o, self._q = (
+                np.concatenate([self._c, c[src]]),
+                np.concatenate([self._o, o[src]]),
+                np.concatenate([self._q, q[src]]),
+            )
             self._limit = np.concatenate([self._limit, limit[src].astype(np.int32)])
             self._pay = np.concatenate([self._pay, pay[src].astype(np.float32)])
             self._end = np.concatenate([self._end, end[src].astype(np.int64)])
@@ -325,10 +334,15 @@ class PartFloods:
 
     def _entries(self, rows: np.ndarray, slots: np.ndarray, hops: np.ndarray) -> FloodEntries:
         return FloodEntries(
-            slot=slots.astype(np.int64), created=self._c[rows], origin=self._o[rows], seq=self._q[rows],
-            hops=hops.astype(np.int32), limit=self._limit[rows], left=(self._end[rows] - self._clock).astype(np.int32),
+            slot=slots.astype(np.int64),
+            created=self._c[rows],
+            origin=self._o[rows],
+            seq=self._q[rows],
+            hops=hops.astype(np.int32),
+            limit=self._limit[rows],
+            left=(self._end[rows] - self._clock).astype(np.int32),
             payload=np.take(self._pay, rows, axis=0),
-        )  # fmt: skip
+        )
 
     def _mask(self, slots: np.ndarray) -> np.ndarray:
         m = np.zeros(self.n_slots, dtype=bool)
@@ -336,8 +350,9 @@ class PartFloods:
         return m
 
     # ------------------------------------------------------------------ API
-    def start(self, origin: np.ndarray, hop_limit: np.ndarray | int, payload: np.ndarray | None,
-              step: int) -> np.ndarray:  # fmt: skip
+    def start(
+        self, origin: np.ndarray, hop_limit: np.ndarray | int, payload: np.ndarray | None, step: int
+    ) -> np.ndarray:
         """Start one flood per origin (own slots); the origin has read its own flood (hops 0).
 
         Args:
@@ -401,8 +416,14 @@ class PartFloods:
         """Reads (and frontier entries: ``hops >= 0``) of slots that joined this part (``take_leaving``'s)."""
         if not len(entries):
             return
-        rows = self._rows_for(entries.created, entries.origin, entries.seq, entries.limit, entries.payload,
-                              self._clock + entries.left.astype(np.int64))  # fmt: skip
+        rows = self._rows_for(
+            entries.created,
+            entries.origin,
+            entries.seq,
+            entries.limit,
+            entries.payload,
+            self._clock + entries.left.astype(np.int64),
+        )
         self._add_row = np.concatenate([self._add_row, rows])
         self._add_slot = np.concatenate([self._add_slot, entries.slot.astype(np.int64)])
         fr = entries.hops >= 0
@@ -418,8 +439,9 @@ class PartFloods:
         """
         self.take_leaving(slots)
 
-    def hop(self, links: tuple[np.ndarray, np.ndarray, np.ndarray], own: np.ndarray,
-            ghost_frontier: FloodEntries) -> FloodDeliveries:  # fmt: skip
+    def hop(
+        self, links: tuple[np.ndarray, np.ndarray, np.ndarray], own: np.ndarray, ghost_frontier: FloodEntries
+    ) -> FloodDeliveries:
         """Spread every flood one hop into the own slots (call on every part, every step).
 
         Args:
@@ -440,8 +462,14 @@ class PartFloods:
         g = ghost_frontier
         gk = ~own[g.slot] if len(g) else np.zeros(0, dtype=bool)
         # a ghost's entry relays hop h + 1 now; the flood can spread until hop (now - 1) + left
-        g_rows = self._rows_for(g.created[gk], g.origin[gk], g.seq[gk], g.limit[gk], g.payload[gk],
-                                self._clock - 1 + g.left[gk].astype(np.int64))  # fmt: skip
+        g_rows = self._rows_for(
+            g.created[gk],
+            g.origin[gk],
+            g.seq[gk],
+            g.limit[gk],
+            g.payload[gk],
+            self._clock - 1 + g.left[gk].astype(np.int64),
+        )
         n = self._c.shape[0]
         e_row = np.concatenate([self._fr_row, g_rows])
         e_slot = np.concatenate([self._fr_slot, g.slot[gk].astype(np.int64)])
@@ -462,16 +490,36 @@ class PartFloods:
         relayed = np.flatnonzero(np.bincount(self._fr_row, minlength=n))  # sorted distinct rows
         spare, out_v, out_f, out_h = self._buffers()
         spare, npool, rd_start, rd_len, out_v, out_f, out_h, nd, row_h, edges, self._token = hop_kernel(
-            start, end, indices, own, e_row[order], e_slot[order], e_own[order], e_hops[order], self._rd_start,
-            self._rd_len, self._pool, add_start, add_len, add_v, self._stamp, self._token, spare, out_v, out_f, out_h,
-        )  # fmt: skip
+            start,
+            end,
+            indices,
+            own,
+            e_row[order],
+            e_slot[order],
+            e_own[order],
+            e_hops[order],
+            self._rd_start,
+            self._rd_len,
+            self._pool,
+            add_start,
+            add_len,
+            add_v,
+            self._stamp,
+            self._token,
+            spare,
+            out_v,
+            out_f,
+            out_h,
+        )
         # the old pool's buffer is the next hop's spare; the deliveries are copied out of the reused buffers
         old = self._pool if self._pool_buf is None else self._pool_buf
         self._scratch = (old if old.flags.writeable else _e(), out_v, out_f, out_h)
         self._pool_buf, self._pool, self._rd_start, self._rd_len = spare, spare[:npool], rd_start, rd_len
         self._add_row, self._add_slot = _e(), _e()
         out_f, out_h = out_f[:nd], out_h[:nd]
-        out = FloodDeliveries(out_v[:nd].copy(), out_h.copy(), out_f.copy(), (self._o, self._c, self._pay, self._q))
+        out = FloodDeliveries(
+            out_v[:nd].copy(), out_h.copy(), out_f.copy(), (self._o, self._c, self._pay, self._q)
+        )
         out_v = out.receiver
         done = row_h >= 0
         self._end[done] = self._clock + self._limit[done] - row_h[done]
@@ -479,8 +527,13 @@ class PartFloods:
         goes = out_h < self._limit[out_f]
         fr_row, fr_slot = out_f[goes], out_v[goes]
         keys = self.keys()
-        self._stats = PartHopStats(self._started, len(out), int(edges) - len(out), keys[relayed],
-                                   keys[np.flatnonzero(np.bincount(fr_row, minlength=n))])  # fmt: skip
+        self._stats = PartHopStats(
+            self._started,
+            len(out),
+            int(edges) - len(out),
+            keys[relayed],
+            keys[np.flatnonzero(np.bincount(fr_row, minlength=n))],
+        )
         self._started = 0
         # forget the floods that cannot spread any more, or that no own slot read
         has_fr = np.zeros(n, dtype=bool)

@@ -82,7 +82,9 @@ class ObsSegment:
 
     def __init__(self, n_shards: int, n_slots: int, obs_dim: int) -> None:
         self.n_shards, self.n_slots, self.obs_dim = int(n_shards), int(n_slots), int(obs_dim)
-        self._shm: SharedMemory | None = _create("obs", self.n_shards * _region_bytes(self.n_slots, self.obs_dim))
+        self._shm: SharedMemory | None = _create(
+            "obs", self.n_shards * _region_bytes(self.n_slots, self.obs_dim)
+        )
         self.name = self._shm.name.lstrip("/")
 
     def rows(self, k: int, n: int) -> np.ndarray:
@@ -90,7 +92,9 @@ class ObsSegment:
         if self._shm is None:
             raise RuntimeError("the observation segment is closed")
         if not (0 <= k < self.n_shards and 0 <= n <= self.n_slots):
-            raise ValueError(f"shard must be in [0, {self.n_shards}) and rows in [0, {self.n_slots}], got {k}, {n}")
+            raise ValueError(
+                f"shard must be in [0, {self.n_shards}) and rows in [0, {self.n_slots}], got {k}, {n}"
+            )
         at = k * _region_bytes(self.n_slots, self.obs_dim)
         return np.ndarray((n, self.obs_dim), dtype=np.float32, buffer=self._shm.buf, offset=at)
 
@@ -118,8 +122,12 @@ class ObsWriter:
         if not 0 <= region < n_shards:
             raise ValueError(f"the observation segment has regions 0..{n_shards - 1}, got {region}")
         self._shm = shm = _attach(name, int(n_shards) * _region_bytes(n_slots, obs_dim), "observation")
-        self.array: np.ndarray = np.ndarray((int(n_slots), int(obs_dim)), dtype=np.float32, buffer=shm.buf,
-                                            offset=int(region) * _region_bytes(n_slots, obs_dim))  # fmt: skip
+        self.array: np.ndarray = np.ndarray(
+            (int(n_slots), int(obs_dim)),
+            dtype=np.float32,
+            buffer=shm.buf,
+            offset=int(region) * _region_bytes(n_slots, obs_dim),
+        )
 
     def close(self) -> None:
         """Unmap the region (the segment stays for the driver)."""
@@ -130,7 +138,9 @@ class ObsWriter:
 def _action_bytes(n_slots: int, layout: tuple[tuple[str, int, str], ...]) -> list[int]:
     # byte offsets within a region: the slots (int64), then each part's rows, each block 64-byte aligned
     offsets, at = [], 0
-    for nbytes in [int(n_slots) * 8] + [int(n_slots) * size * np.dtype(dt).itemsize for _, size, dt in layout]:
+    for nbytes in [int(n_slots) * 8] + [
+        int(n_slots) * size * np.dtype(dt).itemsize for _, size, dt in layout
+    ]:
         offsets.append(at)
         at += -(-nbytes // 64) * 64
     offsets.append(at)
@@ -154,9 +164,12 @@ class _ActionRegions:
         """Region ``k``: its slots ``(S,)`` int64 and each part's rows ``(S, size)``."""
         base = k * self.region_bytes
         slots = np.ndarray((self.n_slots,), dtype=np.int64, buffer=self._buf, offset=base + self.offsets[0])
-        parts = {name: np.ndarray((self.n_slots, size), dtype=np.dtype(dt), buffer=self._buf,
-                                  offset=base + self.offsets[i + 1])
-                 for i, (name, size, dt) in enumerate(self.layout)}  # fmt: skip
+        parts = {
+            name: np.ndarray(
+                (self.n_slots, size), dtype=np.dtype(dt), buffer=self._buf, offset=base + self.offsets[i + 1]
+            )
+            for i, (name, size, dt) in enumerate(self.layout)
+        }
         return slots, parts
 
 
@@ -171,7 +184,9 @@ class ActionSegment:
 
     def __init__(self, n_shards: int, n_slots: int, layout: tuple[tuple[str, int, str], ...]) -> None:
         self.n_shards, self.n_slots, self.layout = int(n_shards), int(n_slots), tuple(layout)
-        self._shm: SharedMemory | None = _create("act", self.n_shards * _action_bytes(self.n_slots, self.layout)[-1])
+        self._shm: SharedMemory | None = _create(
+            "act", self.n_shards * _action_bytes(self.n_slots, self.layout)[-1]
+        )
         self.name = self._shm.name.lstrip("/")
         self._regions = _ActionRegions(self._shm.buf, self.n_slots, self.layout)
 
@@ -201,8 +216,9 @@ class ActionReader:
         ValueError: When the segment is smaller than ``n_shards`` regions of that layout.
     """
 
-    def __init__(self, name: str, region: int, n_shards: int, n_slots: int,
-                 layout: tuple[tuple[str, int, str], ...]) -> None:  # fmt: skip
+    def __init__(
+        self, name: str, region: int, n_shards: int, n_slots: int, layout: tuple[tuple[str, int, str], ...]
+    ) -> None:
         if not 0 <= region < n_shards:
             raise ValueError(f"the action segment has regions 0..{n_shards - 1}, got {region}")
         self._shm = shm = _attach(name, int(n_shards) * _action_bytes(n_slots, layout)[-1], "action")

@@ -99,8 +99,10 @@ def check_address(address: str) -> str:
         ValueError: Naming ``ray_address`` and the allowed forms.
     """
     if not isinstance(address, str) or not _ADDRESS.match(address.strip()):
-        raise ValueError(f"ray_address must be 'auto', 'host:port' or 'ray://host:port' (or None for a local "
-                         f"cluster on 127.0.0.1), got {address!r}")  # fmt: skip
+        raise ValueError(
+            f"ray_address must be 'auto', 'host:port' or 'ray://host:port' (or None for a local "
+            f"cluster on 127.0.0.1), got {address!r}"
+        )
     return address.strip()
 
 
@@ -137,10 +139,12 @@ def exposed_warning(node_address: str, version: str) -> str | None:
     """The warning for a local cluster whose node address is ``node_address``; ``None`` when it is loopback."""
     if is_loopback(node_address):
         return None
-    return (f"the local Ray cluster is not on loopback (Ray {version} gave it the node address {node_address}): "
-            f"gcs_server, both raylet ports, the driver and every shard worker listen on every interface and the "
-            f"runtime-env agent on {node_address}; any machine that reaches them can run code here (firewall "
-            f"them, or pass ray_address)")  # fmt: skip
+    return (
+        f"the local Ray cluster is not on loopback (Ray {version} gave it the node address {node_address}): "
+        f"gcs_server, both raylet ports, the driver and every shard worker listen on every interface and the "
+        f"runtime-env agent on {node_address}; any machine that reaches them can run code here (firewall "
+        f"them, or pass ray_address)"
+    )
 
 
 def start_local_cluster(ray: Any, num_cpus: int) -> str:
@@ -155,8 +159,13 @@ def start_local_cluster(ray: Any, num_cpus: int) -> str:
         beyond loopback).
     """
     with _loopback_node_address():
-        ray.init(num_cpus=num_cpus, include_dashboard=False, _node_ip_address=LOOPBACK, logging_level="ERROR",
-                 log_to_driver=False)  # fmt: skip
+        ray.init(
+            num_cpus=num_cpus,
+            include_dashboard=False,
+            _node_ip_address=LOOPBACK,
+            logging_level="ERROR",
+            log_to_driver=False,
+        )
     address = str(ray.util.get_node_ip_address())
     warning = exposed_warning(address, getattr(ray, "__version__", "?"))
     if warning is not None:
@@ -180,8 +189,9 @@ def connect_driver(ray: Any, address: str) -> None:
         with local:
             ray.init(address=address, logging_level="ERROR", log_to_driver=False)
     except Exception as e:  # ray raises ConnectionError, RuntimeError or its own kinds here
-        raise ConnectionError(f"cannot reach the Ray cluster at ray_address={address!r}: "
-                              f"{type(e).__name__}: {e}") from e  # fmt: skip
+        raise ConnectionError(
+            f"cannot reach the Ray cluster at ray_address={address!r}: {type(e).__name__}: {e}"
+        ) from e
 
 
 def pinned_nodes(ray: Any) -> list[str]:
@@ -291,8 +301,15 @@ class Shard(OnNode):
     """A ``Shard`` in a Ray actor, posting to the exchange over its TCP connection (``distributed.wire``); its
     address also names the Ray node it runs on."""
 
-    def __init__(self, index: int, name: str, config: dict[str, Any], strips: Strips, wire: tuple[str, int, bytes],
-                 wait_s: float) -> None:  # fmt: skip
+    def __init__(
+        self,
+        index: int,
+        name: str,
+        config: dict[str, Any],
+        strips: Strips,
+        wire: tuple[str, int, bytes],
+        wait_s: float,
+    ) -> None:
         host, port, token = wire
         self.wire = WireClient(host, port, token, index, wait_s)
         self.worker = _Shard(index, name, config, strips, self.wire.swap)
@@ -362,9 +379,15 @@ class RayShards:
     """
 
     def __init__(
-        self, name: str, config: dict[str, Any], strips: Strips, n_shards: int, address: str | None, bridge: Bridge,
+        self,
+        name: str,
+        config: dict[str, Any],
+        strips: Strips,
+        n_shards: int,
+        address: str | None,
+        bridge: Bridge,
         spread: bool | None = None,
-    ) -> None:  # fmt: skip
+    ) -> None:
         ray = import_ray()
         self.n_shards = int(n_shards)
         self._ray = ray
@@ -373,8 +396,11 @@ class RayShards:
         from ray.util.scheduling_strategies import NodeAffinitySchedulingStrategy
 
         here = NodeAffinitySchedulingStrategy(ray.get_runtime_context().get_node_id(), soft=False)
-        self.exchange = ray.remote(num_cpus=0, max_restarts=0)(ExchangeActor).options(
-            scheduling_strategy=here).remote(bridge, self.n_shards, EXCHANGE_WAIT_S)  # next to the driver  # fmt: skip
+        self.exchange = (
+            ray.remote(num_cpus=0, max_restarts=0)(ExchangeActor)
+            .options(scheduling_strategy=here)
+            .remote(bridge, self.n_shards, EXCHANGE_WAIT_S)
+        )  # next to the driver
         # the barriers' data path (``distributed.wire``): on loopback for the local cluster, else on the driver
         # node's address, where Ray's own ports are
         host = LOOPBACK if self._own else str(ray.util.get_node_ip_address())
@@ -404,8 +430,11 @@ class RayShards:
         obs, act = self.obs_segment, self.act_segment
         assert obs is not None and act is not None
         here = str(self._ray.get_runtime_context().get_node_id())
-        ref = self.actors[k].attach_rows.remote(here, (obs.name, obs.n_shards, obs.n_slots, obs.obs_dim),
-                                                (act.name, act.n_shards, act.n_slots, act.layout))  # fmt: skip
+        ref = self.actors[k].attach_rows.remote(
+            here,
+            (obs.name, obs.n_shards, obs.n_slots, obs.obs_dim),
+            (act.name, act.n_shards, act.n_slots, act.layout),
+        )
         try:
             self.shared[k] = bool(self._ray.get(ref, timeout=STARTUP_TIMEOUT_S))
         except Exception:  # a worker that cannot map them uses Ray (a dead one fails its next call)
@@ -435,8 +464,9 @@ class RayShards:
     def _drop(self, k: int) -> None:
         self._ray.get(self.exchange.drop.remote(k))
 
-    def call(self, method: str, calls: dict[int, tuple[Any, ...]], timeout_s: float,
-             on_reply: Any = None) -> dict[int, Packed | Failure]:  # fmt: skip
+    def call(
+        self, method: str, calls: dict[int, tuple[Any, ...]], timeout_s: float, on_reply: Any = None
+    ) -> dict[int, Packed | Failure]:
         """Run ``method`` on every named worker at once; a reply or a ``Failure`` per worker. ``on_reply(k, reply)``
         is called with each reply (not with failures) as it comes in, while slower workers still run."""
         ray = self._ray
@@ -454,7 +484,9 @@ class RayShards:
                 got = out[refs[ref]] = self._answer(ref, refs[ref])
                 if on_reply is not None and not isinstance(got, Failure):
                     on_reply(refs[ref], got)
-        if pending:  # late: the ones not waiting at the exchange are killed and dropped; the others then finish
+        if (
+            pending
+        ):  # late: the ones not waiting at the exchange are killed and dropped; the others then finish
             waiting = ray.get(self.exchange.waiting.remote())
             late = [ref for ref in pending if refs[ref] not in waiting] or pending
             for ref in late:
@@ -480,7 +512,9 @@ class RayShards:
             self.kill(k)
             return raised(e.cause if isinstance(e.cause, BaseException) else e)
 
-    def call_rest(self, pending: list[Any], refs: dict[Any, int], timeout_s: float) -> dict[int, Packed | Failure]:
+    def call_rest(
+        self, pending: list[Any], refs: dict[Any, int], timeout_s: float
+    ) -> dict[int, Packed | Failure]:
         """The answers of the calls that waited at the exchange for a late shard (one more deadline)."""
         ray, out = self._ray, {}
         done, late = ray.wait(pending, num_returns=len(pending), timeout=timeout_s)

@@ -131,8 +131,13 @@ class Shard:
     def beat(self, t0: float) -> Packed:
         """The heartbeat every reply carries (``compute_s`` is the call's time, ``wait_s`` its exchanges')."""
         wait, self.wait_s = self.wait_s, 0.0
-        return {"shard": self.index, "address": self.address, "step": int(self.world.tick),
-                "compute_s": time.perf_counter() - t0, "wait_s": wait}  # fmt: skip
+        return {
+            "shard": self.index,
+            "address": self.address,
+            "step": int(self.world.tick),
+            "compute_s": time.perf_counter() - t0,
+            "wait_s": wait,
+        }
 
     def set_delay(self, delay_s: float) -> None:
         """Test hook: sleep ``delay_s`` seconds in every later call (0: none)."""
@@ -185,7 +190,10 @@ class Shard:
             for name, arr in self.carry.items():
                 leave[f"w.{name}"] = arr[leaving]
         leave["x"] = st.pos[leaving, 0]
-        post: dict[str, Any] = {"edge": {"slots": edge, "x": st.pos[edge, 0], "pos": st.pos[edge]}, "leave": leave}
+        post: dict[str, Any] = {
+            "edge": {"slots": edge, "x": st.pos[edge, 0], "pos": st.pos[edge]},
+            "leave": leave,
+        }
         if self.overlay is not None and leaving.size:
             post["leave_floods"] = self.overlay.part.take_leaving(leaving)
         got = self.swap((int(world.tick), "motion"), self.index, post)
@@ -227,8 +235,9 @@ class Shard:
         # still delivered, as in one process); they only leave the grid
         return gone[self.ghost[gone] & st.online[gone]]
 
-    def deliver(self, bus: MessageBus, step: int, pos: np.ndarray, online: np.ndarray,
-                group: np.ndarray) -> DeliveryEvents:  # fmt: skip
+    def deliver(
+        self, bus: MessageBus, step: int, pos: np.ndarray, online: np.ndarray, group: np.ndarray
+    ) -> DeliveryEvents:
         """Stage 7's bus part on a shard: the due messages of every shard for the own receivers.
 
         Rows for an own receiver (or a heartbeat answer about an own agent) stay here; the others, and every
@@ -245,11 +254,15 @@ class Shard:
         seen = self.own | self.ghost
         rounds = [bus.deliver_rows(mine, step, pos, online, group, mine=self.held, seen=seen, push=False)]
         while len(again := bus.take_due(step)):
-            rounds.append(bus.deliver_rows(again, step, pos, online, group, mine=self.held, seen=seen, push=False))
+            rounds.append(
+                bus.deliver_rows(again, step, pos, online, group, mine=self.held, seen=seen, push=False)
+            )
         if len(rounds) == 1:
             return rounds[0]
-        return DeliveryEvents(int(step), *(MessageLog.concat([getattr(r, f) for r in rounds])
-                                           for f in ("sent", "delivered", "dropped")))  # fmt: skip
+        return DeliveryEvents(
+            int(step),
+            *(MessageLog.concat([getattr(r, f) for r in rounds]) for f in ("sent", "delivered", "dropped")),
+        )
 
     def flat_rows(self, slots: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """The flat observation rows of ``slots``, computed for those rows only (``Scenario.observation_rows``),
@@ -296,8 +309,14 @@ class Shard:
         return self.swap((int(self.world.tick), "groups"), self.index, partials)
 
     # ------------------------------------------------------------------ episode
-    def reset(self, seed: np.random.SeedSequence, owner: np.ndarray, obs: bool = True, kin: bool = False,
-              tick: int | None = None) -> Packed:  # fmt: skip
+    def reset(
+        self,
+        seed: np.random.SeedSequence,
+        owner: np.ndarray,
+        obs: bool = True,
+        kin: bool = False,
+        tick: int | None = None,
+    ) -> Packed:
         """Start the episode of ``seed`` exactly as one process does, then keep this shard's agents online.
 
         Every shard replays the placement, so every shard knows every agent's start: the ghosts need no
@@ -428,14 +447,20 @@ class Shard:
         res, terminated = self.run(slots, full, control)
         world = self.world
         done = np.flatnonzero(self.acting)
-        out = self._rows_out(done, res, terminated, bool(control.get("obs", True)), bool(control.get("kinematics")))
+        out = self._rows_out(
+            done, res, terminated, bool(control.get("obs", True)), bool(control.get("kinematics"))
+        )
         col = world.last_events.collisions
         out["col.agent"], out["col.other"], out["col.obj"] = col.agent, col.other_agent, col.obj
         comms = world.comms
         if control.get("events") and comms is not None and comms.events.bus is not None:
             ce = comms.events
             assert ce.bus is not None
-            out["bus.sent"], out["bus.delivered"], out["bus.dropped"] = ce.bus.sent, ce.bus.delivered, ce.bus.dropped
+            out["bus.sent"], out["bus.delivered"], out["bus.dropped"] = (
+                ce.bus.sent,
+                ce.bus.delivered,
+                ce.bus.dropped,
+            )
             out["overlay"], out["sent"] = ce.overlay, np.where(self.own, ce.sent, 0)
         out["beat"] = self.beat(t0)
         return out

@@ -82,8 +82,9 @@ class ShardOverlay:
         """Forget the reads and frontier entries of ``slots`` (a world reset)."""
         self.part.drop(np.asarray(slots, dtype=np.int64))
 
-    def start(self, origin: np.ndarray, hop_limit: np.ndarray | int, payload: np.ndarray | None,
-              step: int) -> np.ndarray:  # fmt: skip
+    def start(
+        self, origin: np.ndarray, hop_limit: np.ndarray | int, payload: np.ndarray | None, step: int
+    ) -> np.ndarray:
         """Floods started by own agents (stage 1); their keys ``(k, 3)``."""
         return self.part.start(origin, hop_limit, payload, step)
 
@@ -96,4 +97,6 @@ class ShardOverlay:
         self._totals = self._totals + self._last
         # origin, created and payload looked up in the part's flood table when read (it replaces its columns
         # instead of writing them, so these rows stay as they are)
-        return Deliveries.by_flood(d.receiver, np.full(len(d), -1, dtype=np.int64), d.hops, d.table[:3], d.rows)
+        return Deliveries.by_flood(
+            d.receiver, np.full(len(d), -1, dtype=np.int64), d.hops, d.table[:3], d.rows
+        )

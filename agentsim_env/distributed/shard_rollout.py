@@ -65,7 +65,10 @@ class ShardRollout:
         """The observation parts of ``slots`` in the layout's shapes and float32 (the values the flat rows hold),
         not flattened: the policy gets parts."""
         got = self.worker.scenario.observation_rows(self.worker.world, slots)
-        return {k: got[k].astype(np.float32, copy=False).reshape(slots.size, *shape) for k, _, shape in self.layout}
+        return {
+            k: got[k].astype(np.float32, copy=False).reshape(slots.size, *shape)
+            for k, _, shape in self.layout
+        }
 
     def act(self, control: Packed) -> Packed:
         """One step: the policy's actions for the own live agents, the step, the sums; counts back."""
@@ -100,8 +103,12 @@ class ShardRollout:
         self.slots = np.flatnonzero(self.live & w.own)
         self.parts = self._observe(self.slots)
         counts = count_events(w.world.last_events)
-        out: Packed = {"live": int((self.live & w.own).sum()), "events": [counts[k] for k in EVENT_KEYS],
-                       "ended": np.flatnonzero(acting & terminated), "arrived": w.arrived}  # fmt: skip
+        out: Packed = {
+            "live": int((self.live & w.own).sum()),
+            "events": [counts[k] for k in EVENT_KEYS],
+            "ended": np.flatnonzero(acting & terminated),
+            "arrived": w.arrived,
+        }
         if control.get("gather"):  # an observer of the steps: the acting agents' rows (no observations)
             done = np.flatnonzero(acting)
             out["acted"], out["still"] = done, self.live[done]
@@ -113,11 +120,17 @@ class ShardRollout:
         """The per-agent rows: every slot this shard holds or saw end (returns, info sums, positions, live)."""
         w = self.worker
         slots = np.flatnonzero(w.own | self.ended_here)
-        out: Packed = {"slots": slots, "returns": self.returns[slots], "pos": w.world.state.pos[slots],
-                       "live": np.flatnonzero(self.live & w.own)}  # fmt: skip
+        out: Packed = {
+            "slots": slots,
+            "returns": self.returns[slots],
+            "pos": w.world.state.pos[slots],
+            "live": np.flatnonzero(self.live & w.own),
+        }
         out["sums"] = {k: v[slots] for k, v in self.sums.items()}
         out["own"] = np.flatnonzero(w.own)
-        out["obs"] = self.worker.flat_layout(self.parts, self.slots.size)  # of ``live``: step() can go on from here
+        out["obs"] = self.worker.flat_layout(
+            self.parts, self.slots.size
+        )  # of ``live``: step() can go on from here
         for key in ("live", "returns", "ended_here", *(f"sum.{k}" for k in self.info_keys)):
             w.carry.pop(key, None)
         return out

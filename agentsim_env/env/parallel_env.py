@@ -43,7 +43,10 @@ from agentsim_env.scenarios.base import (
 from agentsim_env.scenarios.registry import make_scenario
 
 RENDER_MODES = ("human", "rgb_array", "web")
-_MODE_NEEDS = {"human": "pygame", "web": "websockets"}  # the package of the extra a mode needs (render, viewer)
+_MODE_NEEDS = {
+    "human": "pygame",
+    "web": "websockets",
+}  # the package of the extra a mode needs (render, viewer)
 ENDED_AGENTS = ("leave", "stay")
 """What becomes of an agent that ends before its episode does (``ended_agents``): ``"leave"`` (PettingZoo's rule:
 it leaves ``agents``) or ``"stay"`` (it stays, observing zeros with reward 0, until the episode ends)."""
@@ -142,7 +145,9 @@ class AgentSimParallelEnv(MessageCalls, ParallelEnv):
         obs_space = observation_space_for(obs_parts, obs_format)
         self._obs_keys = tuple(obs_parts)
         self._obs_cols = [(sl, obs_parts[k].shape) for k, sl in flat_layout(obs_parts).items()]
-        self._obs_out = Recycled((self.world.state.n_slots, sum(p.size for p in obs_parts.values())), np.float32)
+        self._obs_out = Recycled(
+            (self.world.state.n_slots, sum(p.size for p in obs_parts.values())), np.float32
+        )
         self._act_parts = scenario.act_parts()  # fixed per config; read on every step
         act_space = action_space_for(self._act_parts, action_format)
         # public, as PettingZoo's ParallelEnv declares them (skrl reads them); observation_space(a) is a lookup here
@@ -272,7 +277,11 @@ class AgentSimParallelEnv(MessageCalls, ParallelEnv):
             terms = dict(zip(live, rows(terminated, idx))) if ended_t else self._all_false.copy()
             truncs = dict(zip(live, rows(truncated, idx))) if ended_u else self._all_false.copy()
             keys = tuple(res.info)
-            infos = per_agent(live, keys, [rows(res.info[k], idx) for k in keys]) if keys else {a: {} for a in live}
+            infos = (
+                per_agent(live, keys, [rows(res.info[k], idx) for k in keys])
+                if keys
+                else {a: {} for a in live}
+            )
         if ended_t or ended_u:
             keep = ~(terminated | truncated)[self._live_idx]
             self._set_agents([a for a, k in zip(live, keep.tolist()) if k], self._live_idx[keep])
@@ -336,8 +345,10 @@ class AgentSimParallelEnv(MessageCalls, ParallelEnv):
         if actions.keys() != self._all_false.keys():
             for a in actions:
                 if a not in self._index:
-                    raise ValueError(f"unknown agent id {a!r} in actions; agents are {self.possible_agents[0]!r}..."
-                                     f"{self.possible_agents[-1]!r}")  # fmt: skip
+                    raise ValueError(
+                        f"unknown agent id {a!r} in actions; agents are {self.possible_agents[0]!r}..."
+                        f"{self.possible_agents[-1]!r}"
+                    )
             missing = [a for a in live if a not in actions]
             if missing:
                 raise ValueError(f"missing actions for live agent(s) {missing[:5]}")
@@ -482,7 +493,9 @@ def to_aec(env: AgentSimParallelEnv, *, raw: bool = False) -> Any:
 ENV_KEYS = ("render_mode", "obs_format", "action_format", "check_finite", "num_threads", "ended_agents")
 
 
-def build_parallel_env(name: str, defaults: dict[str, Any] | None = None, **config: Any) -> AgentSimParallelEnv:
+def build_parallel_env(
+    name: str, defaults: dict[str, Any] | None = None, **config: Any
+) -> AgentSimParallelEnv:
     """The ParallelEnv of scenario ``name`` (what ``agentsim_env.make`` returns; the adapters build through it).
 
     Args:

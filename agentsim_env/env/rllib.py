@@ -31,6 +31,7 @@ except ImportError as exc:  # pragma: no cover - depends on the installation
 SHARED_POLICY = "shared"
 """The id of the one policy (RLModule) every agent maps to."""
 
+
 class AgentSimRLlibEnv(ParallelPettingZooEnv):
     """A scenario as an RLlib multi-agent env (``ParallelPettingZooEnv`` with the corrections above).
 

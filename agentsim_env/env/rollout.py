@@ -110,10 +110,17 @@ class RolloutResult:
 
     def summary(self) -> str:
         """A short Markdown table of the run."""
-        lines = ["| metric | value |", "|---|---|", f"| steps | {self.steps} |",
-                 f"| mean return | {float(np.mean(self.returns)) if self.returns.size else 0.0:.3f} |"]  # fmt: skip
+        lines = [
+            "| metric | value |",
+            "|---|---|",
+            f"| steps | {self.steps} |",
+            f"| mean return | {float(np.mean(self.returns)) if self.returns.size else 0.0:.3f} |",
+        ]
         lines += [f"| {k} | {v} |" for k, v in self.events.items()]
-        lines += [f"| env-steps/s | {self.steps_per_s:.1f} |", f"| agent-steps/s | {self.agent_steps_per_s:.0f} |"]
+        lines += [
+            f"| env-steps/s | {self.steps_per_s:.1f} |",
+            f"| agent-steps/s | {self.agent_steps_per_s:.0f} |",
+        ]
         return "\n".join(lines)
 
     def __str__(self) -> str:
@@ -131,7 +138,12 @@ def count_events(events: Any) -> dict[str, int]:
             dropped += int(comms.bus.dropped.msg.shape[0])
         if comms.overlay is not None:
             delivered += len(comms.overlay)
-    return {"collisions": len(events.collisions), "offline": offline, "delivered": delivered, "dropped": dropped}
+    return {
+        "collisions": len(events.collisions),
+        "offline": offline,
+        "delivered": delivered,
+        "dropped": dropped,
+    }
 
 
 class DictRows:
@@ -164,7 +176,9 @@ class DictRows:
         start = 0
         for name, p in self.parts.items():
             if names and not isinstance(acts[names[0]], Mapping):  # flat actions: the parts in layout order
-                rows = [np.asarray(acts[a], dtype=np.float32).reshape(-1)[start : start + p.size] for a in names]
+                rows = [
+                    np.asarray(acts[a], dtype=np.float32).reshape(-1)[start : start + p.size] for a in names
+                ]
             else:
                 rows = [np.asarray(acts[a][name], dtype=np.float32) for a in names]
             start += p.size
@@ -214,7 +228,12 @@ def _array_policy(env: Any, policy: Any) -> ArrayPolicy:
 
 
 def run_rollout(
-    env: Any, policy: Any, steps: int, seed: int | None = None, *, on_step: RolloutCallback | None = None,
+    env: Any,
+    policy: Any,
+    steps: int,
+    seed: int | None = None,
+    *,
+    on_step: RolloutCallback | None = None,
     through_step: bool = False,
 ) -> RolloutResult:
     """Reset ``env`` with ``seed`` and run ``policy`` for up to ``steps`` steps (module docstring).
@@ -324,8 +343,9 @@ def scatter_part_checked(
         raise ValueError(f"the policy returned no action part {name!r} (parts: {sorted(acts)})")
     values = np.asarray(acts[name])
     if values.shape != (live.size, *part.shape):
-        raise ValueError(f"the policy's action part {name!r} has shape {values.shape}, expected "
-                         f"{(live.size, *part.shape)}")  # fmt: skip
+        raise ValueError(
+            f"the policy's action part {name!r} has shape {values.shape}, expected {(live.size, *part.shape)}"
+        )
     out = scatter_part(values.reshape(live.size, part.size), live, n_slots, part.low, part.high)
     if out is None:
         raise ValueError(f"the policy's action part {name!r} holds NaN or inf")
@@ -350,11 +370,17 @@ def _dict_loop(
     while taken < steps and env._live:
         live = list(env._live)
         slots = np.array([index[a] for a in live], dtype=np.int64)
-        parts = {k: np.stack([np.asarray(obs[a][k] if isinstance(obs[a], dict) else _part(env, obs[a], k))
-                              for a in live]) for k in keys}  # fmt: skip
+        parts = {
+            k: np.stack(
+                [np.asarray(obs[a][k] if isinstance(obs[a], dict) else _part(env, obs[a], k)) for a in live]
+            )
+            for k in keys
+        }
         acts = policy.act_rows(parts, slots, taken)
         act_keys = list(env._act_parts)
-        actions: dict[str, Any] = {a: {k: np.asarray(acts[k][i]) for k in act_keys} for i, a in enumerate(live)}
+        actions: dict[str, Any] = {
+            a: {k: np.asarray(acts[k][i]) for k in act_keys} for i, a in enumerate(live)
+        }
         if env.action_format == "flat":
             actions = {a: np.concatenate([v[k].reshape(-1) for k in act_keys]) for a, v in actions.items()}
         obs, rew, _, _, infos = env.step(actions)
@@ -366,7 +392,9 @@ def _dict_loop(
             events[k] += v
         for a, info in infos.items():
             for k, v in info.items():
-                if isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, (bool, np.bool_)):
+                if isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(
+                    v, (bool, np.bool_)
+                ):
                     if k not in acc:
                         acc[k] = np.zeros(len(env.possible_agents), dtype=np.float64)
                     acc[k][index[a]] += float(v)
@@ -398,12 +426,24 @@ def _part(env: Any, flat_row: np.ndarray, key: str) -> np.ndarray:
     return np.asarray(flat_row)[sl].reshape(shape)
 
 
-def _result(env: Any, taken: int, returns: np.ndarray, events: dict[str, int], sums: dict[str, float],
-            agent_steps: int, t0: float) -> RolloutResult:  # fmt: skip
+def _result(
+    env: Any,
+    taken: int,
+    returns: np.ndarray,
+    events: dict[str, int],
+    sums: dict[str, float],
+    agent_steps: int,
+    t0: float,
+) -> RolloutResult:
     n = len(env.possible_agents)
     wall = time.perf_counter() - t0
     return RolloutResult(
-        steps=taken, returns=returns[:n].copy(), final_pos=np.array(env.world.state.pos[:n], dtype=np.float64),
-        events=events, info_sums=sums, agent_steps=agent_steps, wall_s=wall,
+        steps=taken,
+        returns=returns[:n].copy(),
+        final_pos=np.array(env.world.state.pos[:n], dtype=np.float64),
+        events=events,
+        info_sums=sums,
+        agent_steps=agent_steps,
+        wall_s=wall,
         steps_per_s=taken / wall if wall > 0 else 0.0,
-    )  # fmt: skip
+    )

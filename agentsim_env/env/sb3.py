@@ -35,7 +35,13 @@ class AgentSimVecEnv(VecEnv):
     """
 
     def __init__(
-        self, name: str, n_worlds: int, seed: int | None = 0, *, batch: BatchedEnv | None = None, **config: Any
+        self,
+        name: str,
+        n_worlds: int,
+        seed: int | None = 0,
+        *,
+        batch: BatchedEnv | None = None,
+        **config: Any,
     ) -> None:
         self.batch = batch if batch is not None else BatchedEnv(name, n_worlds, **config)
         b = self.batch

@@ -25,6 +25,7 @@ except ImportError as exc:  # pragma: no cover - depends on the installation
 GROUP = "agents"
 """The one group every agent belongs to."""
 
+
 def parallel_env(scenario: str, **config: Any) -> AgentSimParallelEnv:
     """The ParallelEnv of ``scenario`` in flat formats unless ``obs_format`` / ``action_format`` say otherwise.
 

@@ -74,7 +74,13 @@ class BatchedEnv:
     """
 
     def __init__(
-        self, name: str, n_worlds: int, *, check_finite: bool | None = None, num_threads: int = 1, **config: Any
+        self,
+        name: str,
+        n_worlds: int,
+        *,
+        check_finite: bool | None = None,
+        num_threads: int = 1,
+        **config: Any,
     ) -> None:
         check_int("n_worlds", n_worlds, 1, MAX_WORLDS)
         n_worlds = int(n_worlds)
@@ -153,12 +159,16 @@ class BatchedEnv:
             seeds = [int(seed) + w for w in range(b)]
         else:
             if isinstance(seed, (str, bytes)) or not isinstance(seed, (Sequence, np.ndarray)):
-                raise ValueError(f"seed must be None, an int or a sequence of {b} ints (one per world), "
-                                 f"got {type(seed).__name__} {short_repr(seed)}")  # fmt: skip
+                raise ValueError(
+                    f"seed must be None, an int or a sequence of {b} ints (one per world), "
+                    f"got {type(seed).__name__} {short_repr(seed)}"
+                )
             seeds = list(seed)
             if len(seeds) != b or not all(is_int(s) for s in seeds):
-                raise ValueError(f"seed must be None, an int or a sequence of {b} ints (one per world), "
-                                 f"got {short_repr(seed)}")  # fmt: skip
+                raise ValueError(
+                    f"seed must be None, an int or a sequence of {b} ints (one per world), "
+                    f"got {short_repr(seed)}"
+                )
         for w, s in enumerate(seeds):
             try:
                 self._seeds[w].reset(s)
@@ -197,7 +207,9 @@ class BatchedEnv:
         except (TypeError, ValueError, RuntimeError) as exc:
             raise ValueError(f"actions must be an array of real numbers ({ACTION_RULE}): {exc}") from None
         if a.dtype.kind not in REAL_KINDS:
-            raise ValueError(f"actions must be real numbers (ints or floats), got dtype {a.dtype} ({ACTION_RULE})")
+            raise ValueError(
+                f"actions must be real numbers (ints or floats), got dtype {a.dtype} ({ACTION_RULE})"
+            )
         if a.shape != (self.n_worlds, self.n_agents, self.act_dim):
             raise ValueError(
                 f"actions must have shape {(self.n_worlds, self.n_agents, self.act_dim)}, got {a.shape}"
@@ -210,10 +222,13 @@ class BatchedEnv:
         parts = {k: a[:, sl] for k, sl in self._act_layout.items()}
         res, term = self._step_core(parts, acting)
         self.steps += 1
-        obs = self._flat_obs(acting, int(self.steps.max()) if self.check_finite else 0, res, self._obs_out.get())
+        obs = self._flat_obs(
+            acting, int(self.steps.max()) if self.check_finite else 0, res, self._obs_out.get()
+        )
         term = np.asarray(term, dtype=bool)
-        trunc, done_worlds, n_done = finish_step(term, acting, self.steps >= self.scenario.max_steps, self.alive,
-                                                 obs.reshape(-1, self.obs_dim))  # fmt: skip
+        trunc, done_worlds, n_done = finish_step(
+            term, acting, self.steps >= self.scenario.max_steps, self.alive, obs.reshape(-1, self.obs_dim)
+        )
         # Taken before the automatic reset, which starts the next episode of the finished worlds: the step's
         # results are the ended episode's (the scenario's info arrays are fresh each step, never its state).
         shape = (self.n_worlds, self.n_agents)
@@ -225,5 +240,13 @@ class BatchedEnv:
             self._reset_worlds(np.flatnonzero(done_worlds))
             fresh = np.repeat(done_worlds, self.n_agents)
             obs[done_worlds] = self._flat_obs(fresh)[done_worlds]
-        return BatchStep(obs, rewards, term.reshape(shape), trunc.reshape(shape), self.alive.copy(), final,
-                         done_worlds, info)  # fmt: skip
+        return BatchStep(
+            obs,
+            rewards,
+            term.reshape(shape),
+            trunc.reshape(shape),
+            self.alive.copy(),
+            final,
+            done_worlds,
+            info,
+        )

@@ -24,10 +24,22 @@ __all__ = ["MISSION_KEYS", "NEAR_MISS_M", "MissionLog", "fly_mission", "sensor_r
 NEAR_MISS_M = 5.0
 #: Keys of ``fly_mission``'s result, in order.
 MISSION_KEYS: tuple[str, ...] = (
-    "completed", "steps", "mission_time_s", "energy_j", "energy_fraction", "path_length_m",
-    "sensors_required", "payload_total", "sensors_released", "sensors_landed", "delivered_fraction",
-    "messages_sent", "messages_dropped", "near_misses", "collisions",
-)  # fmt: skip
+    "completed",
+    "steps",
+    "mission_time_s",
+    "energy_j",
+    "energy_fraction",
+    "path_length_m",
+    "sensors_required",
+    "payload_total",
+    "sensors_released",
+    "sensors_landed",
+    "delivered_fraction",
+    "messages_sent",
+    "messages_dropped",
+    "near_misses",
+    "collisions",
+)
 
 
 class MissionLog:
@@ -124,11 +136,22 @@ def mission_metrics(env: Any, log: MissionLog, steps: int, work_done: bool) -> d
     needed = env.scenario.zones.n_sensors
     energy = float(env.world.state.energy[: log.n].sum())
     values = (
-        float(work_done or steps < env.scenario.max_steps), steps, steps * float(cfg.dt), energy,
-        energy / (cfg.n_uavs * cfg.battery_j), log.path, needed, cfg.n_uavs * cfg.payload,
-        int(np.count_nonzero(mine)), landed, min(landed / needed, 1.0), log.sent, log.dropped,
-        int(np.count_nonzero(log.near)), log.collisions,
-    )  # fmt: skip
+        float(work_done or steps < env.scenario.max_steps),
+        steps,
+        steps * float(cfg.dt),
+        energy,
+        energy / (cfg.n_uavs * cfg.battery_j),
+        log.path,
+        needed,
+        cfg.n_uavs * cfg.payload,
+        int(np.count_nonzero(mine)),
+        landed,
+        min(landed / needed, 1.0),
+        log.sent,
+        log.dropped,
+        int(np.count_nonzero(log.near)),
+        log.collisions,
+    )
     return {k: float(v) for k, v in zip(MISSION_KEYS, values, strict=True)}
 
 
@@ -148,9 +171,19 @@ def sensor_rows(payloads: Any, head: dict[str, Any]) -> list[dict[str, Any]]:
     a = payloads.as_dict()
     rel, vel = a["release_pos"], a["release_vel"]
     cols = {
-        "sensor_id": a["id"], "uav_id": a["owner"], "zone_id": a["zone"], "t_release": a["release_t"],
-        "x_rel": rel[:, 0], "y_rel": rel[:, 1], "z_rel": rel[:, 2], "vx_rel": vel[:, 0], "vy_rel": vel[:, 1],
-        "x_target": a["target_xy"][:, 0], "y_target": a["target_xy"][:, 1],
-        "x_land": a["land_xy"][:, 0], "y_land": a["land_xy"][:, 1], "t_land": a["land_t"],
-    }  # fmt: skip
+        "sensor_id": a["id"],
+        "uav_id": a["owner"],
+        "zone_id": a["zone"],
+        "t_release": a["release_t"],
+        "x_rel": rel[:, 0],
+        "y_rel": rel[:, 1],
+        "z_rel": rel[:, 2],
+        "vx_rel": vel[:, 0],
+        "vy_rel": vel[:, 1],
+        "x_target": a["target_xy"][:, 0],
+        "y_target": a["target_xy"][:, 1],
+        "x_land": a["land_xy"][:, 0],
+        "y_land": a["land_xy"][:, 1],
+        "t_land": a["land_t"],
+    }
     return [{**head, **{k: v[i].item() for k, v in cols.items()}} for i in np.flatnonzero(a["world"] == 0)]

@@ -108,18 +108,37 @@ def plot_landing_maps(
     w, h = zones.map_size
     nrows, ncols = _grid_shape(len(strategies))
     pw = 4.2
-    fig, axes = plt.subplots(nrows, ncols, figsize=(pw * ncols + 1.2, (pw * h / w + 0.6) * nrows + 1.0),
-                             squeeze=False, constrained_layout=True)  # fmt: skip
+    fig, axes = plt.subplots(
+        nrows,
+        ncols,
+        figsize=(pw * ncols + 1.2, (pw * h / w + 0.6) * nrows + 1.0),
+        squeeze=False,
+        constrained_layout=True,
+    )
     image = None
     for ax, name in zip(axes.flat, strategies, strict=False):
         mine = [s for s in sensors if s["strategy"] == name]
-        image = ax.imshow(raster, origin="lower", extent=extent, cmap="Oranges", vmin=0.0, vmax=vmax,
-                          interpolation="bilinear")  # fmt: skip
+        image = ax.imshow(
+            raster,
+            origin="lower",
+            extent=extent,
+            cmap="Oranges",
+            vmin=0.0,
+            vmax=vmax,
+            interpolation="bilinear",
+        )
         for z in zones.zones:
             ax.add_patch(Circle(z.centre, z.radius, fill=False, ls="--", lw=1.0, ec="#444444"))
             if z.name:
-                ax.text(z.centre[0], z.centre[1] + z.radius + 0.02 * h, z.name, ha="center", va="bottom",
-                        fontsize=8, color="#333333")  # fmt: skip
+                ax.text(
+                    z.centre[0],
+                    z.centre[1] + z.radius + 0.02 * h,
+                    z.name,
+                    ha="center",
+                    va="bottom",
+                    fontsize=8,
+                    color="#333333",
+                )
         if zones.base is not None:
             ax.plot(*zones.base, marker="^", ms=8, color="black", ls="none")
         if show_release:
@@ -173,8 +192,13 @@ def plot_metric_bars(rows: Sequence[Mapping[str, Any]], path: str | os.PathLike[
     y = np.arange(len(names))
     n_seeds = max((len(s.rows) for s in ranked), default=0)
     ncols, nrows = 3, math.ceil(len(BAR_METRICS) / 3)
-    fig, axes = plt.subplots(nrows, ncols, figsize=(15, 0.32 * len(names) * nrows + 1.6 * nrows + 0.8),
-                             squeeze=False, constrained_layout=True)  # fmt: skip
+    fig, axes = plt.subplots(
+        nrows,
+        ncols,
+        figsize=(15, 0.32 * len(names) * nrows + 1.6 * nrows + 0.8),
+        squeeze=False,
+        constrained_layout=True,
+    )
     colors = [_REF_BAR if n == REFERENCE else _BAR for n in names]
     for i, (ax, (key, label, scale, better)) in enumerate(zip(axes.flat, BAR_METRICS, strict=False)):
         stats = [mean_std(s.scores() if key == "score" else s.values(key)) for s in ranked]
@@ -192,8 +216,14 @@ def plot_metric_bars(rows: Sequence[Mapping[str, Any]], path: str | os.PathLike[
         ax.margins(x=0.18)  # room for the value labels
         for yy, m, sd in zip(y, mean, std, strict=True):
             text = f" {m:.3g}" if math.isfinite(m) else " n/a"
-            ax.text(max(np.nan_to_num(m), 0.0) + np.nan_to_num(sd), yy, text, va="center", fontsize=7,
-                    color="#333333" if math.isfinite(m) else "#777777")  # fmt: skip
+            ax.text(
+                max(np.nan_to_num(m), 0.0) + np.nan_to_num(sd),
+                yy,
+                text,
+                va="center",
+                fontsize=7,
+                color="#333333" if math.isfinite(m) else "#777777",
+            )
     for ax in list(axes.flat)[len(BAR_METRICS) :]:
         ax.axis("off")
     handles = [

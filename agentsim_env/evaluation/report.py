@@ -61,10 +61,24 @@ __all__ = [
 
 #: ``sensors.csv`` columns: the run's keys, then the per-sensor schema of domain reference 2.6.
 SENSOR_COLUMNS: tuple[str, ...] = (
-    "zones", "strategy", "seed",
-    "sensor_id", "uav_id", "zone_id", "t_release", "x_rel", "y_rel", "z_rel", "vx_rel", "vy_rel",
-    "x_target", "y_target", "x_land", "y_land", "t_land",
-)  # fmt: skip
+    "zones",
+    "strategy",
+    "seed",
+    "sensor_id",
+    "uav_id",
+    "zone_id",
+    "t_release",
+    "x_rel",
+    "y_rel",
+    "z_rel",
+    "vx_rel",
+    "vy_rel",
+    "x_target",
+    "y_target",
+    "x_land",
+    "y_land",
+    "t_land",
+)
 
 #: Columns of the ranking table: (runs.csv key, header, decimals, scale).
 TABLE_METRICS: tuple[tuple[str, str, int, float], ...] = (
@@ -216,9 +230,17 @@ def summary_markdown(grid: Any, files: Sequence[str] = ()) -> str:
 
 #: ``sensors.csv`` column <- ``sensors`` table column, for the values read back from a store.
 _FROM_STORE: dict[str, str] = {
-    "sensor_id": "sensor", "uav_id": "uav", "zone_id": "zone", "t_release": "release_t", "x_rel": "release_x",
-    "y_rel": "release_y", "z_rel": "release_z", "x_land": "land_x", "y_land": "land_y", "t_land": "land_t",
-}  # fmt: skip
+    "sensor_id": "sensor",
+    "uav_id": "uav",
+    "zone_id": "zone",
+    "t_release": "release_t",
+    "x_rel": "release_x",
+    "y_rel": "release_y",
+    "z_rel": "release_z",
+    "x_land": "land_x",
+    "y_land": "land_y",
+    "t_land": "land_t",
+}
 
 
 def _same(a: Any, b: Any) -> bool:
@@ -270,24 +292,30 @@ def store_rows(grid: Any, con: sqlite3.Connection) -> tuple[list[dict[str, Any]]
             (run.store_run,),
         ).fetchall()
         if sorted(mine) != [r[0] for r in recorded]:
-            raise ValueError(f"{store}: run {run.store_run} ({label}) recorded sensors "
-                             f"{[r[0] for r in recorded]}, the evaluation {sorted(mine)}")  # fmt: skip
+            raise ValueError(
+                f"{store}: run {run.store_run} ({label}) recorded sensors "
+                f"{[r[0] for r in recorded]}, the evaluation {sorted(mine)}"
+            )
         for values in recorded:
             # NULL (not landed) as NaN, as the evaluation writes it
             got_row = {k: math.nan if v is None else v for k, v in zip(_FROM_STORE, values)}
             ev = mine[int(got_row["sensor_id"])]
             bad = [k for k, v in got_row.items() if not _same(v, ev[k])]
             if bad:
-                raise ValueError(f"{store}: run {run.store_run} ({label}), sensor {got_row['sensor_id']}: "
-                                 f"the store and the evaluation disagree on {', '.join(bad)}")  # fmt: skip
+                raise ValueError(
+                    f"{store}: run {run.store_run} ({label}), sensor {got_row['sensor_id']}: "
+                    f"the store and the evaluation disagree on {', '.join(bad)}"
+                )
             extra = {k: ev[k] for k in SENSOR_COLUMNS if k not in got_row and k not in head}
             sensors.append({**head, **got_row, **extra})
         landed = sum(r[list(_FROM_STORE).index("x_land")] is not None for r in recorded)
         counts = {"steps": rec[2], "sensors_released": len(recorded), "sensors_landed": landed}
         for key, value in counts.items():
             if not _same(value, row[key]):
-                raise ValueError(f"{store}: run {run.store_run} ({label}): {key} is {value} in the store, "
-                                 f"{row[key]} in the evaluation")  # fmt: skip
+                raise ValueError(
+                    f"{store}: run {run.store_run} ({label}): {key} is {value} in the store, "
+                    f"{row[key]} in the evaluation"
+                )
             row[key] = float(value)
     return sensors, rows
 

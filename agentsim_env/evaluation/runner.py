@@ -294,10 +294,14 @@ def mission_label(zones: str, strategy: str, seed: int) -> str:
 
 
 def run_one(
-    source: ZoneSource, strategy: str, seed: int, overrides: Mapping[str, Any] | None = None,
-    reference: Mapping[str, float] | None = None, record_env: Callable[[Any, str], Any] | None = None,
+    source: ZoneSource,
+    strategy: str,
+    seed: int,
+    overrides: Mapping[str, Any] | None = None,
+    reference: Mapping[str, float] | None = None,
+    record_env: Callable[[Any, str], Any] | None = None,
     label: str | None = None,
-) -> RunResult:  # fmt: skip
+) -> RunResult:
     """Fly one strategy on one zone file with one seed and evaluate the deployment.
 
     Args:
@@ -392,10 +396,20 @@ def teleport_reference(source: ZoneSource, overrides: Mapping[str, Any] | None =
     unreleased = dict.fromkeys(("t_release", "x_rel", "y_rel", "z_rel", "vx_rel", "vy_rel"), math.nan)
     head = {"zones": source.label, "strategy": TELEPORT, "seed": 0}
     sensors = [
-        {**head, "sensor_id": i, "uav_id": -1, "zone_id": int(zone_of[i]), **unreleased, "x_target": float(x),
-         "y_target": float(y), "x_land": float(x), "y_land": float(y), "t_land": 0.0}
+        {
+            **head,
+            "sensor_id": i,
+            "uav_id": -1,
+            "zone_id": int(zone_of[i]),
+            **unreleased,
+            "x_target": float(x),
+            "y_target": float(y),
+            "x_land": float(x),
+            "y_land": float(y),
+            "t_land": 0.0,
+        }
         for i, (x, y) in enumerate(pts)
-    ]  # fmt: skip
+    ]
     return RunResult(source.label, TELEPORT, 0, metrics, sensors)
 
 

@@ -177,6 +177,13 @@ def run_rows(runs: Iterable[Any]) -> list[dict[str, Any]]:
     out = []
     for run in runs:
         row = run.row()
-        out.append({"zones": row.pop("zones"), "strategy": row.pop("strategy"), "seed": row.pop("seed"),
-                    "score": composite_score(row), **row})  # fmt: skip
+        out.append(
+            {
+                "zones": row.pop("zones"),
+                "strategy": row.pop("strategy"),
+                "seed": row.pop("seed"),
+                "score": composite_score(row),
+                **row,
+            }
+        )
     return out

@@ -123,13 +123,17 @@ def model_env(token: str, scenario: str) -> dict[str, Any]:
     folder = Path(str(token))
     if not folder.is_dir():
         what = "is a file, not a folder" if folder.exists() else "does not exist"
-        raise ValueError(f"strategy {token!r} {what}; a trained model is a folder holding model.zip and "
-                         "config.json (as 'agentsim train --out DIR' writes them), and a strategy name is "
-                         "one of 'agentsim evaluate --help'")  # fmt: skip
+        raise ValueError(
+            f"strategy {token!r} {what}; a trained model is a folder holding model.zip and "
+            "config.json (as 'agentsim train --out DIR' writes them), and a strategy name is "
+            "one of 'agentsim evaluate --help'"
+        )
     missing = [f for f in ("model.zip", "config.json") if not (folder / f).is_file()]
     if missing:
-        raise ValueError(f"trained model folder {token!r} lacks {' and '.join(missing)} (a trained model folder "
-                         "holds model.zip and config.json, as 'agentsim train --out DIR' writes them)")  # fmt: skip
+        raise ValueError(
+            f"trained model folder {token!r} lacks {' and '.join(missing)} (a trained model folder "
+            "holds model.zip and config.json, as 'agentsim train --out DIR' writes them)"
+        )
     reader: Callable[[str], tuple[str, dict[str, Any]]] = load(MODEL_ENV)
     trained_on, env = reader(str(folder))
     if trained_on != scenario:

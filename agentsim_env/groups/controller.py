@@ -233,8 +233,10 @@ class GroupController:
         if self._answers is None or not self._answers[0].size:
             self._answers = answers
         else:
-            self._answers = (np.concatenate([self._answers[0], answers[0]]),
-                             np.concatenate([self._answers[1], answers[1]]))  # fmt: skip
+            self._answers = (
+                np.concatenate([self._answers[0], answers[0]]),
+                np.concatenate([self._answers[1], answers[1]]),
+            )
 
     def settle_answers(self) -> None:
         """Read the answers handed in since the previous tick into ``last_answer`` now (the tick would).

@@ -205,8 +205,9 @@ def decode_velocity_unchecked(
             are ignored.
         max_speed: ``(S,)`` float64 speed scale per slot (m/s, >= 0).
     """
-    _velocity_kernel(ms.kind, ms.params, ms.t, ms.n_waypoints, ms.wp_index, ms.loop, ms.done, acting, actions,
-                     max_speed)  # fmt: skip
+    _velocity_kernel(
+        ms.kind, ms.params, ms.t, ms.n_waypoints, ms.wp_index, ms.loop, ms.done, acting, actions, max_speed
+    )
 
 
 def decode_primitive(

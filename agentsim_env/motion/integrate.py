@@ -321,9 +321,28 @@ def integrate_unchecked(
 ) -> None:
     """:func:`integrate` without the checks, for a caller that already validated these very arrays and ``dt``;
     ``threads`` splits the slots into row ranges (the result does not depend on it)."""
-    (threads or _ONE).run(lambda lo, hi, _: _integrate_kernel(lo, hi, ms.kind, ms.params, ms.t, ms.waypoints,
-                          ms.n_waypoints, ms.wp_index, ms.done, ms.loop, pos, vel, heading, max_speed, max_accel,
-                          online, dt), ms.kind.shape[0])  # fmt: skip
+    (threads or _ONE).run(
+        lambda lo, hi, _: _integrate_kernel(
+            lo,
+            hi,
+            ms.kind,
+            ms.params,
+            ms.t,
+            ms.waypoints,
+            ms.n_waypoints,
+            ms.wp_index,
+            ms.done,
+            ms.loop,
+            pos,
+            vel,
+            heading,
+            max_speed,
+            max_accel,
+            online,
+            dt,
+        ),
+        ms.kind.shape[0],
+    )
 
 
 @njit(cache=True)

@@ -254,9 +254,7 @@ class WindModel:
             out[:, :2] += g
         return out
 
-    def init_gusts(
-        self, n: int, rng: RngLike, world: ArrayLike | None = None
-    ) -> NDArray[np.float64]:
+    def init_gusts(self, n: int, rng: RngLike, world: ArrayLike | None = None) -> NDArray[np.float64]:
         """Draw gusts from the stationary distribution ``N(0, sigma^2 I)`` of each object's world.
 
         Args:

@@ -46,9 +46,12 @@ def _bad_online_row(pos: np.ndarray, vel: np.ndarray, online: np.ndarray, half_b
     """0 if every online row is valid, 1 if one is not finite, 2 if one's x is out of its band."""
     for i in range(online.shape[0]):
         if online[i] and not (
-            np.isfinite(pos[i, 0]) and np.isfinite(pos[i, 1]) and np.isfinite(pos[i, 2])
-            and np.isfinite(vel[i, 0]) and np.isfinite(vel[i, 1])
-        ):  # fmt: skip
+            np.isfinite(pos[i, 0])
+            and np.isfinite(pos[i, 1])
+            and np.isfinite(pos[i, 2])
+            and np.isfinite(vel[i, 0])
+            and np.isfinite(vel[i, 1])
+        ):
             return 1
     for i in range(online.shape[0]):
         if online[i] and abs(pos[i, 0]) >= half_band:

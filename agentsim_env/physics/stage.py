@@ -47,9 +47,16 @@ class PhysicsStage:
         if self.backend is None or self._version != scene.version:
             be = self.backend
             if be is None or not be.extend_obstacles(scene.kind, scene.centre, scene.half, scene.world):
-                self.backend = PymunkPlanarBackend(state.radius, state.world_id, state.n_worlds, scene.kind,
-                                                   scene.centre, scene.half, scene.world,
-                                                   substeps=self.substeps)  # fmt: skip
+                self.backend = PymunkPlanarBackend(
+                    state.radius,
+                    state.world_id,
+                    state.n_worlds,
+                    scene.kind,
+                    scene.centre,
+                    scene.half,
+                    scene.world,
+                    substeps=self.substeps,
+                )
             self._version = scene.version
         return self.backend
 

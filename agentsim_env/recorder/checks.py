@@ -132,8 +132,10 @@ def _check_version(con: sqlite3.Connection, p: Path) -> None:
     tables = {r[0] for r in con.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
     other = sorted(tables - {"meta", "sqlite_sequence", "sqlite_stat1"})
     if "meta" not in tables and other:
-        raise StoreError(f"{p}: not an agentsim store (an SQLite file with other tables: {', '.join(other[:5])}); "
-                         "record to a new file")  # fmt: skip
+        raise StoreError(
+            f"{p}: not an agentsim store (an SQLite file with other tables: {', '.join(other[:5])}); "
+            "record to a new file"
+        )
     row = (
         con.execute("SELECT value FROM meta WHERE key = 'schema_version'").fetchone()
         if "meta" in tables
@@ -150,8 +152,9 @@ def _check_version(con: sqlite3.Connection, p: Path) -> None:
 def _stale_runs(con: sqlite3.Connection) -> bool:
     """Whether a run is left ``running`` by a process of this host that no longer exists."""
     host = socket.gethostname()
-    rows = con.execute("SELECT pid FROM runs WHERE status = 'running' AND host = ? AND typeof(pid) = 'integer'",
-                       (host,)).fetchall()  # fmt: skip
+    rows = con.execute(
+        "SELECT pid FROM runs WHERE status = 'running' AND host = ? AND typeof(pid) = 'integer'", (host,)
+    ).fetchall()
     return any(not _pid_alive(int(pid)) for (pid,) in rows)
 
 
@@ -180,14 +183,18 @@ def check_schema(con: sqlite3.Connection, path: str | os.PathLike[str]) -> None:
     for table, cols in expected_columns().items():
         have = {r[1]: str(r[2]).upper() for r in con.execute(f"PRAGMA table_info({_q(table)})")}
         if not have:
-            raise StoreError(f"{path}: table {table} is missing: the store is damaged (tables of schema version "
-                             f"{SCHEMA_VERSION}: {', '.join(expected_columns())})")  # fmt: skip
+            raise StoreError(
+                f"{path}: table {table} is missing: the store is damaged (tables of schema version "
+                f"{SCHEMA_VERSION}: {', '.join(expected_columns())})"
+            )
         for col, decl in cols.items():
             if col not in have:
                 raise StoreError(f"{path}: column {table}.{col} is missing: the store is damaged")
             if have[col] != decl:
-                raise StoreError(f"{path}: column {table}.{col} is declared {have[col] or 'without a type'}, "
-                                 f"but a store declares it {decl}: the store is damaged")  # fmt: skip
+                raise StoreError(
+                    f"{path}: column {table}.{col} is declared {have[col] or 'without a type'}, "
+                    f"but a store declares it {decl}: the store is damaged"
+                )
         for col in have:
             if table == "steps" and col.startswith("info_") and have[col] != "REAL":
                 raise StoreError(
@@ -255,8 +262,11 @@ def check_values(
     checks = {c: rules.get(c) or _BY_TYPE[decl] for c, decl in cols.items() if c in rules or decl in _BY_TYPE}
     bads = [f"({rule[0].format(c=_q(c))})" for c, rule in checks.items()]
     try:
-        row = con.execute(f"SELECT rowid, {', '.join(bads)} FROM {_q(table)} WHERE ({where}) AND "
-                          f"({' OR '.join(bads)}) LIMIT 1", list(params)).fetchone()  # fmt: skip
+        row = con.execute(
+            f"SELECT rowid, {', '.join(bads)} FROM {_q(table)} WHERE ({where}) AND "
+            f"({' OR '.join(bads)}) LIMIT 1",
+            list(params),
+        ).fetchone()
         if row is None:
             return
         col = next(c for c, bad in zip(checks, row[1:]) if bad)
@@ -275,9 +285,12 @@ def _info_columns(con: sqlite3.Connection) -> list[str]:
 
 def _show(con: sqlite3.Connection, table: str, col: str, rowid: int) -> str:
     """The value in a message: its type and at most 40 characters of it."""
-    kind, value = con.execute(f"SELECT typeof({_q(col)}), CASE WHEN typeof({_q(col)}) IN ('text', 'blob') THEN "
-                              f"substr(CAST({_q(col)} AS TEXT), 1, 41) ELSE {_q(col)} END FROM {_q(table)} "
-                              "WHERE rowid = ?", (rowid,)).fetchone()  # fmt: skip
+    kind, value = con.execute(
+        f"SELECT typeof({_q(col)}), CASE WHEN typeof({_q(col)}) IN ('text', 'blob') THEN "
+        f"substr(CAST({_q(col)} AS TEXT), 1, 41) ELSE {_q(col)} END FROM {_q(table)} "
+        "WHERE rowid = ?",
+        (rowid,),
+    ).fetchone()
     if kind == "text":
         return f"text {value[:40]!r}{'...' if len(value) > 40 else ''}"
     if kind == "blob":
@@ -292,8 +305,9 @@ def _where(con: sqlite3.Connection, table: str, rowid: int) -> str:
     keys = [k for k in _KEYS if k in expected_columns()[table]]
     if not keys:
         return f"row {rowid}"
-    values = con.execute(f"SELECT {', '.join(_q(k) for k in keys)} FROM {_q(table)} WHERE rowid = ?",
-                         (rowid,)).fetchone()  # fmt: skip
+    values = con.execute(
+        f"SELECT {', '.join(_q(k) for k in keys)} FROM {_q(table)} WHERE rowid = ?", (rowid,)
+    ).fetchone()
     named = [f"{k} {v}" for k, v in zip(keys, values) if isinstance(v, int)]
     return f"the row of {', '.join(named)}" if named else f"row {rowid}"
 

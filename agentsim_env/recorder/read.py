@@ -41,8 +41,16 @@ if TYPE_CHECKING:  # pragma: no cover - typing only
 INSTALL_HINT = 'pip install "agentsim-env[store]"'
 """How to install the optional dependencies of the reading API (pandas, pyarrow)."""
 
-TABLES: tuple[str, ...] = ("meta", "runs", "episodes", "steps", "messages", "events", "sensors",
-                           "observations")  # fmt: skip
+TABLES: tuple[str, ...] = (
+    "meta",
+    "runs",
+    "episodes",
+    "steps",
+    "messages",
+    "events",
+    "sensors",
+    "observations",
+)
 """Every table of a store, in export order."""
 
 FORMATS: tuple[str, ...] = ("csv", "parquet")
@@ -71,8 +79,13 @@ _ORDER: dict[str, str] = {
     "observations": "run, episode, step, world, agent",
 }
 _FLAGS = ("online", "terminated", "truncated")
-_COUNTS = (("episodes", "episodes"), ("step_rows", "steps"), ("messages", "messages"), ("events", "events"),
-           ("sensors", "sensors"))  # fmt: skip
+_COUNTS = (
+    ("episodes", "episodes"),
+    ("step_rows", "steps"),
+    ("messages", "messages"),
+    ("events", "events"),
+    ("sensors", "sensors"),
+)
 _BATCH = 65536
 
 IdFilter: TypeAlias = "int | Sequence[int] | None"
@@ -215,8 +228,9 @@ class Store:
             for i, (_, table) in enumerate(_COUNTS)
         )
         counts = "".join(f", COALESCE(c{i}.n, 0) AS {name}" for i, (name, _) in enumerate(_COUNTS))
-        cur = self.con.execute(f"SELECT r.*, r.ended - r.started AS seconds{counts} FROM runs AS r{joins} "
-                               "ORDER BY r.run")  # fmt: skip
+        cur = self.con.execute(
+            f"SELECT r.*, r.ended - r.started AS seconds{counts} FROM runs AS r{joins} ORDER BY r.run"
+        )
         names = [d[0] for d in cur.description]
         return [dict(zip(names, row)) for row in cur]
 
@@ -303,7 +317,9 @@ class Store:
         chosen = _check_tables(tables)
         pa = _pyarrow() if fmt == "parquet" else None
         out = Path(out_dir)
-        snapshot = not self.con.in_transaction  # one read transaction: the tables agree while a writer goes on
+        snapshot = (
+            not self.con.in_transaction
+        )  # one read transaction: the tables agree while a writer goes on
         if snapshot:
             self.con.execute("BEGIN")
         temps: dict[Path, Path] = {}
@@ -366,8 +382,9 @@ def _arrow_table(pa: Any, schema: Any, rows: list[tuple[Any, ...]], table: str) 
         try:
             arrays.append(pa.array(values, type=field.type))
         except (pa.ArrowInvalid, pa.ArrowTypeError) as exc:
-            raise StoreError(f"{table}.{field.name}: a value does not fit the column type {field.type}: {exc}") \
-                from None  # fmt: skip
+            raise StoreError(
+                f"{table}.{field.name}: a value does not fit the column type {field.type}: {exc}"
+            ) from None
     return pa.Table.from_arrays(arrays, schema=schema)
 
 

@@ -74,16 +74,21 @@ def agent_color(agent: int, n_agents: int = 1, group: int = 0) -> np.ndarray:
 def _check_frame_memory(info: ReplayInfo) -> None:
     """The drawing's memory fits the limit (``core.budget``): per-agent state and a few frames' worth of pixels."""
     h, w, _ = info.canvas.shape
-    check_memory(f"{info.path}: the replay of run {info.run} episode {info.episode} (runs.n_agents={info.n_agents}, "
-                 f"{w} x {h} pixels)", 128 * info.n_agents + 4 * h * w * 3 + 64 * _FETCH * 6,
-                 "lower --size, or the store's runs.n_agents is damaged")  # fmt: skip
+    check_memory(
+        f"{info.path}: the replay of run {info.run} episode {info.episode} (runs.n_agents={info.n_agents}, "
+        f"{w} x {h} pixels)",
+        128 * info.n_agents + 4 * h * w * 3 + 64 * _FETCH * 6,
+        "lower --size, or the store's runs.n_agents is damaged",
+    )
 
 
 def _step_rows(con: sqlite3.Connection, info: ReplayInfo) -> Iterator[tuple[int, np.ndarray]]:
     """``(step, rows)`` per recorded step, ``rows`` an ``(k, 5)`` array of agent, x, y, heading, online."""
     cur = con.execute(
         "SELECT step, agent, x, y, heading, online FROM steps WHERE run = ? AND episode = ? AND world = ? "
-        "ORDER BY step", (info.run, info.episode, info.world))  # fmt: skip
+        "ORDER BY step",
+        (info.run, info.episode, info.world),
+    )
     pending: np.ndarray | None = None
     while True:
         batch = cur.fetchmany(_FETCH)
@@ -120,8 +125,9 @@ def _discs(
         img[y0:y1, x0:x1][m] = c
 
 
-def _segments(img: np.ndarray, p0: tuple[np.ndarray, np.ndarray], p1: tuple[np.ndarray, np.ndarray],
-              colors: np.ndarray) -> None:  # fmt: skip
+def _segments(
+    img: np.ndarray, p0: tuple[np.ndarray, np.ndarray], p1: tuple[np.ndarray, np.ndarray], colors: np.ndarray
+) -> None:
     """One-pixel lines from ``p0`` to ``p1`` (``(columns, rows)``), one colour per segment."""
     (x0, y0), (x1, y1) = p0, p1
     ok = np.isfinite(x0) & np.isfinite(y0) & np.isfinite(x1) & np.isfinite(y1)
@@ -190,14 +196,19 @@ def _draw_scene(img: np.ndarray, scene: StaticScene, cv: Canvas) -> None:
         mx, my = cv.px(np.asarray(mxy)[:, 0], np.asarray(mxy)[:, 1])
         floor = min_marker_px(cv.size)
         for m in range(len(mx)):
-            _discs(img, mx[m : m + 1], my[m : m + 1], max(float(rad[m]) * s, floor), np.asarray(rgb[m], np.uint8))
+            _discs(
+                img, mx[m : m + 1], my[m : m + 1], max(float(rad[m]) * s, floor), np.asarray(rgb[m], np.uint8)
+            )
 
 
 def _first_groups(con: sqlite3.Connection, info: ReplayInfo) -> np.ndarray:
     """Each agent's group at its first recorded step (-1 when not recorded)."""
     groups = np.full(info.n_agents, -1, dtype=np.int64)
-    rows = con.execute("SELECT agent, grp FROM steps WHERE run = ? AND episode = ? AND world = ? AND step = ? "
-                       "AND grp IS NOT NULL", (info.run, info.episode, info.world, info.steps[0])).fetchall()  # fmt: skip
+    rows = con.execute(
+        "SELECT agent, grp FROM steps WHERE run = ? AND episode = ? AND world = ? AND step = ? "
+        "AND grp IS NOT NULL",
+        (info.run, info.episode, info.world, info.steps[0]),
+    ).fetchall()
     for a, g in rows:
         if isinstance(a, int) and isinstance(g, int) and 0 <= a < info.n_agents:
             groups[a] = g
@@ -223,13 +234,23 @@ class _Replay:
         self.present = np.zeros(n, dtype=bool)
         self.r = max(info.radius * cv.scale, min_agent_px(cv.size))
         key = (info.run, info.episode, info.world)
-        col = np.array(con.execute("SELECT step, agent FROM events WHERE run = ? AND episode = ? AND world = ? "
-                                   "AND event = 'collision' AND agent >= 0", key).fetchall(),
-                       dtype=np.int64).reshape(-1, 2)  # fmt: skip
+        col = np.array(
+            con.execute(
+                "SELECT step, agent FROM events WHERE run = ? AND episode = ? AND world = ? "
+                "AND event = 'collision' AND agent >= 0",
+                key,
+            ).fetchall(),
+            dtype=np.int64,
+        ).reshape(-1, 2)
         self.col_step, self.col_agent = col[:, 0], col[:, 1]
-        sen = np.array(con.execute("SELECT release_step, release_x, release_y, land_step, land_x, land_y FROM "
-                                   "sensors WHERE run = ? AND episode = ? AND world = ?", key).fetchall(),
-                       dtype=float).reshape(-1, 6)  # fmt: skip
+        sen = np.array(
+            con.execute(
+                "SELECT release_step, release_x, release_y, land_step, land_x, land_y FROM "
+                "sensors WHERE run = ? AND episode = ? AND world = ?",
+                key,
+            ).fetchall(),
+            dtype=float,
+        ).reshape(-1, 6)
         self.rel_step, self.land_step = sen[:, 0], sen[:, 3]
         self.rel_px, self.land_px = cv.px(sen[:, 1], sen[:, 2]), cv.px(sen[:, 4], sen[:, 5])
         self.last_step = info.steps[-1]
@@ -267,7 +288,9 @@ class _Replay:
         _discs(img, self.xy[live, 0], self.xy[live, 1], r, _RIM)
         _discs(img, self.xy[live, 0], self.xy[live, 1], r - max(1.0, r / 6), self.colors[live])
         hx, hy = np.cos(self.heading[live]), np.sin(self.heading[live])
-        _discs(img, self.xy[live, 0] + hx * r * 0.7, self.xy[live, 1] - hy * r * 0.7, max(r / 3, 1.0), _HEADING)
+        _discs(
+            img, self.xy[live, 0] + hx * r * 0.7, self.xy[live, 1] - hy * r * 0.7, max(r / 3, 1.0), _HEADING
+        )
         recent = (self.col_step <= step) & (self.col_step > step - COLLISION_HOLD)
         hit = np.unique(self.col_agent[recent])
         hit = hit[hit < len(self.xy)]

@@ -136,8 +136,11 @@ def _scenario_bounds(name: str, config: dict[str, Any]) -> tuple[float, float, f
         from agentsim_env.scenarios.registry import make_scenario
     except ImportError:  # pragma: no cover
         return None
-    attempts = [config] + [{k: v for k, v in config.items() if k != drop}
-                           for drop, sub in config.items() if isinstance(sub, dict)]  # fmt: skip
+    attempts = [config] + [
+        {k: v for k, v in config.items() if k != drop}
+        for drop, sub in config.items()
+        if isinstance(sub, dict)
+    ]
     for cfg in attempts:
         try:  # build() checks the memory the world needs before allocating it
             world = make_scenario(name, **cfg).build(1)
@@ -150,13 +153,17 @@ def _scenario_bounds(name: str, config: dict[str, Any]) -> tuple[float, float, f
 def _extent(con: sqlite3.Connection, run: int, episode: int, world: int) -> tuple[float, ...] | None:
     """``(xmin, xmax, ymin, ymax)`` of the recorded agent and sensor positions of the episode."""
     key = (run, episode, world)
-    a = con.execute("SELECT min(x), max(x), min(y), max(y) FROM steps WHERE run = ? AND episode = ? AND world = ?",
-                    key).fetchone()  # fmt: skip
-    b = con.execute("SELECT min(min(release_x, coalesce(land_x, release_x))), "
-                    "max(max(release_x, coalesce(land_x, release_x))), "
-                    "min(min(release_y, coalesce(land_y, release_y))), "
-                    "max(max(release_y, coalesce(land_y, release_y))) "
-                    "FROM sensors WHERE run = ? AND episode = ? AND world = ?", key).fetchone()  # fmt: skip
+    a = con.execute(
+        "SELECT min(x), max(x), min(y), max(y) FROM steps WHERE run = ? AND episode = ? AND world = ?", key
+    ).fetchone()
+    b = con.execute(
+        "SELECT min(min(release_x, coalesce(land_x, release_x))), "
+        "max(max(release_x, coalesce(land_x, release_x))), "
+        "min(min(release_y, coalesce(land_y, release_y))), "
+        "max(max(release_y, coalesce(land_y, release_y))) "
+        "FROM sensors WHERE run = ? AND episode = ? AND world = ?",
+        key,
+    ).fetchone()
     boxes = [r for r in (a, b) if r is not None and None not in r]
     if not boxes:
         return None
@@ -228,8 +235,10 @@ def replay_info(
             worlds = "0" if n_worlds == 1 else f"0-{n_worlds - 1}"
             raise ValueError(f"{path}: run {run} has no world {world}; its worlds: {worlds}")
         check_values(con, path, "episodes", "run = ? AND world = ?", (run, world))
-        episodes = [e for (e,) in con.execute("SELECT episode FROM episodes WHERE run = ? AND world = ?",
-                                              (run, world))]  # fmt: skip
+        episodes = [
+            e
+            for (e,) in con.execute("SELECT episode FROM episodes WHERE run = ? AND world = ?", (run, world))
+        ]
         if episode not in episodes:
             have = _ranges(episodes) if episodes else "none"
             raise ValueError(
@@ -237,12 +246,30 @@ def replay_info(
             )
         key, where = (run, episode, world), "run = ? AND episode = ? AND world = ?"
         position = number_within(POSITION_LIMIT)
-        check_values(con, path, "steps", where, key, {"step": integer_within(0), "agent": integer_within(0, n_agents - 1),
-                                                      "x": position, "y": position, "z": position,
-                                                      **{c: number_within() for c in ("vx", "vy", "vz", "heading")}})  # fmt: skip
+        check_values(
+            con,
+            path,
+            "steps",
+            where,
+            key,
+            {
+                "step": integer_within(0),
+                "agent": integer_within(0, n_agents - 1),
+                "x": position,
+                "y": position,
+                "z": position,
+                **{c: number_within() for c in ("vx", "vy", "vz", "heading")},
+            },
+        )
         check_values(con, path, "events", where, key)
-        check_values(con, path, "sensors", where, key,
-                     {c: position for c in ("release_x", "release_y", "release_z", "land_x", "land_y")})  # fmt: skip
+        check_values(
+            con,
+            path,
+            "sensors",
+            where,
+            key,
+            {c: position for c in ("release_x", "release_y", "release_z", "land_x", "land_y")},
+        )
         steps = tuple(
             s for (s,) in con.execute(f"SELECT DISTINCT step FROM steps WHERE {where} ORDER BY step", key)
         )
@@ -254,10 +281,19 @@ def replay_info(
     finally:
         con.close()
     return ReplayInfo(
-        path=str(path), run=int(run), episode=episode, world=world, scenario=str(name), n_agents=int(n_agents),
-        steps=steps, canvas=Canvas(bounds, size), dt=float(cfg.dt) if "dt" in config else None,
-        radius=float(cfg.body.radius), config=config, rows=int(rows),
-    )  # fmt: skip
+        path=str(path),
+        run=int(run),
+        episode=episode,
+        world=world,
+        scenario=str(name),
+        n_agents=int(n_agents),
+        steps=steps,
+        canvas=Canvas(bounds, size),
+        dt=float(cfg.dt) if "dt" in config else None,
+        radius=float(cfg.body.radius),
+        config=config,
+        rows=int(rows),
+    )
 
 
 __all__ = ["HEADER", "Canvas", "ReplayInfo", "replay_info"]

@@ -51,8 +51,11 @@ def recorded_seeds(info: ReplayInfo) -> tuple[int, list[tuple[int, int]]]:
     con = open_read(info.path)
     try:
         (n_worlds,) = con.execute("SELECT n_worlds FROM runs WHERE run = ?", (info.run,)).fetchone()
-        rows = con.execute("SELECT episode, seed FROM episodes WHERE run = ? AND world = ? AND episode <= ? "
-                           "ORDER BY episode", (info.run, info.world, info.episode)).fetchall()  # fmt: skip
+        rows = con.execute(
+            "SELECT episode, seed FROM episodes WHERE run = ? AND world = ? AND episode <= ? "
+            "ORDER BY episode",
+            (info.run, info.world, info.episode),
+        ).fetchall()
     finally:
         con.close()
     known = []
@@ -60,9 +63,11 @@ def recorded_seeds(info: ReplayInfo) -> tuple[int, list[tuple[int, int]]]:
         if s in (None, "None"):
             continue
         if not (isinstance(s, (int, str)) and str(s).isascii() and str(s).isdigit() and len(str(s)) <= 100):
-            raise StoreError(f"{info.path}: episodes.seed holds {str(s)[:40]!r} in the row of run {info.run}, "
-                             f"episode {e}, world {info.world}, but it must be an integer >= 0 or None: "
-                             "the store is damaged")  # fmt: skip
+            raise StoreError(
+                f"{info.path}: episodes.seed holds {str(s)[:40]!r} in the row of run {info.run}, "
+                f"episode {e}, world {info.world}, but it must be an integer >= 0 or None: "
+                "the store is damaged"
+            )
         known.append((int(e), int(s)))
     return int(n_worlds), known
 

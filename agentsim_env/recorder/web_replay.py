@@ -65,9 +65,12 @@ class ReplayData:
         self.steps = np.asarray(info.steps, dtype=np.int64)
         t, n = len(self.steps), info.n_agents
         # (T, N) arrays of 20 bytes a cell, and the episode's rows as read (a Python tuple and a float64 row each)
-        check_memory(f"{info.path}: the replay of run {info.run} episode {info.episode} (runs.n_agents={n} x {t} "
-                     f"steps, {info.rows} rows)", 20 * t * n + 360 * info.rows,
-                     "replay fewer agents or a shorter episode, or the store's runs.n_agents is damaged")  # fmt: skip
+        check_memory(
+            f"{info.path}: the replay of run {info.run} episode {info.episode} (runs.n_agents={n} x {t} "
+            f"steps, {info.rows} rows)",
+            20 * t * n + 360 * info.rows,
+            "replay fewer agents or a shorter episode, or the store's runs.n_agents is damaged",
+        )
         self.names = names or [f"#{i}" for i in range(n)]
         self.pos = np.zeros((t, n, 3), np.float32)
         self.heading = np.zeros((t, n), np.float32)
@@ -86,10 +89,14 @@ class ReplayData:
         con = open_read(info.path)
         try:
             check_values(con, info.path, "messages", "run = ? AND episode = ? AND world = ?", key)
-            rows = np.array(con.execute(
-                "SELECT step, agent, x, y, coalesce(z, 0), coalesce(heading, 0), coalesce(online, 0), "
-                "coalesce(grp, -1) FROM steps WHERE run = ? AND episode = ? AND world = ? ORDER BY step, agent",
-                key).fetchall(), dtype=float).reshape(-1, 8)  # fmt: skip
+            rows = np.array(
+                con.execute(
+                    "SELECT step, agent, x, y, coalesce(z, 0), coalesce(heading, 0), coalesce(online, 0), "
+                    "coalesce(grp, -1) FROM steps WHERE run = ? AND episode = ? AND world = ? ORDER BY step, agent",
+                    key,
+                ).fetchall(),
+                dtype=float,
+            ).reshape(-1, 8)
             ti = np.array([index[int(s)] for s in rows[:, 0]], dtype=np.int64)
             ai = rows[:, 1].astype(np.int64)
             ok = (ai >= 0) & (ai < n)
@@ -106,23 +113,40 @@ class ReplayData:
                 self.group[i, gone] = self.group[i - 1, gone]
             msgs = con.execute(
                 "SELECT step, kind, coalesce(sender, -1), receiver FROM messages WHERE run = ? AND episode = ? "
-                "AND world = ? AND event = 'delivered' AND receiver IS NOT NULL ORDER BY step", key).fetchall()  # fmt: skip
+                "AND world = ? AND event = 'delivered' AND receiver IS NOT NULL ORDER BY step",
+                key,
+            ).fetchall()
             by_step: dict[int, list[tuple[int, int, int]]] = {}
             for s, k, snd, rcv in msgs:
                 by_step.setdefault(int(s), []).append((int(snd), int(rcv), int(k or AGENT)))
             for s in self.steps.tolist():
                 m = by_step.get(s, [])
-                self.messages.append((np.array([(a, b) for a, b, _ in m], np.int32).reshape(-1, 2),
-                                      page_kinds(np.array([k for *_, k in m], np.int64))))  # fmt: skip
+                self.messages.append(
+                    (
+                        np.array([(a, b) for a, b, _ in m], np.int32).reshape(-1, 2),
+                        page_kinds(np.array([k for *_, k in m], np.int64)),
+                    )
+                )
                 for a, b, k in m[:MAX_MESSAGE_LINES]:
-                    self._add(s, message_log_kind(k), f"{KIND_NAMES.get(k, k)} {self._name(a)} -> {self._name(b)}", [b])
+                    self._add(
+                        s,
+                        message_log_kind(k),
+                        f"{KIND_NAMES.get(k, k)} {self._name(a)} -> {self._name(b)}",
+                        [b],
+                    )
                 if len(m) > MAX_MESSAGE_LINES:
-                    self._add(s, "message", f"... and {len(m) - MAX_MESSAGE_LINES} more deliveries this step", [])
+                    self._add(
+                        s, "message", f"... and {len(m) - MAX_MESSAGE_LINES} more deliveries this step", []
+                    )
             for s, ev, a, b, obj, old, new in con.execute(
                 "SELECT step, event, agent, other_agent, object, old, new FROM events WHERE run = ? AND "
-                "episode = ? AND world = ? ORDER BY step", key):  # fmt: skip
+                "episode = ? AND world = ? ORDER BY step",
+                key,
+            ):
                 if ev in ("collision", "offline") and a is not None and 0 <= a < n and s in index:
-                    why[a] = (index[s], COLLIDED if ev == "collision" else OFFLINE) if why[a][0] < 0 else why[a]
+                    why[a] = (
+                        (index[s], COLLIDED if ev == "collision" else OFFLINE) if why[a][0] < 0 else why[a]
+                    )
                 if ev == "collision":
                     other = f"agent {self._name(b)}" if b is not None and b >= 0 else f"object #{obj}"
                     self._add(s, "collision", f"{self._name(a)} collided with {other}", [a])
@@ -131,14 +155,22 @@ class ReplayData:
                 elif ev == "group":
                     self._add(s, "group", f"{self._name(a)}: group {old} -> {new}", [a])
             if "info_arrived" in info_columns(con):  # scenarios that score arrivals record them per step
-                for s, a in con.execute("SELECT step, agent FROM steps WHERE run = ? AND episode = ? AND world = ? "
-                                        "AND info_arrived > 0 ORDER BY step", key):  # fmt: skip
+                for s, a in con.execute(
+                    "SELECT step, agent FROM steps WHERE run = ? AND episode = ? AND world = ? "
+                    "AND info_arrived > 0 ORDER BY step",
+                    key,
+                ):
                     if a is not None and 0 <= a < n and s in index and why[a][0] < 0:
                         why[a] = (index[s], ARRIVED)
-            self.sensors = np.array(con.execute(
-                "SELECT release_step, release_x, release_y, coalesce(release_z, 0), coalesce(land_step, -1), "
-                "coalesce(land_x, release_x), coalesce(land_y, release_y) FROM sensors WHERE run = ? AND "
-                "episode = ? AND world = ?", key).fetchall(), dtype=float).reshape(-1, 7)  # fmt: skip
+            self.sensors = np.array(
+                con.execute(
+                    "SELECT release_step, release_x, release_y, coalesce(release_z, 0), coalesce(land_step, -1), "
+                    "coalesce(land_x, release_x), coalesce(land_y, release_y) FROM sensors WHERE run = ? AND "
+                    "episode = ? AND world = ?",
+                    key,
+                ).fetchall(),
+                dtype=float,
+            ).reshape(-1, 7)
             for s in np.unique(self.sensors[:, 0]).astype(int).tolist():
                 k = int((self.sensors[:, 0] == s).sum())
                 self._add(s, "release", f"{k} sensor{'s' if k > 1 else ''} released", [])
@@ -155,9 +187,15 @@ class ReplayData:
         for i in range(1, len(self.steps)):
             ended = np.flatnonzero(self.online[i - 1].astype(bool) & ~self.online[i].astype(bool))
             if ended.size:
-                self.log[i].append({"step": int(self.steps[i]), "episode": self.info.episode, "kind": "terminated",
-                                    "text": f"offline: {', '.join(self._name(int(a)) for a in ended[:8])}",
-                                    "slots": ended[:64].tolist()})  # fmt: skip
+                self.log[i].append(
+                    {
+                        "step": int(self.steps[i]),
+                        "episode": self.info.episode,
+                        "kind": "terminated",
+                        "text": f"offline: {', '.join(self._name(int(a)) for a in ended[:8])}",
+                        "slots": ended[:64].tolist(),
+                    }
+                )
 
     def _name(self, agent: int | None) -> str:
         if agent is None or agent < 0:
@@ -167,14 +205,28 @@ class ReplayData:
     def _add(self, step: int, kind: str, text: str, slots: list[int]) -> None:
         i = int(np.searchsorted(self.steps, step))
         if i < len(self.steps) and self.steps[i] == step:
-            self.log[i].append({"step": int(step), "episode": self.info.episode, "kind": kind, "text": text,
-                                "slots": [int(s) for s in slots if s is not None]})  # fmt: skip
+            self.log[i].append(
+                {
+                    "step": int(step),
+                    "episode": self.info.episode,
+                    "kind": kind,
+                    "text": text,
+                    "slots": [int(s) for s in slots if s is not None],
+                }
+            )
 
     def arrays(self, i: int, selected: int | None = None) -> dict[str, np.ndarray]:
         """The frame arrays of step index ``i``."""
         step = int(self.steps[i])
-        out = {"pos": self.pos[i], "heading": self.heading[i], "group": self.group[i], "online": self.online[i],
-               "status": self.status[i], "msg": self.messages[i][0], "msg_kind": self.messages[i][1]}  # fmt: skip
+        out = {
+            "pos": self.pos[i],
+            "heading": self.heading[i],
+            "group": self.group[i],
+            "online": self.online[i],
+            "status": self.status[i],
+            "msg": self.messages[i][0],
+            "msg_kind": self.messages[i][1],
+        }
         if len(self.sensors):
             s = self.sensors
             out_pos, state = [], []
@@ -206,8 +258,13 @@ def rebuild_scene(info: ReplayInfo) -> tuple[dict[str, Any], str | None]:
 
     n_worlds, known = recorded_seeds(info)  # a damaged seed is refused before anything is built
     config = info.config  # validated by replay_info
-    replay = {"run": info.run, "episode": info.episode, "n_steps": len(info.steps), "first_step": int(info.steps[0]),
-              "last_step": int(info.steps[-1])}  # fmt: skip
+    replay = {
+        "run": info.run,
+        "episode": info.episode,
+        "n_steps": len(info.steps),
+        "first_step": int(info.steps[0]),
+        "last_step": int(info.steps[-1]),
+    }
     title = f"replay: {info.scenario}, run {info.run}, episode {info.episode}"
     try:
         env = build_parallel_env(info.scenario, **(config if isinstance(config, dict) else {}))
@@ -233,11 +290,23 @@ def rebuild_scene(info: ReplayInfo) -> tuple[dict[str, Any], str | None]:
 
 def _bare_scene(info: ReplayInfo, title: str, replay: dict[str, Any]) -> dict[str, Any]:
     (xmin, xmax, ymin, ymax) = info.canvas.bounds
-    return {"type": "scene", "mode": "replay", "title": title, "scenario": info.scenario, "dt": info.dt or 0.1,
-            "bounds": [xmin, xmax, ymin, ymax], "z_range": [0.0, 10.0],
-            "n_agents": info.n_agents, "agent_names": [f"#{i}" for i in range(info.n_agents)],
-            "agent_radius": [info.radius] * info.n_agents, "n_groups": 1,
-            "objects": {"kind": [], "centre": [], "half": []}, "zones": [], "log_kinds": [], "replay": replay}  # fmt: skip
+    return {
+        "type": "scene",
+        "mode": "replay",
+        "title": title,
+        "scenario": info.scenario,
+        "dt": info.dt or 0.1,
+        "bounds": [xmin, xmax, ymin, ymax],
+        "z_range": [0.0, 10.0],
+        "n_agents": info.n_agents,
+        "agent_names": [f"#{i}" for i in range(info.n_agents)],
+        "agent_radius": [info.radius] * info.n_agents,
+        "n_groups": 1,
+        "objects": {"kind": [], "centre": [], "half": []},
+        "zones": [],
+        "log_kinds": [],
+        "replay": replay,
+    }
 
 
 class ReplayViewer:
@@ -254,21 +323,44 @@ class ReplayViewer:
         quiet: Print nothing.
     """
 
-    def __init__(self, path: str | os.PathLike[str], *, run: int | None = None, episode: int = 0, world: int = 0,
-                 host: str = "127.0.0.1", port: int = 0, speed: float | None = None, quiet: bool = False) -> None:  # fmt: skip
+    def __init__(
+        self,
+        path: str | os.PathLike[str],
+        *,
+        run: int | None = None,
+        episode: int = 0,
+        world: int = 0,
+        host: str = "127.0.0.1",
+        port: int = 0,
+        speed: float | None = None,
+        quiet: bool = False,
+    ) -> None:
         self.info = replay_info(path, run, episode, world)
         self.scene, why = rebuild_scene(self.info)
         self.data = ReplayData(self.info, self.scene["agent_names"])
         if why:
-            self.data.log[0].insert(0, {"step": int(self.data.steps[0]), "episode": episode, "kind": "episode",
-                                        "text": why, "slots": []})  # fmt: skip
+            self.data.log[0].insert(
+                0,
+                {
+                    "step": int(self.data.steps[0]),
+                    "episode": episode,
+                    "kind": "episode",
+                    "text": why,
+                    "slots": [],
+                },
+            )
         rate = speed if speed is not None else clamp_speed(1.0 / self.info.dt if self.info.dt else 10.0)
         self.controls = Controls(rate)
         self.controls.reply = self._status  # replies to the controls carry the step and the steps/s shown
         self.controls.n_agents = self.info.n_agents
-        self.server = WebServer("viewer.html", host=host, port=port, title="agentsim replay",
-                                handlers=self.controls.handlers({"seek": self._seek, "play": self.controls._resume}),
-                                on_connect=self._hello)  # fmt: skip
+        self.server = WebServer(
+            "viewer.html",
+            host=host,
+            port=port,
+            title="agentsim replay",
+            handlers=self.controls.handlers({"seek": self._seek, "play": self.controls._resume}),
+            on_connect=self._hello,
+        )
         self.quiet = quiet
         self.index = 0
         self.seq = 0
@@ -284,8 +376,13 @@ class ReplayViewer:
         return [self.scene, self._status()]
 
     def _status(self) -> dict[str, Any]:
-        return {**self.controls.status(), "step": int(self.data.steps[self.index]), "episode": self.info.episode,
-                "index": self.index, "steps_per_s": self.controls.speed}  # fmt: skip
+        return {
+            **self.controls.status(),
+            "step": int(self.data.steps[self.index]),
+            "episode": self.info.episode,
+            "index": self.index,
+            "steps_per_s": self.controls.speed,
+        }
 
     def _seek(self, msg: dict[str, Any]) -> dict[str, Any]:
         extra = sorted(set(msg) - {"cmd", "step"})
@@ -302,7 +399,9 @@ class ReplayViewer:
         self.index = i
         self.seq += 1
         arrays = self.data.arrays(i)
-        self.server.publish_frame(self.seq, pack_frame(self.seq, int(self.data.steps[i]), self.info.episode, arrays))
+        self.server.publish_frame(
+            self.seq, pack_frame(self.seq, int(self.data.steps[i]), self.info.episode, arrays)
+        )
         self.server.publish_log(self.data.log[i])
         self.server.broadcast(self._status())
 
@@ -331,8 +430,12 @@ class ReplayViewer:
         """Start the server and the playback thread; returns the URL."""
         url = self.server.start()
         if not self.quiet:
-            print(f"agentsim viewer (replay of {self.info.path}, run {self.info.run}, episode {self.info.episode}, "
-                  f"{len(self.data.steps)} steps): {url}", file=sys.stderr, flush=True)  # fmt: skip
+            print(
+                f"agentsim viewer (replay of {self.info.path}, run {self.info.run}, episode {self.info.episode}, "
+                f"{len(self.data.steps)} steps): {url}",
+                file=sys.stderr,
+                flush=True,
+            )
         self._seek_to = 0
         self._thread = threading.Thread(target=self._run, name="agentsim-replay", daemon=True)
         self._thread.start()

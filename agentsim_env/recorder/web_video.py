@@ -56,8 +56,10 @@ CHROMIUM_FLAGS: list[str] = [
 ]
 
 PLAYWRIGHT_HINT = 'exporting the 3D view needs Playwright: pip install "agentsim-env[viewer]"'
-CHROMIUM_HINT = ("exporting the 3D view needs Chromium (none found): install it (Debian/Ubuntu: apt install "
-                 "chromium) or set AGENTSIM_CHROMIUM to its executable")  # fmt: skip
+CHROMIUM_HINT = (
+    "exporting the 3D view needs Chromium (none found): install it (Debian/Ubuntu: apt install "
+    "chromium) or set AGENTSIM_CHROMIUM to its executable"
+)
 
 # Only the 3D view and its legend: the panel, header, replay bar, error banner and the view's own buttons are
 # hidden; a label names the replay and the step (the page's own status line is in the hidden panel). Below
@@ -71,8 +73,10 @@ _PAGE_CSS = """
 _ADD_LABEL = (
     "() => { const d = document.createElement('div'); d.id = 'export-label'; document.body.append(d); }"
 )
-_SEEK = ("([step, text]) => { document.getElementById('export-label').textContent = text; "
-         "window.agentsim.send({cmd: 'seek', step: step}); }")  # fmt: skip
+_SEEK = (
+    "([step, text]) => { document.getElementById('export-label').textContent = text; "
+    "window.agentsim.send({cmd: 'seek', step: step}); }"
+)
 _DRAWN = "([step, seq]) => window.agentsim.lastStep === step && window.agentsim.lastSeq > seq"
 
 
@@ -104,8 +108,10 @@ def check_export(out: str | os.PathLike[str], fps: float | None, size: int, ever
     fmt = video_format(out)
     if fmt is None:
         suffix = Path(out).suffix or "no suffix"
-        raise ValueError(f"--out {str(out)!r}: the 3D view is exported as {', '.join('.' + f for f in VIDEO_FORMATS)}"
-                         f" (got {suffix})")  # fmt: skip
+        raise ValueError(
+            f"--out {str(out)!r}: the 3D view is exported as {', '.join('.' + f for f in VIDEO_FORMATS)}"
+            f" (got {suffix})"
+        )
     if fps is not None and (isinstance(fps, bool) or not isinstance(fps, (int, float)) or not fps > 0):
         raise ValueError(f"--fps must be > 0, got {fps!r}")
     lo, hi = SIZE_RANGE
@@ -200,8 +206,9 @@ def export_replay_video(
         need = -(-len(info.steps) // MAX_FRAMES)
         while len(info.frame_steps(need)) > MAX_FRAMES:  # the last step is drawn too: at most one more
             need += 1
-        raise ValueError(f"the export would draw {len(steps)} frames, at most {MAX_FRAMES}: pass --every {need} "
-                         "or more")  # fmt: skip
+        raise ValueError(
+            f"the export would draw {len(steps)} frames, at most {MAX_FRAMES}: pass --every {need} or more"
+        )
     target = Path(out)
     if target.is_dir():
         raise ValueError(f"--out {str(target)!r} is a folder; give a file name ending in .{fmt}")

@@ -59,8 +59,10 @@ class RecordedParallelEnv(AgentSimParallelEnv):
         names = [a for a in obs if self._index[a] in set(rec.observe_agents.tolist())]
         if not names:
             return
-        flat = [np.concatenate([np.ravel(v) for v in o.values()]) if isinstance(o, dict) else np.ravel(o)
-                for o in (obs[a] for a in names)]  # fmt: skip
+        flat = [
+            np.concatenate([np.ravel(v) for v in o.values()]) if isinstance(o, dict) else np.ravel(o)
+            for o in (obs[a] for a in names)
+        ]
         rec.observations(np.array([self._index[a] for a in names]), np.stack(flat))
 
     def close(self) -> None:

@@ -90,8 +90,12 @@ def package_versions() -> dict[str, str]:
 
     import agentsim_env
 
-    return {"agentsim_env": agentsim_env.__version__, "numpy": np.__version__, "numba": numba.__version__,
-            "python": sys.version.split()[0]}  # fmt: skip
+    return {
+        "agentsim_env": agentsim_env.__version__,
+        "numpy": np.__version__,
+        "numba": numba.__version__,
+        "python": sys.version.split()[0],
+    }
 
 
 def _config_json(config: Any) -> str:
@@ -196,7 +200,7 @@ class Recorder:
                     time.time(),
                     os.getpid(),
                     socket.gethostname(),
-                ),  # fmt: skip
+                ),
             )
             con.commit()
         except sqlite3.Error as exc:
@@ -213,8 +217,10 @@ class Recorder:
         con, run = self.con, self.run
         if con is not None and run is not None:
             try:
-                con.execute("UPDATE runs SET status = ?, ended = ?, last_step = ? WHERE run = ?",
-                            (status, time.time(), self._last_step, run))  # fmt: skip
+                con.execute(
+                    "UPDATE runs SET status = ?, ended = ?, last_step = ? WHERE run = ?",
+                    (status, time.time(), self._last_step, run),
+                )
                 con.commit()
             except sqlite3.Error as exc:
                 self._fail(exc)
@@ -280,9 +286,13 @@ class Recorder:
         seeds = list(seeds) if seeds is not None else [None] * len(ws)
         try:
             con = self._con()
-            con.executemany("INSERT INTO episodes VALUES (?, ?, ?, ?, 0)",
-                            [(self.run, int(w), int(self._episode[w]), None if s is None else str(s))
-                             for w, s in zip(ws, seeds)])  # fmt: skip
+            con.executemany(
+                "INSERT INTO episodes VALUES (?, ?, ?, ?, 0)",
+                [
+                    (self.run, int(w), int(self._episode[w]), None if s is None else str(s))
+                    for w, s in zip(ws, seeds)
+                ],
+            )
             slots = (ws[:, None] * self._n + np.arange(self._n)).ravel()
             self._write_states(con, slots, np.zeros(slots.size, dtype=np.int64), None)
             self._commit(force=True)
@@ -323,9 +333,15 @@ class Recorder:
         try:
             self._con().executemany(
                 "INSERT INTO observations VALUES (?, ?, ?, ?, ?, ?)",
-                zip(repeat(self.run), self._episode[w].tolist(), w.tolist(), world.step_count[w].tolist(),
-                    (slots % self._n).tolist(), [json.dumps(r) for r in np.asarray(flat, float).tolist()]),
-            )  # fmt: skip
+                zip(
+                    repeat(self.run),
+                    self._episode[w].tolist(),
+                    w.tolist(),
+                    world.step_count[w].tolist(),
+                    (slots % self._n).tolist(),
+                    [json.dumps(r) for r in np.asarray(flat, float).tolist()],
+                ),
+            )
             if self._pending == 0:  # the step was just committed: its observations are durable with it
                 self._con().commit()
         except sqlite3.Error as exc:
@@ -417,18 +433,43 @@ class Recorder:
                 # target: a group id for GROUP messages, else a receiver slot, stored as its agent index
                 target = np.where((log.kind != GROUP) & (log.target >= 0), log.target % n, log.target)
                 reasons = [_REASONS.get(r, str(r)) for r in log.reason.tolist()]
-                rows += zip(repeat(self.run), ep, w, (log.step + shift).tolist(), repeat(name), log.msg.tolist(),
-                            log.kind.tolist(), send.tolist(), target.tolist(), recv.tolist(), repeat(None),
-                            (log.created + shift).tolist(), reasons, repeat(None))  # fmt: skip
+                rows += zip(
+                    repeat(self.run),
+                    ep,
+                    w,
+                    (log.step + shift).tolist(),
+                    repeat(name),
+                    log.msg.tolist(),
+                    log.kind.tolist(),
+                    send.tolist(),
+                    target.tolist(),
+                    recv.tolist(),
+                    repeat(None),
+                    (log.created + shift).tolist(),
+                    reasons,
+                    repeat(None),
+                )
         o = c.overlay
         if o is not None and len(o):
             ep, w = self._where(o.receiver)
             shift = self._tick_shift(world, w)
             step = world.step_count[np.asarray(w, dtype=np.int64)].tolist()
-            rows += zip(repeat(self.run), ep, w, step, repeat("overlay"), o.flood.tolist(), repeat(None),
-                        (o.origin % n).tolist(), repeat(None), (o.receiver % n).tolist(), o.hops.tolist(),
-                        (o.created + shift).tolist(), repeat(None),
-                        [json.dumps(p) for p in o.payload.tolist()])  # fmt: skip
+            rows += zip(
+                repeat(self.run),
+                ep,
+                w,
+                step,
+                repeat("overlay"),
+                o.flood.tolist(),
+                repeat(None),
+                (o.origin % n).tolist(),
+                repeat(None),
+                (o.receiver % n).tolist(),
+                o.hops.tolist(),
+                (o.created + shift).tolist(),
+                repeat(None),
+                [json.dumps(p) for p in o.payload.tolist()],
+            )
         if rows:
             _insert(con, "INSERT INTO messages ", 14, rows)
 
@@ -441,24 +482,64 @@ class Recorder:
             step = world.step_count[np.asarray(w, dtype=np.int64)].tolist()
             other = np.where(col.other_agent >= 0, col.other_agent % n, -1)
             obj = world.scene.index_in_world(col.obj)  # numbered within the world, as a single env numbers it
-            rows += zip(repeat(self.run), ep, w, step, repeat("collision"), (col.agent % n).tolist(),
-                        other.tolist(), obj.tolist(), repeat(None), repeat(None))  # fmt: skip
+            rows += zip(
+                repeat(self.run),
+                ep,
+                w,
+                step,
+                repeat("collision"),
+                (col.agent % n).tolist(),
+                other.tolist(),
+                obj.tolist(),
+                repeat(None),
+                repeat(None),
+            )
         if ev.timed_out.size:
             ep, w = self._where(ev.timed_out)
             step = world.step_count[np.asarray(w, dtype=np.int64)].tolist()
-            rows += zip(repeat(self.run), ep, w, step, repeat("offline"), (ev.timed_out % n).tolist(),
-                        repeat(None), repeat(None), repeat(None), repeat(None))  # fmt: skip
+            rows += zip(
+                repeat(self.run),
+                ep,
+                w,
+                step,
+                repeat("offline"),
+                (ev.timed_out % n).tolist(),
+                repeat(None),
+                repeat(None),
+                repeat(None),
+                repeat(None),
+            )
         if ev.lost.size:  # agents of a shard that stopped answering (distributed runs)
             ep, w = self._where(ev.lost)
             step = world.step_count[np.asarray(w, dtype=np.int64)].tolist()
-            rows += zip(repeat(self.run), ep, w, step, repeat("shard_offline"), (ev.lost % n).tolist(),
-                        repeat(None), repeat(None), repeat(None), repeat(None))  # fmt: skip
+            rows += zip(
+                repeat(self.run),
+                ep,
+                w,
+                step,
+                repeat("shard_offline"),
+                (ev.lost % n).tolist(),
+                repeat(None),
+                repeat(None),
+                repeat(None),
+                repeat(None),
+            )
         g = ev.groups
         if g is not None and len(g):
             ep, w = self._where(g.slot)
             step = world.step_count[np.asarray(w, dtype=np.int64)].tolist()
-            rows += zip(repeat(self.run), ep, w, step, repeat("group"), (g.slot % n).tolist(), repeat(None),
-                        repeat(None), g.old.tolist(), g.new.tolist())  # fmt: skip
+            rows += zip(
+                repeat(self.run),
+                ep,
+                w,
+                step,
+                repeat("group"),
+                (g.slot % n).tolist(),
+                repeat(None),
+                repeat(None),
+                g.old.tolist(),
+                g.new.tolist(),
+            )
         if rows:
             _insert(con, "INSERT INTO events ", 10, rows)
 
@@ -478,12 +559,22 @@ class Recorder:
             con.executemany(
                 "INSERT INTO sensors (run, episode, world, sensor, uav, zone, release_step, release_x, release_y, "
                 "release_z, release_t) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
-                zip(repeat(self.run), ep, wid.tolist(), p.released.tolist(), (owner % n).tolist(),
-                    objs.get("zone")[i].tolist(), step, *rp.T.tolist(), objs.get("release_t")[i].tolist()),
-            )  # fmt: skip
-            con.executemany("INSERT INTO events VALUES (?, ?, ?, ?, 'release', ?, NULL, ?, NULL, NULL)",
-                            zip(repeat(self.run), ep, wid.tolist(), step, (owner % n).tolist(),
-                                p.released.tolist()))  # fmt: skip
+                zip(
+                    repeat(self.run),
+                    ep,
+                    wid.tolist(),
+                    p.released.tolist(),
+                    (owner % n).tolist(),
+                    objs.get("zone")[i].tolist(),
+                    step,
+                    *rp.T.tolist(),
+                    objs.get("release_t")[i].tolist(),
+                ),
+            )
+            con.executemany(
+                "INSERT INTO events VALUES (?, ?, ?, ?, 'release', ?, NULL, ?, NULL, NULL)",
+                zip(repeat(self.run), ep, wid.tolist(), step, (owner % n).tolist(), p.released.tolist()),
+            )
         if p.landed.size:
             i = objs.index_of(p.landed)
             wid = objs.get("world")[i]
@@ -493,13 +584,21 @@ class Recorder:
             con.executemany(
                 "UPDATE sensors SET land_step = ?, land_x = ?, land_y = ?, land_t = ? "
                 "WHERE run = ? AND world = ? AND episode = ? AND sensor = ?",
-                zip(step, *lxy.T.tolist(), objs.get("land_t")[i].tolist(), repeat(self.run), wid.tolist(), ep,
-                    p.landed.tolist()),
-            )  # fmt: skip
+                zip(
+                    step,
+                    *lxy.T.tolist(),
+                    objs.get("land_t")[i].tolist(),
+                    repeat(self.run),
+                    wid.tolist(),
+                    ep,
+                    p.landed.tolist(),
+                ),
+            )
             owner = objs.get("owner")[i]
-            con.executemany("INSERT INTO events VALUES (?, ?, ?, ?, 'landing', ?, NULL, ?, NULL, NULL)",
-                            zip(repeat(self.run), ep, wid.tolist(), step, (owner % n).tolist(),
-                                p.landed.tolist()))  # fmt: skip
+            con.executemany(
+                "INSERT INTO events VALUES (?, ?, ?, ?, 'landing', ?, NULL, ?, NULL, NULL)",
+                zip(repeat(self.run), ep, wid.tolist(), step, (owner % n).tolist(), p.landed.tolist()),
+            )
 
 
 __all__ = ["Recorder", "package_versions"]

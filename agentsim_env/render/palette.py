@@ -16,10 +16,22 @@ import numpy as np
 __all__ = ["MAX_DISTINCT", "PALETTE", "agent_colors", "min_agent_px", "min_marker_px"]
 
 PALETTE = np.array(
-    [[31, 119, 180], [255, 127, 14], [44, 160, 44], [214, 39, 40], [148, 103, 189], [140, 86, 75],
-     [227, 119, 194], [188, 189, 34], [23, 190, 207], [57, 59, 121], [231, 186, 82], [0, 128, 128]],
+    [
+        [31, 119, 180],
+        [255, 127, 14],
+        [44, 160, 44],
+        [214, 39, 40],
+        [148, 103, 189],
+        [140, 86, 75],
+        [227, 119, 194],
+        [188, 189, 34],
+        [23, 190, 207],
+        [57, 59, 121],
+        [231, 186, 82],
+        [0, 128, 128],
+    ],
     dtype=np.uint8,
-)  # fmt: skip
+)
 """The agent colours, RGB uint8, in the order agents (or groups) take them."""
 MAX_DISTINCT = len(PALETTE)
 """Most agents of a world drawn in colours of their own; more are coloured by group."""

@@ -25,7 +25,9 @@ _SHADOW = np.array([175, 175, 175], dtype=np.uint8)
 _CROSS = np.array([40, 40, 40], dtype=np.uint8)
 
 
-def _mask(img: np.ndarray, cx: float, cy: float, r: float) -> tuple[tuple[slice, slice], np.ndarray, np.ndarray]:
+def _mask(
+    img: np.ndarray, cx: float, cy: float, r: float
+) -> tuple[tuple[slice, slice], np.ndarray, np.ndarray]:
     """The window around ``(cx, cy)`` of reach ``r`` and its pixel-centre offsets ``(dx, dy)`` from it."""
     h, w, _ = img.shape
     x0, x1 = max(int(cx - r), 0), min(int(cx + r) + 1, w)
@@ -44,7 +46,9 @@ def _disc(img: np.ndarray, cx: float, cy: float, r: float, color: np.ndarray) ->
 _CHUNK = 8192  # discs stamped per numpy pass (bounds the index arrays to a few tens of MB)
 
 
-def _stamp(img: np.ndarray, cx: np.ndarray, cy: np.ndarray, r: float, colors: np.ndarray, cross: bool = False) -> None:
+def _stamp(
+    img: np.ndarray, cx: np.ndarray, cy: np.ndarray, r: float, colors: np.ndarray, cross: bool = False
+) -> None:
     """Discs of radius ``r`` pixels (or their diagonals, ``cross``) at ``(cx, cy)``, ``colors`` ``(k, 3)``.
 
     Every disc is stamped from one pixel mask (its centre snapped to the pixel it falls in), all of them in a few
@@ -68,8 +72,9 @@ def _stamp(img: np.ndarray, cx: np.ndarray, cy: np.ndarray, r: float, colors: np
         img[rows[ok], cols[ok]] = colors[sl][which[ok]]  # overlapping discs: the later one is on top
 
 
-def _stamp_sized(img: np.ndarray, cx: np.ndarray, cy: np.ndarray, r: np.ndarray, colors: np.ndarray,
-                 cross: bool = False) -> None:  # fmt: skip
+def _stamp_sized(
+    img: np.ndarray, cx: np.ndarray, cy: np.ndarray, r: np.ndarray, colors: np.ndarray, cross: bool = False
+) -> None:
     """:func:`_stamp` for discs of several radii (rounded to a quarter pixel; one pass per radius)."""
     q = np.round(np.asarray(r, dtype=float) * 4.0) / 4.0
     for radius in np.unique(q):
@@ -109,8 +114,10 @@ def render_topdown(world: World, w: int = 0, markers: Markers | None = None, siz
         # an obstacle smaller than a pixel still shows as one
         if sc.kind[o] == BOX:
             hx, hy = max(sc.half[o, 0] * scale, 0.5), max(sc.half[o, 1] * scale, 0.5)
-            img[max(int(cy - hy), 0) : max(int(np.ceil(cy + hy)), 0),
-                max(int(cx - hx), 0) : max(int(np.ceil(cx + hx)), 0)] = color  # fmt: skip
+            img[
+                max(int(cy - hy), 0) : max(int(np.ceil(cy + hy)), 0),
+                max(int(cx - hx), 0) : max(int(np.ceil(cx + hx)), 0),
+            ] = color
         else:
             _disc(img, cx, cy, max(sc.half[o, 0] * scale, 0.75), color)
     if markers is not None:
@@ -129,17 +136,29 @@ def render_topdown(world: World, w: int = 0, markers: Markers | None = None, siz
     off = ~np.asarray(st.online[slots], dtype=bool)
     on = ~off
     _stamp_sized(img, cx[off], cy[off], r[off] * 0.8, faded[off])
-    _stamp_sized(img, cx[off], cy[off], r[off] * 0.8, np.broadcast_to(_CROSS, (int(off.sum()), 3)), cross=True)
+    _stamp_sized(
+        img, cx[off], cy[off], r[off] * 0.8, np.broadcast_to(_CROSS, (int(off.sum()), 3)), cross=True
+    )
     a = np.clip((st.pos[slots, 2] - zmin) / max(zmax - zmin, 1e-9), 0.0, 1.0)
     shadow = on & (a * r >= 1.0)
-    _stamp_sized(img, cx[shadow] + (a * r)[shadow], cy[shadow] + (a * r)[shadow], r[shadow],
-                 np.broadcast_to(_SHADOW, (int(shadow.sum()), 3)))  # fmt: skip
+    _stamp_sized(
+        img,
+        cx[shadow] + (a * r)[shadow],
+        cy[shadow] + (a * r)[shadow],
+        r[shadow],
+        np.broadcast_to(_SHADOW, (int(shadow.sum()), 3)),
+    )
     n_on = int(on.sum())
     _stamp_sized(img, cx[on], cy[on], r[on], np.broadcast_to(_RIM, (n_on, 3)))
     _stamp_sized(img, cx[on], cy[on], r[on] - np.maximum(1.0, r[on] / 6), colors[on])
     hx, hy = np.cos(st.heading[slots][on]), np.sin(st.heading[slots][on])
-    _stamp_sized(img, cx[on] + hx * r[on] * 0.7, cy[on] - hy * r[on] * 0.7, np.maximum(r[on] / 3, 1.0),
-                 np.broadcast_to(_HEADING, (n_on, 3)))  # fmt: skip
+    _stamp_sized(
+        img,
+        cx[on] + hx * r[on] * 0.7,
+        cy[on] - hy * r[on] * 0.7,
+        np.maximum(r[on] / 3, 1.0),
+        np.broadcast_to(_HEADING, (n_on, 3)),
+    )
     return img
 
 

@@ -228,15 +228,28 @@ def plot_trajectories(traj: Trajectories, path: str | os.PathLike[str], title: s
         m = len(mxy)
         keep = np.unique(np.linspace(0, m - 1, min(m, MAX_PATHS)).astype(np.int64))
         crowd_m = min(1.0, 200.0 / keep.size)
-        floor = 0.006 * max(w, h) * max(crowd_m**0.5, 0.2)  # a goal of a metre still shows on a map of kilometres
-        discs = [Circle((float(mxy[i, 0]), float(mxy[i, 1])), max(float(rad[i]), floor)) for i in keep.tolist()]
-        ax.add_collection(PatchCollection(discs, facecolors=np.asarray(rgb, dtype=float)[keep] / 255.0,
-                                          edgecolors="none", alpha=0.6))  # fmt: skip
-        label = "scenario markers (goals, zones, sensors)" + (f", {keep.size:,} of {m:,}" if keep.size < m else "")
-        handles.append(Patch(facecolor=tuple(np.asarray(rgb[0], dtype=float) / 255.0), alpha=0.6, label=label))
+        floor = (
+            0.006 * max(w, h) * max(crowd_m**0.5, 0.2)
+        )  # a goal of a metre still shows on a map of kilometres
+        discs = [
+            Circle((float(mxy[i, 0]), float(mxy[i, 1])), max(float(rad[i]), floor)) for i in keep.tolist()
+        ]
+        ax.add_collection(
+            PatchCollection(
+                discs, facecolors=np.asarray(rgb, dtype=float)[keep] / 255.0, edgecolors="none", alpha=0.6
+            )
+        )
+        label = "scenario markers (goals, zones, sensors)" + (
+            f", {keep.size:,} of {m:,}" if keep.size < m else ""
+        )
+        handles.append(
+            Patch(facecolor=tuple(np.asarray(rgb[0], dtype=float) / 255.0), alpha=0.6, label=label)
+        )
     counts = dict.fromkeys(OUTCOMES, 0)
     n = len(traj.outcome)
-    shown = np.unique(np.linspace(0, n - 1, min(n, MAX_PATHS)).astype(np.int64)) if n else np.zeros(0, np.int64)
+    shown = (
+        np.unique(np.linspace(0, n - 1, min(n, MAX_PATHS)).astype(np.int64)) if n else np.zeros(0, np.int64)
+    )
     outcome = np.asarray(traj.outcome, dtype=object)
     for name, k in zip(*np.unique(outcome, return_counts=True)):
         counts[str(name)] = int(k)
@@ -245,38 +258,90 @@ def plot_trajectories(traj: Trajectories, path: str | os.PathLike[str], title: s
     crowd = min(1.0, 200.0 / max(shown.size, 1))  # markers and lines shrink past 200 paths, to stay readable
     if shown.size:
         paths = [traj.xy[: traj.last[i] + 1, i] for i in shown.tolist()]
-        ax.add_collection(LineCollection(paths, colors=colours[shown], linewidths=max(0.4, 1.4 * crowd ** 0.5),
-                                         alpha=0.9, zorder=3))  # fmt: skip
+        ax.add_collection(
+            LineCollection(
+                paths, colors=colours[shown], linewidths=max(0.4, 1.4 * crowd**0.5), alpha=0.9, zorder=3
+            )
+        )
         first = np.array([p[0] for p in paths])
-        ax.scatter(first[:, 0], first[:, 1], s=max(1.0, 25 * crowd), marker="o", facecolors="white",
-                   edgecolors=colours[shown].tolist(), linewidths=max(0.3, 1.2 * crowd), zorder=4)  # fmt: skip
+        ax.scatter(
+            first[:, 0],
+            first[:, 1],
+            s=max(1.0, 25 * crowd),
+            marker="o",
+            facecolors="white",
+            edgecolors=colours[shown].tolist(),
+            linewidths=max(0.3, 1.2 * crowd),
+            zorder=4,
+        )
     for name, end in OUTCOMES.items():
         mine = shown[outcome[shown] == name]
         if not mine.size:
             continue
         last = np.array([traj.xy[traj.last[i], i] for i in mine.tolist()])
-        ax.scatter(last[:, 0], last[:, 1], s=max(2.0, 90 * crowd), marker=end, c=colours[mine], edgecolors="black",
-                   linewidths=0.5 * crowd ** 0.5, zorder=5)  # fmt: skip
+        ax.scatter(
+            last[:, 0],
+            last[:, 1],
+            s=max(2.0, 90 * crowd),
+            marker=end,
+            c=colours[mine],
+            edgecolors="black",
+            linewidths=0.5 * crowd**0.5,
+            zorder=5,
+        )
     if n <= MAX_DISTINCT:
         for i in range(n):
             handles.append(Line2D([], [], color=colours[i], linewidth=1.6, label=traj.agents[i]))
     else:
         groups, sizes = np.unique(group, return_counts=True)
         for g, k in list(zip(groups.tolist(), sizes.tolist()))[:MAX_DISTINCT]:
-            handles.append(Line2D([], [], color=PALETTE[max(g, 0) % MAX_DISTINCT] / 255.0,
-                                  linewidth=1.6, label=f"group {g} ({k:,} agents)"))  # fmt: skip
+            handles.append(
+                Line2D(
+                    [],
+                    [],
+                    color=PALETTE[max(g, 0) % MAX_DISTINCT] / 255.0,
+                    linewidth=1.6,
+                    label=f"group {g} ({k:,} agents)",
+                )
+            )
         if len(groups) > MAX_DISTINCT:
-            handles.append(Patch(facecolor="none", edgecolor="none",
-                                 label=f"... {len(groups) - MAX_DISTINCT} more groups (colours repeat)"))  # fmt: skip
-    handles.append(Line2D([], [], linestyle="none", marker="o", markerfacecolor="white",
-                          markeredgecolor="black", label="start"))  # fmt: skip
+            handles.append(
+                Patch(
+                    facecolor="none",
+                    edgecolor="none",
+                    label=f"... {len(groups) - MAX_DISTINCT} more groups (colours repeat)",
+                )
+            )
+    handles.append(
+        Line2D(
+            [],
+            [],
+            linestyle="none",
+            marker="o",
+            markerfacecolor="white",
+            markeredgecolor="black",
+            label="start",
+        )
+    )
     for name, k in counts.items():
         if k:
-            handles.append(Line2D([], [], linestyle="none", marker=OUTCOMES[name], markerfacecolor="0.85",
-                                  markeredgecolor="black", markersize=8, markeredgewidth=0.6,
-                                  label=f"{name} ({k})"))  # fmt: skip
+            handles.append(
+                Line2D(
+                    [],
+                    [],
+                    linestyle="none",
+                    marker=OUTCOMES[name],
+                    markerfacecolor="0.85",
+                    markeredgecolor="black",
+                    markersize=8,
+                    markeredgewidth=0.6,
+                    label=f"{name} ({k})",
+                )
+            )
     if shown.size < n:
-        handles.append(Patch(facecolor="none", edgecolor="none", label=f"paths of {shown.size:,} of {n:,} agents"))
+        handles.append(
+            Patch(facecolor="none", edgecolor="none", label=f"paths of {shown.size:,} of {n:,} agents")
+        )
     pad = 0.03 * max(w, h)
     ax.set_xlim(xmin - pad, xmax + pad)
     ax.set_ylim(ymin - pad, ymax + pad)

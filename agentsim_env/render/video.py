@@ -141,9 +141,16 @@ class VideoWriter:
         else:
             if self._mp4 is None:
                 iio = _imageio_ffmpeg()
-                self._mp4 = iio.get_writer(str(self.path), format="FFMPEG", mode="I", fps=self.fps,  # type: ignore[call-overload]
-                                           codec="libx264", pixelformat="yuv420p", macro_block_size=1,
-                                           ffmpeg_log_level="error")  # fmt: skip
+                self._mp4 = iio.get_writer(
+                    str(self.path),
+                    format="FFMPEG",
+                    mode="I",
+                    fps=self.fps,  # type: ignore[call-overload]
+                    codec="libx264",
+                    pixelformat="yuv420p",
+                    macro_block_size=1,
+                    ffmpeg_log_level="error",
+                )
             self._mp4.append_data(_even(a))
         self.frames += 1
 
@@ -168,8 +175,15 @@ class VideoWriter:
         frames, self._gif = self._gif, []
         duration = 1000.0 / self.fps  # milliseconds per frame (GIF stores hundredths of a second)
         if self._backend == "pillow":
-            frames[0].save(self.path, save_all=True, append_images=frames[1:], duration=duration, loop=0,
-                           optimize=False, disposal=1)  # fmt: skip
+            frames[0].save(
+                self.path,
+                save_all=True,
+                append_images=frames[1:],
+                duration=duration,
+                loop=0,
+                optimize=False,
+                disposal=1,
+            )
         else:  # pragma: no cover - only without Pillow
             import imageio.v2 as iio
 

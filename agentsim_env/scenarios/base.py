@@ -79,8 +79,10 @@ class SlotState:
     def allocate(cls: type[SlotT], n_slots: int, n_worlds: int = 1) -> SlotT:
         """An instance whose every :func:`slot` field is a zeroed ``(n_slots or n_worlds, *shape)`` array."""
         arrays = {
-            f.name: np.zeros((n_worlds if f.metadata["per_world"] else n_slots, *f.metadata["shape"]),
-                             dtype=f.metadata["dtype"])  # fmt: skip
+            f.name: np.zeros(
+                (n_worlds if f.metadata["per_world"] else n_slots, *f.metadata["shape"]),
+                dtype=f.metadata["dtype"],
+            )
             for f in dataclasses.fields(cls)  # type: ignore[arg-type]
             if "shape" in f.metadata
         }
@@ -123,8 +125,9 @@ class Scenario(ABC, Generic[ConfigT]):
 
     def __init__(self, config: ConfigT) -> None:
         self.config = config
-        self.lidar = ProximityConfig(n_azimuth=config.sensing.n_azimuth,
-                                     elevations_deg=tuple(config.sensing.elevations_deg))  # fmt: skip
+        self.lidar = ProximityConfig(
+            n_azimuth=config.sensing.n_azimuth, elevations_deg=tuple(config.sensing.elevations_deg)
+        )
         self._spec: _Spec | None = None
 
     # -- the four required methods ------------------------------------------------------------------------
@@ -138,7 +141,11 @@ class Scenario(ABC, Generic[ConfigT]):
 
     @abstractmethod
     def score(
-        self, world: World, events: StepEvents, acting: np.ndarray, totals: dict[str, np.ndarray] | None = None
+        self,
+        world: World,
+        events: StepEvents,
+        acting: np.ndarray,
+        totals: dict[str, np.ndarray] | None = None,
     ) -> StepResult:
         """Stage 9: rewards, terminations and infos of every slot after the world stepped.
 
@@ -186,9 +193,16 @@ class Scenario(ABC, Generic[ConfigT]):
         """Limits of the ``primitive`` action mode (default: the body's, radius up to a quarter of the map)."""
         b = self.config.body
         x0, x1, y0, y1 = world.config.bounds
-        return MotionLimits(max_speed=b.max_speed, max_accel=b.max_accel, max_radius=min(x1 - x0, y1 - y0) / 4,
-                            max_duration=10.0, z_min=b.altitude[0], z_max=b.altitude[1], max_omega=1.0,
-                            arrival_radius=1.0)  # fmt: skip
+        return MotionLimits(
+            max_speed=b.max_speed,
+            max_accel=b.max_accel,
+            max_radius=min(x1 - x0, y1 - y0) / 4,
+            max_duration=10.0,
+            z_min=b.altitude[0],
+            z_max=b.altitude[1],
+            max_omega=1.0,
+            arrival_radius=1.0,
+        )
 
     def state_extra(self, world: World, w: int) -> np.ndarray:
         """Scenario-specific global state of world ``w`` appended after the per-agent block (default none)."""
@@ -217,9 +231,16 @@ class Scenario(ABC, Generic[ConfigT]):
         if found is None:
             return []
         xy, rgb, radius = found
-        return [{"kind": "marker", "pos": [round(float(x), 3), round(float(y), 3), 0.0],
-                 "radius": round(float(r), 3), "colour": "#{:02x}{:02x}{:02x}".format(*(int(v) for v in c)),
-                 "label": f"marker {i}"} for i, ((x, y), c, r) in enumerate(zip(xy, rgb, radius))]  # fmt: skip
+        return [
+            {
+                "kind": "marker",
+                "pos": [round(float(x), 3), round(float(y), 3), 0.0],
+                "radius": round(float(r), 3),
+                "colour": "#{:02x}{:02x}{:02x}".format(*(int(v) for v in c)),
+                "label": f"marker {i}",
+            }
+            for i, ((x, y), c, r) in enumerate(zip(xy, rgb, radius))
+        ]
 
     # -- sizes ---------------------------------------------------------------------------------------------
     @property
@@ -268,8 +289,11 @@ class Scenario(ABC, Generic[ConfigT]):
         Raises:
             ValueError: When the estimated memory is over the limit (``core.budget``).
         """
-        check_memory(f"{self.name} with n_agents={self.n_agents} x n_worlds={n_worlds}", self.memory_estimate(n_worlds),
-                     "lower n_agents or n_worlds (or the sensor rays, inbox_size and payload_dim)")  # fmt: skip
+        check_memory(
+            f"{self.name} with n_agents={self.n_agents} x n_worlds={n_worlds}",
+            self.memory_estimate(n_worlds),
+            "lower n_agents or n_worlds (or the sensor rays, inbox_size and payload_dim)",
+        )
         world = self.make_world(n_worlds)
         if (world.comms is None) != (self.config.comms is None):
             raise TypeError(f"{type(self).__name__}.make_world must pass comms=self.config.comms to World")
@@ -286,8 +310,12 @@ class Scenario(ABC, Generic[ConfigT]):
             for k, v in obs.items():
                 lo, hi = self._bounds(world, k)
                 parts[k] = Part(tuple(int(d) for d in v.shape[1:]), lo, hi)
-            res = run_step(self, world, {k: np.zeros((world.state.n_slots, p.size))
-                                         for k, p in self.act_parts().items()}, acting)[0]  # fmt: skip
+            res = run_step(
+                self,
+                world,
+                {k: np.zeros((world.state.n_slots, p.size)) for k, p in self.act_parts().items()},
+                acting,
+            )[0]
             self._spec = _Spec(parts, int(self.state(world, 0).shape[0]), tuple(res.info))
         return self._spec
 
@@ -327,7 +355,9 @@ class Scenario(ABC, Generic[ConfigT]):
             if s.obs_part is not None:
                 out[s.name] = s.observe(world.readings[s.name])
         if world.comms is not None:
-            out["inbox"], out["comms"] = world.comms.observe(world.state.pos, max(world.tick - 1, 0), INBOX_CLIP)
+            out["inbox"], out["comms"] = world.comms.observe(
+                world.state.pos, max(world.tick - 1, 0), INBOX_CLIP
+            )
         return out
 
     def observe_rows(self, world: World, slots: np.ndarray) -> dict[str, np.ndarray]:
@@ -342,8 +372,9 @@ class Scenario(ABC, Generic[ConfigT]):
             if s.obs_part is not None:
                 out[s.name] = s.observe(world.readings[s.name])[slots]
         if world.comms is not None:
-            out["inbox"], out["comms"] = world.comms.observe_rows(world.state.pos, max(world.tick - 1, 0), slots,
-                                                                  INBOX_CLIP)  # fmt: skip
+            out["inbox"], out["comms"] = world.comms.observe_rows(
+                world.state.pos, max(world.tick - 1, 0), slots, INBOX_CLIP
+            )
         return out
 
     def flat_observation(self, world: World, out: np.ndarray | None = None) -> np.ndarray:
@@ -394,8 +425,12 @@ def write_comms(world: World, out: np.ndarray, col: int) -> None:
     world.comms.observe_flat(world.state.pos, max(world.tick - 1, 0), out, col, INBOX_CLIP)
 
 
-def flat_parts(parts: dict[str, np.ndarray], n_slots: int, out: np.ndarray | None = None,
-               threads: RowThreads | None = None) -> np.ndarray:  # fmt: skip
+def flat_parts(
+    parts: dict[str, np.ndarray],
+    n_slots: int,
+    out: np.ndarray | None = None,
+    threads: RowThreads | None = None,
+) -> np.ndarray:
     """Observation parts ``{part: (S, ...)}`` concatenated per slot into ``(S, obs_dim)`` float32: ``out`` when
     given, else a fresh array; with ``threads``, row ranges are copied on them (numpy copies without the GIL)."""
     cols = [p.reshape(n_slots, -1) for p in parts.values()]

@@ -93,8 +93,27 @@ def _task_kernel(lo, hi, goal, pos, prev_dist, acting, online, goal_radius, bonu
 
 
 @nb.njit(cache=True, error_model="numpy", nogil=True)
-def _score_kernel(lo, hi, goal, pos, vel, prev_dist, arrived_acc, energy, acting, online, goal_radius, bonus, dt,  # type: ignore[no-untyped-def]  # noqa: E501
-                  rows, every, dist, arrived, task, effort):  # fmt: skip
+def _score_kernel(
+    lo,
+    hi,
+    goal,
+    pos,
+    vel,
+    prev_dist,
+    arrived_acc,
+    energy,
+    acting,
+    online,
+    goal_radius,
+    bonus,
+    dt,  # type: ignore[no-untyped-def]  # noqa: E501
+    rows,
+    every,
+    dist,
+    arrived,
+    task,
+    effort,
+):
     # The slots [lo, hi) when ``every``, else rows[lo:hi] (a shard's own slots; the caller zeroes the others'
     # outputs and their state is left alone: a slot's state travels with its agent when it changes shards).
     for r in range(lo, hi):
@@ -199,17 +218,25 @@ class NavigationConfig(ScenarioConfig):
         check_pair("obstacle_height", self.obstacle_height, 0.01, 1e4)
         side = self.side
         if side > max_side:
-            raise ValueError(f"the map side grows with n_agents x area_per_agent to {side:.0f} m, over the "
-                             f"{max_side:.0f} m limit{' of physics=pymunk' if self.physics == 'pymunk' else ''}; "
-                             f"set map_size (<= {max_side:.0f}) or lower area_per_agent")  # fmt: skip
+            raise ValueError(
+                f"the map side grows with n_agents x area_per_agent to {side:.0f} m, over the "
+                f"{max_side:.0f} m limit{' of physics=pymunk' if self.physics == 'pymunk' else ''}; "
+                f"set map_size (<= {max_side:.0f}) or lower area_per_agent"
+            )
         n_obs = self.obstacle_density * side * side
         if n_obs > MAX_OBSTACLES:
-            raise ValueError(f"obstacle_density x map side^2 gives {n_obs:,.0f} obstacles per world, over the "
-                             f"limit of {MAX_OBSTACLES:,}; lower obstacle_density or map_size")  # fmt: skip
-        problem = placement_problem(self.n_agents, (2.0, side - 2.0, 2.0, side - 2.0), 4.0 * self.body.radius + 2.0)
+            raise ValueError(
+                f"obstacle_density x map side^2 gives {n_obs:,.0f} obstacles per world, over the "
+                f"limit of {MAX_OBSTACLES:,}; lower obstacle_density or map_size"
+            )
+        problem = placement_problem(
+            self.n_agents, (2.0, side - 2.0, 2.0, side - 2.0), 4.0 * self.body.radius + 2.0
+        )
         if problem:
-            raise ValueError(f"n_agents: {problem} (4 x body.radius + 2 apart, on a map of side {side:g} m); "
-                             f"raise map_size or lower n_agents or body.radius")  # fmt: skip
+            raise ValueError(
+                f"n_agents: {problem} (4 x body.radius + 2 apart, on a map of side {side:g} m); "
+                f"raise map_size or lower n_agents or body.radius"
+            )
 
     @property
     def side(self) -> float:
@@ -258,15 +285,26 @@ class NavigationScenario(Scenario[NavigationConfig]):
         """World sized for the map, the band and the sensors; goals allocated per slot."""
         c = self.config
         s, b = c.side, c.body
-        wc = WorldConfig(bounds=(0.0, s, 0.0, s), z_range=(0.0, b.altitude[1] + 5.0), dt=c.dt, physics=c.physics,
-                         collisions=c.collisions, grid_cell=max(c.sensing.range / 2, 2.0))  # fmt: skip
+        wc = WorldConfig(
+            bounds=(0.0, s, 0.0, s),
+            z_range=(0.0, b.altitude[1] + 5.0),
+            dt=c.dt,
+            physics=c.physics,
+            collisions=c.collisions,
+            grid_cell=max(c.sensing.range / 2, 2.0),
+        )
         sensors: list[Sensor] = [ProximitySensor(self.lidar)]
         if c.gnss is not None:
             sensors.append(GnssSensor(c.gnss, n_worlds, c.n_agents, wc.bounds, b.altitude))
         world = World(wc, n_worlds, c.n_agents, sensors=sensors, comms=c.comms)
         st = world.state
-        st.configure(radius=b.radius, sensor_range=c.sensing.range, max_speed=b.max_speed, max_accel=b.max_accel,
-                     n_groups=int(c.n_groups or 1))  # fmt: skip
+        st.configure(
+            radius=b.radius,
+            sensor_range=c.sensing.range,
+            max_speed=b.max_speed,
+            max_accel=b.max_accel,
+            n_groups=int(c.n_groups or 1),
+        )
         world.task = NavigationSlots.allocate(st.n_slots)
         return world
 
@@ -292,17 +330,31 @@ class NavigationScenario(Scenario[NavigationConfig]):
         t.arrived[sl] = False
         world.remove_objects_of_world(w)
         n_obs = int(round(c.obstacle_density * s * s))
-        kind, centre, half = obstacle_layout(rng, n_obs, (0.0, s, 0.0, s), c.obstacle_size, c.obstacle_height,
-                                             np.vstack([start, goal]), keep_clear_radius=c.body.radius + 2.0)  # fmt: skip
+        kind, centre, half = obstacle_layout(
+            rng,
+            n_obs,
+            (0.0, s, 0.0, s),
+            c.obstacle_size,
+            c.obstacle_height,
+            np.vstack([start, goal]),
+            keep_clear_radius=c.body.radius + 2.0,
+        )
         if kind.size:
             world.scene.add(kind, centre, half, w)
 
     def motion_limits(self, world: World) -> MotionLimits:
         """Primitive limits: circles up to a quarter of the map, 10 s segments, goto arrival at goal_radius / 2."""
         b = self.config.body
-        return MotionLimits(max_speed=b.max_speed, max_accel=b.max_accel, max_radius=self.config.side / 4,
-                            max_duration=10.0, z_min=b.altitude[0], z_max=b.altitude[1], max_omega=1.0,
-                            arrival_radius=self.config.goal_radius / 2)  # fmt: skip
+        return MotionLimits(
+            max_speed=b.max_speed,
+            max_accel=b.max_accel,
+            max_radius=self.config.side / 4,
+            max_duration=10.0,
+            z_min=b.altitude[0],
+            z_max=b.altitude[1],
+            max_omega=1.0,
+            arrival_radius=self.config.goal_radius / 2,
+        )
 
     def group_partials(
         self, world: World, events: StepEvents, acting: np.ndarray, mine: np.ndarray
@@ -314,15 +366,31 @@ class NavigationScenario(Scenario[NavigationConfig]):
         rows, every = _scored_rows(world)
         n = st.n_slots
         task = np.empty(n) if every else np.zeros(n)  # rows not scored stay 0
-        args = (t.goal, st.pos, t.prev_dist, acting, st.online, float(c.goal_radius), float(c.arrival_bonus), rows,
-                every, task)  # fmt: skip
-        world.threads.run(lambda lo, hi, _: _task_kernel(lo, hi, *args), n if every else rows.shape[0],
-                          light_min_rows())
-        return task_partials(task, st.group, st.world_id, acting & mine, int(c.n_groups or 1), world.n_worlds,
-                             world.threads)  # fmt: skip
+        args = (
+            t.goal,
+            st.pos,
+            t.prev_dist,
+            acting,
+            st.online,
+            float(c.goal_radius),
+            float(c.arrival_bonus),
+            rows,
+            every,
+            task,
+        )
+        world.threads.run(
+            lambda lo, hi, _: _task_kernel(lo, hi, *args), n if every else rows.shape[0], light_min_rows()
+        )
+        return task_partials(
+            task, st.group, st.world_id, acting & mine, int(c.n_groups or 1), world.n_worlds, world.threads
+        )
 
     def score(
-        self, world: World, events: StepEvents, acting: np.ndarray, totals: dict[str, np.ndarray] | None = None
+        self,
+        world: World,
+        events: StepEvents,
+        acting: np.ndarray,
+        totals: dict[str, np.ndarray] | None = None,
     ) -> StepResult:
         """Progress, arrival, collisions and energy -> rewards and terminations (group share from ``totals``)."""
         c, st, t = self.config, world.state, world.task
@@ -331,22 +399,53 @@ class NavigationScenario(Scenario[NavigationConfig]):
         new = np.empty if every else np.zeros  # rows not scored stay 0
         dist, task, effort = new(n), new(n), new(n)
         arrived, collided = np.zeros(n, dtype=np.bool_), np.zeros(n)
-        args = (t.goal, st.pos, st.vel, t.prev_dist, t.arrived, st.energy, acting, st.online, float(c.goal_radius),
-                float(c.arrival_bonus), float(world.config.dt), rows, every, dist, arrived, task, effort)  # fmt: skip
-        world.threads.run(lambda lo, hi, _: _score_kernel(lo, hi, *args), n if every else rows.shape[0],
-                          light_min_rows())
+        args = (
+            t.goal,
+            st.pos,
+            st.vel,
+            t.prev_dist,
+            t.arrived,
+            st.energy,
+            acting,
+            st.online,
+            float(c.goal_radius),
+            float(c.arrival_bonus),
+            float(world.config.dt),
+            rows,
+            every,
+            dist,
+            arrived,
+            task,
+            effort,
+        )
+        world.threads.run(
+            lambda lo, hi, _: _score_kernel(lo, hi, *args), n if every else rows.shape[0], light_min_rows()
+        )
         collided[events.went_offline] = 1.0
         # the state keeps its array (resets write it); dist goes out as info
         if every:
             np.copyto(t.prev_dist, dist)
         else:
             t.prev_dist[rows] = dist[rows]
-        rewards = compose_rewards(c.reward, task, group=st.group, world=st.world_id, acting=acting,
-                                  n_groups=int(c.n_groups or 1), collided=collided, energy=effort,
-                                  messages_sent=None if world.comms is None else world.comms.sent,
-                                  totals=totals, n_worlds=world.n_worlds, threads=world.threads)  # fmt: skip
-        info: dict[str, np.ndarray] = {"arrived": arrived.astype(np.int8), "collided": collided.astype(np.int8),
-                                       "distance": dist}  # fmt: skip
+        rewards = compose_rewards(
+            c.reward,
+            task,
+            group=st.group,
+            world=st.world_id,
+            acting=acting,
+            n_groups=int(c.n_groups or 1),
+            collided=collided,
+            energy=effort,
+            messages_sent=None if world.comms is None else world.comms.sent,
+            totals=totals,
+            n_worlds=world.n_worlds,
+            threads=world.threads,
+        )
+        info: dict[str, np.ndarray] = {
+            "arrived": arrived.astype(np.int8),
+            "collided": collided.astype(np.int8),
+            "distance": dist,
+        }
         return StepResult(rewards, arrived, info)
 
     def observe(self, world: World) -> dict[str, np.ndarray]:
@@ -371,15 +470,33 @@ class NavigationScenario(Scenario[NavigationConfig]):
         rows = np.ascontiguousarray(slots, dtype=np.int64)
         out = np.empty((rows.shape[0], self._obs.shape[1]), dtype=np.float32)
         lo, hi = float(c.body.altitude[0]), float(c.body.altitude[1])
-        _observe_rows_kernel(rows, st.pos, st.vel, st.heading, world.task.goal, scan.distance, scan.hit_kind,
-                             self._side, lo, hi, float(c.body.max_speed), out)  # fmt: skip
-        return {"self": out[:, :SELF_DIM], "lidar": out[:, SELF_DIM : SELF_DIM + 2 * k].reshape(-1, k, 2),
-                "task": out[:, SELF_DIM + 2 * k :]}  # fmt: skip
+        _observe_rows_kernel(
+            rows,
+            st.pos,
+            st.vel,
+            st.heading,
+            world.task.goal,
+            scan.distance,
+            scan.hit_kind,
+            self._side,
+            lo,
+            hi,
+            float(c.body.max_speed),
+            out,
+        )
+        return {
+            "self": out[:, :SELF_DIM],
+            "lidar": out[:, SELF_DIM : SELF_DIM + 2 * k].reshape(-1, k, 2),
+            "task": out[:, SELF_DIM + 2 * k :],
+        }
 
     def flat_observation(self, world: World, out: np.ndarray | None = None) -> np.ndarray:
         """The flat layout written straight into ``out`` or a fresh array: the three parts by the observation
         kernel, then the inbox and counters (with comms), when no sensor adds a part."""
-        if any(s.obs_part is not None for s in world.sensors) or type(self).observation is not Scenario.observation:
+        if (
+            any(s.obs_part is not None for s in world.sensors)
+            or type(self).observation is not Scenario.observation
+        ):
             return super().flat_observation(world, out)
         lead = self._obs.shape[1]
         if out is None:
@@ -396,8 +513,19 @@ class NavigationScenario(Scenario[NavigationConfig]):
         scan = world.scan
         assert scan is not None
         lo, hi = float(c.body.altitude[0]), float(c.body.altitude[1])
-        args = (st.pos, st.vel, st.heading, world.task.goal, scan.distance, scan.hit_kind, self._side, lo, hi,
-                float(c.body.max_speed), out)  # fmt: skip
+        args = (
+            st.pos,
+            st.vel,
+            st.heading,
+            world.task.goal,
+            scan.distance,
+            scan.hit_kind,
+            self._side,
+            lo,
+            hi,
+            float(c.body.max_speed),
+            out,
+        )
         world.threads.run(lambda r0, r1, _: _observe_kernel(r0, r1, *args), st.n_slots)
         return out
 
@@ -417,10 +545,17 @@ class NavigationScenario(Scenario[NavigationConfig]):
         """Each agent's goal (the viewer draws it in its agent's colour and links the two)."""
         sl = slice(w * self.n_agents, (w + 1) * self.n_agents)
         names, r = self.agent_names(), round(float(self.config.goal_radius), 3)
-        return [{"kind": "goal", "pos": [round(float(x), 3), round(float(y), 3), 0.0], "radius": r,
-                 "colour": "#2e9e44", "label": f"goal of {names[i]}", "slot": i}
-                for i, (x, y) in enumerate(world.task.goal[sl, :2].tolist())]  # fmt: skip
+        return [
+            {
+                "kind": "goal",
+                "pos": [round(float(x), 3), round(float(y), 3), 0.0],
+                "radius": r,
+                "colour": "#2e9e44",
+                "label": f"goal of {names[i]}",
+                "slot": i,
+            }
+            for i, (x, y) in enumerate(world.task.goal[sl, :2].tolist())
+        ]
 
 
 SCENARIO = NavigationScenario
-

@@ -83,22 +83,36 @@ class RelayScenario(Scenario[RelayConfig]):
     shardable = True
     test_configs = (
         {"n_groups": 2, "group_size": 3},
-        {"n_groups": 2, "group_size": 2, "max_steps": 120,
-         "comms": {"loss": 0.3, "latency": 2, "heartbeat_period": 5}},
+        {
+            "n_groups": 2,
+            "group_size": 2,
+            "max_steps": 120,
+            "comms": {"loss": 0.3, "latency": 2, "heartbeat_period": 5},
+        },
         {"n_groups": 1, "n_agents": 3, "obstacle_density": 0.0, "comms": {"overlay_full": True}},
-    )  # fmt: skip
+    )
 
     def make_world(self, n_worlds: int) -> World:
         """World sized for the corridor and the band; per-slot target, scout and arrival arrays."""
         c = self.config
         b = c.body
-        wc = WorldConfig(bounds=(0.0, c.length, 0.0, c.corridor_width), z_range=(0.0, b.altitude[1] + 5.0),
-                         dt=c.dt, physics=c.physics, collisions=c.collisions,
-                         grid_cell=max(c.sensing.range / 2, 2.0))  # fmt: skip
+        wc = WorldConfig(
+            bounds=(0.0, c.length, 0.0, c.corridor_width),
+            z_range=(0.0, b.altitude[1] + 5.0),
+            dt=c.dt,
+            physics=c.physics,
+            collisions=c.collisions,
+            grid_cell=max(c.sensing.range / 2, 2.0),
+        )
         world = World(wc, n_worlds, self.n_agents, sensors=[ProximitySensor(self.lidar)], comms=c.comms)
         st = world.state
-        st.configure(radius=b.radius, sensor_range=c.sensing.range, max_speed=b.max_speed, max_accel=b.max_accel,
-                     n_groups=c.n_groups)  # fmt: skip
+        st.configure(
+            radius=b.radius,
+            sensor_range=c.sensing.range,
+            max_speed=b.max_speed,
+            max_accel=b.max_accel,
+            n_groups=c.n_groups,
+        )
         world.task = RelaySlots.allocate(st.n_slots)
         return world
 
@@ -122,7 +136,9 @@ class RelayScenario(Scenario[RelayConfig]):
         st.heading[sl] = rng.uniform(-np.pi, np.pi, n)
         st.online[sl] = True
         st.energy[sl] = 0.0
-        scout_slot = np.arange(g_n) + g_n * rng.integers(0, int(c.group_size or 1), g_n)  # slot i is in group i % G
+        scout_slot = np.arange(g_n) + g_n * rng.integers(
+            0, int(c.group_size or 1), g_n
+        )  # slot i is in group i % G
         ang = rng.uniform(-np.pi, np.pi, g_n)
         r = rng.uniform(c.target_offset[0], c.target_offset[1], g_n)
         tgt = st.pos[sl][scout_slot, :2] + r[:, None] * np.column_stack([np.cos(ang), np.sin(ang)])
@@ -134,9 +150,15 @@ class RelayScenario(Scenario[RelayConfig]):
         t.arrived[sl] = False
         world.remove_objects_of_world(w)
         n_obs = int(round(c.obstacle_density * length * width))
-        kind, centre, half = obstacle_layout(rng, n_obs, (0.0, length, 0.0, width), c.obstacle_size,
-                                             c.obstacle_height, np.vstack([chain[:, :2], tgt]),
-                                             keep_clear_radius=max(c.body.radius + 2.0, c.arrival_radius + 1.0))  # fmt: skip
+        kind, centre, half = obstacle_layout(
+            rng,
+            n_obs,
+            (0.0, length, 0.0, width),
+            c.obstacle_size,
+            c.obstacle_height,
+            np.vstack([chain[:, :2], tgt]),
+            keep_clear_radius=max(c.body.radius + 2.0, c.arrival_radius + 1.0),
+        )
         if kind.size:
             world.scene.add(kind, centre, half, w)
 
@@ -165,12 +187,19 @@ class RelayScenario(Scenario[RelayConfig]):
         size = world.n_worlds * c.n_groups
         out = {"pending": np.bincount(self._key(world)[pending], minlength=size).astype(np.int64)}
         if c.reward.group_share:
-            out.update(task_partials(task, st.group, st.world_id, acting & mine, c.n_groups, world.n_worlds,
-                                     world.threads))
+            out.update(
+                task_partials(
+                    task, st.group, st.world_id, acting & mine, c.n_groups, world.n_worlds, world.threads
+                )
+            )
         return out
 
     def score(
-        self, world: World, events: StepEvents, acting: np.ndarray, totals: dict[str, np.ndarray] | None = None
+        self,
+        world: World,
+        events: StepEvents,
+        acting: np.ndarray,
+        totals: dict[str, np.ndarray] | None = None,
     ) -> StepResult:
         """Progress and arrival of non-scouts, scouts' end, collisions, energy and messages -> rewards.
 
@@ -189,13 +218,26 @@ class RelayScenario(Scenario[RelayConfig]):
         effort = np.einsum("ij,ij->i", st.vel, st.vel) * world.config.dt
         st.energy += np.where(acting, effort, 0.0)
         assert world.comms is not None
-        rewards = compose_rewards(c.reward, task, group=st.group, world=st.world_id, acting=acting,
-                                  n_groups=c.n_groups, collided=collided, energy=effort,
-                                  messages_sent=world.comms.sent,
-                                  totals=totals if c.reward.group_share else None, n_worlds=world.n_worlds,
-                                  threads=world.threads)  # fmt: skip
-        info = {"arrived": arrived.astype(np.int8), "collided": collided.astype(np.int8), "distance": dist,
-                "scout": t.scout.astype(np.int8)}  # fmt: skip
+        rewards = compose_rewards(
+            c.reward,
+            task,
+            group=st.group,
+            world=st.world_id,
+            acting=acting,
+            n_groups=c.n_groups,
+            collided=collided,
+            energy=effort,
+            messages_sent=world.comms.sent,
+            totals=totals if c.reward.group_share else None,
+            n_worlds=world.n_worlds,
+            threads=world.threads,
+        )
+        info = {
+            "arrived": arrived.astype(np.int8),
+            "collided": collided.astype(np.int8),
+            "distance": dist,
+            "scout": t.scout.astype(np.int8),
+        }
         return StepResult(rewards, arrived | scout_done, info)
 
     def observe(self, world: World) -> dict[str, np.ndarray]:
@@ -237,8 +279,14 @@ class RelayScenario(Scenario[RelayConfig]):
         """Targets as discs, one colour per group."""
         sl = slice(w * self.n_agents, (w + 1) * self.n_agents)
         g = np.arange(self.n_groups)
-        rgb = np.column_stack([40 + 70 * (g % 3), 170 - 50 * (g % 2), 60 + 60 * ((g + 1) % 3)]).astype(np.uint8)
-        return world.task.target[sl][: self.n_groups].copy(), rgb, np.full(self.n_groups, self.config.arrival_radius)
+        rgb = np.column_stack([40 + 70 * (g % 3), 170 - 50 * (g % 2), 60 + 60 * ((g + 1) % 3)]).astype(
+            np.uint8
+        )
+        return (
+            world.task.target[sl][: self.n_groups].copy(),
+            rgb,
+            np.full(self.n_groups, self.config.arrival_radius),
+        )
 
     def view_markers(self, world: World, w: int) -> list[dict[str, Any]]:
         """Each group's target, with the scout that sees it (``slot``)."""
@@ -250,9 +298,17 @@ class RelayScenario(Scenario[RelayConfig]):
         for s in scouts.tolist():
             g = s % self.n_groups  # slot i is in group i % n_groups
             x, y = t.target[sl][s].tolist()
-            out.append({"kind": "target", "pos": [round(x, 3), round(y, 3), 0.0],
-                        "radius": round(float(self.config.arrival_radius), 3), "colour": "#2e9e44",
-                        "label": f"target of group {g} (seen by its scout {names[s]})", "slot": s, "group": g})  # fmt: skip
+            out.append(
+                {
+                    "kind": "target",
+                    "pos": [round(x, 3), round(y, 3), 0.0],
+                    "radius": round(float(self.config.arrival_radius), 3),
+                    "colour": "#2e9e44",
+                    "label": f"target of group {g} (seen by its scout {names[s]})",
+                    "slot": s,
+                    "group": g,
+                }
+            )
         return out
 
     def group_success(self, world: World, w: int = 0, fraction: float = 0.5) -> np.ndarray:
@@ -275,4 +331,3 @@ class RelayScenario(Scenario[RelayConfig]):
 
 
 SCENARIO = RelayScenario
-

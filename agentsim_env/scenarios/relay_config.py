@@ -12,8 +12,9 @@ from agentsim_env.core.validation import check_float, check_int, check_pair, coe
 from agentsim_env.scenarios.config import BodyConfig, ScenarioConfig, SensingConfig
 from agentsim_env.scenarios.rewards import RewardConfig
 
-RELAY_COMMS = CommsConfig(payload_dim=4, inbox_size=8, max_range=35.0, overlay_range=35.0, max_hops=8,
-                          nearest_range=35.0)  # fmt: skip
+RELAY_COMMS = CommsConfig(
+    payload_dim=4, inbox_size=8, max_range=35.0, overlay_range=35.0, max_hops=8, nearest_range=35.0
+)
 """The default communication settings (a ``comms`` dict overrides some of these fields)."""
 
 
@@ -55,8 +56,9 @@ class RelayConfig(ScenarioConfig):
     arrival_radius: float = 3.0
     arrival_bonus: float = 10.0
     body: BodyConfig = field(default_factory=lambda: BodyConfig(max_speed=6.0, altitude=(4.0, 10.0)))
-    sensing: SensingConfig = field(default_factory=lambda: SensingConfig(range=8.0, n_azimuth=12,
-                                                                        elevations_deg=(0.0,)))  # fmt: skip
+    sensing: SensingConfig = field(
+        default_factory=lambda: SensingConfig(range=8.0, n_azimuth=12, elevations_deg=(0.0,))
+    )
     reward: RewardConfig = field(
         default_factory=lambda: RewardConfig(group_share=0.5, energy_weight=0.001, message_cost=0.01)
     )
@@ -74,15 +76,21 @@ class RelayConfig(ScenarioConfig):
         else:
             check_int("n_agents", self.n_agents, 2 * self.n_groups, 256 * self.n_groups)
             if self.n_agents % self.n_groups:
-                raise ValueError(f"n_agents ({self.n_agents}) must be a multiple of n_groups ({self.n_groups})")
+                raise ValueError(
+                    f"n_agents ({self.n_agents}) must be a multiple of n_groups ({self.n_groups})"
+                )
             size = self.n_agents // self.n_groups
             if self.group_size is not None and self.group_size != size:
-                raise ValueError(f"n_agents ({self.n_agents}) must equal n_groups x group_size "
-                                 f"({self.n_groups} x {self.group_size}); give one of the two")  # fmt: skip
+                raise ValueError(
+                    f"n_agents ({self.n_agents}) must equal n_groups x group_size "
+                    f"({self.n_groups} x {self.group_size}); give one of the two"
+                )
             object.__setattr__(self, "group_size", size)
         super().__post_init__()
         if self.comms is None:
-            raise ValueError("comms must be a CommsConfig or a dict of its fields (relay needs comms), got None")
+            raise ValueError(
+                "comms must be a CommsConfig or a dict of its fields (relay needs comms), got None"
+            )
         check_float("lateral_spread", self.lateral_spread, 0.0, 1e3)
         check_float("corridor_width", self.corridor_width, 2.0 * self.lateral_spread + 4.0, 1e4)
         check_float("obstacle_density", self.obstacle_density, 0.0, 0.01)
@@ -94,9 +102,11 @@ class RelayConfig(ScenarioConfig):
         check_pair("obstacle_height", self.obstacle_height, 0.01, 1e4)
         limit = 2e4 if self.physics == "pymunk" else 1e5
         if self.length > limit:
-            raise ValueError(f"the corridor is (n_agents - 1) x gap[1] + 2 x (target_offset[1] + 5) = "
-                             f"{self.length:.0f} m long, over the {limit:.0f} m limit"
-                             f"{' of physics=pymunk' if self.physics == 'pymunk' else ''}; lower n_agents or gap")  # fmt: skip
+            raise ValueError(
+                f"the corridor is (n_agents - 1) x gap[1] + 2 x (target_offset[1] + 5) = "
+                f"{self.length:.0f} m long, over the {limit:.0f} m limit"
+                f"{' of physics=pymunk' if self.physics == 'pymunk' else ''}; lower n_agents or gap"
+            )
 
     @property
     def margin(self) -> float:

@@ -44,20 +44,30 @@ class RendezvousSlots(SlotState):
 class Rendezvous(Scenario[RendezvousConfig]):
     """Meet at the centroid; see the module docstring."""
 
-    name, config_cls, test_configs = "rendezvous", RendezvousConfig, ({"n_agents": 4}, {"n_agents": 3, "max_steps": 50})
+    name, config_cls, test_configs = (
+        "rendezvous",
+        RendezvousConfig,
+        ({"n_agents": 4}, {"n_agents": 3, "max_steps": 50}),
+    )
 
     def make_world(self, n_worlds: int) -> World:
         c = self.config
         wc = WorldConfig(bounds=(0.0, c.side, 0.0, c.side), z_range=(0.0, c.body.altitude[1] + 5.0), dt=c.dt)
         world = World(wc, n_worlds, c.n_agents, sensors=[ProximitySensor(self.lidar)], comms=c.comms)
-        world.state.configure(radius=c.body.radius, sensor_range=c.sensing.range, max_speed=c.body.max_speed,
-                              max_accel=c.body.max_accel)  # fmt: skip
+        world.state.configure(
+            radius=c.body.radius,
+            sensor_range=c.sensing.range,
+            max_speed=c.body.max_speed,
+            max_accel=c.body.max_accel,
+        )
         world.task = RendezvousSlots.allocate(world.state.n_slots)
         return world
 
     def reset_world(self, world: World, w: int, rng: np.random.Generator) -> None:
         c, st, sl = self.config, world.state, world.state.slots_of_world(world=w)
-        st.pos[sl] = np.column_stack([rng.uniform(2, c.side - 2, (c.n_agents, 2)), rng.uniform(*c.body.altitude, c.n_agents)])
+        st.pos[sl] = np.column_stack(
+            [rng.uniform(2, c.side - 2, (c.n_agents, 2)), rng.uniform(*c.body.altitude, c.n_agents)]
+        )
         st.vel[sl], st.online[sl] = 0.0, True
         world.task.prev_dist[sl] = np.linalg.norm(st.pos[sl] - self._centroid(world)[sl], axis=1)
 
@@ -68,7 +78,11 @@ class Rendezvous(Scenario[RendezvousConfig]):
         return np.repeat(c, self.n_agents, axis=0)
 
     def score(
-        self, world: World, events: StepEvents, acting: np.ndarray, totals: dict[str, np.ndarray] | None = None
+        self,
+        world: World,
+        events: StepEvents,
+        acting: np.ndarray,
+        totals: dict[str, np.ndarray] | None = None,
     ) -> StepResult:
         st, t = world.state, world.task
         dist = np.linalg.norm(st.pos - self._centroid(world), axis=1)
@@ -83,8 +97,11 @@ class Rendezvous(Scenario[RendezvousConfig]):
         lo, hi = c.body.altitude
         xyz = (st.pos - [0.0, 0.0, lo]) / [c.side, c.side, hi - lo] * 2 - 1
         me = np.column_stack([xyz, st.vel / c.body.max_speed])
-        return {"self": np.clip(me, -1, 1).astype(np.float32), "lidar": world.sensors[0].observe(scan),
-                "task": np.clip((self._centroid(world) - st.pos) / c.side, -1, 1).astype(np.float32)}  # fmt: skip
+        return {
+            "self": np.clip(me, -1, 1).astype(np.float32),
+            "lidar": world.sensors[0].observe(scan),
+            "task": np.clip((self._centroid(world) - st.pos) / c.side, -1, 1).astype(np.float32),
+        }
 
 
 SCENARIO = Rendezvous

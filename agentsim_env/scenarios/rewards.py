@@ -113,7 +113,12 @@ def group_keys(group: np.ndarray, world: np.ndarray, n_worlds: int) -> np.ndarra
 
 
 def task_partials(
-    task: np.ndarray, group: np.ndarray, world: np.ndarray, mask: np.ndarray, n_groups: int, n_worlds: int,
+    task: np.ndarray,
+    group: np.ndarray,
+    world: np.ndarray,
+    mask: np.ndarray,
+    n_groups: int,
+    n_worlds: int,
     threads: RowThreads | None = None,
 ) -> dict[str, np.ndarray]:
     """One part's group sums of the task values over the slots in ``mask``, in fixed point.
@@ -151,8 +156,12 @@ def task_partials(
 
     def sums(lo: int, hi: int, _: int) -> int:
         # each range its own arrays, added after (exact: integer sums)
-        out = (np.zeros(size, dtype=np.int64), np.zeros(size, dtype=np.int64), np.zeros(size, dtype=np.int64),
-               np.zeros((3, size), dtype=np.int64))  # fmt: skip
+        out = (
+            np.zeros(size, dtype=np.int64),
+            np.zeros(size, dtype=np.int64),
+            np.zeros(size, dtype=np.int64),
+            np.zeros((3, size), dtype=np.int64),
+        )
         parts.append(out)
         return int(_partials_kernel(lo, hi, task, group, world, mask, b, MAX_TASK_VALUE, *out, big))
 
@@ -166,8 +175,15 @@ def task_partials(
     if n_big:
         at = np.flatnonzero(big)
         big_sum = np.bincount(group_keys(group[at], world[at], b), weights=task[at], minlength=size)[:size]
-    return {"task_hi": hi_w, "task_lo": lo_w, "task_count": cnt, "task_nan": odd[0], "task_pinf": odd[1],
-            "task_ninf": odd[2], "task_big": big_sum}  # fmt: skip
+    return {
+        "task_hi": hi_w,
+        "task_lo": lo_w,
+        "task_count": cnt,
+        "task_nan": odd[0],
+        "task_pinf": odd[1],
+        "task_ninf": odd[2],
+        "task_big": big_sum,
+    }
 
 
 def combine_partials(parts: Iterable[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
@@ -208,7 +224,9 @@ def group_means(totals: dict[str, np.ndarray]) -> np.ndarray:
 
     A group with a NaN member, or with both infinities, has mean NaN; one with one kind of infinity has it.
     """
-    total = totals["task_hi"].astype(np.float64) + totals["task_lo"].astype(np.float64) * 2.0**-FIXED_POINT_BITS
+    total = (
+        totals["task_hi"].astype(np.float64) + totals["task_lo"].astype(np.float64) * 2.0**-FIXED_POINT_BITS
+    )
     if "task_big" in totals:
         total = total + totals["task_big"]
     mean = total / np.maximum(totals["task_count"], 1).astype(np.float64)
@@ -307,8 +325,13 @@ def compose_rewards(
         energy is not None and bool(cfg.energy_weight),
         messages_sent is not None and bool(cfg.message_cost),
     )
-    w = (float(cfg.task_weight), float(cfg.group_share), float(cfg.collision_penalty), float(cfg.energy_weight),
-         float(cfg.message_cost))  # fmt: skip
+    w = (
+        float(cfg.task_weight),
+        float(cfg.group_share),
+        float(cfg.collision_penalty),
+        float(cfg.energy_weight),
+        float(cfg.message_cost),
+    )
     task = np.asarray(task, dtype=np.float64)
     acting = np.asarray(acting, dtype=np.bool_)
     group = np.asarray(group)
@@ -321,13 +344,22 @@ def compose_rewards(
         means = group_means(totals)
         if int(key.max()) >= means.shape[0]:  # a group no part had acting members of (read by no acting slot)
             means = np.concatenate([means, np.zeros(int(key.max()) + 1 - means.shape[0])])
-    args = (task, group, acting, key, means,
-            _NONE if collided is None else np.asarray(collided, dtype=np.float64),
-            _NONE if energy is None else np.asarray(energy, dtype=np.float64),
-            _NONE if messages_sent is None else np.asarray(messages_sent), w, use)  # fmt: skip
+    args = (
+        task,
+        group,
+        acting,
+        key,
+        means,
+        _NONE if collided is None else np.asarray(collided, dtype=np.float64),
+        _NONE if energy is None else np.asarray(energy, dtype=np.float64),
+        _NONE if messages_sent is None else np.asarray(messages_sent),
+        w,
+        use,
+    )
     out = np.empty(task.shape[0])
-    (threads or _ONE_THREAD).run(lambda lo, hi, _: _compose_kernel(lo, hi, *args, out), task.shape[0],
-                                 light_min_rows())
+    (threads or _ONE_THREAD).run(
+        lambda lo, hi, _: _compose_kernel(lo, hi, *args, out), task.shape[0], light_min_rows()
+    )
     return out
 
 

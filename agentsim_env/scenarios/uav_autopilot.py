@@ -110,9 +110,16 @@ class SweepRoutes:
         self.length = np.maximum(self.cum[:, -1], 1e-9)
 
     def command(
-        self, agent: np.ndarray, pos: np.ndarray, wp: np.ndarray, speed: float, transit_speed: float,
-        altitude: float, max_accel: float, max_speed: float,
-    ) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+        self,
+        agent: np.ndarray,
+        pos: np.ndarray,
+        wp: np.ndarray,
+        speed: float,
+        transit_speed: float,
+        altitude: float,
+        max_accel: float,
+        max_speed: float,
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Velocity commands ``(S, 3)`` / ``max_speed`` and the advanced waypoint indices.
 
         ``wp`` is the index of the waypoint flown to (0: transit to the route's start); a slot whose
@@ -142,8 +149,7 @@ class SweepRoutes:
         n = self.n_wp[agent]
         k = np.clip(wp, 1, n - 1)
         ahead = np.linalg.norm(self.points[agent, k] - pos[:, :2], axis=1)
-        flown = np.where(wp >= n, self.length[agent],
-                         np.clip(self.cum[agent, k] - ahead, 0.0, None))  # fmt: skip
+        flown = np.where(wp >= n, self.length[agent], np.clip(self.cum[agent, k] - ahead, 0.0, None))
         return np.where(wp == 0, 0.0, np.clip(flown / self.length[agent], 0.0, 1.0))
 
 
@@ -169,8 +175,10 @@ class ClaimMap:
         ] = {}  # payload id -> (world, predicted gain), while it falls
         pts = tracker.grid.points
         # largest gain a single sensor can have: a whole disc at the most important place
-        sums = [tracker.phi[h].sum() for h in tracker.grid.tree.query_ball_point(pts[:: max(len(pts) // 4000, 1)],
-                                                                                 tracker.r_s)]  # fmt: skip
+        sums = [
+            tracker.phi[h].sum()
+            for h in tracker.grid.tree.query_ball_point(pts[:: max(len(pts) // 4000, 1)], tracker.r_s)
+        ]
         self.max_gain = float(max(sums)) if sums else 1.0
 
     def reset_world(self, w: int) -> None:
@@ -249,8 +257,16 @@ class AutopilotMode:
         c, st = self.c, world.state
         agent = np.arange(st.n_slots) % int(c.n_agents)
         b = c.body
-        return self.routes.command(agent, st.pos, wp, float(c.autopilot_speed), float(b.max_speed),
-                                   float(c.autopilot_altitude), float(b.max_accel), float(b.max_speed))  # fmt: skip
+        return self.routes.command(
+            agent,
+            st.pos,
+            wp,
+            float(c.autopilot_speed),
+            float(b.max_speed),
+            float(c.autopilot_altitude),
+            float(b.max_accel),
+            float(b.max_speed),
+        )
 
     def progress(self, world: World, wp: np.ndarray) -> np.ndarray:
         """Fraction of each slot's piece swept ``(S,)``, in [0, 1]."""
@@ -289,6 +305,12 @@ class AutopilotMode:
         st = world.state
         gain = claims.gain(st.world_id, self.landing(world))
         prog = self.progress(world, wp)
-        out = np.column_stack([gain * self.gain_scale * 2 - 1, prog * 2 - 1,
-                               np.where(in_zone, 1.0, -1.0), payload_frac - (1.0 - prog)])  # fmt: skip
+        out = np.column_stack(
+            [
+                gain * self.gain_scale * 2 - 1,
+                prog * 2 - 1,
+                np.where(in_zone, 1.0, -1.0),
+                payload_frac - (1.0 - prog),
+            ]
+        )
         return np.clip(out, -1.0, 1.0).astype(np.float32)

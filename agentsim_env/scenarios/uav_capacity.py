@@ -50,9 +50,15 @@ def fleet_capacity(zs: ZoneSet, n_uavs: int, payload: int) -> dict[str, Any]:
     n, p, need = int(n_uavs), int(payload), int(zs.n_sensors)
     cap = n * p
     return {
-        "n_uavs": n, "payload": p, "capacity": cap, "needed": need, "carried": need <= cap, "spare": cap - need,
-        "n_uavs_needed": _ceil_div(need, max(p, 1)), "payload_needed": _ceil_div(need, max(n, 1)),
-    }  # fmt: skip
+        "n_uavs": n,
+        "payload": p,
+        "capacity": cap,
+        "needed": need,
+        "carried": need <= cap,
+        "spare": cap - need,
+        "n_uavs_needed": _ceil_div(need, max(p, 1)),
+        "payload_needed": _ceil_div(need, max(n, 1)),
+    }
 
 
 def capacity_text(cap: dict[str, Any], fleet: str = "fleet") -> str:
@@ -70,8 +76,11 @@ def capacity_text(cap: dict[str, Any], fleet: str = "fleet") -> str:
     )
     if cap["carried"]:
         return f"{head}: carried ({cap['spare']} spare)"
-    fixes = [f"--set {k}={cap[k + '_needed']}" for k, top in (("n_uavs", MAX_N_UAVS), ("payload", MAX_PAYLOAD))
-             if cap[k + "_needed"] <= top]  # fmt: skip
+    fixes = [
+        f"--set {k}={cap[k + '_needed']}"
+        for k, top in (("n_uavs", MAX_N_UAVS), ("payload", MAX_PAYLOAD))
+        if cap[k + "_needed"] <= top
+    ]
     advice = f" ({' or '.join(fixes)})" if fixes else ""
     return (
         f"{head}: cannot carry {-cap['spare']} of them; raise n_uavs or payload{advice}, or lower n_sensors"

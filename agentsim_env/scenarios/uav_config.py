@@ -55,8 +55,12 @@ class UavReleaseConfig(ScenarioConfig):
     weighted coverage per required sensor, ``1 / zones.n_sensors``) is the shaping baseline of a release. These fields do nothing when ``autopilot`` is off.
     """
 
-    nested: ClassVar[dict[str, type]] = {**ScenarioConfig.nested, "wind": WindConfig, "scatter": ScatterConfig,
-                                         "wsn": WsnConfig}  # fmt: skip
+    nested: ClassVar[dict[str, type]] = {
+        **ScenarioConfig.nested,
+        "wind": WindConfig,
+        "scatter": ScatterConfig,
+        "wsn": WsnConfig,
+    }
     aliases: ClassVar[dict[str, str]] = {"n_uavs": "n_agents"}
 
     zones: Any = (
@@ -71,10 +75,12 @@ class UavReleaseConfig(ScenarioConfig):
     grid_cells: int = 8
     grid_extent: float = 80.0
     max_steps: int = 6000
-    body: BodyConfig = field(default_factory=lambda: BodyConfig(radius=0.6, max_speed=15.0, max_accel=4.0,
-                                                                altitude=(5.0, 60.0)))  # fmt: skip
-    sensing: SensingConfig = field(default_factory=lambda: SensingConfig(range=20.0, n_azimuth=8,
-                                                                        elevations_deg=(0.0, -45.0)))  # fmt: skip
+    body: BodyConfig = field(
+        default_factory=lambda: BodyConfig(radius=0.6, max_speed=15.0, max_accel=4.0, altitude=(5.0, 60.0))
+    )
+    sensing: SensingConfig = field(
+        default_factory=lambda: SensingConfig(range=20.0, n_azimuth=8, elevations_deg=(0.0, -45.0))
+    )
     wind: WindConfig = field(default_factory=lambda: WindConfig(mean_speed=2.0))
     scatter: ScatterConfig = field(default_factory=lambda: ScatterConfig(1.0, 0.05, 0.5))
     wsn: WsnConfig = field(default_factory=WsnConfig)

@@ -134,11 +134,18 @@ class UavReleaseScenario(Scenario[UavReleaseConfig]):
         """World over the zones' map with the payload stage; deployment trackers for ``n_worlds`` worlds."""
         c, b = self.config, self.config.body
         w, h = self.zones.map_size
-        wc = WorldConfig(bounds=(0.0, w, 0.0, h), z_range=(0.0, b.altitude[1]), dt=c.dt, physics=c.physics,
-                         collisions=c.collisions, grid_cell=max(c.sensing.range / 2, 5.0))  # fmt: skip
+        wc = WorldConfig(
+            bounds=(0.0, w, 0.0, h),
+            z_range=(0.0, b.altitude[1]),
+            dt=c.dt,
+            physics=c.physics,
+            collisions=c.collisions,
+            grid_cell=max(c.sensing.range / 2, 5.0),
+        )
         payloads = PayloadStage(self.fall, c.scatter, c.wind, n_worlds)
-        world = World(wc, n_worlds, c.n_agents, sensors=[ProximitySensor(self.lidar)], comms=c.comms,
-                      payloads=payloads)  # fmt: skip
+        world = World(
+            wc, n_worlds, c.n_agents, sensors=[ProximitySensor(self.lidar)], comms=c.comms, payloads=payloads
+        )
         st = world.state
         # one group: the whole fleet
         st.configure(
@@ -172,9 +179,16 @@ class UavReleaseScenario(Scenario[UavReleaseConfig]):
         """Primitive limits: circles up to a quarter of the map, 30 s segments, goto arrival within 1 m."""
         b = self.config.body
         w, h = self.zones.map_size
-        return MotionLimits(max_speed=b.max_speed, max_accel=b.max_accel, max_radius=min(w, h) / 4,
-                            max_duration=30.0, z_min=b.altitude[0], z_max=b.altitude[1], max_omega=1.0,
-                            arrival_radius=1.0)  # fmt: skip
+        return MotionLimits(
+            max_speed=b.max_speed,
+            max_accel=b.max_accel,
+            max_radius=min(w, h) / 4,
+            max_duration=30.0,
+            z_min=b.altitude[0],
+            z_max=b.altitude[1],
+            max_omega=1.0,
+            arrival_radius=1.0,
+        )
 
     def apply_actions(self, world: World, actions: dict[str, np.ndarray], acting: np.ndarray) -> None:
         """Motion commands, then releases from the UAVs' current position and velocity (into stage 4)."""
@@ -197,15 +211,26 @@ class UavReleaseScenario(Scenario[UavReleaseConfig]):
                 target = self.pilot.landing(world)[go]
             wld = st.world_id[go]
             assert world.payloads is not None
-            ids = world.payloads.release(go, wld, st.pos[go], st.vel[go], float(world.step_count[wld[0]]) * c.dt,
-                                         self.zones.zone_index(target), target)  # fmt: skip
+            ids = world.payloads.release(
+                go,
+                wld,
+                st.pos[go],
+                st.vel[go],
+                float(world.step_count[wld[0]]) * c.dt,
+                self.zones.zone_index(target),
+                target,
+            )
             if self.pilot is not None:
                 t.release_gain[go] = t.claims.claim(wld, target, ids)
             t.payload_left[go] -= 1
             t.released[go] = 1
 
     def score(
-        self, world: World, events: StepEvents, acting: np.ndarray, totals: dict[str, np.ndarray] | None = None
+        self,
+        world: World,
+        events: StepEvents,
+        acting: np.ndarray,
+        totals: dict[str, np.ndarray] | None = None,
     ) -> StepResult:
         """Landings (stage 4's events): coverage, fidelity, miss terms; energy; end of mission bonus."""
         c, st, t = self.config, world.state, world.task
@@ -253,14 +278,25 @@ class UavReleaseScenario(Scenario[UavReleaseConfig]):
             sl = st.slots_of_world(w)
             task[sl] += final_bonus(ps, w, self.zones, c, self.fnd_oracle)
             terminated[sl] |= world.step_count[w] < c.max_steps  # finished, not cut off by the time limit
-        rewards = compose_rewards(c.reward, task, group=st.group, world=st.world_id, acting=acting, n_groups=1,
-                                  collided=collided, messages_sent=world.comms.sent if world.comms else None,
-                                  threads=world.threads)  # fmt: skip
+        rewards = compose_rewards(
+            c.reward,
+            task,
+            group=st.group,
+            world=st.world_id,
+            acting=acting,
+            n_groups=1,
+            collided=collided,
+            messages_sent=world.comms.sent if world.comms else None,
+            threads=world.threads,
+        )
         cov = np.repeat([t.tracker.weighted_coverage(w) for w in range(world.n_worlds)], n)
         info: dict[str, np.ndarray] = {
-            "released": t.released.copy(), "landed": n_landed.astype(np.int8),
-            "payload_left": t.payload_left.copy(), "energy_j": st.energy.copy(), "coverage_weighted": cov,
-        }  # fmt: skip
+            "released": t.released.copy(),
+            "landed": n_landed.astype(np.int8),
+            "payload_left": t.payload_left.copy(),
+            "energy_j": st.energy.copy(),
+            "coverage_weighted": cov,
+        }
         return StepResult(rewards, terminated & acting, info)
 
     def observe(self, world: World) -> dict[str, np.ndarray]:
@@ -286,12 +322,25 @@ class UavReleaseScenario(Scenario[UavReleaseConfig]):
         demand = self._demand(world)[st.world_id]
         wts = self.zones.weights()
         radius = np.broadcast_to(self.zones.radii() / self.diag, rel.shape[:2])
-        zones = np.concatenate([rel / self.diag, radius[..., None], demand[..., None],
-                                np.broadcast_to(wts / wts.max(), rel.shape[:2])[..., None]], axis=2)  # fmt: skip
+        zones = np.concatenate(
+            [
+                rel / self.diag,
+                radius[..., None],
+                demand[..., None],
+                np.broadcast_to(wts / wts.max(), rel.shape[:2])[..., None],
+            ],
+            axis=2,
+        )
         ps = world.payloads.objects
         done = ps.get("landed")
-        grid = local_counts(st.pos[:, :2], st.world_id, ps.get("land_xy")[done], ps.get("world")[done],
-                            c.grid_cells, c.grid_extent)  # fmt: skip
+        grid = local_counts(
+            st.pos[:, :2],
+            st.world_id,
+            ps.get("land_xy")[done],
+            ps.get("world")[done],
+            c.grid_cells,
+            c.grid_extent,
+        )
         out = {
             "self": np.clip(selfp, -1, 1).astype(np.float32),
             "lidar": np.stack([scan.distance, scan.hit_kind / 3.0], axis=-1).astype(np.float32),
@@ -317,8 +366,12 @@ class UavReleaseScenario(Scenario[UavReleaseConfig]):
     def state_extra(self, world: World, w: int) -> np.ndarray:
         """Payload left / payload and battery used / capacity per UAV."""
         sl = slice(w * self.n_agents, (w + 1) * self.n_agents)
-        return np.column_stack([world.task.payload_left[sl] / self.config.payload,
-                                world.state.energy[sl] / self.config.battery_j]).ravel()  # fmt: skip
+        return np.column_stack(
+            [
+                world.task.payload_left[sl] / self.config.payload,
+                world.state.energy[sl] / self.config.battery_j,
+            ]
+        ).ravel()
 
     def markers(self, world: World, w: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Zones as tinted discs, landed sensors as dark dots, falling ones as orange dots."""
@@ -329,8 +382,13 @@ class UavReleaseScenario(Scenario[UavReleaseConfig]):
         tints = np.array([[205, 225, 245], [245, 220, 200], [215, 240, 210], [240, 215, 240]], dtype=np.uint8)
         k = len(self.zones.zones)
         xy = np.vstack([self.zones.centres(), ps.get("land_xy")[landed], ps.get("pos")[falling, :2]])
-        rgb = np.vstack([tints[np.arange(k) % 4], np.tile([[40, 40, 40]], (landed.sum(), 1)),
-                         np.tile([[240, 140, 20]], (falling.sum(), 1))]).astype(np.uint8)  # fmt: skip
+        rgb = np.vstack(
+            [
+                tints[np.arange(k) % 4],
+                np.tile([[40, 40, 40]], (landed.sum(), 1)),
+                np.tile([[240, 140, 20]], (falling.sum(), 1)),
+            ]
+        ).astype(np.uint8)
         rad = np.concatenate([self.zones.radii(), np.full(landed.sum() + falling.sum(), 1.2)])
         return xy, rgb, rad
 
@@ -345,9 +403,18 @@ class UavReleaseScenario(Scenario[UavReleaseConfig]):
                 d[0] = float(prof.density(0.5 * r[1]))
             top = float(d.max())
             d = d / top if top > 0.0 and np.isfinite(top) else np.ones_like(d)
-            out.append({"kind": "zone", "pos": [float(z.centre[0]), float(z.centre[1]), 0.0], "radius": z.radius,
-                        "colour": "#d7301f", "label": z.name or f"zone {i}", "name": z.name or f"zone {i}",
-                        "n_sensors": z.n_sensors, "density": np.round(d, 4).tolist()})  # fmt: skip
+            out.append(
+                {
+                    "kind": "zone",
+                    "pos": [float(z.centre[0]), float(z.centre[1]), 0.0],
+                    "radius": z.radius,
+                    "colour": "#d7301f",
+                    "label": z.name or f"zone {i}",
+                    "name": z.name or f"zone {i}",
+                    "n_sensors": z.n_sensors,
+                    "density": np.round(d, 4).tolist(),
+                }
+            )
         return out
 
 

@@ -113,7 +113,9 @@ def _check_zone_values(label: str, v: dict[str, Any]) -> None:
     check_float(f("radius"), v["radius"], 0.5, MAX_MAP_SIDE)
     check_int(f("n_sensors"), v["n_sensors"], 1, MAX_SENSORS_PER_ZONE)
     if not isinstance(v["profile"], str):
-        raise ValueError(f"{f('profile')} must be a string, one of {PROFILE_KINDS}, got {short_repr(v['profile'])}")
+        raise ValueError(
+            f"{f('profile')} must be a string, one of {PROFILE_KINDS}, got {short_repr(v['profile'])}"
+        )
     check_choice(f("profile"), v["profile"], PROFILE_KINDS)
     check_float(f("alpha"), v["alpha"], 0.0)
     if v["alpha"] >= 2.0:
@@ -280,7 +282,9 @@ def _check_keys(label: str, d: dict[str, Any], allowed: tuple[str, ...], require
         if key not in allowed:
             close = difflib.get_close_matches(str(key), allowed, n=1)
             hint = f" (did you mean {close[0]!r}?)" if close else ""
-            raise ValueError(f"{label}: unknown field {short_repr(key, 60)}{hint}; allowed fields: {list(allowed)}")
+            raise ValueError(
+                f"{label}: unknown field {short_repr(key, 60)}{hint}; allowed fields: {list(allowed)}"
+            )
 
 
 def zones_from_dict(d: dict[str, Any]) -> ZoneSet:
@@ -299,8 +303,10 @@ def zones_from_dict(d: dict[str, Any]) -> ZoneSet:
     if not isinstance(d, dict):
         raise ValueError(f"the zone file must hold a JSON object, got {type(d).__name__}")
     if json_depth(d, MAX_JSON_DEPTH) > MAX_JSON_DEPTH:
-        raise ValueError(f"the zone file is nested more than {MAX_JSON_DEPTH} levels deep; at most "
-                         f"{MAX_JSON_DEPTH} are allowed")  # fmt: skip
+        raise ValueError(
+            f"the zone file is nested more than {MAX_JSON_DEPTH} levels deep; at most "
+            f"{MAX_JSON_DEPTH} are allowed"
+        )
     _check_keys("zone file", d, _TOP_FIELDS, ("map_size", "zones"))
     if "description" in d:  # not kept, but checked like every other text of the file
         check_text("field 'description'", d["description"], allow_newlines=True)

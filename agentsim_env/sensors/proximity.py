@@ -378,8 +378,21 @@ class ProximitySensor:
     def step(self, ctx: StepContext) -> ScanResult:
         """Scan every online slot on the step's shared grid (into the sensor's reused buffers)."""
         st, sc = ctx.state, ctx.scene
-        return self.scan(st.pos, st.heading, st.sensor_range, st.radius, st.online, st.world_id, ctx.grid,
-                         sc.kind, sc.centre, sc.half, sc.world, ctx.object_grid, sc.ground)  # fmt: skip
+        return self.scan(
+            st.pos,
+            st.heading,
+            st.sensor_range,
+            st.radius,
+            st.online,
+            st.world_id,
+            ctx.grid,
+            sc.kind,
+            sc.centre,
+            sc.half,
+            sc.world,
+            ctx.object_grid,
+            sc.ground,
+        )
 
     def observe(self, reading: ScanResult) -> np.ndarray:
         """``(S, K, 2)`` float32: normalised distance and hit code / 3 per ray."""
@@ -455,7 +468,9 @@ class ProximitySensor:
         threads = self.threads
         parts = 1 if threads.num_threads == 1 else len(threads.ranges(s))
         if len(self._stamps) < parts or self._stamps[0].shape[0] < kind.shape[0]:
-            self._stamps = [np.empty(kind.shape[0], dtype=np.int64) for _ in range(max(parts, len(self._stamps)))]
+            self._stamps = [
+                np.empty(kind.shape[0], dtype=np.int64) for _ in range(max(parts, len(self._stamps)))
+            ]
         agent_args = _grid_args(agent_grid if use_agents else None, lo, hi, "agent_grid")
         if use_objects:
             lo, hi = olo, ohi
@@ -465,6 +480,25 @@ class ProximitySensor:
         prep = _scan_prep(pos, radius, online, agent_args[1], use_agents, kind, half)
         bufs = (out.distance, out.hit_kind, out.hit_id)
         stamps, dirs, n_az = self._stamps, self.directions, self.config.n_azimuth
-        threads.run(lambda lo, hi, part: _scan_kernel(lo, hi, pos, heading, srange, online, world, agent_args,
-                    scene, object_args, dirs, n_az, flags, prep, stamps[part], bufs), s)  # fmt: skip
+        threads.run(
+            lambda lo, hi, part: _scan_kernel(
+                lo,
+                hi,
+                pos,
+                heading,
+                srange,
+                online,
+                world,
+                agent_args,
+                scene,
+                object_args,
+                dirs,
+                n_az,
+                flags,
+                prep,
+                stamps[part],
+                bufs,
+            ),
+            s,
+        )
         return out

@@ -34,5 +34,17 @@ class CollisionStage:
         if not self.enabled:
             return CollisionEvents.empty()
         st, sc = ctx.state, ctx.scene
-        return find_collisions(st.pos, st.radius, st.online, st.world_id, ctx.grid, sc.kind, sc.centre, sc.half,
-                               sc.world, ctx.object_grid, self.margin, self.threads)  # fmt: skip
+        return find_collisions(
+            st.pos,
+            st.radius,
+            st.online,
+            st.world_id,
+            ctx.grid,
+            sc.kind,
+            sc.centre,
+            sc.half,
+            sc.world,
+            ctx.object_grid,
+            self.margin,
+            self.threads,
+        )

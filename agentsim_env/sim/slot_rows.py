@@ -102,7 +102,9 @@ def _walk(path: str, obj: Any, n_slots: int, depth: int, seen: set[int], out: di
         return  # a root is walked whatever its module (a scenario's SlotState may live outside the package)
     skip = _per_world_fields(obj)
     for name, value in _attributes(obj):
-        if name not in skip and (isinstance(value, np.ndarray) or type(value).__module__.startswith("agentsim_env.")):
+        if name not in skip and (
+            isinstance(value, np.ndarray) or type(value).__module__.startswith("agentsim_env.")
+        ):
             _walk(f"{path}.{name}", value, n_slots, depth + 1, seen, out)
 
 
@@ -116,8 +118,14 @@ def slot_arrays(world: World) -> dict[str, np.ndarray]:
         ``{path: array}`` with ``array.shape[0] == world.state.n_slots``, in a fixed order.
     """
     n = world.state.n_slots
-    roots: list[tuple[str, Any]] = [("state", world.state), ("motion", world.motion_stage), ("task", world.task),
-                                    ("groups", world.groups), ("comms", world.comms), ("payloads", world.payloads)]  # fmt: skip
+    roots: list[tuple[str, Any]] = [
+        ("state", world.state),
+        ("motion", world.motion_stage),
+        ("task", world.task),
+        ("groups", world.groups),
+        ("comms", world.comms),
+        ("payloads", world.payloads),
+    ]
     roots += [(f"sensors.{s.name}", s) for s in world.sensors]
     roots += [(f"readings.{k}", v) for k, v in world.readings.items()]
     out: dict[str, np.ndarray] = {}
@@ -174,8 +182,10 @@ def unpack_slot_rows(world: World, slots: np.ndarray, rows: dict[str, np.ndarray
     arrays = slot_arrays(world)
     if arrays.keys() != rows.keys():
         missing, extra = sorted(arrays.keys() - rows.keys()), sorted(rows.keys() - arrays.keys())
-        raise ValueError(f"the rows do not match this world's per-slot arrays: missing {missing}, unknown {extra} "
-                         f"(pack and unpack worlds of one scenario config)")  # fmt: skip
+        raise ValueError(
+            f"the rows do not match this world's per-slot arrays: missing {missing}, unknown {extra} "
+            f"(pack and unpack worlds of one scenario config)"
+        )
     for path, arr in arrays.items():
         row = rows[path]
         if row.shape != (s.size, *arr.shape[1:]):

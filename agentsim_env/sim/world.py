@@ -139,8 +139,14 @@ class World:
         self.groups: GroupController | None = None
         if comms is not None:
             period = comms.heartbeat_period
-            self.groups = GroupController(n_worlds, n_agents, period, max(comms.heartbeat_timeout, period),
-                                          group=st.group, home=st.home_group)  # fmt: skip
+            self.groups = GroupController(
+                n_worlds,
+                n_agents,
+                period,
+                max(comms.heartbeat_timeout, period),
+                group=st.group,
+                home=st.home_group,
+            )
             self.comms = CommsStack(comms, n_worlds, n_agents, st.group)
         stages = [self.motion_stage, self.physics, self.payloads, self.collide, self.groups, self.comms]
         self.subsystems: tuple[Subsystem, ...] = tuple(s for s in stages if s is not None) + self.sensors
@@ -201,7 +207,9 @@ class World:
         if sc.n_objects == 0:
             return None
         if self._object_grid is None or self._object_grid_version != sc.version:
-            self._object_grid = build_object_grid(self.object_grid_spec, sc.centre, sc.footprint_radius(), sc.world)
+            self._object_grid = build_object_grid(
+                self.object_grid_spec, sc.centre, sc.footprint_radius(), sc.world
+            )
             self._object_grid_version = sc.version
         return self._object_grid
 
@@ -267,8 +275,16 @@ class World:
     def context(self) -> StepContext:
         """A fresh step context over the current state, scene, grid and counters."""
         own = None if self.bridge is None else self.bridge.own
-        return StepContext(self.state, self.scene, self.agent_grid, self.object_grid(), self.config.dt,
-                           self.tick, self.step_count, own=own)  # fmt: skip
+        return StepContext(
+            self.state,
+            self.scene,
+            self.agent_grid,
+            self.object_grid(),
+            self.config.dt,
+            self.tick,
+            self.step_count,
+            own=own,
+        )
 
     def _sense(self, ctx: StepContext) -> dict[str, Any]:
         # 8. sensors: each on the step's shared grid
@@ -307,7 +323,9 @@ class World:
             self.regrid(ctx)
         comm_events = self.run_comms(ctx)  # 7
         readings = self.run_sensors(ctx)  # 8
-        return self.end_step(StepEvents(events, went, timed_out, comm_events, group_events, landed, readings), hooks)
+        return self.end_step(
+            StepEvents(events, went, timed_out, comm_events, group_events, landed, readings), hooks
+        )
 
     def run_motion(self, ctx: StepContext) -> tuple[CollisionEvents | None, PayloadEvents | None]:
         """Stages 2-4: motion, physics (its contacts are returned), the map clip, payloads (their landings)."""
@@ -316,8 +334,11 @@ class World:
         contacts = self.physics.step(ctx) if self.physics is not None else None  # 3. physics
         if self._box[0] is not cfg:
             (xmin, xmax, ymin, ymax), (zmin, zmax) = cfg.bounds, cfg.z_range
-            self._box = (cfg, np.array([xmin, ymin, zmin], dtype=np.float64),
-                         np.array([xmax, ymax, zmax], dtype=np.float64))  # fmt: skip
+            self._box = (
+                cfg,
+                np.array([xmin, ymin, zmin], dtype=np.float64),
+                np.array([xmax, ymax, zmax], dtype=np.float64),
+            )
         clip_box(st.pos, self._box[1], self._box[2])  # agents stay inside the map and the altitude band
         landed = self.payloads.step(ctx) if self.payloads is not None else None  # 4. payloads
         return contacts, landed

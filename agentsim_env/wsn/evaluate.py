@@ -107,7 +107,9 @@ class WsnConfig:
         if isinstance(self.radio, dict):  # e.g. a config read back from JSON (a recorded run)
             object.__setattr__(self, "radio", build_config(RadioParams, self.radio, label="wsn.radio"))
         if not isinstance(self.radio, RadioParams):
-            raise ValueError(f"wsn.radio must be a RadioParams or a dict of its fields, got {type(self.radio).__name__}")
+            raise ValueError(
+                f"wsn.radio must be a RadioParams or a dict of its fields, got {type(self.radio).__name__}"
+            )
         for name in ("k", "knn_k"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:

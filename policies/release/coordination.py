@@ -147,9 +147,15 @@ def split_work(zones: ZoneSet, n_uavs: int, payload: int) -> list[Piece]:
 
 
 def encode(
-    kind: int, uav: int, xy: ArrayLike, map_size: tuple[float, float], *, zone: int = 0, piece: int = 0,
+    kind: int,
+    uav: int,
+    xy: ArrayLike,
+    map_size: tuple[float, float],
+    *,
+    zone: int = 0,
+    piece: int = 0,
     payload_frac: float = 0.0,
-) -> NDArray[np.float32]:  # fmt: skip
+) -> NDArray[np.float32]:
     """Payload of one message (layout in the module docstring).
 
     Args:
@@ -244,10 +250,12 @@ def rim_pull(xy: ArrayLike, centre: ArrayLike, radius: float, margin: float) -> 
 
 
 def plan_mission(
-    pieces: list[Piece], starts: NDArray[np.float64], payload: int,
+    pieces: list[Piece],
+    starts: NDArray[np.float64],
+    payload: int,
     plan_piece: Callable[[Piece, NDArray[np.float64]], list[tuple]],
     plan_targets: Callable[[int, NDArray[np.int64], NDArray[np.float64], TargetBook], list[tuple]],
-) -> tuple[TargetBook, list[list[tuple]], list[list[int]]]:  # fmt: skip
+) -> tuple[TargetBook, list[list[tuple]], list[list[int]]]:
     """Every UAV's task list: its pieces in order, then overflow targets of other UAVs (module docstring).
 
     Args:
@@ -291,9 +299,18 @@ def plan_mission(
 
 
 def piece_tasks(
-    strategy: str, zone: Zone, pc: Piece, start: ArrayLike, altitude: float, speed: float, seed: int, fall: Any,
-    wind: Any, options: dict, rim_margin: float,
-) -> list[tuple]:  # fmt: skip
+    strategy: str,
+    zone: Zone,
+    pc: Piece,
+    start: ArrayLike,
+    altitude: float,
+    speed: float,
+    seed: int,
+    fall: Any,
+    wind: Any,
+    options: dict,
+    rim_margin: float,
+) -> list[tuple]:
     """Tasks ``(kind, -1, xy, aim, heading, zone)`` of one piece, planned by ``make_plan`` from ``start``.
 
     B8's teleport plan becomes hover releases over its targets (tour from ``start``); targets within
@@ -301,12 +318,36 @@ def piece_tasks(
     flat ground the landing offset does not depend on where the release happens).
     """
     rng = np.random.default_rng([seed, pc.pid])
-    plan = make_plan(strategy, zone.centre, zone.radial_profile(), zone.n_sensors, altitude, speed, rng, pc.sector,
-                     start, fall, wind, options)  # fmt: skip
+    plan = make_plan(
+        strategy,
+        zone.centre,
+        zone.radial_profile(),
+        zone.n_sensors,
+        altitude,
+        speed,
+        rng,
+        pc.sector,
+        start,
+        fall,
+        wind,
+        options,
+    )
     if plan.mode == "teleport":
         tgt = plan.release_xy[plan_tour(plan.release_xy, start)]
-        plan = assemble_plan(strategy, "hover", tgt, zone.centre, zone.radius, pc.sector, start, altitude, 0.0, fall,
-                             wind, fall_dt=float(options.get("fall_dt", 0.01)))  # fmt: skip
+        plan = assemble_plan(
+            strategy,
+            "hover",
+            tgt,
+            zone.centre,
+            zone.radius,
+            pc.sector,
+            start,
+            altitude,
+            0.0,
+            fall,
+            wind,
+            fall_dt=float(options.get("fall_dt", 0.01)),
+        )
     kind = HOVER if plan.mode == "hover" else FLY
     shift = rim_pull(plan.release_xy, zone.centre, zone.radius, rim_margin)
     out: list[tuple] = []
@@ -322,9 +363,12 @@ def piece_tasks(
 
 
 def target_tasks(
-    tids: NDArray[np.int64], start: ArrayLike, book: TargetBook, hover: bool,
+    tids: NDArray[np.int64],
+    start: ArrayLike,
+    book: TargetBook,
+    hover: bool,
     throw: Callable[[int, float], NDArray[np.float64]],
-) -> list[tuple]:  # fmt: skip
+) -> list[tuple]:
     """Tasks for loose targets (overflow, reclaimed): an NN + 2-opt tour from ``start``, straight approaches.
 
     Args:

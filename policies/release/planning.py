@@ -431,17 +431,27 @@ def assemble_plan(
     n = tgt.shape[0]
     start = np.asarray(start_xy, dtype=np.float64).reshape(2)
     make_plan = functools.partial(
-        ReleasePlan, strategy=strategy, mode=mode, centre=np.asarray(centre, dtype=np.float64).reshape(2),
-        radius=float(radius), sector=sector, start_xy=start, altitude=float(altitude),
+        ReleasePlan,
+        strategy=strategy,
+        mode=mode,
+        centre=np.asarray(centre, dtype=np.float64).reshape(2),
+        radius=float(radius),
+        sector=sector,
+        start_xy=start,
+        altitude=float(altitude),
         info=dict(info or {}),
-    )  # fmt: skip
+    )
     if mode == "teleport":
         pts = np.hstack([tgt, np.zeros((n, 1))])
         return make_plan(
-            waypoints=np.zeros((0, 3)), release_wp=np.full(n, -1, dtype=np.int64),
-            release_xy=tgt, release_points=pts, release_vel=np.zeros((n, 3)), release_speed=0.0,
+            waypoints=np.zeros((0, 3)),
+            release_wp=np.full(n, -1, dtype=np.int64),
+            release_xy=tgt,
+            release_points=pts,
+            release_vel=np.zeros((n, 3)),
+            release_speed=0.0,
             path_length=0.0,
-        )  # fmt: skip
+        )
     v_rel = float(speed) if mode == "waypoints" else 0.0
     table = throw_table(altitude, v_rel, fall, wind_mean, fall_dt)
     lead = np.zeros(n, dtype=bool)
@@ -481,7 +491,13 @@ def assemble_plan(
     waypoints = np.hstack([wp_xy, np.full((wp_xy.shape[0], 1), float(altitude))])
     release_points = np.hstack([rel, np.full((n, 1), float(altitude))])
     return make_plan(
-        waypoints=waypoints, release_wp=release_wp.astype(np.int64), release_xy=tgt,
-        release_points=release_points, release_vel=vel, release_speed=v_rel,
-        path_length=path_length(wp_xy, start), n_lead_in=int(lead.sum()), residual=residual,
-    )  # fmt: skip
+        waypoints=waypoints,
+        release_wp=release_wp.astype(np.int64),
+        release_xy=tgt,
+        release_points=release_points,
+        release_vel=vel,
+        release_speed=v_rel,
+        path_length=path_length(wp_xy, start),
+        n_lead_in=int(lead.sum()),
+        residual=residual,
+    )

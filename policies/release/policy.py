@@ -66,9 +66,18 @@ from agentsim_env.policies.release.targets import STRATEGIES
 __all__ = ["DEFAULT_RELEASE_SPEED", "ReleasePolicy"]
 
 #: Release speed (m/s) per strategy: slow on tours with sharp turns, faster on smooth patterns; 0 = hover.
-DEFAULT_RELEASE_SPEED = {"B0_uniform": 4.0, "B1_inverse_cdf": 4.0, "B1LD_sunflower": 4.0, "B2_rings": 5.0,
-                         "B3_spiral": 5.0, "B4_boustrophedon": 5.0, "B5_cvt": 4.0, "B6_drop_clusters": 0.0,
-                         "B7_ergodic": 4.0, "B8_oracle": 0.0}  # fmt: skip
+DEFAULT_RELEASE_SPEED = {
+    "B0_uniform": 4.0,
+    "B1_inverse_cdf": 4.0,
+    "B1LD_sunflower": 4.0,
+    "B2_rings": 5.0,
+    "B3_spiral": 5.0,
+    "B4_boustrophedon": 5.0,
+    "B5_cvt": 4.0,
+    "B6_drop_clusters": 0.0,
+    "B7_ergodic": 4.0,
+    "B8_oracle": 0.0,
+}
 _N_SPEED, _N_HEAD = 31, 36  # throw table grid: 0.5 m/s and 10 degree steps (linear interpolation)
 _HOVER_TOL, _ARRIVE, _MAX_RETRIES, _BRAKE = 0.5, 1.5, 3, 0.6  # m, m, count, fraction of max_accel
 _VZ = 4.0  # largest climb / descent rate commanded, m/s
@@ -76,8 +85,9 @@ _VZ = 4.0  # largest climb / descent rate commanded, m/s
 
 def _throw_tables(alts: np.ndarray, vmax: float, fall: Any, wind: Any) -> np.ndarray:
     """Landing offsets ``(A, _N_SPEED, _N_HEAD, 2)`` of a level release at each altitude, speed, heading."""
-    a, s, h = np.meshgrid(alts, np.linspace(0.0, vmax, _N_SPEED), 2 * np.pi * np.arange(_N_HEAD) / _N_HEAD,
-                          indexing="ij")  # fmt: skip
+    a, s, h = np.meshgrid(
+        alts, np.linspace(0.0, vmax, _N_SPEED), 2 * np.pi * np.arange(_N_HEAD) / _N_HEAD, indexing="ij"
+    )
     p0 = np.stack([np.zeros(a.size), np.zeros(a.size), a.ravel()], axis=1)
     v0 = np.stack([(s * np.cos(h)).ravel(), (s * np.sin(h)).ravel(), np.zeros(a.size)], axis=1)
     xy, _ = predict_landing(p0, v0, fall, wind, dt=0.02)
@@ -125,11 +135,21 @@ class ReleasePolicy:
     """
 
     def __init__(
-        self, env: Any, strategy: str = "B5_cvt", *, cruise_speed: float = 12.0, release_speed: float | None = None,
-        coordinate: bool | None = None, options: dict | None = None, hello_every: int = 10, lost_after: int = 50,
-        release_tol: float = 1.0, default_altitude: float = 15.0, layer_spacing: float = 2.0,
+        self,
+        env: Any,
+        strategy: str = "B5_cvt",
+        *,
+        cruise_speed: float = 12.0,
+        release_speed: float | None = None,
+        coordinate: bool | None = None,
+        options: dict | None = None,
+        hello_every: int = 10,
+        lost_after: int = 50,
+        release_tol: float = 1.0,
+        default_altitude: float = 15.0,
+        layer_spacing: float = 2.0,
         rim_margin: float = 1.0,
-    ) -> None:  # fmt: skip
+    ) -> None:
         if strategy not in STRATEGIES:
             raise ValueError(f"strategy must be one of {tuple(STRATEGIES)}, got {strategy!r}")
         sc = env.scenario
@@ -138,9 +158,13 @@ class ReleasePolicy:
         c = sc.config
         if c.action_mode != "velocity":
             raise ValueError(f"action_mode must be 'velocity' for ReleasePolicy, got {c.action_mode!r}")
-        checks = (("cruise_speed", cruise_speed, True), ("release_tol", release_tol, True),
-                  ("default_altitude", default_altitude, True), ("layer_spacing", layer_spacing, False),
-                  ("rim_margin", rim_margin, False))  # fmt: skip
+        checks = (
+            ("cruise_speed", cruise_speed, True),
+            ("release_tol", release_tol, True),
+            ("default_altitude", default_altitude, True),
+            ("layer_spacing", layer_spacing, False),
+            ("rim_margin", rim_margin, False),
+        )
         for name, v, strict in checks:
             if not (math.isfinite(v) and (v > 0 if strict else v >= 0)):
                 raise ValueError(f"{name} must be a finite number {'>' if strict else '>='} 0, got {v!r}")
@@ -154,8 +178,10 @@ class ReleasePolicy:
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise ValueError(f"{name} must be an integer >= 1, got {v!r}")
         if getattr(c, "autopilot", False):
-            raise ValueError("ReleasePolicy flies the UAVs itself: it needs autopilot=False (with autopilot the "
-                             "scenario flies them and only the release is decided)")  # fmt: skip
+            raise ValueError(
+                "ReleasePolicy flies the UAVs itself: it needs autopilot=False (with autopilot the "
+                "scenario flies them and only the release is decided)"
+            )
         if coordinate is None:
             coordinate = c.comms is not None
         if coordinate and c.comms is None:
@@ -217,8 +243,14 @@ class ReleasePolicy:
         )
         if self.coordinate:
             for pc in pieces:  # claim every piece (at its first target), then the overflow targets taken
-                first = next((t[2] for t in self._tasks[pc.uav] if t[0] != WAYPOINT and self.book.piece[t[1]] == pc.pid),
-                             start[pc.uav])  # fmt: skip
+                first = next(
+                    (
+                        t[2]
+                        for t in self._tasks[pc.uav]
+                        if t[0] != WAYPOINT and self.book.piece[t[1]] == pc.pid
+                    ),
+                    start[pc.uav],
+                )
                 self._queue[pc.uav].append(
                     encode(MSG_CLAIM, pc.uav, first, self._map, zone=pc.zone, piece=pc.pid)
                 )
@@ -241,8 +273,19 @@ class ReleasePolicy:
 
     def _piece_tasks(self, pc: Piece, start: np.ndarray) -> list[tuple]:
         z = self.env.scenario.zones.zones[pc.zone]
-        return piece_tasks(self.strategy, z, pc, start, float(self._alts[pc.uav, pc.zone]), self.release_speed,
-                           self._seed, self.env.scenario.fall, self._wind, self.options, self.rim_margin)  # fmt: skip
+        return piece_tasks(
+            self.strategy,
+            z,
+            pc,
+            start,
+            float(self._alts[pc.uav, pc.zone]),
+            self.release_speed,
+            self._seed,
+            self.env.scenario.fall,
+            self._wind,
+            self.options,
+            self.rim_margin,
+        )
 
     def _target_tasks(self, j: int, tids: np.ndarray, start: np.ndarray, book: TargetBook) -> list[tuple]:
         def throw(k: int, head: float) -> np.ndarray:
@@ -320,8 +363,16 @@ class ReleasePolicy:
                 self._views[j].released_by[tid] = j
                 if self.coordinate:
                     b = self.book
-                    self._queue[j].append(encode(MSG_RELEASED, j, b.xy[tid], self._map, zone=int(b.zone[tid]),
-                                                 piece=int(b.piece[tid])))  # fmt: skip
+                    self._queue[j].append(
+                        encode(
+                            MSG_RELEASED,
+                            j,
+                            b.xy[tid],
+                            self._map,
+                            zone=int(b.zone[tid]),
+                            piece=int(b.piece[tid]),
+                        )
+                    )
             self._pending[j] = -1
         self._left[slots] = left
         if self.coordinate:
@@ -503,5 +554,9 @@ class ReleasePolicy:
             return False
         if not self.coordinate:
             return True
-        return all(self._views[j].done[u] or self._views[j].is_lost(self._step, u, self.lost_after)
-                   for j in live for u in range(self._n) if u != j)  # fmt: skip
+        return all(
+            self._views[j].done[u] or self._views[j].is_lost(self._step, u, self.lost_after)
+            for j in live
+            for u in range(self._n)
+            if u != j
+        )

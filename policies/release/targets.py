@@ -331,9 +331,24 @@ def _ergodic(profile: RadialProfile, n: int, sector, start: NDArray, opts: Mappi
         raise ValueError("options 'spacing', 'turn_radius' must be > 0, 'substeps' >= 1 and 'modes' >= 2")
     st = np.clip(start, lo, hi) - lo
     return _smc_kernel(
-        float(st[0]), float(st[1]), float(lx), float(ly), phik, lam, inv_h, spacing / sub,
-        spacing / sub / turn_r, sub, n, sub * n * 20 + 1000, float(-lo[0]), float(-lo[1]), big_r, t0, width,
-    )  # fmt: skip
+        float(st[0]),
+        float(st[1]),
+        float(lx),
+        float(ly),
+        phik,
+        lam,
+        inv_h,
+        spacing / sub,
+        spacing / sub / turn_r,
+        sub,
+        n,
+        sub * n * 20 + 1000,
+        float(-lo[0]),
+        float(-lo[1]),
+        big_r,
+        t0,
+        width,
+    )
 
 
 # ---------------------------------------------------------------------------------------- entry point
@@ -467,7 +482,20 @@ def make_plan(
     elif opts.get("mode", mode) != mode:
         raise ValueError(f"options['mode'] for {strategy} must be {mode!r} or 'hover', got {opts['mode']!r}")
     return assemble_plan(
-        strategy, mode, pts + c, c, big_r, sector, start + c, altitude, speed, fall, wind_mean,
-        hover_groups=groups, min_leg=float(opts.get("min_leg", 2.0)),
-        lead_in=float(opts.get("lead_in", 10.0)), fall_dt=float(opts.get("fall_dt", 0.01)), info=info,
-    )  # fmt: skip
+        strategy,
+        mode,
+        pts + c,
+        c,
+        big_r,
+        sector,
+        start + c,
+        altitude,
+        speed,
+        fall,
+        wind_mean,
+        hover_groups=groups,
+        min_leg=float(opts.get("min_leg", 2.0)),
+        lead_in=float(opts.get("lead_in", 10.0)),
+        fall_dt=float(opts.get("fall_dt", 0.01)),
+        info=info,
+    )

@@ -164,7 +164,9 @@ def designer_handlers(path: Path | None) -> dict[str, Handler]:
         d = _check_message(msg, "zones.preview")["zones"]
         rid = msg.get("id")
         if "id" in msg and (isinstance(rid, bool) or not isinstance(rid, int)):
-            raise ClientError(f"zones.preview: 'id' must be an integer (echoed in the reply), got {type(rid).__name__}")
+            raise ClientError(
+                f"zones.preview: 'id' must be an integer (echoed in the reply), got {type(rid).__name__}"
+            )
         echo = {} if rid is None else {"id": rid}  # the page tells from it which request a reply answers
         try:
             zs = _validate(d)

@@ -23,8 +23,19 @@ MSG_KIND = {AGENT: 0, GROUP: 1, ENV: 2, OVERLAY: 3}
 _PAGE_KIND = np.zeros(max(KIND_NAMES) + 1, np.uint8)  # any other kind (heartbeats) draws as an agent message
 for _k, _v in MSG_KIND.items():
     _PAGE_KIND[_k] = _v
-LOG_KINDS = ("collision", "timeout", "group", "release", "landing", "terminated", "episode", "message", "broadcast",
-             "heartbeat", "overlay")  # fmt: skip
+LOG_KINDS = (
+    "collision",
+    "timeout",
+    "group",
+    "release",
+    "landing",
+    "terminated",
+    "episode",
+    "message",
+    "broadcast",
+    "heartbeat",
+    "overlay",
+)
 #: Log kinds the page hides until its filter box is ticked: periodic traffic that would flood the log (the
 #: controller's heartbeats, GROUP broadcasts such as the UAVs' HELLO heartbeats every few steps, and the overlay's
 #: per-step hop summary, one line every step while a flood spreads).
@@ -69,8 +80,9 @@ def pack_frame(seq: int, step: int, episode: int, arrays: dict[str, np.ndarray])
     head_len, header = 8, b""
     for _ in range(4):
         shifted = {k: {**m, "offset": m["offset"] + head_len} for k, m in meta.items()}
-        header = json.dumps({"seq": seq, "step": step, "episode": episode, "arrays": shifted},
-                            separators=(",", ":")).encode()  # fmt: skip
+        header = json.dumps(
+            {"seq": seq, "step": step, "episode": episode, "arrays": shifted}, separators=(",", ":")
+        ).encode()
         need = 8 + (len(header) + 7) // 8 * 8
         if need == head_len:
             break
@@ -115,9 +127,17 @@ def density_curve(zone: Any, samples: int = DENSITY_SAMPLES) -> np.ndarray:
 
 def _zones(markers: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """The ``zones`` list of the scene message (its older form): the scenario's zone markers."""
-    return [{"name": m.get("name", m.get("label", "")), "centre": list(m["pos"][:2]), "radius": m["radius"],
-             "n_sensors": m.get("n_sensors", 0), "density": m.get("density", [])}
-            for m in markers if m.get("kind") == "zone"]  # fmt: skip
+    return [
+        {
+            "name": m.get("name", m.get("label", "")),
+            "centre": list(m["pos"][:2]),
+            "radius": m["radius"],
+            "n_sensors": m.get("n_sensors", 0),
+            "density": m.get("density", []),
+        }
+        for m in markers
+        if m.get("kind") == "zone"
+    ]
 
 
 def new_status(n: int) -> np.ndarray:
@@ -153,8 +173,15 @@ def track_status(status: np.ndarray, world: World, w: int, events: StepEvents) -
     status[gone] = OFFLINE  # offline by any other road (a shard lost)
 
 
-def scene_message(world: World, scenario: Any, w: int = 0, *, title: str = "", mode: str = "live",
-                  replay: dict[str, Any] | None = None) -> dict[str, Any]:  # fmt: skip
+def scene_message(
+    world: World,
+    scenario: Any,
+    w: int = 0,
+    *,
+    title: str = "",
+    mode: str = "live",
+    replay: dict[str, Any] | None = None,
+) -> dict[str, Any]:
     """The ``scene`` message: bounds, static objects, agents' names and sizes, zones (docs/viewer.md)."""
     sc = world.scene
     mine = np.flatnonzero(sc.world == w)
@@ -223,14 +250,17 @@ def _rays(world: World, slot: int) -> tuple[np.ndarray, np.ndarray] | None:
     st = world.state
     dirs = np.asarray(getattr(sensor, "directions"), dtype=np.float64)  # noqa: B009 - the proximity sensor's; body yaw frame
     c, s = np.cos(st.heading[slot]), np.sin(st.heading[slot])
-    world_dirs = np.column_stack([c * dirs[:, 0] - s * dirs[:, 1], s * dirs[:, 0] + c * dirs[:, 1], dirs[:, 2]])
+    world_dirs = np.column_stack(
+        [c * dirs[:, 0] - s * dirs[:, 1], s * dirs[:, 0] + c * dirs[:, 1], dirs[:, 2]]
+    )
     dist = np.asarray(scan.distance[slot], dtype=np.float64) * float(st.sensor_range[slot])
     ends = st.pos[slot][None, :] + world_dirs * dist[:, None]
     return ends.astype(np.float32), (np.asarray(scan.hit_kind[slot]) != 0).astype(np.uint8)
 
 
-def state_arrays(world: World, w: int, events: StepEvents | None, selected: int | None,
-                 status: np.ndarray | None = None) -> dict[str, np.ndarray]:  # fmt: skip
+def state_arrays(
+    world: World, w: int, events: StepEvents | None, selected: int | None, status: np.ndarray | None = None
+) -> dict[str, np.ndarray]:
     """The frame's arrays for world ``w`` (positions, headings, groups, online, status, messages, payloads, rays).
 
     ``status``: why each agent is (not) active (``STATUS_NAMES``, kept by ``track_status``); without it, an
@@ -244,8 +274,11 @@ def state_arrays(world: World, w: int, events: StepEvents | None, selected: int 
         "heading": st.heading[lo:hi].astype(np.float32),
         "group": st.group[lo:hi].astype(np.int16),
         "online": st.online[lo:hi].astype(np.uint8),
-        "status": (status.astype(np.uint8) if status is not None
-                   else np.where(st.online[lo:hi], ACTIVE, OFFLINE).astype(np.uint8)),  # fmt: skip
+        "status": (
+            status.astype(np.uint8)
+            if status is not None
+            else np.where(st.online[lo:hi], ACTIVE, OFFLINE).astype(np.uint8)
+        ),
     }
     if events is not None:
         out["msg"], out["msg_kind"] = _messages(events, lo, hi)
@@ -256,8 +289,9 @@ def state_arrays(world: World, w: int, events: StepEvents | None, selected: int 
         land = np.asarray(ps.get("land_xy"))[landed]
         pos = np.vstack([np.asarray(ps.get("pos"))[falling], np.column_stack([land, np.zeros(len(land))])])
         out["payload_pos"] = pos.astype(np.float32)
-        out["payload_state"] = np.concatenate([np.full(int(falling.sum()), 1, np.uint8),
-                                               np.full(len(land), 2, np.uint8)])  # fmt: skip
+        out["payload_state"] = np.concatenate(
+            [np.full(int(falling.sum()), 1, np.uint8), np.full(len(land), 2, np.uint8)]
+        )
     if selected is not None and 0 <= selected < n:
         rays = _rays(world, lo + selected)
         if rays is not None:
@@ -275,8 +309,9 @@ def _line(step: int, episode: int, kind: str, text: str, slots: list[int]) -> di
     return {"step": step, "episode": episode, "kind": kind, "text": text, "slots": slots}
 
 
-def log_lines(world: World, scenario: Any, events: StepEvents, w: int, episode: int,
-              names: list[str] | None = None) -> list[dict[str, Any]]:  # fmt: skip
+def log_lines(
+    world: World, scenario: Any, events: StepEvents, w: int, episode: int, names: list[str] | None = None
+) -> list[dict[str, Any]]:
     """The log stream's lines for one step of world ``w``: collisions, timeouts, group changes, releases,
     landings, terminations and (up to ``MAX_MESSAGE_LINES``) messages. ``names``: the agents' ids (default:
     the scenario's; pass them to save building the list every step)."""
@@ -325,12 +360,25 @@ def log_lines(world: World, scenario: Any, events: StepEvents, w: int, episode: 
         keep = np.flatnonzero((d.receiver >= lo) & (d.receiver < hi))
         for j in keep[:MAX_MESSAGE_LINES].tolist():
             kind = KIND_NAMES.get(int(d.kind[j]), str(int(d.kind[j])))
-            out.append(_line(step, episode, message_log_kind(int(d.kind[j])),
-                             f"{kind} {name(int(d.sender[j]))} -> {name(int(d.receiver[j]))}",
-                             [int(d.receiver[j]) - lo]))  # fmt: skip
+            out.append(
+                _line(
+                    step,
+                    episode,
+                    message_log_kind(int(d.kind[j])),
+                    f"{kind} {name(int(d.sender[j]))} -> {name(int(d.receiver[j]))}",
+                    [int(d.receiver[j]) - lo],
+                )
+            )
         if keep.size > MAX_MESSAGE_LINES:
-            out.append(_line(step, episode, "message", f"... and {keep.size - MAX_MESSAGE_LINES} more bus "
-                                                       "deliveries this step", []))  # fmt: skip
+            out.append(
+                _line(
+                    step,
+                    episode,
+                    "message",
+                    f"... and {keep.size - MAX_MESSAGE_LINES} more bus deliveries this step",
+                    [],
+                )
+            )
     if c is not None and c.overlay is not None and len(c.overlay.receiver):
         o = c.overlay
         k = int(((o.receiver >= lo) & (o.receiver < hi)).sum())
@@ -363,16 +411,38 @@ def agent_message(world: World, scenario: Any, w: int, slot: int) -> dict[str, A
         names = scenario.agent_names()
         for r in rows.tolist():
             snd = int(box.sender[s, r])
-            inbox.append({
-                "kind": KIND_NAMES.get(int(box.kind[s, r]), str(int(box.kind[s, r]))),
-                "sender": names[snd - w * n] if w * n <= snd < (w + 1) * n else "env",
-                "age": int(tick - box.created[s, r]),
-                "hops": int(box.hops[s, r]),
-                "payload": np.round(box.payload[s, r].astype(float), 3).tolist(),
-            })  # fmt: skip
-    return {"type": "agent", "slot": int(slot), "name": scenario.agent_names()[slot], "state": state,
-            "inbox": inbox}  # fmt: skip
+            inbox.append(
+                {
+                    "kind": KIND_NAMES.get(int(box.kind[s, r]), str(int(box.kind[s, r]))),
+                    "sender": names[snd - w * n] if w * n <= snd < (w + 1) * n else "env",
+                    "age": int(tick - box.created[s, r]),
+                    "hops": int(box.hops[s, r]),
+                    "payload": np.round(box.payload[s, r].astype(float), 3).tolist(),
+                }
+            )
+    return {
+        "type": "agent",
+        "slot": int(slot),
+        "name": scenario.agent_names()[slot],
+        "state": state,
+        "inbox": inbox,
+    }
 
 
-__all__ = ["LOG_HIDDEN", "LOG_KINDS", "MAGIC", "STATUS_NAMES", "message_log_kind", "new_status", "track_status", "page_kinds", "agent_message", "density_curve", "log_lines", "pack_frame", "scene_message", "state_arrays",
-           "unpack_frame"]  # fmt: skip
+__all__ = [
+    "LOG_HIDDEN",
+    "LOG_KINDS",
+    "MAGIC",
+    "STATUS_NAMES",
+    "message_log_kind",
+    "new_status",
+    "track_status",
+    "page_kinds",
+    "agent_message",
+    "density_curve",
+    "log_lines",
+    "pack_frame",
+    "scene_message",
+    "state_arrays",
+    "unpack_frame",
+]

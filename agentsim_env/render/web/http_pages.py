@@ -42,7 +42,9 @@ def check_head(head: bytes, trailing: bool) -> tuple[int, str] | None:
     if len(parts) != 3:
         return None
     method = parts[0]
-    fields = [(name.strip().lower(), value.strip()) for name, _, value in (ln.partition(b":") for ln in lines[1:])]
+    fields = [
+        (name.strip().lower(), value.strip()) for name, _, value in (ln.partition(b":") for ln in lines[1:])
+    ]
     if method not in (b"GET", b"HEAD"):
         shown = method[:20].decode("ascii", "replace")
         return 405, f"method {shown!r} is not allowed: this server answers {ALLOWED_METHODS} only\n"
@@ -124,12 +126,24 @@ def answer(connection: Any, request: Any, *, files: dict[str, Path], page: str, 
             response.body = b""
         return response
     body = file.read_bytes()
-    ctype = {".js": "text/javascript", ".mjs": "text/javascript", ".css": "text/css",
-             ".html": "text/html"}.get(file.suffix) or mimetypes.guess_type(file.name)[0] or "text/plain"  # fmt: skip
+    ctype = (
+        {".js": "text/javascript", ".mjs": "text/javascript", ".css": "text/css", ".html": "text/html"}.get(
+            file.suffix
+        )
+        or mimetypes.guess_type(file.name)[0]
+        or "text/plain"
+    )
     if ctype.startswith("text/"):
         ctype += "; charset=utf-8"
-    headers = Headers([("Content-Type", ctype), ("Content-Length", str(len(body))), ("Cache-Control", "no-cache"),
-                       ("X-Content-Type-Options", "nosniff"), ("Connection", "close")])  # fmt: skip
+    headers = Headers(
+        [
+            ("Content-Type", ctype),
+            ("Content-Length", str(len(body))),
+            ("Cache-Control", "no-cache"),
+            ("X-Content-Type-Options", "nosniff"),
+            ("Connection", "close"),
+        ]
+    )
     return Response(200, "OK", headers, b"" if method == "HEAD" else body)
 
 
@@ -188,5 +202,13 @@ def guarded_connection() -> type[Any]:
     return GuardedConnection
 
 
-__all__ = ["ALLOWED_METHODS", "MAX_HEAD_BYTES", "STATIC_DIR", "answer", "check_head", "guarded_connection", "origins",
-           "static_files"]
+__all__ = [
+    "ALLOWED_METHODS",
+    "MAX_HEAD_BYTES",
+    "STATIC_DIR",
+    "answer",
+    "check_head",
+    "guarded_connection",
+    "origins",
+    "static_files",
+]

@@ -99,9 +99,13 @@ class _Client:
     in_flight: int = 0
     sent_seq: int = -1
     log_pos: int = 0
-    outbox: deque[tuple[str | None, str]] = field(default_factory=deque)  # (broadcast type or None, JSON text)
+    outbox: deque[tuple[str | None, str]] = field(
+        default_factory=deque
+    )  # (broadcast type or None, JSON text)
     drained: asyncio.Event = field(default_factory=asyncio.Event)  # set while the outbox is empty
-    jobs: dict[str, dict[str, Any] | None] = field(default_factory=dict)  # Background command -> newest waiting
+    jobs: dict[str, dict[str, Any] | None] = field(
+        default_factory=dict
+    )  # Background command -> newest waiting
     gone: bool = False
 
 
@@ -175,10 +179,15 @@ class WebServer:
             self._stopped = asyncio.Event()
             try:
                 self._server = await ws_server.serve(
-                    self._session, self.host, self.port, process_request=self._http,
-                    max_size=MAX_MESSAGE_BYTES, ping_interval=None, compression=None,
+                    self._session,
+                    self.host,
+                    self.port,
+                    process_request=self._http,
+                    max_size=MAX_MESSAGE_BYTES,
+                    ping_interval=None,
+                    compression=None,
                     create_connection=guarded_connection(),
-                )  # fmt: skip
+                )
             except OSError as exc:
                 failure.append(exc)
                 started.set()
@@ -336,7 +345,9 @@ class WebServer:
                 if client.gone:
                     break
                 self._receive(client, raw)
-                if len(client.outbox) >= REPLY_BACKLOG:  # the page is not reading its replies: stop reading it
+                if (
+                    len(client.outbox) >= REPLY_BACKLOG
+                ):  # the page is not reading its replies: stop reading it
                     await client.drained.wait()
         except Exception:  # a page that vanishes mid-message ends its session, nothing more
             pass
@@ -362,7 +373,9 @@ class WebServer:
             if reply is not None:
                 self._queue(client, reply)
             return
-        if cmd in client.jobs:  # one running for this page: this request waits, replacing any older waiting one
+        if (
+            cmd in client.jobs
+        ):  # one running for this page: this request waits, replacing any older waiting one
             client.jobs[cmd] = msg
             return
         client.jobs[cmd] = None
@@ -478,8 +491,10 @@ class WebServer:
                 dropped = max(0, behind - kept)
                 client.log_pos = self._log_total
             if behind > 0:
-                await self._send(client, json.dumps({"type": "log", "lines": lines, "dropped": dropped},
-                                                    separators=(",", ":")))  # fmt: skip
+                await self._send(
+                    client,
+                    json.dumps({"type": "log", "lines": lines, "dropped": dropped}, separators=(",", ":")),
+                )
             frame = self._frame
             if frame is not None and frame[0] > client.sent_seq and client.in_flight < MAX_IN_FLIGHT:
                 client.sent_seq = frame[0]

@@ -93,8 +93,14 @@ class Controls:
 
     def handlers(self, extra: dict[str, Any] | None = None) -> dict[str, Any]:
         """The server's command handlers for pause, resume, step, speed and select."""
-        return {"pause": self._pause, "resume": self._resume, "step": self._step, "speed": self._speed,
-                "select": self._select, **(extra or {})}  # fmt: skip
+        return {
+            "pause": self._pause,
+            "resume": self._resume,
+            "step": self._step,
+            "speed": self._speed,
+            "select": self._select,
+            **(extra or {}),
+        }
 
     @staticmethod
     def _only(msg: dict[str, Any], keys: tuple[str, ...]) -> None:
@@ -139,8 +145,12 @@ class Controls:
     def _select(self, msg: dict[str, Any]) -> dict[str, Any] | None:
         self._only(msg, ("slot",))
         slot = msg.get("slot")
-        if slot is not None and (isinstance(slot, bool) or not isinstance(slot, int) or not 0 <= slot < self.n_agents):
-            raise ClientError(f"select: 'slot' must be an agent index in 0..{self.n_agents - 1} or null, got {slot!r}")
+        if slot is not None and (
+            isinstance(slot, bool) or not isinstance(slot, int) or not 0 <= slot < self.n_agents
+        ):
+            raise ClientError(
+                f"select: 'slot' must be an agent index in 0..{self.n_agents - 1} or null, got {slot!r}"
+            )
         self.selected = slot
         return None
 
@@ -210,14 +220,31 @@ class WebViewer:
             ``env.viewer.wait_for_page()`` after the first ``reset`` to hold there.
     """
 
-    def __init__(self, *, host: str = "127.0.0.1", port: int = 0, speed: float = 0.0, title: str = "",
-                 w: int = 0, quiet: bool = False, max_fps: float = 60.0, wait: bool = False) -> None:  # fmt: skip
+    def __init__(
+        self,
+        *,
+        host: str = "127.0.0.1",
+        port: int = 0,
+        speed: float = 0.0,
+        title: str = "",
+        w: int = 0,
+        quiet: bool = False,
+        max_fps: float = 60.0,
+        wait: bool = False,
+    ) -> None:
         self.controls = Controls(speed)
         self.controls.reply = self._status
         handlers = self.controls.handlers({"select": self._select})
-        self.server = WebServer("viewer.html", host=host, port=port, title=title or "agentsim viewer",
-                                handlers=handlers, on_connect=self._hello, max_fps=max_fps,
-                                on_tick=self._flush)  # fmt: skip
+        self.server = WebServer(
+            "viewer.html",
+            host=host,
+            port=port,
+            title=title or "agentsim viewer",
+            handlers=handlers,
+            on_connect=self._hello,
+            max_fps=max_fps,
+            on_tick=self._flush,
+        )
         self.title = title
         self.w = w
         self.quiet = quiet
@@ -256,8 +283,12 @@ class WebViewer:
             if not self.quiet:
                 print(f"agentsim viewer: {url}", file=sys.stderr, flush=True)
                 if self.server.host not in ("127.0.0.1", "localhost", "::1"):
-                    print(f"agentsim viewer: WARNING: serving on {self.server.host}, reachable from other machines; "
-                          "the page has no authentication", file=sys.stderr, flush=True)  # fmt: skip
+                    print(
+                        f"agentsim viewer: WARNING: serving on {self.server.host}, reachable from other machines; "
+                        "the page has no authentication",
+                        file=sys.stderr,
+                        flush=True,
+                    )
         return self.server.url
 
     def new_episode(self, episode: int | None = None) -> None:
@@ -267,8 +298,17 @@ class WebViewer:
         self._scene = scene_message(self.world, self.scenario, self.w, title=self.title)
         self._reset_status()
         self.server.broadcast(self._scene)
-        self.server.publish_log([{"step": 0, "episode": self.episode, "kind": "episode",
-                                  "text": f"episode {self.episode} started", "slots": []}])  # fmt: skip
+        self.server.publish_log(
+            [
+                {
+                    "step": 0,
+                    "episode": self.episode,
+                    "kind": "episode",
+                    "text": f"episode {self.episode} started",
+                    "slots": [],
+                }
+            ]
+        )
         self._send_frame(None)
         if self.wait:  # the first episode only: later ones go on whether or not a page watches
             self.wait = False
@@ -280,8 +320,11 @@ class WebViewer:
         Waits in short slices so that Ctrl-C in the calling thread is seen at once.
         """
         if not self.quiet and not self.server.n_pages and self.server.url:
-            print(f"agentsim viewer: waiting for a page at {self.server.url} (open it to start)", file=sys.stderr,
-                  flush=True)  # fmt: skip
+            print(
+                f"agentsim viewer: waiting for a page at {self.server.url} (open it to start)",
+                file=sys.stderr,
+                flush=True,
+            )
         end = None if timeout is None else time.perf_counter() + timeout
         while not self.server.n_pages and not self.controls.closed:
             if end is not None and time.perf_counter() >= end:
@@ -307,7 +350,11 @@ class WebViewer:
         The simulation has been idle for a while (no hook ran), so its state holds still while it is read.
         """
         held = self._held
-        if held is not None and time.perf_counter() - self._last_hook > 2 * TICK_S and self.server.ready_pages:
+        if (
+            held is not None
+            and time.perf_counter() - self._last_hook > 2 * TICK_S
+            and self.server.ready_pages
+        ):
             self._held = None
             self._send_frame(held)
 
@@ -327,15 +374,25 @@ class WebViewer:
 
     def _status(self) -> dict[str, Any]:
         step = int(self.world.step_count[self.w]) if self.world is not None else 0
-        return {**self.controls.status(), "step": step, "episode": self.episode, "steps_per_s": round(self._rate, 1)}
+        return {
+            **self.controls.status(),
+            "step": step,
+            "episode": self.episode,
+            "steps_per_s": round(self._rate, 1),
+        }
 
     def _send_frame(self, events: StepEvents | None) -> None:
         world = self.world
         assert world is not None
         with self._frame_lock:  # the simulation's thread and the server's (_flush, _select) both send frames
             self.seq += 1
-            arrays = state_arrays(world, self.w, events, self.controls.selected,
-                                  self._why if self._why.shape[0] == world.state.n_agents else None)  # fmt: skip
+            arrays = state_arrays(
+                world,
+                self.w,
+                events,
+                self.controls.selected,
+                self._why if self._why.shape[0] == world.state.n_agents else None,
+            )
             frame = pack_frame(self.seq, int(world.step_count[self.w]), self.episode, arrays)
             self.server.publish_frame(self.seq, frame)
 
