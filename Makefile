@@ -53,7 +53,7 @@ fuzz: $(STAMP)
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check agentsim_env policies train tests benchmarks
-	$(VENV)/bin/ruff format --check agentsim_env policies train tests benchmarks examples docs
+	$(VENV)/bin/ruff format --check agentsim_env policies train tests benchmarks examples $(wildcard docs/*.py)
 	$(VENV)/bin/mypy agentsim_env policies train
 
 clean:
