@@ -110,11 +110,12 @@ def _fill_run(p: argparse.ArgumentParser) -> None:
 def _fill_evaluate(p: argparse.ArgumentParser) -> None:
     from agentsim_env.evaluation.runner import TELEPORT, available_strategies
 
-    names = [n for n in available_strategies() if n != TELEPORT]
-    listed = textwrap.fill(", ".join(names), 100, initial_indent="  ", subsequent_indent="  ")
+    listed = textwrap.fill(
+        ", ".join(available_strategies()), 100, initial_indent="  ", subsequent_indent="  "
+    )
     p.epilog = (
-        f"release strategies (--strategies):\n{listed}\n  ({TELEPORT} is always added as the reference)\n\n"
-        + (p.epilog or "")
+        f"release strategies (--strategies):\n{listed}\n  (the {TELEPORT} reference, placed without flying, is "
+        f"always added;\n  the flown {TELEPORT} strategy is labelled {TELEPORT}_flown)\n\n" + (p.epilog or "")
     )
 
 

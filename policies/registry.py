@@ -3,14 +3,45 @@
 from __future__ import annotations
 
 import importlib
+from collections.abc import Iterator, Mapping
 from typing import Any
 
 from agentsim_env.policies.base import Policy
-from agentsim_env.policies.release.targets import STRATEGIES
+from agentsim_env.policies.release.registry import strategy_class, strategy_names
+
+#: A baseline: ``"module:Class"`` or ``("module:Class", kwargs for for_env)``.
+Entry = str | tuple[str, dict[str, Any]]
+
+
+class ReleaseBaselines(Mapping[str, Entry]):
+    """The ``uav_release`` baselines: every registered release strategy, read from the registry at each call.
+
+    ``B5_cvt`` (density-weighted CVT) comes first: the scenario's default baseline. A deprecated former
+    strategy name is found too (``strategy_class`` warns) but not listed.
+    """
+
+    DEFAULT = "B5_cvt"
+    POLICY = "agentsim_env.policies.release.policy:ReleasePolicy"
+
+    def __getitem__(self, name: str) -> Entry:
+        try:
+            cls = strategy_class(name)
+        except ValueError:
+            raise KeyError(name) from None
+        return (self.POLICY, {"strategy": cls.name})
+
+    def __iter__(self) -> Iterator[str]:
+        names = strategy_names()
+        head = [self.DEFAULT] if self.DEFAULT in names else []
+        return iter(head + [n for n in names if n != self.DEFAULT])
+
+    def __len__(self) -> int:
+        return len(strategy_names())
+
 
 # scenario -> {policy name: "module:Class" or ("module:Class", kwargs for for_env)}; the first entry is the
 # scenario's default baseline.
-BASELINES: dict[str, dict[str, str | tuple[str, dict[str, Any]]]] = {
+BASELINES: dict[str, Mapping[str, Entry]] = {
     "navigation": {
         "go_to_goal": "agentsim_env.policies.navigation:GoToGoalPolicy",
         "random": "agentsim_env.policies.random:RandomPolicy",
@@ -24,11 +55,7 @@ BASELINES: dict[str, dict[str, str | tuple[str, dict[str, Any]]]] = {
         "random": "agentsim_env.policies.random:RandomPolicy",
     },
 }
-# B5 (density-weighted CVT) first: the scenario's default baseline
-BASELINES["uav_release"] = {
-    name: ("agentsim_env.policies.release.policy:ReleasePolicy", {"strategy": name})
-    for name in ["B5_cvt"] + [s for s in STRATEGIES if s != "B5_cvt"]
-}
+BASELINES["uav_release"] = ReleaseBaselines()
 
 
 def baseline_names(scenario: str) -> list[str]:
@@ -36,6 +63,18 @@ def baseline_names(scenario: str) -> list[str]:
     if scenario not in BASELINES:
         raise ValueError(f"no scripted baselines for scenario {scenario!r}; known: {sorted(BASELINES)}")
     return list(BASELINES[scenario])
+
+
+def baseline_name(scenario: str, name: str) -> str:
+    """The current name of baseline ``name`` of ``scenario``.
+
+    A deprecated former name (``B8_oracle``) maps to its current one with a ``DeprecationWarning``; a current
+    name, and a name that is not a baseline of ``scenario``, are returned unchanged (the caller reports those).
+    """
+    entry = BASELINES.get(scenario, {}).get(name)
+    if isinstance(entry, tuple) and isinstance(entry[1].get("strategy"), str):
+        return str(entry[1]["strategy"])
+    return name
 
 
 def make_policy(scenario: str, env: Any, name: str | None = None) -> Policy:
@@ -81,7 +120,7 @@ def resolve_policy(scenario: str, policy: str | None, config: dict[str, Any]) ->
         if trained_on != scenario:
             raise ValueError(f"--policy {name!r} was trained on {trained_on!r}, not {scenario!r}")
         return name, {**env_config, **config}
-    if name not in names:
+    if name not in BASELINES[scenario]:
         raise ValueError(
             f"--policy must be one of {names} for {scenario!r} or a trained model "
             f"(a folder with model.zip, or a .zip), got {name!r}"

@@ -182,7 +182,7 @@ def test_bad_strategy_message_lists_the_allowed_names(
 ) -> None:
     assert main(["evaluate", "--strategies", "B9_nope", "--out", str(tmp_path / "o"), "--quiet"]) == 2
     err = capsys.readouterr().err
-    assert "B0_uniform" in err and "B8_oracle" in err and "'all'" in err
+    assert "B0_uniform" in err and "B8_teleport" in err and "'all'" in err
 
 
 def test_bad_zone_file_exits_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -244,9 +244,13 @@ def test_zone_labels_and_strategy_expansion(tmp_path: Path) -> None:
     assert [s.label for s in srcs] == ["tiny", "default"] and srcs[1].zones.n_sensors == 150
     assert runner.resolve_strategies(["all"]) == sorted(runner.available_strategies())
     assert runner.resolve_strategies(["all"])[0] == "B0_uniform" and len(runner.available_strategies()) == 10
-    assert runner.resolve_strategies(["B2_rings", TELEPORT, "B2_rings"]) == ["B2_rings"]
+    # the B8_teleport strategy is flown like the others (the reference row is added anyway), under its own label
+    assert runner.resolve_strategies(["B2_rings", TELEPORT, "B2_rings"]) == ["B2_rings", TELEPORT]
+    assert runner.strategy_labels(["B2_rings", TELEPORT]) == ["B2_rings", f"{TELEPORT}_flown"]
+    with pytest.warns(DeprecationWarning, match="B8_oracle"):
+        assert runner.resolve_strategies(["B8_oracle"]) == [TELEPORT]
     with pytest.raises(ValueError, match="at least one"):
-        runner.resolve_strategies([TELEPORT])
+        runner.resolve_strategies([])
 
 
 def _fake_env(pos: np.ndarray) -> SimpleNamespace:
@@ -375,7 +379,7 @@ def test_default_zone_file_every_strategy(tmp_path: Path) -> None:
         == 0
     )
     _, rows = _read_csv(out / "runs.csv")
-    assert {r["strategy"] for r in rows} == {*runner.available_strategies(), TELEPORT}
+    assert {r["strategy"] for r in rows} == {*runner.strategy_labels(runner.available_strategies()), TELEPORT}
     flown = [r for r in rows if r["strategy"] != TELEPORT]
     assert all(float(r["completed"]) == 1.0 and float(r["sensors_landed"]) == 150.0 for r in flown)
     best = max(rows, key=lambda r: float(r["score"]))

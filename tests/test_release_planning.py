@@ -18,7 +18,7 @@ from agentsim_env.policies.release.planning import (
     sector_quota,
     split_sectors,
 )
-from agentsim_env.policies.release.targets import STRATEGIES, make_plan
+from agentsim_env.policies.release.registry import make_plan, strategy_names
 from agentsim_env.wsn.profiles import RadialProfile
 
 R = 100.0
@@ -40,7 +40,7 @@ def ballistic():
 
 
 # ------------------------------------------------------------------------------------- counts / zone
-@pytest.mark.parametrize("name", sorted(STRATEGIES))
+@pytest.mark.parametrize("name", sorted(strategy_names()))
 def test_each_strategy_yields_n_targets_inside_the_zone(name):
     plan = _plan(name)
     assert plan.n_releases == 200

@@ -59,6 +59,7 @@ import numpy as np
 
 from agentsim_env.evaluation.mission import MISSION_KEYS, fly_mission, sensor_rows
 from agentsim_env.evaluation.strategies import (
+    current_name,
     is_model_token,
     model_env,
     model_label,
@@ -197,7 +198,11 @@ def available_strategies() -> list[str]:
 
 
 def resolve_strategies(names: Iterable[str]) -> list[str]:
-    """Expand ``"all"`` (every registered strategy, by name) and check names; ``TELEPORT`` is dropped.
+    """Expand ``"all"`` (every registered strategy, by name) and check names.
+
+    The strategy named ``TELEPORT`` is flown like every other one (its table label is ``TELEPORT + "_flown"``);
+    the ``TELEPORT`` reference row (placed, not flown) is always added by ``run_grid``. A deprecated former
+    name is replaced by its current name (with a ``DeprecationWarning``).
 
     Args:
         names: Strategy names, trained model folders (paths), or ``["all"]``.
@@ -214,8 +219,8 @@ def resolve_strategies(names: Iterable[str]) -> list[str]:
     for name in names:
         picked = sorted(allowed) if name == "all" else [name]  # B0 ... B8, whatever the registry order
         for n in picked:
-            if n == TELEPORT:
-                continue  # always evaluated
+            if n not in allowed and not is_model_token(n):
+                n = current_name(SCENARIO, n)
             if n not in allowed and is_model_token(n):
                 model_env(n, SCENARIO)  # validates the folder
                 if n not in out:
@@ -225,7 +230,7 @@ def resolve_strategies(names: Iterable[str]) -> list[str]:
                 names = ", ".join(allowed)
                 raise ValueError(
                     f"unknown strategy {n!r}; allowed: 'all', {names} or a trained model folder (a path holding "
-                    f"model.zip and config.json) ({TELEPORT} is always added)"
+                    f"model.zip and config.json) (the {TELEPORT} reference, not flown, is always added)"
                 )
             if n not in out:
                 out.append(n)
@@ -242,11 +247,14 @@ def _is_model(strategy: str) -> bool:
 def strategy_labels(strategies: Sequence[str]) -> list[str]:
     """Table names of resolved strategies: registered names as they are, model folders by folder name.
 
-    Labels are made unique (``name_2`` ...) when folder names repeat or match a registered name.
+    Labels are made unique (``name_2`` ...) when folder names repeat or match a registered name; the flown
+    ``TELEPORT`` strategy is ``TELEPORT + "_flown"`` (``TELEPORT`` names the reference row, placed not flown).
     """
     out: list[str] = []
     for s in strategies:
         label = model_label(s) if _is_model(s) else s
+        if label == TELEPORT:
+            label = f"{TELEPORT}_flown"
         base, i = label, 1
         while label in out or label == TELEPORT:
             i += 1

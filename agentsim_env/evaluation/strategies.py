@@ -1,8 +1,9 @@
 """Where the evaluation finds its release strategies: a registry of ``"module:attribute"`` references.
 
-The evaluation package does not import the policies package. It needs three callables, a policy factory
+The evaluation package does not import the policies package. It needs four callables, a policy factory
 (``make_policy(scenario, env, name) -> Policy``), the list of strategy names of a scenario
-(``baseline_names(scenario) -> list[str]``) and the reader of a trained model's config
+(``baseline_names(scenario) -> list[str]``), the current name of a possibly deprecated strategy name
+(``baseline_name(scenario, name) -> str``) and the reader of a trained model's config
 (``model_env_config(path) -> (scenario, env_config)``); all are named here as ``"module:attribute"`` strings
 and loaded with importlib on first use.
 
@@ -22,11 +23,13 @@ from pathlib import Path
 from typing import Any
 
 __all__ = [
+    "CURRENT_NAME",
     "MODEL_ENV",
     "NAMES",
     "POLICY_FACTORY",
     "NameLister",
     "PolicyFactory",
+    "current_name",
     "is_model_token",
     "load",
     "model_env",
@@ -44,6 +47,8 @@ NameLister = Callable[[str], list[str]]
 POLICY_FACTORY = "agentsim_env.policies.registry:make_policy"
 #: Default reference of the name lister.
 NAMES = "agentsim_env.policies.registry:baseline_names"
+#: Default reference of ``baseline_name(scenario, name)``: a deprecated name's current name (warns).
+CURRENT_NAME = "agentsim_env.policies.registry:baseline_name"
 #: Default reference of the trained-model config reader, ``model_env_config(path) -> (scenario, env)``.
 MODEL_ENV = "agentsim_env.policies.learned:model_env_config"
 
@@ -86,6 +91,20 @@ def strategy_names(scenario: str) -> list[str]:
     """
     lister: NameLister = load(NAMES)
     return list(lister(scenario))
+
+
+def current_name(scenario: str, name: str) -> str:
+    """The current name of strategy ``name`` of ``scenario``.
+
+    Args:
+        scenario: Scenario name.
+        name: A strategy name, possibly a deprecated former one (mapped with a ``DeprecationWarning``).
+
+    Returns:
+        The current name; a name that is not a strategy of ``scenario`` comes back unchanged.
+    """
+    resolver: Callable[[str, str], str] = load(CURRENT_NAME)
+    return resolver(scenario, name)
 
 
 def is_model_token(token: str) -> bool:

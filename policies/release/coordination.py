@@ -55,7 +55,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from agentsim_env.policies.release.planning import assemble_plan, plan_tour
-from agentsim_env.policies.release.targets import make_plan
+from agentsim_env.policies.release.strategy import ReleaseStrategy
 from agentsim_env.scenarios.uav_zones import Zone, ZoneSet
 
 __all__ = [
@@ -299,7 +299,7 @@ def plan_mission(
 
 
 def piece_tasks(
-    strategy: str,
+    strategy: ReleaseStrategy,
     zone: Zone,
     pc: Piece,
     start: ArrayLike,
@@ -308,18 +308,16 @@ def piece_tasks(
     seed: int,
     fall: Any,
     wind: Any,
-    options: dict,
     rim_margin: float,
 ) -> list[tuple]:
-    """Tasks ``(kind, -1, xy, aim, heading, zone)`` of one piece, planned by ``make_plan`` from ``start``.
+    """Tasks ``(kind, -1, xy, aim, heading, zone)`` of one piece, planned by ``strategy.plan`` from ``start``.
 
-    B8's teleport plan becomes hover releases over its targets (tour from ``start``); targets within
-    ``rim_margin`` of the rim are pulled in (``rim_pull``), their release points moving with them (over
+    A teleport plan (not flyable) becomes hover releases over its targets (tour from ``start``); targets
+    within ``rim_margin`` of the rim are pulled in (``rim_pull``), their release points moving with them (over
     flat ground the landing offset does not depend on where the release happens).
     """
     rng = np.random.default_rng([seed, pc.pid])
-    plan = make_plan(
-        strategy,
+    plan = strategy.plan(
         zone.centre,
         zone.radial_profile(),
         zone.n_sensors,
@@ -330,12 +328,11 @@ def piece_tasks(
         start,
         fall,
         wind,
-        options,
     )
     if plan.mode == "teleport":
         tgt = plan.release_xy[plan_tour(plan.release_xy, start)]
         plan = assemble_plan(
-            strategy,
+            strategy.name,
             "hover",
             tgt,
             zone.centre,
@@ -346,7 +343,7 @@ def piece_tasks(
             0.0,
             fall,
             wind,
-            fall_dt=float(options.get("fall_dt", 0.01)),
+            fall_dt=strategy.fall_dt,
         )
     kind = HOVER if plan.mode == "hover" else FLY
     shift = rim_pull(plan.release_xy, zone.centre, zone.radius, rim_margin)

@@ -49,7 +49,7 @@ class ReleasePlan:
     """What one UAV does over one zone (or one sector of it).
 
     Attributes:
-        strategy: Strategy name (a key of ``targets.STRATEGIES``).
+        strategy: Strategy name (a registered name, ``registry.strategy_names()``).
         mode: ``"waypoints"`` (fly through each release point, release within tolerance), ``"hover"``
             (stop at each waypoint and release the sensors assigned to it) or ``"teleport"`` (oracle
             placement, no flight).

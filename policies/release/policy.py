@@ -10,12 +10,12 @@ own state comes from its observation (``self`` part, ``(lo, hi)`` the altitude b
     x = (s[0] + 1) / 2 * width     y = (s[1] + 1) / 2 * height     z = lo + (s[2] + 1) / 2 * (hi - lo)
     velocity = s[3:6] * max_speed  payload left = round(s[8] * payload)
 
-Planning (``coordination.split_work`` / ``plan_mission``): each UAV plans its pieces with ``make_plan``
-(wedge, the zone's full ``N``, release speed, mean-wind compensation) from where the previous one ended,
-working at its layer ``h_jk = clip(zone altitude (or default_altitude) + j * layer_spacing, lo, hi)``.
-Targets within ``rim_margin`` of a rim are pulled in (the release point moves with them). B8
-("teleport", not flyable) is flown as hover releases over its targets at ``lo + j * layer_spacing``; the
-true zero-error oracle is evaluated separately by placing the points.
+Planning (``coordination.split_work`` / ``plan_mission``): each UAV plans its pieces with the strategy's
+``plan`` (wedge, the zone's full ``N``, release speed, mean-wind compensation) from where the previous one
+ended, working at its layer (``ReleaseStrategy.layer_altitudes``: by default ``h_jk = clip(zone altitude (or
+default_altitude) + j * layer_spacing, lo, hi)``). Targets within ``rim_margin`` of a rim are pulled in (the
+release point moves with them). A teleport plan (B8, not flyable) is flown as hover releases over its targets
+(B8 at ``lo + j * layer_spacing``); the true zero-error oracle is evaluated separately by placing the points.
 
 Altitude: a UAV climbs in place at take-off, flies between zones at its transit layer (above every working
 layer), changes altitude only outside zones it is not working, and enters its zone slowly until it is at
@@ -61,23 +61,10 @@ from agentsim_env.policies.release.coordination import (
     split_work,
     target_tasks,
 )
-from agentsim_env.policies.release.targets import STRATEGIES
+from agentsim_env.policies.release.registry import make_strategy
+from agentsim_env.policies.release.strategy import ReleaseStrategy
 
-__all__ = ["DEFAULT_RELEASE_SPEED", "ReleasePolicy"]
-
-#: Release speed (m/s) per strategy: slow on tours with sharp turns, faster on smooth patterns; 0 = hover.
-DEFAULT_RELEASE_SPEED = {
-    "B0_uniform": 4.0,
-    "B1_inverse_cdf": 4.0,
-    "B1LD_sunflower": 4.0,
-    "B2_rings": 5.0,
-    "B3_spiral": 5.0,
-    "B4_boustrophedon": 5.0,
-    "B5_cvt": 4.0,
-    "B6_drop_clusters": 0.0,
-    "B7_ergodic": 4.0,
-    "B8_oracle": 0.0,
-}
+__all__ = ["ReleasePolicy"]
 _N_SPEED, _N_HEAD = 31, 36  # throw table grid: 0.5 m/s and 10 degree steps (linear interpolation)
 _HOVER_TOL, _ARRIVE, _MAX_RETRIES, _BRAKE = 0.5, 1.5, 3, 0.6  # m, m, count, fraction of max_accel
 _VZ = 4.0  # largest climb / descent rate commanded, m/s
@@ -110,16 +97,16 @@ def _forecast(wind: Any) -> Any:
 
 
 class ReleasePolicy:
-    """Scripted B0-B8 release strategy for every UAV of a ``uav_release`` env (Dict observations).
+    """A registered release strategy flown by every UAV of a ``uav_release`` env (Dict observations).
 
     Args:
         env: A ``uav_release`` ParallelEnv (``action_mode="velocity"``, dict observations).
-        strategy: A key of ``STRATEGIES``.
+        strategy: A registered strategy name (``registry.strategy_names()``).
         cruise_speed: Transit speed in m/s (capped at the scenario's ``max_speed``).
-        release_speed: Speed at fly-through releases; ``None``: ``DEFAULT_RELEASE_SPEED[strategy]``.
+        release_speed: Speed at fly-through releases; ``None``: the strategy's ``release_speed``.
         coordinate: Exchange CLAIM/RELEASED/DONE/HELLO messages and reclaim lost UAVs' work (``None``: when the
             env has comms; ``True`` without comms is an error).
-        options: Strategy options passed to ``make_plan``.
+        options: Strategy options (fields of the strategy class; ``fall_dt`` defaults to 0.02 s here).
         hello_every: Steps of silence after which a UAV sends a heartbeat.
         lost_after: Steps of silence (without DONE) after which a UAV is considered lost.
         release_tol: Largest predicted landing miss (m) accepted at a fly-through release.
@@ -129,6 +116,8 @@ class ReleasePolicy:
             half the radius), so that the landing scatter keeps them inside.
 
     Attributes:
+        strategy: The strategy's registered name.
+        release_strategy: The strategy with its options.
         book: Every planned target (``TargetBook``), set at the first ``act`` of an episode.
         mission_complete: Every live UAV is idle and (coordinating) knows every other one is done or lost;
             evaluation loops stop there (the scenario itself runs on while spare sensors are on board).
@@ -150,8 +139,8 @@ class ReleasePolicy:
         layer_spacing: float = 2.0,
         rim_margin: float = 1.0,
     ) -> None:
-        if strategy not in STRATEGIES:
-            raise ValueError(f"strategy must be one of {tuple(STRATEGIES)}, got {strategy!r}")
+        # RK4 at 0.02 s: sub-millimetre, half the cost
+        plan_with: ReleaseStrategy = make_strategy(strategy, **{"fall_dt": 0.02, **(options or {})})
         sc = env.scenario
         if getattr(sc, "name", None) != "uav_release":
             raise ValueError(f"env must be a 'uav_release' env, got scenario {getattr(sc, 'name', None)!r}")
@@ -190,15 +179,11 @@ class ReleasePolicy:
             raise ValueError(
                 f"comms.payload_dim must be >= {PAYLOAD_DIM} with coordinate=True, got {c.comms.payload_dim}"
             )
-        self.env, self.strategy, self.coordinate = env, strategy, bool(coordinate)
-        self.options = {"fall_dt": 0.02, **(options or {})}  # RK4 at 0.02 s: sub-millimetre, half the cost
+        self.env, self.coordinate = env, bool(coordinate)
+        self.strategy, self.release_strategy = plan_with.name, plan_with
         self.cruise = min(float(cruise_speed), c.body.max_speed)
-        speed = DEFAULT_RELEASE_SPEED[strategy] if release_speed is None else float(release_speed)
-        self.hover = (
-            speed == 0.0
-            or strategy in ("B6_drop_clusters", "B8_oracle")
-            or self.options.get("mode") == "hover"
-        )
+        speed = plan_with.release_speed if release_speed is None else float(release_speed)
+        self.hover = speed == 0.0 or plan_with.hovers
         self.release_speed = 0.0 if self.hover else speed
         self.hello_every, self.lost_after, self.tol = hello_every, lost_after, float(release_tol)
         self.default_altitude, self.layer = float(default_altitude), float(layer_spacing)
@@ -226,9 +211,7 @@ class ReleasePolicy:
         start = np.tile(np.asarray(zs.base if zs.base is not None else (10.0, 10.0)), (n, 1))
         start[slots] = pos[:, :2]
         zone_alt = np.array([z.altitude or self.default_altitude for z in zs.zones])
-        self._alts = np.clip(zone_alt[None, :] + self.layer * np.arange(n)[:, None], lo, hi)
-        if self.strategy == "B8_oracle":
-            self._alts[:] = np.clip(lo + self.layer * np.arange(n), lo, hi)[:, None]
+        self._alts = self.release_strategy.layer_altitudes(zone_alt, n, self.layer, (lo, hi))
         # transit layers above every working layer, one per UAV
         self._transit = np.clip(self._alts.max() + self.layer * (1 + np.arange(n)), lo, hi)
         self._zc, self._zr = zs.centres(), zs.radii()
@@ -274,7 +257,7 @@ class ReleasePolicy:
     def _piece_tasks(self, pc: Piece, start: np.ndarray) -> list[tuple]:
         z = self.env.scenario.zones.zones[pc.zone]
         return piece_tasks(
-            self.strategy,
+            self.release_strategy,
             z,
             pc,
             start,
@@ -283,7 +266,6 @@ class ReleasePolicy:
             self._seed,
             self.env.scenario.fall,
             self._wind,
-            self.options,
             self.rim_margin,
         )
 

@@ -1,7 +1,8 @@
 """Target and route generators for the scripted release baselines B0-B8 (domain reference 5.2).
 
 Every generator works in offsets from the zone centre and returns landing targets already in visiting
-order; ``make_plan`` then turns them into a compensated ``ReleasePlan`` (``planning.assemble_plan``).
+order; the strategies of ``baselines`` call them from their ``pattern`` and ``ReleaseStrategy.plan`` turns
+the targets into a compensated ``ReleasePlan`` (``planning.assemble_plan``).
 
 Sectors (domain 5.3). ``n_sensors`` is always the zone total ``N``. With a wedge:
 
@@ -24,19 +25,16 @@ from __future__ import annotations
 
 import math
 import warnings
-from collections.abc import Mapping
 
 import numpy as np
 from numba import njit
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import NDArray
 from scipy.cluster.vq import kmeans2
 from scipy.optimize import brentq
 from scipy.spatial import cKDTree
 
 from agentsim_env.policies.release.planning import (
     TWO_PI,
-    ReleasePlan,
-    assemble_plan,
     in_sector,
     normalise_sector,
     plan_tour,
@@ -44,36 +42,27 @@ from agentsim_env.policies.release.planning import (
 )
 from agentsim_env.wsn.profiles import RadialProfile
 
-__all__ = ["STRATEGIES", "cvt_points", "make_plan", "spiral_points"]
+__all__ = [
+    "GOLDEN_ANGLE",
+    "cvt_points",
+    "drop_clusters",
+    "ergodic_points",
+    "lane_points",
+    "orient",
+    "polar",
+    "random_wedge_points",
+    "ring_points",
+    "serpentine",
+    "spiral_points",
+    "tour",
+]
 
 GOLDEN_ANGLE = math.pi * (3.0 - math.sqrt(5.0))
 
-STRATEGIES: dict[str, str] = {
-    "B0_uniform": "uniform random targets r = R sqrt(u) (ignores the profile), NN + 2-opt tour",
-    "B1_inverse_cdf": "profile-distributed random targets r = F^-1(u), NN + 2-opt tour",
-    "B1LD_sunflower": "sunflower low-discrepancy targets following the profile, NN + 2-opt tour",
-    "B2_rings": "concentric rings at CDF midpoints, equal mass per ring, releases evenly spaced on circles",
-    "B3_spiral": "Archimedean spiral with variable pitch Delta(r) = s(r) = c / sqrt(rho(r)), N releases",
-    "B4_boustrophedon": "lawnmower lanes over the box, release each time accumulated rho*Delta*ds gains 1",
-    "B5_cvt": "density-weighted CVT (Lloyd on a grid, phi = rho^2) from the sunflower set, NN + 2-opt tour",
-    "B6_drop_clusters": "k-means drop points on B1 targets; hover and release each cluster's sensors",
-    "B7_ergodic": "spectral multiscale coverage trajectory for phi = rho, constant-interval in-zone releases",
-    "B8_oracle": "teleport placement of the B1-LD (or B5) points: no flight, zero landing error",
-}
-
-_COMMON_OPTS = frozenset({"mode", "min_leg", "lead_in", "fall_dt", "two_opt"})
-_OPTS: dict[str, frozenset[str]] = {
-    "B2_rings": frozenset({"n_rings", "ring_radii"}),
-    "B4_boustrophedon": frozenset({"lane_spacing"}),
-    "B5_cvt": frozenset({"lloyd_iters", "grid"}),
-    "B6_drop_clusters": frozenset({"n_drops"}),
-    "B7_ergodic": frozenset({"modes", "spacing", "substeps", "turn_radius"}),
-    "B8_oracle": frozenset({"base", "lloyd_iters", "grid"}),
-}
-
 
 # ---------------------------------------------------------------------------------------- helpers
-def _polar(r: NDArray, theta: NDArray) -> NDArray:
+def polar(r: NDArray, theta: NDArray) -> NDArray:
+    """Offsets ``(n, 2)`` of the polar coordinates ``(r, theta)``."""
     return np.stack([r * np.cos(theta), r * np.sin(theta)], axis=1) if r.size else np.zeros((0, 2))
 
 
@@ -82,25 +71,81 @@ def _wedge_angles(n: int, sector: tuple[float, float] | None, rng: np.random.Gen
     return t0 + width * rng.random(n)
 
 
-def _tour(pts: NDArray, start: NDArray, two_opt: bool) -> NDArray:
+def tour(pts: NDArray, start: NDArray, two_opt: bool) -> NDArray:
+    """The points in nearest-neighbour tour order from ``start`` (improved by 2-opt when ``two_opt``)."""
     return pts[plan_tour(pts, start, two_opt)]
 
 
-def _orient(pts: NDArray, start: NDArray) -> NDArray:
+def orient(pts: NDArray, start: NDArray) -> NDArray:
     """Fly a fixed sequence from whichever end is nearer the start (positions are unchanged)."""
     if pts.shape[0] > 1 and np.hypot(*(pts[-1] - start)) < np.hypot(*(pts[0] - start)):
         return pts[::-1].copy()
     return pts
 
 
-def _serpentine(pts: NDArray, group: NDArray, along: NDArray, start: NDArray) -> NDArray:
+def serpentine(pts: NDArray, group: NDArray, along: NDArray, start: NDArray) -> NDArray:
     """Order by group (arcs, lanes, turns), alternating direction along each group; nearer end first."""
     if pts.shape[0] == 0:
         return pts
     _, rank = np.unique(group, return_inverse=True)
     sign = np.where(rank % 2 == 0, 1.0, -1.0)
     order = np.lexsort((sign * along, rank))
-    return _orient(pts[order], start)
+    return orient(pts[order], start)
+
+
+def random_wedge_points(
+    profile: RadialProfile,
+    n: int,
+    sector: tuple[float, float] | None,
+    rng: np.random.Generator,
+    follow_profile: bool = True,
+) -> NDArray:
+    """``sector_quota(n, sector)`` random offsets in the wedge (B0, B1, B6).
+
+    Args:
+        profile: Radial profile.
+        n: Sensors of the whole zone.
+        sector: Wedge or ``None``.
+        rng: Source of the radii, then the angles.
+        follow_profile: Radii ``F^-1(u)`` (profile-distributed); else ``R sqrt(u)`` (uniform over the disc).
+
+    Returns:
+        ``(quota, 2)`` offsets in draw order.
+    """
+    nq = sector_quota(n, sector)
+    u = rng.random(nq)
+    r = np.asarray(profile.inverse_cdf(u)) if follow_profile else float(profile.radius) * np.sqrt(u)
+    return polar(r, _wedge_angles(nq, sector, rng))
+
+
+def drop_clusters(
+    pts: NDArray, n_drops: int, start: NDArray, two_opt: bool, rng: np.random.Generator
+) -> tuple[NDArray, NDArray, NDArray]:
+    """k-means drop points of ``pts`` (B6), toured from ``start``; empty clusters are dropped.
+
+    Args:
+        pts: ``(m, 2)`` targets (``m >= 1``).
+        n_drops: Clusters wanted (at most ``m`` are made).
+        start: Where the tour starts.
+        two_opt: Improve the tour with 2-opt.
+        rng: Generator of the k-means initialisation.
+
+    Returns:
+        ``(targets (m, 2), hover group of each target (m,), sensors per drop (d,))``: every target moved to
+        its drop point, in tour order.
+    """
+    m = pts.shape[0]
+    with warnings.catch_warnings():  # an empty cluster is simply dropped below
+        warnings.simplefilter("ignore")
+        try:
+            cent, lab = kmeans2(pts, min(n_drops, m), iter=20, minit="++", rng=rng)
+        except TypeError:  # scipy < 1.15 names the generator argument ``seed``
+            cent, lab = kmeans2(pts, min(n_drops, m), iter=20, minit="++", seed=rng)
+    counts = np.bincount(lab, minlength=cent.shape[0])
+    cent, counts = cent[counts > 0], counts[counts > 0]
+    order = plan_tour(cent, start, two_opt)
+    groups = np.repeat(np.arange(order.size), counts[order])
+    return np.repeat(cent[order], counts[order], axis=0), groups, counts[order]
 
 
 # ---------------------------------------------------------------------------------------- patterns
@@ -134,7 +179,7 @@ def _ring_layout(profile: RadialProfile, n: int, n_rings: int | None, radii: str
     return at[1::2], counts
 
 
-def _rings(
+def ring_points(
     profile: RadialProfile, n: int, n_rings: int | None, radii: str
 ) -> tuple[NDArray, NDArray, NDArray]:
     """Concentric rings; returns offsets, ring index and angle of each point (ring by ring, CCW)."""
@@ -146,7 +191,7 @@ def _rings(
     ring = np.repeat(np.arange(r_j.size), counts)
     k = np.arange(n) - np.repeat(np.cumsum(counts) - counts, counts)
     theta = ring * GOLDEN_ANGLE + TWO_PI * k / counts[ring]  # golden phase: no radial alignment
-    return _polar(r_j[ring], theta), ring, theta
+    return polar(r_j[ring], theta), ring, theta
 
 
 def spiral_points(profile: RadialProfile, n: int, grid: int = 20000) -> tuple[NDArray, NDArray]:
@@ -180,10 +225,10 @@ def spiral_points(profile: RadialProfile, n: int, grid: int = 20000) -> tuple[ND
     theta = np.concatenate([[0.0], np.cumsum(TWO_PI * sq / c * dr)])
     levels = np.minimum(np.arange(n) + 0.5, cum[-1])
     th = np.interp(levels, cum, theta)
-    return _polar(np.interp(levels, cum, r), th), th
+    return polar(np.interp(levels, cum, r), th), th
 
 
-def _lanes(profile: RadialProfile, n: int, spacing: float | None, samples: int = 2048) -> NDArray:
+def lane_points(profile: RadialProfile, n: int, spacing: float | None, samples: int = 2048) -> NDArray:
     """Boustrophedon lanes (along x) over the zone box; release at accumulated mass ``k - 1/2``."""
     big_r = float(profile.radius)
     if n == 0:
@@ -297,18 +342,41 @@ def _smc_kernel(x0, y0, lx, ly, phik, lam, inv_h, step, max_turn, sub, n_out, n_
     return out[:cnt]
 
 
-def _ergodic(profile: RadialProfile, n: int, sector, start: NDArray, opts: Mapping) -> NDArray:
-    """B7: SMC trajectory for ``phi = rho`` restricted to the wedge, over the wedge's bounding box."""
+def ergodic_points(
+    profile: RadialProfile,
+    n: int,
+    sector: tuple[float, float] | None,
+    start: NDArray,
+    modes: int | None = None,
+    spacing: float | None = None,
+    substeps: int = 4,
+    turn_radius: float | None = None,
+) -> NDArray:
+    """B7: SMC trajectory for ``phi = rho`` restricted to the wedge, over the wedge's bounding box.
+
+    Args:
+        profile: Radial profile.
+        n: Releases to place in the wedge.
+        sector: Wedge or ``None``.
+        start: UAV start, offset from the centre.
+        modes: Cosine modes per axis (default ``clip(ceil(sqrt(n)), 8, 64)``).
+        spacing: Trajectory length between releases (default: the area per release's side).
+        substeps: Integration steps per release interval.
+        turn_radius: Smallest turn radius (default ``spacing``).
+
+    Returns:
+        ``(m, 2)`` release offsets in trajectory order (``m <= n``).
+    """
     if n == 0:
         return np.zeros((0, 2))
     big_r = float(profile.radius)
     t0, width = normalise_sector(sector)
     ang = [t0, t0 + width] + [q * math.pi / 2 for q in range(4) if (q * math.pi / 2 - t0) % TWO_PI < width]
-    corner = np.vstack([[0.0, 0.0], _polar(np.full(len(ang), big_r), np.asarray(ang))])
+    corner = np.vstack([[0.0, 0.0], polar(np.full(len(ang), big_r), np.asarray(ang))])
     lo, hi = corner.min(axis=0), corner.max(axis=0)
     hi = np.maximum(hi, lo + 1e-6 * big_r)
     lx, ly = hi - lo
-    kk = int(opts.get("modes") or np.clip(math.ceil(math.sqrt(n)), 8, 64))
+    kk = int(modes or np.clip(math.ceil(math.sqrt(n)), 8, 64))
     g = 200
     xs, ys = lo[0] + (np.arange(g) + 0.5) * lx / g, lo[1] + (np.arange(g) + 0.5) * ly / g
     px, py = np.meshgrid(xs, ys, indexing="ij")
@@ -324,9 +392,9 @@ def _ergodic(profile: RadialProfile, n: int, sector, start: NDArray, opts: Mappi
     cmy = np.cos(np.outer(ys - lo[1], k) * math.pi / ly)
     phik = cmx.T @ phi @ cmy * (lx / g) * (ly / g) * inv_h
     lam = (1.0 + np.add.outer((k / lx) ** 2, (k / ly) ** 2) * big_r**2) ** -1.5
-    spacing = float(opts.get("spacing") or math.sqrt(0.5 * width * big_r**2 / n))
-    sub = int(opts.get("substeps") or 4)
-    turn_r = float(opts.get("turn_radius") or spacing)
+    spacing = float(spacing or math.sqrt(0.5 * width * big_r**2 / n))
+    sub = int(substeps or 4)
+    turn_r = float(turn_radius or spacing)
     if spacing <= 0 or sub < 1 or kk < 2 or turn_r <= 0:
         raise ValueError("options 'spacing', 'turn_radius' must be > 0, 'substeps' >= 1 and 'modes' >= 2")
     st = np.clip(start, lo, hi) - lo
@@ -348,154 +416,4 @@ def _ergodic(profile: RadialProfile, n: int, sector, start: NDArray, opts: Mappi
         big_r,
         t0,
         width,
-    )
-
-
-# ---------------------------------------------------------------------------------------- entry point
-def make_plan(
-    strategy: str,
-    centre: ArrayLike,
-    profile: RadialProfile,
-    n_sensors: int,
-    altitude: float,
-    speed: float,
-    rng: np.random.Generator,
-    sector: tuple[float, float] | None = None,
-    start_xy: ArrayLike | None = None,
-    fall=None,
-    wind_mean=None,
-    options: Mapping | None = None,
-) -> ReleasePlan:
-    """Plan one UAV's releases over one zone (or one wedge of it) with a B0-B8 strategy.
-
-    Args:
-        strategy: A key of ``STRATEGIES``.
-        centre: Zone centre ``(2,)`` in world metres.
-        profile: Radial density profile (``RadialProfile``); its ``radius`` is the zone radius.
-        n_sensors: Sensors for the whole zone (``N``); see the module docstring for wedges.
-        altitude: Release height above flat ground (> 0).
-        speed: Cruise speed (>= 0), also the release speed of fly-through plans.
-        rng: Source of all randomness (B0, B1, B6).
-        sector: ``(theta0, theta1)`` wedge for this UAV, or ``None`` for the whole disc.
-        start_xy: UAV start; default: the rim at the wedge's mid-angle (angle 0 for the whole disc).
-        fall: ``FallParams`` for release-point compensation, or ``None`` (release over the target).
-        wind_mean: Mean wind ``(2,)`` (or callable of height) used by the compensation.
-        options: Extra knobs. Common: ``mode`` (``"hover"`` turns a fly-through plan into hovers),
-            ``min_leg`` (2 m), ``lead_in`` (10 m), ``fall_dt`` (0.01 s), ``two_opt`` (True). B2
-            ``n_rings``, ``ring_radii`` (``"cdf"`` or ``"isotropic"``); B4 ``lane_spacing``; B5/B8
-            ``lloyd_iters`` (30), ``grid``; B6 ``n_drops`` (N/10); B7 ``modes``, ``spacing``,
-            ``substeps``, ``turn_radius``; B8 ``base`` (``"B1LD_sunflower"`` or ``"B5_cvt"``).
-
-    Returns:
-        The ``ReleasePlan``.
-
-    Raises:
-        ValueError: On an unknown strategy or option, or invalid numbers.
-    """
-    if strategy not in STRATEGIES:
-        raise ValueError(f"strategy must be one of {tuple(STRATEGIES)}, got {strategy!r}")
-    opts = dict(options or {})
-    allowed = _COMMON_OPTS | _OPTS.get(strategy, frozenset())
-    if set(opts) - allowed:
-        raise ValueError(f"options for {strategy} must be among {sorted(allowed)}, got {sorted(opts)}")
-    if isinstance(n_sensors, bool) or not isinstance(n_sensors, (int, np.integer)) or n_sensors < 0:
-        raise ValueError(f"n_sensors must be an integer >= 0, got {n_sensors!r}")
-    if not (math.isfinite(altitude) and altitude > 0):
-        raise ValueError(f"altitude must be a finite number > 0, got {altitude!r}")
-    if not (math.isfinite(speed) and speed >= 0):
-        raise ValueError(f"speed must be a finite number >= 0, got {speed!r}")
-    if not isinstance(rng, np.random.Generator):
-        raise ValueError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
-    c = np.asarray(centre, dtype=np.float64).reshape(2)
-    big_r = float(profile.radius)
-    t0, width = normalise_sector(sector)
-    n = int(n_sensors)
-    if start_xy is None:
-        a = t0 + 0.5 * width if sector is not None else 0.0
-        start_xy = c + big_r * np.array([math.cos(a), math.sin(a)])
-    start = np.asarray(start_xy, dtype=np.float64).reshape(2) - c
-    two_opt = bool(opts.get("two_opt", True))
-    mode = "waypoints"
-    groups = None
-    info: dict = {}
-
-    if strategy in ("B0_uniform", "B1_inverse_cdf", "B6_drop_clusters"):
-        nq = sector_quota(n, sector)
-        u = rng.random(nq)
-        r = big_r * np.sqrt(u) if strategy == "B0_uniform" else np.asarray(profile.inverse_cdf(u))
-        pts = _polar(r, _wedge_angles(nq, sector, rng))
-        if strategy != "B6_drop_clusters":
-            pts = _tour(pts, start, two_opt)
-        elif nq:
-            m = int(opts.get("n_drops") or max(1, round(nq / 10)))
-            if m < 1:
-                raise ValueError(f"options['n_drops'] must be >= 1, got {opts.get('n_drops')!r}")
-            with warnings.catch_warnings():  # an empty cluster is simply dropped below
-                warnings.simplefilter("ignore")
-                try:
-                    cent, lab = kmeans2(pts, min(m, nq), iter=20, minit="++", rng=rng)
-                except TypeError:  # scipy < 1.15 names the generator argument ``seed``
-                    cent, lab = kmeans2(pts, min(m, nq), iter=20, minit="++", seed=rng)
-            counts = np.bincount(lab, minlength=cent.shape[0])
-            cent, counts = cent[counts > 0], counts[counts > 0]
-            order = plan_tour(cent, start, two_opt)
-            pts = np.repeat(cent[order], counts[order], axis=0)
-            groups = np.repeat(np.arange(order.size), counts[order])
-            mode = "hover"
-            info["drop_counts"] = counts[order]
-    elif strategy in ("B1LD_sunflower", "B5_cvt", "B8_oracle"):
-        base = "B5_cvt" if strategy == "B5_cvt" else opts.get("base", "B1LD_sunflower")
-        if base == "B5_cvt":
-            pts = cvt_points(profile, n, int(opts.get("lloyd_iters", 30)), opts.get("grid"))
-        elif base == "B1LD_sunflower":
-            pts = np.asarray(profile.low_discrepancy(n), dtype=np.float64)
-        else:
-            raise ValueError(f"options['base'] must be 'B1LD_sunflower' or 'B5_cvt', got {base!r}")
-        pts = pts[in_sector(pts, sector)]
-        if strategy == "B8_oracle":
-            mode = "teleport"
-        else:
-            pts = _tour(pts, start, two_opt)
-    elif strategy == "B2_rings":
-        pts, ring, theta = _rings(profile, n, opts.get("n_rings"), opts.get("ring_radii", "cdf"))
-        keep = in_sector(pts, sector)
-        rel = np.mod(theta - t0, TWO_PI)
-        # Outer ring first when starting outside: groups sorted by decreasing radius.
-        pts = _serpentine(pts[keep], -ring[keep], rel[keep], start)
-        info["n_rings"] = int(np.unique(ring).size)
-    elif strategy == "B3_spiral":
-        pts, th = spiral_points(profile, n)
-        keep = in_sector(pts, sector)
-        if sector is None:
-            pts = _orient(pts, start)
-        else:
-            turn = np.floor((th[keep] - t0) / TWO_PI)
-            pts = _serpentine(pts[keep], -turn, th[keep], start)
-    elif strategy == "B4_boustrophedon":
-        pts = _lanes(profile, n, opts.get("lane_spacing"))
-        pts = _orient(pts[in_sector(pts, sector)], start)
-    else:  # B7_ergodic
-        pts = _ergodic(profile, sector_quota(n, sector), sector, start, opts)
-
-    if opts.get("mode", mode) == "hover" and mode == "waypoints":
-        mode = "hover"
-    elif opts.get("mode", mode) != mode:
-        raise ValueError(f"options['mode'] for {strategy} must be {mode!r} or 'hover', got {opts['mode']!r}")
-    return assemble_plan(
-        strategy,
-        mode,
-        pts + c,
-        c,
-        big_r,
-        sector,
-        start + c,
-        altitude,
-        speed,
-        fall,
-        wind_mean,
-        hover_groups=groups,
-        min_leg=float(opts.get("min_leg", 2.0)),
-        lead_in=float(opts.get("lead_in", 10.0)),
-        fall_dt=float(opts.get("fall_dt", 0.01)),
-        info=info,
     )
