@@ -302,12 +302,8 @@ def test_importing_the_package_loads_no_scenario_env_or_simulator() -> None:
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     loaded, world = out.splitlines()
-    assert eval(loaded) == [  # noqa: S307 (our own output)
-        "agentsim_env",
-        "agentsim_env._compile_notice",
-        "agentsim_env._numba_cache",
-        "agentsim_env.core",
-        "agentsim_env.core.plugins",
-        "agentsim_env.env",
-    ]
+    heavy = ("agentsim_env.scenarios", "agentsim_env.sim", "agentsim_env.policies", "agentsim_env.env.")
+    modules = eval(loaded)  # noqa: S307 (our own output)
+    assert "agentsim_env.core.plugins" in modules
+    assert not [m for m in modules if m.startswith(heavy)], modules
     assert world == "True"
