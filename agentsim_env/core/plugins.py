@@ -24,7 +24,7 @@ from __future__ import annotations
 import importlib
 import re
 import warnings
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
 from typing import Any
 
 __all__ = [
@@ -255,7 +255,7 @@ class Registry:
         """Whether ``name`` is known (without loading it)."""
         return name in self._registered or name in self._builtins or name in self._eps()
 
-    def __iter__(self) -> Any:
+    def __iter__(self) -> Iterator[str]:
         """The names, sorted."""
         return iter(self.names())
 
