@@ -13,15 +13,27 @@ Example:
 PettingZoo's constructor names: ``agentsim_env.parallel_env(name, **config)`` (the same as ``make``) and
 ``agentsim_env.env(name, **config)`` (the AEC env); per scenario, ``agentsim_env.scenarios.<name>_v<version>``
 has ``parallel_env``, ``env`` and ``raw_env``. Gymnasium ids: see ``agentsim_env.gymnasium_envs``.
+
+Extending from your own package (``docs/extending.md``): ``register_scenario``, ``register_policy`` and
+``register_strategy`` (or entry points in the groups ``agentsim_env.scenarios``, ``agentsim_env.policies`` and
+``agentsim_env.strategies``); ``Scenario`` and ``World`` are the classes a scenario is written with. The classes
+(``Scenario``, ``World``, ``BatchedEnv``) load on first access.
 """
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from agentsim_env import env  # the env package, callable: env(name, **config) is the AEC env
 from agentsim_env._compile_notice import install as _install_compile_notice
 from agentsim_env._numba_cache import ensure_numba_cache as _ensure_numba_cache
+from agentsim_env.core.plugins import register_policy, register_scenario, register_strategy
+
+if TYPE_CHECKING:
+    from agentsim_env.env.parallel_env import AgentSimParallelEnv
+    from agentsim_env.env.vector import BatchedEnv
+    from agentsim_env.scenarios.base import Scenario
+    from agentsim_env.sim import World
 
 _ensure_numba_cache()  # before any kernel module: numba picks a function's cache directory when decorating it
 _install_compile_notice()  # one stderr line when a kernel compiles instead of loading from the cache
@@ -36,7 +48,7 @@ def list_scenarios() -> list[str]:
     return _list()
 
 
-def make(name: str, **config: Any) -> Any:
+def make(name: str, **config: Any) -> AgentSimParallelEnv:
     """Build the ParallelEnv of scenario ``name``.
 
     Args:
@@ -56,9 +68,45 @@ def make(name: str, **config: Any) -> Any:
     return build_parallel_env(name, **config)
 
 
-def parallel_env(name: str, **config: Any) -> Any:
+def parallel_env(name: str, **config: Any) -> AgentSimParallelEnv:
     """Alias of :func:`make` (PettingZoo naming)."""
     return make(name, **config)
 
 
-__all__ = ["__version__", "env", "list_scenarios", "make", "parallel_env"]
+# classes exported on first access, so that importing the package loads no scenario, simulator or env module
+_LAZY = {
+    "BatchedEnv": "agentsim_env.env.vector",
+    "Scenario": "agentsim_env.scenarios.base",
+    "World": "agentsim_env.sim",
+}
+
+
+def __getattr__(name: str) -> Any:
+    """The lazily exported classes (``BatchedEnv``, ``Scenario``, ``World``), imported on first access."""
+    if name in _LAZY:
+        import importlib
+
+        value = getattr(importlib.import_module(_LAZY[name]), name)
+        globals()[name] = value  # later accesses skip this function
+        return value
+    raise AttributeError(f"module 'agentsim_env' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    """The module's names, the lazy classes included."""
+    return sorted({*globals(), *_LAZY})
+
+
+__all__ = [
+    "BatchedEnv",
+    "Scenario",
+    "World",
+    "__version__",
+    "env",
+    "list_scenarios",
+    "make",
+    "parallel_env",
+    "register_policy",
+    "register_scenario",
+    "register_strategy",
+]

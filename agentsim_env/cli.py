@@ -96,12 +96,12 @@ def _fill_main(p: argparse.ArgumentParser) -> None:
 
 def _fill_run(p: argparse.ArgumentParser) -> None:
     import agentsim_env
-    from agentsim_env.policies.registry import BASELINES
+    from agentsim_env.policies.registry import scenario_policies
 
     names = agentsim_env.list_scenarios()
     _action(p, "scenario").help = f"one of: {', '.join(names)}"
     lines = [
-        _wrap(n, [f"{b} (default)" if i == 0 else b for i, b in enumerate(BASELINES.get(n, []))] or ["-"])
+        _wrap(n, [f"{b} (default)" if i == 0 else b for i, b in enumerate(scenario_policies(n))] or ["-"])
         for n in names
     ]
     p.epilog = "baselines per scenario (--policy):\n" + "\n".join(lines) + "\n\n" + (p.epilog or "")

@@ -12,19 +12,19 @@ process builds its own copy:
 | ``random`` (navigation, rendezvous)     | natively; draws keyed by (seed, step, slot)               |
 | a trained model                         | natively (one forward pass; torch runs one thread)        |
 | uav_release strategies                  | through dicts (they plan over the whole fleet and read the env they drive: an env is required) |
+| a plug-in policy (``register_policy``)  | natively with ``act_rows``, else through dicts (``DictRows``) |
 | any other ``Policy`` object             | through dicts (``DictRows``, the slow path)               |
 """
 
 from __future__ import annotations
 
-import importlib
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 from agentsim_env.env.rollout import ArrayPolicy, DictRows
 from agentsim_env.policies.learned import is_model_path, load_policy
-from agentsim_env.policies.registry import BASELINES, baseline_names, make_policy
+from agentsim_env.policies.registry import baseline_names, make_policy, policy_class
 from agentsim_env.scenarios.registry import make_scenario
 
 
@@ -42,13 +42,6 @@ class PolicyEnv:
     def __init__(self, scenario: str, config: Mapping[str, Any]) -> None:
         self.scenario = make_scenario(scenario, **dict(config))
         self.possible_agents = self.scenario.agent_names()
-
-
-def _class_of(scenario: str, name: str) -> Any:
-    entry = BASELINES[scenario][name]
-    path = entry if isinstance(entry, str) else entry[0]
-    module, cls = path.split(":")
-    return getattr(importlib.import_module(module), cls)
 
 
 def _rows(policy: Any, env: Any) -> ArrayPolicy:
@@ -103,7 +96,7 @@ def build_policy(
     if name not in names:
         raise ValueError(f"policy must be {_allowed(scenario)}; got {name!r}")
     if env is None:
-        if not hasattr(_class_of(scenario, name), "act_rows"):
+        if not hasattr(policy_class(scenario, name), "act_rows"):
             raise ValueError(
                 f"policy {name!r} of {scenario!r} reads the env it drives: pass env= to build it"
             )

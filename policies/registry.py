@@ -1,4 +1,11 @@
-"""Scripted baselines per scenario, found by name so the CLI and tests need no scenario-specific code."""
+"""Scripted baselines per scenario, found by name so the CLI and tests need no scenario-specific code.
+
+A scenario's policies are its built-in baselines (``BASELINES``, the default first) followed by the policies of
+``agentsim_env.core.plugins.POLICIES`` that serve it (added with ``agentsim_env.register_policy(name, cls,
+scenario=...)`` or by an installed plug-in's entry point in the group ``agentsim_env.policies``, whose class
+names its scenarios in a class attribute ``scenarios = ("my_scenario",)``), sorted by name. A policy is built
+with its class's ``for_env(env, **options)`` (the ``Policy`` protocol). ``docs/extending.md`` has an example.
+"""
 
 from __future__ import annotations
 
@@ -6,6 +13,7 @@ import importlib
 from collections.abc import Iterator, Mapping
 from typing import Any
 
+from agentsim_env.core.plugins import POLICIES, policy_scenarios
 from agentsim_env.policies.base import Policy
 from agentsim_env.policies.release.registry import strategy_class, strategy_names
 
@@ -58,11 +66,55 @@ BASELINES: dict[str, Mapping[str, Entry]] = {
 BASELINES["uav_release"] = ReleaseBaselines()
 
 
+def plugin_policies(scenario: str) -> list[str]:
+    """The names of the policies of ``POLICIES`` (registered or installed) that serve ``scenario``, sorted.
+
+    Raises:
+        ValueError: A plug-in policy that does not load, names no scenario, or repeats the name of a built-in
+            baseline of ``scenario``.
+    """
+    names = [n for n in POLICIES.names() if scenario in policy_scenarios(n)]
+    for name in names:
+        if name in BASELINES.get(scenario, {}):
+            raise ValueError(
+                f"policy {name!r} ({POLICIES.origin(name)}) repeats the name of a built-in baseline of "
+                f"{scenario!r} ({list(BASELINES[scenario])}); register it under another name"
+            )
+    return names
+
+
+def scenario_policies(scenario: str) -> list[str]:
+    """Every policy of ``scenario``: its built-in baselines (default first), then plug-in policies; may be empty."""
+    return list(BASELINES.get(scenario, {})) + plugin_policies(scenario)
+
+
 def baseline_names(scenario: str) -> list[str]:
-    """Baselines available for ``scenario`` (default first)."""
-    if scenario not in BASELINES:
-        raise ValueError(f"no scripted baselines for scenario {scenario!r}; known: {sorted(BASELINES)}")
-    return list(BASELINES[scenario])
+    """Baselines available for ``scenario`` (default first), plug-in policies serving it included.
+
+    Raises:
+        ValueError: A scenario without any policy (the message lists the scenarios that have some).
+    """
+    names = scenario_policies(scenario)
+    if not names:
+        known = sorted({*BASELINES, *(s for n in POLICIES.names() for s in policy_scenarios(n))})
+        raise ValueError(f"no scripted baselines for scenario {scenario!r}; known: {known}")
+    return names
+
+
+def policy_class(scenario: str, name: str) -> Any:
+    """The class of policy ``name`` of ``scenario`` (a built-in baseline or a plug-in), imported.
+
+    Raises:
+        ValueError: ``name`` is no policy of ``scenario`` (the message lists them).
+    """
+    builtin = BASELINES.get(scenario, {})
+    if name in builtin:
+        entry = builtin[name]
+        module, cls = (entry if isinstance(entry, str) else entry[0]).split(":")
+        return getattr(importlib.import_module(module), cls)
+    if name not in plugin_policies(scenario):
+        raise ValueError(f"policy must be one of {baseline_names(scenario)} for {scenario!r}, got {name!r}")
+    return POLICIES.get(name)
 
 
 def baseline_name(scenario: str, name: str) -> str:
@@ -89,12 +141,11 @@ def make_policy(scenario: str, env: Any, name: str | None = None) -> Policy:
         return load_policy(name, env)
     names = baseline_names(scenario)
     name = name or names[0]
-    if name not in BASELINES[scenario]:
+    if name not in names:
         raise ValueError(f"policy must be one of {names} for {scenario!r}, got {name!r}")
-    entry = BASELINES[scenario][name]
-    path, kwargs = (entry, {}) if isinstance(entry, str) else entry
-    module, cls = path.split(":")
-    return getattr(importlib.import_module(module), cls).for_env(env, **kwargs)  # type: ignore[no-any-return]
+    entry = BASELINES.get(scenario, {}).get(name)
+    kwargs = entry[1] if isinstance(entry, tuple) else {}
+    return policy_class(scenario, name).for_env(env, **kwargs)  # type: ignore[no-any-return]
 
 
 def resolve_policy(scenario: str, policy: str | None, config: dict[str, Any]) -> tuple[str, dict[str, Any]]:

@@ -1,37 +1,63 @@
-"""Scenario registry: scenarios are registered by name and tests iterate over it."""
+"""Scenario registry: scenarios are found by name (``agentsim_env.core.plugins.SCENARIOS``) and tests iterate
+over it.
+
+The built-in scenarios, those added with ``agentsim_env.register_scenario`` and those of installed plug-ins
+(entry points of the group ``agentsim_env.scenarios``) are listed alike; modules are imported on first use so
+``import agentsim_env`` stays cheap. ``docs/extending.md`` shows how to add one.
+"""
 
 from __future__ import annotations
 
-import importlib
+import warnings
 from typing import Any
 
+from agentsim_env.core.plugins import SCENARIOS, check_name
 from agentsim_env.core.validation import build_config
 from agentsim_env.scenarios.base import Scenario
 
-# name -> module path; modules are imported on first use so `import agentsim_env` stays cheap.
-_SCENARIOS: dict[str, str] = {
-    "navigation": "agentsim_env.scenarios.navigation",
-    "uav_release": "agentsim_env.scenarios.uav_release",
-    "relay": "agentsim_env.scenarios.relay",
-    "rendezvous": "agentsim_env.scenarios.rendezvous",
-}
-
 
 def register(name: str, module: str) -> None:
-    """Register a scenario module (it must define ``Scenario`` subclass ``SCENARIO``)."""
-    _SCENARIOS[name] = module
+    """Register a scenario module that defines ``SCENARIO`` (deprecated: use ``register_scenario``).
+
+    Kept for one release: ``register(name, "pkg.module")`` is ``register_scenario(name, "pkg.module:SCENARIO",
+    replace=True)``.
+
+    Raises:
+        ValueError: A bad name or module path.
+    """
+    warnings.warn(
+        "agentsim_env.scenarios.registry.register(name, 'module') is deprecated and will be removed in the next "
+        "release; use agentsim_env.register_scenario(name, 'module:Class') or an entry point "
+        "(docs/extending.md)",
+        DeprecationWarning,
+        stacklevel=2,
+    )
+    SCENARIOS.register(check_name("scenario", name), f"{module}:SCENARIO", replace=True)
 
 
 def list_scenarios() -> list[str]:
-    """Names of every registered scenario, sorted."""
-    return sorted(_SCENARIOS)
+    """Names of every scenario (built-in, registered and installed plug-ins), sorted."""
+    return SCENARIOS.names()
 
 
 def scenario_class(name: str) -> type[Scenario]:
-    """The Scenario class registered under ``name``."""
-    if name not in _SCENARIOS:
+    """The Scenario class registered under ``name``.
+
+    Raises:
+        ValueError: An unknown name (the message lists the known ones), a reference that does not load, an
+            object that is no ``Scenario`` subclass, or a class whose ``name`` differs from ``name``.
+    """
+    if name not in SCENARIOS:
         raise ValueError(f"unknown scenario {name!r}; registered scenarios: {list_scenarios()}")
-    return importlib.import_module(_SCENARIOS[name]).SCENARIO  # type: ignore[no-any-return]
+    cls = SCENARIOS.get(name)
+    if not (isinstance(cls, type) and issubclass(cls, Scenario)):
+        raise ValueError(f"scenario {name!r} ({SCENARIOS.origin(name)}) is not a Scenario subclass: {cls!r}")
+    if getattr(cls, "name", None) != name:
+        raise ValueError(
+            f"scenario {name!r} ({SCENARIOS.origin(name)}) is the class {cls.__qualname__} whose name is "
+            f"{getattr(cls, 'name', None)!r}; register it under its own name"
+        )
+    return cls
 
 
 def make_scenario(name: str, **config: Any) -> Scenario:
