@@ -10,7 +10,8 @@ A scenario is one small file: a config extending ``ScenarioConfig``, a per-slot 
 - ``observe(world)``: the scenario's own observation parts.
 
 Derived, never kept in step by hand: the observation parts (shapes from what ``observe`` returns on a probe
-world, bounds from ``obs_bounds``), the sensor parts (each sensor with an ``obs_part``), the comms parts
+world, bounds from ``obs_bounds`` or the sensor declaring the part, as the proximity sensor declares ``lidar``),
+the sensor parts (each sensor with an ``obs_part``), the comms parts
 (``inbox``, ``comms`` observations and the ``comm`` action, added when the config has comms), the action parts
 (``motion`` from ``action_mode`` plus ``extra_actions``), the global state and its size (the base's per-agent
 block plus ``state_extra``). ``apply_actions`` (stage 1) has a default that decodes ``motion``; a scenario with
@@ -38,7 +39,7 @@ from agentsim_env.motion import MotionLimits, decode_primitive
 from agentsim_env.motion.actions import decode_velocity_unchecked
 from agentsim_env.scenarios.config import ScenarioConfig
 from agentsim_env.scenarios.rewards import combine_partials
-from agentsim_env.sensors.proximity import ProximityConfig
+from agentsim_env.sensors.proximity import ProximityConfig, ProximitySensor
 from agentsim_env.sim.world import StepEvents, StepScores, World
 
 ConfigT = TypeVar("ConfigT", bound=ScenarioConfig)
@@ -111,8 +112,8 @@ class Scenario(ABC, Generic[ConfigT]):
     agent_prefix: ClassVar[str] = "agent"
     #: Configs the conformance suite runs (each also in flat obs/action format); keep them small and fast.
     test_configs: ClassVar[tuple[dict[str, Any], ...]] = ({},)
-    #: Bounds of the scenario's observation parts (default (-1, 1)).
-    obs_bounds: ClassVar[dict[str, tuple[float, float]]] = {"lidar": (0.0, 1.0)}
+    #: Bounds of the scenario's observation parts (default (-1, 1); a sensor's declared part has its own).
+    obs_bounds: ClassVar[dict[str, tuple[float, float]]] = {}
     #: Scenario action parts after ``motion`` (name -> size), each a box in [-1, 1].
     extra_actions: ClassVar[dict[str, int]] = {}
     #: Info keys that count events (an evaluation sums them over an episode, per agent).
@@ -325,6 +326,8 @@ class Scenario(ABC, Generic[ConfigT]):
         for s in world.sensors:
             if s.name == part and s.obs_part is not None:
                 return s.obs_part.low, s.obs_part.high
+            if isinstance(s, ProximitySensor) and s.part_name == part:  # placed by the scenario itself
+                return s.part.low, s.part.high
         return self.obs_bounds.get(part, (-1.0, 1.0))
 
     def obs_parts(self) -> dict[str, Part]:
