@@ -19,9 +19,9 @@ from agentsim_env.sensors import (
     ProximityConfig,
     ProximitySensor,
     ScanResult,
-    scan_reference,
 )
 from agentsim_env.sensors.proximity import lidar_observation, write_lidar_row
+from tests.reference.proximity import scan_reference
 
 BOUNDS = (0.0, 40.0, 0.0, 40.0)
 
