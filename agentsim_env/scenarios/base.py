@@ -309,8 +309,15 @@ class Scenario(ABC, Generic[ConfigT]):
             acting = np.ones(world.state.n_slots, dtype=bool)
             parts = {}
             for k, v in obs.items():
+                shape = tuple(int(d) for d in v.shape[1:])
+                declared = _declared_part(world, k)
+                if declared is not None and declared.shape != shape:
+                    raise ValueError(
+                        f"{self.name}: observation part {k!r} has shape {shape}, its sensor declares "
+                        f"{declared.shape}"
+                    )
                 lo, hi = self._bounds(world, k)
-                parts[k] = Part(tuple(int(d) for d in v.shape[1:]), lo, hi)
+                parts[k] = Part(shape, lo, hi)
             res = run_step(
                 self,
                 world,
@@ -323,11 +330,9 @@ class Scenario(ABC, Generic[ConfigT]):
     def _bounds(self, world: World, part: str) -> tuple[float, float]:
         if part in ("inbox", "comms"):
             return (-INBOX_CLIP, INBOX_CLIP) if part == "inbox" else (0.0, 1.0)
-        for s in world.sensors:
-            if s.name == part and s.obs_part is not None:
-                return s.obs_part.low, s.obs_part.high
-            if isinstance(s, ProximitySensor) and s.part_name == part:  # placed by the scenario itself
-                return s.part.low, s.part.high
+        declared = _declared_part(world, part)
+        if declared is not None:
+            return declared.low, declared.high
         return self.obs_bounds.get(part, (-1.0, 1.0))
 
     def obs_parts(self) -> dict[str, Part]:
@@ -411,6 +416,17 @@ class Scenario(ABC, Generic[ConfigT]):
         )
         extra = np.asarray(self.state_extra(world, w), dtype=np.float64).ravel()
         return np.clip(np.concatenate([per.ravel(), extra]), -10.0, 10.0).astype(np.float32)
+
+
+def _declared_part(world: World, part: str) -> Part | None:
+    """The observation part a sensor of ``world`` declares under the name ``part``, or ``None``: a sensor's
+    ``obs_part`` (added by the base), or the proximity sensor's ``lidar`` (placed by the scenario)."""
+    for s in world.sensors:
+        if s.name == part and s.obs_part is not None:
+            return s.obs_part
+        if isinstance(s, ProximitySensor) and s.part_name == part:
+            return s.part
+    return None
 
 
 def comms_width(world: World) -> int:
