@@ -10,7 +10,7 @@ from agentsim_env.motion.state import CIRCULAR, LINEAR, PARABOLIC, PATH, VELOCIT
 
 
 def clip_box_reference(pos: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> None:
-    """Plain numpy statement of :func:`clip_box` ."""
+    """Plain numpy statement of :func:`agentsim_env.motion.integrate.clip_box`."""
     for a in range(3):
         np.clip(pos[:, a], lo[a], hi[a], out=pos[:, a])
 
