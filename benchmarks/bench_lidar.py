@@ -15,7 +15,9 @@ import os
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")  # before numba is imported: one core, as documented
 
 import argparse  # noqa: E402
+import sys  # noqa: E402
 import time  # noqa: E402
+from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 from scipy.spatial import cKDTree  # noqa: E402
@@ -35,7 +37,9 @@ from agentsim_env.sensors.proximity import (  # noqa: E402
     ProximitySensor,
     ScanResult,
 )
-from agentsim_env.sensors.proximity_reference import _ref_t, scan_reference  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository root: the tests' references
+from tests.reference.proximity import _ref_t, scan_reference  # noqa: E402
 
 RANGE, RADIUS, CELL = 10.0, 0.5, 5.0
 

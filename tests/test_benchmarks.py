@@ -225,7 +225,8 @@ def test_run_all_finds_benchmarks_with_main() -> None:
 @given(st.integers(0, 2**32 - 1))
 @settings(max_examples=40, deadline=None)
 def test_compose_rewards_kernel_equals_numpy_reference(seed: int) -> None:
-    from agentsim_env.scenarios.rewards import RewardConfig, compose_rewards, compose_rewards_reference
+    from agentsim_env.scenarios.rewards import RewardConfig, compose_rewards
+    from tests.reference.rewards import compose_rewards_reference
 
     rng = np.random.default_rng(seed)
     s, b, g = int(rng.integers(0, 40)), int(rng.integers(1, 4)), int(rng.integers(1, 4))

@@ -7,16 +7,15 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agentsim_env.env.batch_kernels import (
-    finish_step,
+from agentsim_env.env.batch_kernels import finish_step, prepare_actions, scatter_part
+from agentsim_env.env.buffers import Recycled
+from agentsim_env.motion.integrate import clip_box
+from tests.reference.batch_kernels import (
     finish_step_reference,
-    prepare_actions,
     prepare_actions_reference,
-    scatter_part,
     scatter_part_reference,
 )
-from agentsim_env.env.buffers import Recycled
-from agentsim_env.motion.integrate import clip_box, clip_box_reference
+from tests.reference.motion import clip_box_reference
 
 SPECIAL = np.array([-0.0, 0.0, -1.0, 1.0, -1.5, 1.5, 1e300, -1e300, np.nan, np.inf, -np.inf])
 

@@ -31,7 +31,6 @@ from agentsim_env.motion import (
     decode_primitive,
     decode_velocity,
     integrate,
-    integrate_reference,
     selector_action,
     set_circular,
     set_hold,
@@ -40,6 +39,7 @@ from agentsim_env.motion import (
     set_path,
     set_velocity,
 )
+from tests.reference.motion import integrate_reference
 
 DT = 0.1
 LIMITS = MotionLimits(

@@ -19,9 +19,9 @@ from agentsim_env.payloads import (
     compensated_release_xy,
     fall_time_vertical_drag,
     predict_landing,
-    reference_fall,
     vacuum_landing,
 )
+from tests.reference.payloads import reference_fall
 
 CUBE = FallParams()  # 100 g, 6 cm cube, C_d 1.05
 BOX = FallParams(mass=0.25, area=0.08**2)

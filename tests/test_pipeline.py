@@ -7,10 +7,11 @@ import numpy as np
 import pytest
 
 import agentsim_env
-from agentsim_env.core.pipeline import Sensor, Subsystem
+from agentsim_env.core.pipeline import Part, Sensor, Subsystem
 from agentsim_env.env.vector import BatchedEnv
 from agentsim_env.scenarios.base import Scenario
-from agentsim_env.scenarios.registry import list_scenarios, scenario_class
+from agentsim_env.scenarios.registry import list_scenarios, make_scenario, scenario_class
+from agentsim_env.sensors.proximity import ProximitySensor
 from agentsim_env.sim import StepEvents, World
 
 
@@ -144,3 +145,27 @@ def test_a_world_draws_nothing_before_its_reset() -> None:
     world = uav.build(1)
     with pytest.raises(ValueError, match="reset"):  # release scatter
         world.payloads.release(0, 0, [10.0, 10.0, 20.0], [0.0, 0.0, 0.0], 0.0)
+
+
+@pytest.mark.parametrize("name", list_scenarios())
+def test_the_lidar_part_is_the_one_the_proximity_sensor_declares(name: str) -> None:
+    scenario = make_scenario(name, **scenario_class(name).test_configs[0])
+    world = scenario.build(1)
+    sensors = [s for s in world.sensors if isinstance(s, ProximitySensor)]
+    parts = scenario.obs_parts()
+    assert ("lidar" in parts) == bool(sensors), name
+    if sensors:
+        assert parts["lidar"] == sensors[0].part == Part((scenario.lidar.n_rays, 2), 0.0, 1.0)
+
+
+def test_a_lidar_part_of_another_shape_than_declared_is_refused() -> None:
+    from agentsim_env.scenarios.rendezvous import Rendezvous
+
+    class HalfLidar(Rendezvous):
+        def observe(self, world: World) -> dict[str, np.ndarray]:
+            out = super().observe(world)
+            out["lidar"] = out["lidar"][:, ::2]
+            return out
+
+    with pytest.raises(ValueError, match="'lidar' has shape"):
+        HalfLidar(Rendezvous.config_cls()).obs_parts()

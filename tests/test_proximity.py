@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import numba as nb
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from agentsim_env.core.pipeline import Part
 from agentsim_env.core.scene import BOX, CYLINDER, SPHERE, Scene
 from agentsim_env.core.spatial import GridSpec, build_grid, build_object_grid
 from agentsim_env.sensors import (
@@ -17,8 +19,9 @@ from agentsim_env.sensors import (
     ProximityConfig,
     ProximitySensor,
     ScanResult,
-    scan_reference,
 )
+from agentsim_env.sensors.proximity import lidar_observation, write_lidar_row
+from tests.reference.proximity import scan_reference
 
 BOUNDS = (0.0, 40.0, 0.0, 40.0)
 
@@ -393,3 +396,38 @@ def test_a_scan_sees_changes_of_arrays_it_had_to_convert() -> None:
     near = scan()
     pos[1, 0] = 6.0
     assert scan() > near
+
+
+@nb.njit(cache=False)
+def _rows_with_writer(distance, hit_kind, rows, out, col):  # type: ignore[no-untyped-def]
+    for r in range(rows.shape[0]):
+        write_lidar_row(distance, hit_kind, rows[r], out, r, col)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_lidar_part_is_declared_and_written_the_same_two_ways(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    sensor = ProximitySensor(ProximityConfig(n_azimuth=5, elevations_deg=(0.0, -30.0)))
+    s, k = 7, sensor.n_rays
+    scan = ScanResult(
+        rng.random((s, k)).astype(np.float32),
+        rng.integers(HIT_NONE, HIT_GROUND + 1, (s, k)).astype(np.int8),
+        np.full((s, k), -1, dtype=np.int32),
+    )
+    scan.distance[0, :2] = (0.0, 1.0)
+    assert (sensor.part_name, sensor.part) == ("lidar", Part((k, 2), 0.0, 1.0))
+    got = sensor.observe(scan)
+    assert got.dtype == np.float32 and got.shape == (s, *sensor.part.shape)
+    # the statement the scenarios wrote before the sensor owned the part
+    want = np.stack([scan.distance, scan.hit_kind / 3.0], axis=-1).astype(np.float32)
+    np.testing.assert_array_equal(got.view(np.uint32), want.view(np.uint32))
+    np.testing.assert_array_equal(lidar_observation(scan).view(np.uint32), want.view(np.uint32))
+    assert got.min() >= sensor.part.low and got.max() <= sensor.part.high
+    # flat rows: the part at column 3 of rows holding other columns, for some slots in another order
+    rows = np.array([4, 0, 6, 2], dtype=np.int64)
+    out = np.full((rows.shape[0], 3 + 2 * k + 2), -7.0, dtype=np.float32)
+    _rows_with_writer(scan.distance, scan.hit_kind, rows, out, 3)
+    np.testing.assert_array_equal(
+        out[:, 3 : 3 + 2 * k].view(np.uint32), want[rows].reshape(4, -1).view(np.uint32)
+    )
+    assert (out[:, :3] == -7.0).all() and (out[:, 3 + 2 * k :] == -7.0).all()

@@ -17,11 +17,11 @@ from agentsim_env.scenarios.rewards import (
     RewardConfig,
     combine_partials,
     compose_rewards,
-    compose_rewards_reference,
     group_mean,
     group_means,
     task_partials,
 )
+from tests.reference.rewards import compose_rewards_reference
 
 SCENARIOS: dict[str, dict[str, Any]] = {
     "navigation": {

@@ -32,13 +32,13 @@ from agentsim_env.wsn import (
     routing_tree,
     rx_energy,
     simulate_lifetime,
-    simulate_lifetime_reference,
     target_density_ratio,
     tx_energy,
     weighted_coverage,
     zone_fidelity,
     zone_grid,
 )
+from tests.reference.wsn import simulate_lifetime_reference
 
 K_BITS = 4000
 RADIO = RadioParams()

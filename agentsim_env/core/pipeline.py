@@ -96,9 +96,10 @@ class Part:
 class Sensor(Subsystem, Protocol):
     """A stage-8 subsystem: ``step(ctx)`` measures every online slot on the step's shared grid.
 
-    ``obs_part`` is ``None`` for a sensor whose reading the scenario turns into observations itself (the
-    proximity scan); otherwise the scenario base adds ``observe(reading)`` (``(S, *obs_part.shape)`` float32,
-    inside the bounds) to every observation under the sensor's ``name``.
+    ``obs_part`` is ``None`` for a sensor whose part the scenario places among its own (the proximity scan: it
+    declares ``lidar`` and writes it, the scenario puts it between ``self`` and ``task``); otherwise the
+    scenario base adds ``observe(reading)`` (``(S, *obs_part.shape)`` float32, inside the bounds) to every
+    observation under the sensor's ``name``.
     """
 
     @property

@@ -4,8 +4,8 @@
 ``BatchedEnv`` step; ``finish_step`` works out truncations, the agents still alive, the zeroed observations of
 agents that ended earlier and the worlds to reset after it; ``scatter_part`` puts one stacked action part of
 the ParallelEnv's live agents into its slots, checked and clipped. Each replaces a handful of small numpy
-passes whose fixed cost dominated small worlds; the ``*_reference`` functions are the numpy statements they
-replace (the tests check that both give the same bits).
+passes whose fixed cost dominated small worlds; the numpy statements they replace are in
+``tests/reference/batch_kernels.py`` (the tests check that both give the same bits).
 """
 
 from __future__ import annotations
@@ -43,15 +43,6 @@ def prepare_actions(actions: np.ndarray, alive: np.ndarray) -> tuple[np.ndarray,
     out = np.empty(actions.shape, dtype=np.float64)
     bad = _prepare_kernel(np.ascontiguousarray(actions, dtype=np.float64), alive, out)
     return out, int(bad)
-
-
-def prepare_actions_reference(actions: np.ndarray, alive: np.ndarray) -> tuple[np.ndarray, int]:
-    """Plain numpy statement of :func:`prepare_actions` (same contract; used by the tests)."""
-    a = np.asarray(actions, dtype=np.float64)
-    bad = ~np.isfinite(a).all(axis=1) & alive
-    if bad.any():
-        return np.zeros(a.shape), int(np.flatnonzero(bad)[0])
-    return np.clip(np.where(alive[:, None], a, 0.0), -1.0, 1.0), -1
 
 
 @nb.njit(cache=True)
@@ -97,19 +88,6 @@ def finish_step(
     return trunc, done, int(n_done)
 
 
-def finish_step_reference(
-    term: np.ndarray, acting: np.ndarray, over: np.ndarray, alive: np.ndarray, obs: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, int]:
-    """Plain numpy statement of :func:`finish_step` (same contract; used by the tests)."""
-    n = alive.shape[1]
-    trunc = acting & ~term & np.repeat(over, n)
-    ended = (term | trunc).reshape(alive.shape)
-    alive &= ~ended
-    obs[(~alive & ~ended).reshape(-1)] = 0.0
-    done = np.asarray(~alive.any(axis=1))
-    return trunc, done, int(done.sum())
-
-
 @nb.njit(cache=True)
 def _scatter_kernel(a, idx, lo, hi, out):  # type: ignore[no-untyped-def]
     for r in range(a.shape[0]):
@@ -141,14 +119,3 @@ def scatter_part(
     out = np.zeros((n_slots, values.shape[1]), dtype=np.float64)
     ok = _scatter_kernel(np.ascontiguousarray(values, dtype=np.float64), idx, float(low), float(high), out)
     return out if ok else None
-
-
-def scatter_part_reference(
-    values: np.ndarray, idx: np.ndarray, n_slots: int, low: float, high: float
-) -> np.ndarray | None:
-    """Plain numpy statement of :func:`scatter_part` (same contract; used by the tests)."""
-    out = np.zeros((n_slots, values.shape[1]))
-    out[idx] = values
-    if not np.isfinite(out).all():
-        return None
-    return np.clip(out, low, high, out=out)

@@ -16,7 +16,7 @@ from agentsim_env.motion.actions import (
     decode_velocity,
     selector_action,
 )
-from agentsim_env.motion.integrate import integrate, integrate_reference
+from agentsim_env.motion.integrate import integrate
 from agentsim_env.motion.primitives import (
     set_circular,
     set_hold,
@@ -59,7 +59,6 @@ __all__ = [
     "decode_primitive",
     "decode_velocity",
     "integrate",
-    "integrate_reference",
     "selector_action",
     "set_circular",
     "set_hold",

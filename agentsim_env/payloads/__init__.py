@@ -5,7 +5,6 @@ from agentsim_env.payloads.ballistic import (
     compensated_release_xy,
     fall_time_vertical_drag,
     predict_landing,
-    reference_fall,
     vacuum_landing,
 )
 from agentsim_env.payloads.payload_set import PAYLOAD_FIELDS, PayloadSet, ScatterConfig
@@ -22,6 +21,5 @@ __all__ = [
     "compensated_release_xy",
     "fall_time_vertical_drag",
     "predict_landing",
-    "reference_fall",
     "vacuum_landing",
 ]

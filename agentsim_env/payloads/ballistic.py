@@ -25,7 +25,6 @@ __all__ = [
     "fall_time_vertical_drag",
     "hermite_ground_crossing",
     "predict_landing",
-    "reference_fall",
     "rk4_step",
     "vacuum_landing",
 ]
@@ -267,7 +266,7 @@ def _integrate(
     dt: float,
     t_max: float,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Integrate objects until all land; shared by ``reference_fall`` and ``predict_landing``."""
+    """Integrate objects until all land; ``predict_landing`` and the tests' fine-step reference fall."""
     if not (math.isfinite(dt) and dt > 0.0):
         raise ValueError(f"dt must be a finite number > 0, got {dt!r}")
     p = _as_n3(p0, "p0")
@@ -297,30 +296,6 @@ def _integrate(
         active = active[~down]
         t += dt
     return xy, t_land
-
-
-def reference_fall(
-    p0: ArrayLike,
-    v0: ArrayLike,
-    params: FallParams,
-    wind_fn: WindFn | None = None,
-    dt: float = 1e-4,
-    t_max: float = 600.0,
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Fine-step RK4 reference fall (a test oracle; slow for large ``n``).
-
-    Args:
-        p0: Release positions ``(n, 3)`` or ``(3,)`` with ``z > 0``.
-        v0: Release velocities, same shape.
-        params: Node parameters.
-        wind_fn: Wind velocity as a function of height, ``z (n,) -> (n, 3)``; ``None`` is still air.
-        dt: Integration step in seconds.
-        t_max: Give up (``ValueError``) after this many simulated seconds.
-
-    Returns:
-        ``(xy (n, 2), t_fall (n,))``.
-    """
-    return _integrate(p0, v0, params, wind_fn, dt, t_max)
 
 
 def predict_landing(

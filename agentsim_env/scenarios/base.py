@@ -10,7 +10,8 @@ A scenario is one small file: a config extending ``ScenarioConfig``, a per-slot 
 - ``observe(world)``: the scenario's own observation parts.
 
 Derived, never kept in step by hand: the observation parts (shapes from what ``observe`` returns on a probe
-world, bounds from ``obs_bounds``), the sensor parts (each sensor with an ``obs_part``), the comms parts
+world, bounds from ``obs_bounds`` or the sensor declaring the part, as the proximity sensor declares ``lidar``),
+the sensor parts (each sensor with an ``obs_part``), the comms parts
 (``inbox``, ``comms`` observations and the ``comm`` action, added when the config has comms), the action parts
 (``motion`` from ``action_mode`` plus ``extra_actions``), the global state and its size (the base's per-agent
 block plus ``state_extra``). ``apply_actions`` (stage 1) has a default that decodes ``motion``; a scenario with
@@ -38,7 +39,7 @@ from agentsim_env.motion import MotionLimits, decode_primitive
 from agentsim_env.motion.actions import decode_velocity_unchecked
 from agentsim_env.scenarios.config import ScenarioConfig
 from agentsim_env.scenarios.rewards import combine_partials
-from agentsim_env.sensors.proximity import ProximityConfig
+from agentsim_env.sensors.proximity import ProximityConfig, ProximitySensor
 from agentsim_env.sim.world import StepEvents, StepScores, World
 
 ConfigT = TypeVar("ConfigT", bound=ScenarioConfig)
@@ -111,8 +112,8 @@ class Scenario(ABC, Generic[ConfigT]):
     agent_prefix: ClassVar[str] = "agent"
     #: Configs the conformance suite runs (each also in flat obs/action format); keep them small and fast.
     test_configs: ClassVar[tuple[dict[str, Any], ...]] = ({},)
-    #: Bounds of the scenario's observation parts (default (-1, 1)).
-    obs_bounds: ClassVar[dict[str, tuple[float, float]]] = {"lidar": (0.0, 1.0)}
+    #: Bounds of the scenario's observation parts (default (-1, 1); a sensor's declared part has its own).
+    obs_bounds: ClassVar[dict[str, tuple[float, float]]] = {}
     #: Scenario action parts after ``motion`` (name -> size), each a box in [-1, 1].
     extra_actions: ClassVar[dict[str, int]] = {}
     #: Info keys that count events (an evaluation sums them over an episode, per agent).
@@ -308,8 +309,15 @@ class Scenario(ABC, Generic[ConfigT]):
             acting = np.ones(world.state.n_slots, dtype=bool)
             parts = {}
             for k, v in obs.items():
+                shape = tuple(int(d) for d in v.shape[1:])
+                declared = _declared_part(world, k)
+                if declared is not None and declared.shape != shape:
+                    raise ValueError(
+                        f"{self.name}: observation part {k!r} has shape {shape}, its sensor declares "
+                        f"{declared.shape}"
+                    )
                 lo, hi = self._bounds(world, k)
-                parts[k] = Part(tuple(int(d) for d in v.shape[1:]), lo, hi)
+                parts[k] = Part(shape, lo, hi)
             res = run_step(
                 self,
                 world,
@@ -322,9 +330,9 @@ class Scenario(ABC, Generic[ConfigT]):
     def _bounds(self, world: World, part: str) -> tuple[float, float]:
         if part in ("inbox", "comms"):
             return (-INBOX_CLIP, INBOX_CLIP) if part == "inbox" else (0.0, 1.0)
-        for s in world.sensors:
-            if s.name == part and s.obs_part is not None:
-                return s.obs_part.low, s.obs_part.high
+        declared = _declared_part(world, part)
+        if declared is not None:
+            return declared.low, declared.high
         return self.obs_bounds.get(part, (-1.0, 1.0))
 
     def obs_parts(self) -> dict[str, Part]:
@@ -408,6 +416,17 @@ class Scenario(ABC, Generic[ConfigT]):
         )
         extra = np.asarray(self.state_extra(world, w), dtype=np.float64).ravel()
         return np.clip(np.concatenate([per.ravel(), extra]), -10.0, 10.0).astype(np.float32)
+
+
+def _declared_part(world: World, part: str) -> Part | None:
+    """The observation part a sensor of ``world`` declares under the name ``part``, or ``None``: a sensor's
+    ``obs_part`` (added by the base), or the proximity sensor's ``lidar`` (placed by the scenario)."""
+    for s in world.sensors:
+        if s.name == part and s.obs_part is not None:
+            return s.obs_part
+        if isinstance(s, ProximitySensor) and s.part_name == part:
+            return s.part
+    return None
 
 
 def comms_width(world: World) -> int:

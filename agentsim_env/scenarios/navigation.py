@@ -54,7 +54,7 @@ from agentsim_env.scenarios.config import ScenarioConfig
 from agentsim_env.scenarios.placement import jittered_points, obstacle_layout, placement_problem
 from agentsim_env.scenarios.rewards import RewardConfig, compose_rewards, task_partials
 from agentsim_env.sensors.gnss import GnssConfig, GnssSensor
-from agentsim_env.sensors.proximity import ProximitySensor
+from agentsim_env.sensors.proximity import ProximitySensor, write_lidar_row
 from agentsim_env.sim import StepEvents, World, WorldConfig
 
 SELF_DIM, TASK_DIM = 8, 4
@@ -134,7 +134,7 @@ def _score_kernel(
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
 def _observe_row(s, r, pos, vel, heading, goal, distance, hit_kind, side, lo, hi, vmax, out):  # type: ignore[no-untyped-def]
-    # Slot s into row r of out (., 8 + 2K + 4) float32: self | lidar (distance, kind / 3 interleaved) | task.
+    # Slot s into row r of out (., 8 + 2K + 4) float32: self | lidar (the sensor's part) | task.
     n_k = distance.shape[1]
     diag = side * np.sqrt(2.0)
     t0 = SELF_DIM + 2 * n_k
@@ -145,9 +145,7 @@ def _observe_row(s, r, pos, vel, heading, goal, distance, hit_kind, side, lo, hi
         out[r, 3 + a] = min(max(vel[s, a] / vmax, -1.0), 1.0)
     out[r, 6] = min(max(np.cos(heading[s]), -1.0), 1.0)
     out[r, 7] = min(max(np.sin(heading[s]), -1.0), 1.0)
-    for k in range(n_k):
-        out[r, SELF_DIM + 2 * k] = distance[s, k]
-        out[r, SELF_DIM + 2 * k + 1] = hit_kind[s, k] / 3.0
+    write_lidar_row(distance, hit_kind, s, out, r, SELF_DIM)
     dx, dy, dz = goal[s, 0] - pos[s, 0], goal[s, 1] - pos[s, 1], goal[s, 2] - pos[s, 2]
     out[r, t0] = min(max(dx / diag, -1.0), 1.0)
     out[r, t0 + 1] = min(max(dy / diag, -1.0), 1.0)

@@ -264,7 +264,7 @@ class RelayScenario(Scenario[RelayConfig]):
         task[~t.scout] = 0.0  # only the scout perceives the target
         return {
             "self": np.clip(selfp, -1, 1).astype(np.float32),
-            "lidar": np.stack([scan.distance, scan.hit_kind / 3.0], axis=-1).astype(np.float32),
+            "lidar": world.sensors[0].observe(scan),
             "task": np.clip(task, -1, 1).astype(np.float32),
         }
 

@@ -298,8 +298,8 @@ def compose_rewards(
 ) -> np.ndarray:
     """Combine the terms into one reward per slot (zero for slots that were not acting).
 
-    One numba pass (the composition runs every step); :func:`compose_rewards_reference` is the numpy
-    statement of the same formula.
+    One numba pass (the composition runs every step); the tests hold the numpy statement of the same
+    formula.
 
     Args:
         cfg: The weights.
@@ -361,28 +361,3 @@ def compose_rewards(
         lambda lo, hi, _: _compose_kernel(lo, hi, *args, out), task.shape[0], light_min_rows()
     )
     return out
-
-
-def compose_rewards_reference(
-    cfg: RewardConfig,
-    task: np.ndarray,
-    *,
-    group: np.ndarray,
-    world: np.ndarray,
-    acting: np.ndarray,
-    n_groups: int,
-    collided: np.ndarray | None = None,
-    energy: np.ndarray | None = None,
-    messages_sent: np.ndarray | None = None,
-) -> np.ndarray:
-    """Plain numpy statement of :func:`compose_rewards` (same arguments; used by the tests)."""
-    r = cfg.task_weight * task
-    if cfg.group_share:
-        r = r + cfg.group_share * group_mean(task, group, world, acting, n_groups)
-    if collided is not None and cfg.collision_penalty:
-        r = r - cfg.collision_penalty * collided
-    if energy is not None and cfg.energy_weight:
-        r = r - cfg.energy_weight * energy
-    if messages_sent is not None and cfg.message_cost:
-        r = r - cfg.message_cost * messages_sent
-    return np.where(acting, r, 0.0)

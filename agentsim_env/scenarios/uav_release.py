@@ -100,7 +100,7 @@ class UavReleaseScenario(Scenario[UavReleaseConfig]):
     config_cls = UavReleaseConfig
     version = 0
     agent_prefix = "uav"
-    obs_bounds = {"lidar": (0.0, 1.0), "landed": (0.0, 1.0)}
+    obs_bounds = {"landed": (0.0, 1.0)}
     event_keys = ("released", "landed")
     final_keys = ("coverage_weighted",)
     extra_actions = {"release": 3}
@@ -343,7 +343,7 @@ class UavReleaseScenario(Scenario[UavReleaseConfig]):
         )
         out = {
             "self": np.clip(selfp, -1, 1).astype(np.float32),
-            "lidar": np.stack([scan.distance, scan.hit_kind / 3.0], axis=-1).astype(np.float32),
+            "lidar": world.sensors[0].observe(scan),
             "zones": np.clip(zones, -1, 1).astype(np.float32),
             "landed": grid,
         }

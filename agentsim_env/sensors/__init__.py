@@ -9,7 +9,6 @@ from agentsim_env.sensors.proximity import (
     ProximitySensor,
     ScanResult,
 )
-from agentsim_env.sensors.proximity_reference import scan_reference
 
 __all__ = [
     "HIT_AGENT",
@@ -19,5 +18,4 @@ __all__ = [
     "ProximityConfig",
     "ProximitySensor",
     "ScanResult",
-    "scan_reference",
 ]

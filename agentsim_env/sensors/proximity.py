@@ -10,13 +10,19 @@ Conventions: distances are normalised by the slot's range (``1.0`` = nothing wit
 the range counts); a ray whose origin lies inside a shape (or below the ground) reads ``0`` on that shape;
 exact ties go to the lower ``(hit_kind, hit_id)``. Offline slots scan nothing and are invisible.
 
-The grid kernel (:class:`ProximitySensor`) and the brute-force numpy reference (:func:`scan_reference`
-in :mod:`proximity_reference`, used by the tests) share these conventions exactly; the ray-shape tests
-live in :mod:`raycast`. The kernel finds agents through the step's agent grid (``spatial.build_grid``
+The grid kernel (:class:`ProximitySensor`) and the brute-force numpy reference of the tests
+(``tests/reference/proximity.py``) share these conventions exactly; the ray-shape tests live in
+:mod:`raycast`. The kernel finds agents through the step's agent grid (``spatial.build_grid``
 over the online slots, built from the same positions) and objects through the object grid
 (``spatial.build_object_grid`` with ``scene.footprint_radius()``); both are keyed by world. Per
 candidate it rejects by bounding sphere vs range, then tests only the azimuths whose horizontal
 projection can cross the candidate's bounding disc, so the cost per agent stays flat as N grows.
+
+The sensor declares its observation part, ``lidar (K, 2)`` in [0, 1] (:attr:`ProximitySensor.part_name`,
+:attr:`ProximitySensor.part`), and writes it: per ray the normalised distance and the hit code / 3 (0 none,
+1/3 agent, 2/3 object, 1 ground). A scenario places the part among its own (it sits between ``self`` and
+``task``), either as an array (:func:`lidar_observation`, the sensor's ``observe``) or written into flat
+observation rows by its own numba kernel (:func:`write_lidar_row`); both give the same bits.
 """
 
 from __future__ import annotations
@@ -27,7 +33,7 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
-from agentsim_env.core.pipeline import StepContext
+from agentsim_env.core.pipeline import Part, StepContext
 from agentsim_env.core.spatial import Grid, cell_of
 from agentsim_env.core.threads import RowThreads
 from agentsim_env.core.validation import coerce_fields
@@ -245,6 +251,48 @@ def _scan_kernel(
             out_id[i, k] = bi[k]
 
 
+# ------------------------------------------------------------------------------------- observation part
+LIDAR_PART = "lidar"
+"""Name of the proximity sensor's observation part."""
+LIDAR_BOUNDS = (0.0, 1.0)
+"""Bounds of every value of the ``lidar`` part."""
+
+
+def lidar_observation(scan: ScanResult) -> np.ndarray:
+    """The ``lidar`` part of every slot: ``(S, K, 2)`` float32, normalised distance and hit code / 3 per ray.
+
+    Args:
+        scan: A scan of every slot.
+
+    Returns:
+        A fresh array (the values :func:`write_lidar_row` writes into flat rows).
+    """
+    out = np.empty((*scan.distance.shape, 2), dtype=np.float32)
+    out[..., 0] = scan.distance
+    out[..., 1] = scan.hit_kind / 3.0  # in float64, then rounded to float32 as the row writer does
+    return out
+
+
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def write_lidar_row(distance, hit_kind, s, out, r, col):  # type: ignore[no-untyped-def]
+    """Slot ``s``'s ``lidar`` part into ``out[r, col : col + 2K]``, distance and hit code / 3 interleaved.
+
+    For numba kernels that write whole flat observation rows (inlined into them): the values of
+    :func:`lidar_observation` row ``s`` flattened, bit for bit.
+
+    Args:
+        distance: ``(S, K)`` float32 scan distances (``ScanResult.distance``).
+        hit_kind: ``(S, K)`` int8 hit codes (``ScanResult.hit_kind``).
+        s: Slot read.
+        out: ``(R, D)`` float32 rows written.
+        r: Row written.
+        col: First column of the part in the row.
+    """
+    for k in range(distance.shape[1]):
+        out[r, col + 2 * k] = distance[s, k]
+        out[r, col + 2 * k + 1] = hit_kind[s, k] / 3.0
+
+
 # ----------------------------------------------------------------------------------------------- sensor
 def _arr(a, dtype):  # type: ignore[no-untyped-def]
     # The per-step case (already a C-contiguous array of the right dtype) costs no numpy call at all.
@@ -348,7 +396,9 @@ class ProximitySensor:
     """Grid-accelerated ray caster for every slot (one numba kernel over row ranges, 1 thread by default)."""
 
     name = "proximity"
-    obs_part = None  # scenarios build their ``lidar`` part from the scan themselves
+    obs_part = None  # the scenario places the ``lidar`` part among its own parts (see the module docstring)
+    part_name = LIDAR_PART
+    """Name of the observation part the sensor declares (:attr:`part`)."""
 
     def __init__(self, config: ProximityConfig | None = None) -> None:
         """Precompute the ray directions.
@@ -369,6 +419,11 @@ class ProximitySensor:
     def n_rays(self) -> int:
         """Rays per slot K."""
         return self.config.n_rays
+
+    @property
+    def part(self) -> Part:
+        """The ``lidar`` observation part: ``(K, 2)`` in [0, 1]."""
+        return Part((self.n_rays, 2), *LIDAR_BOUNDS)
 
     # ------------------------------------------------------------------ the Sensor protocol (stage 8)
     def reset_world(self, w: int, rng: np.random.Generator) -> None:
@@ -395,8 +450,8 @@ class ProximitySensor:
         )
 
     def observe(self, reading: ScanResult) -> np.ndarray:
-        """``(S, K, 2)`` float32: normalised distance and hit code / 3 per ray."""
-        return np.stack([reading.distance, reading.hit_kind / 3.0], axis=-1).astype(np.float32)
+        """The ``lidar`` part ``(S, K, 2)`` float32 of a scan (:func:`lidar_observation`)."""
+        return lidar_observation(reading)
 
     def scan(
         self,

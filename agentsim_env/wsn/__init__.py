@@ -41,7 +41,6 @@ from agentsim_env.wsn.lifetime import (
     coverage_lifetime,
     routing_tree,
     simulate_lifetime,
-    simulate_lifetime_reference,
 )
 from agentsim_env.wsn.profiles import GOLDEN_ANGLE, PROFILE_KINDS, RadialProfile
 from agentsim_env.wsn.radio import RadioParams, aggregation_energy, rx_energy, tx_energy
@@ -75,7 +74,6 @@ __all__ = [
     "routing_tree",
     "rx_energy",
     "simulate_lifetime",
-    "simulate_lifetime_reference",
     "sink_edges",
     "sink_positions",
     "target_density_ratio",

@@ -1,4 +1,4 @@
-"""Brute-force numpy reference of the proximity sensor (no grid; used by the tests and benchmarks).
+"""Brute-force numpy reference of the proximity sensor (no grid; used by the tests and ``bench_lidar``).
 
 It follows the conventions of :mod:`agentsim_env.sensors.proximity` exactly (ring-major rays, normalised
 distances, ``0`` from inside a shape, ties to the lower ``(hit_kind, hit_id)``) and applies the same
