@@ -141,7 +141,7 @@ def make_policy(scenario: str, env: Any, name: str | None = None) -> Policy:
         return load_policy(name, env)
     names = baseline_names(scenario)
     name = name or names[0]
-    if name not in names:
+    if name not in names and name not in BASELINES.get(scenario, {}):  # the latter: a deprecated former name
         raise ValueError(f"policy must be one of {names} for {scenario!r}, got {name!r}")
     entry = BASELINES.get(scenario, {}).get(name)
     kwargs = entry[1] if isinstance(entry, tuple) else {}
@@ -171,7 +171,7 @@ def resolve_policy(scenario: str, policy: str | None, config: dict[str, Any]) ->
         if trained_on != scenario:
             raise ValueError(f"--policy {name!r} was trained on {trained_on!r}, not {scenario!r}")
         return name, {**env_config, **config}
-    if name not in BASELINES[scenario]:
+    if name not in names and name not in BASELINES.get(scenario, {}):  # the latter: a deprecated former name
         raise ValueError(
             f"--policy must be one of {names} for {scenario!r} or a trained model "
             f"(a folder with model.zip, or a .zip), got {name!r}"

@@ -184,8 +184,11 @@ def test_the_three_registries_and_their_groups() -> None:
         agentsim_env.register_scenario("not_a_scenario", dict)
     with pytest.raises(ValueError, match=r"must be a policy class \(for_env, reset, act\)"):
         agentsim_env.register_policy("not_a_policy", dict, scenario="rendezvous")
-    with pytest.raises(ValueError, match="must be a release strategy class or factory"):
+    assert "B5_cvt" in STRATEGIES.builtin_names() and len(STRATEGIES.builtin_names()) == 10
+    with pytest.raises(ValueError, match="must be a ReleaseStrategy subclass"):
         agentsim_env.register_strategy("not_a_strategy", 3)
+    with pytest.raises(ValueError, match="already taken"):
+        agentsim_env.register_strategy("B5_cvt", "plugmod_nowhere:cvt")
     agentsim_env.register_strategy("spread", "plugmod_nowhere:spread")
     assert "spread" in STRATEGIES.names() and STRATEGIES.origin("spread") == "registered"
 

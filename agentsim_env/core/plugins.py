@@ -318,10 +318,27 @@ POLICIES = Registry(
 """Policies added to the scripted baselines (``agentsim_env.policies.registry`` lists the built-in ones); each
 serves the scenarios given to :func:`register_policy`, else those of its class attribute ``scenarios``."""
 
+_SHIPPED_STRATEGIES = {
+    "B0_uniform": "B0Uniform",
+    "B1_inverse_cdf": "B1InverseCdf",
+    "B1LD_sunflower": "B1LDSunflower",
+    "B2_rings": "B2Rings",
+    "B3_spiral": "B3Spiral",
+    "B4_boustrophedon": "B4Boustrophedon",
+    "B5_cvt": "B5Cvt",
+    "B6_drop_clusters": "B6DropClusters",
+    "B7_ergodic": "B7Ergodic",
+    "B8_teleport": "B8Teleport",
+}
 STRATEGIES = Registry(
-    "strategy", "agentsim_env.strategies", None, callable, "a release strategy class or factory"
+    "strategy",
+    "agentsim_env.strategies",
+    {name: f"agentsim_env.policies.release.baselines:{cls}" for name, cls in _SHIPPED_STRATEGIES.items()},
+    lambda obj: isinstance(obj, type),
+    "a ReleaseStrategy subclass",
 )
-"""Release strategies added by plug-ins (``docs/release_strategies.md``)."""
+"""Release strategies: the shipped B0-B8 (built-in references) and those registered or installed as plug-ins;
+``agentsim_env.policies.release.registry`` reads it and checks each class (``docs/release_strategies.md``)."""
 
 _POLICY_SCENARIOS: dict[str, tuple[str, ...]] = {}  # policy name -> scenarios given to register_policy
 
@@ -394,10 +411,11 @@ def register_strategy(name: str, strategy: Any, *, replace: bool = False) -> Non
 
     Args:
         name: The strategy's name.
-        strategy: A strategy class or factory, or its ``"module:attribute"`` reference (imported on first use).
+        strategy: A ``ReleaseStrategy`` subclass whose ``name`` is ``name``, or its ``"module:attribute"``
+            reference (imported on first use).
         replace: Take the name even when an earlier registration or an entry point holds it.
 
     Raises:
-        ValueError: A bad name or reference, an object that is not callable, or a taken name.
+        ValueError: A bad name or reference, an object that is not a class, or a taken name.
     """
     STRATEGIES.register(name, strategy, replace=replace)

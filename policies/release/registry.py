@@ -1,4 +1,4 @@
-"""Release strategies by name: the shipped B0-B8 and those registered later.
+"""Release strategies by name: the shipped B0-B8 and those registered later or installed as plug-ins.
 
 ``strategy_names()`` and ``strategy_class(name)`` are the only readers of the registry (a later plugin
 registry can plug in there); ``register`` / ``unregister`` add and remove classes. ``B8_oracle`` is the
@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
+from agentsim_env.core.plugins import STRATEGIES
 from agentsim_env.policies.release.baselines import SHIPPED
 from agentsim_env.policies.release.planning import ReleasePlan
 from agentsim_env.policies.release.strategy import ReleaseStrategy
@@ -29,19 +30,18 @@ __all__ = [
     "unregister",
 ]
 
-_REGISTRY: dict[str, type[ReleaseStrategy]] = {cls.name: cls for cls in SHIPPED}
-
 #: Former names still accepted for one release: old name -> current name.
 DEPRECATED_NAMES: Mapping[str, str] = {"B8_oracle": "B8_teleport"}
+_SHIPPED_NAMES = tuple(cls.name for cls in SHIPPED)
 
 
 def strategy_names() -> list[str]:
-    """The registered strategy names, in registration order (B0 ... B8 first)."""
-    return list(_REGISTRY)
+    """The strategy names: the shipped B0 ... B8 in order, then the registered and installed ones, sorted."""
+    return [*_SHIPPED_NAMES, *(n for n in STRATEGIES.names() if n not in _SHIPPED_NAMES)]
 
 
 def strategy_class(name: str) -> type[ReleaseStrategy]:
-    """The strategy class registered as ``name``.
+    """The strategy class registered as ``name`` (``core.plugins.STRATEGIES``: shipped, registered, plug-ins).
 
     Args:
         name: A registered name, or a deprecated former name (warns with ``DeprecationWarning``).
@@ -50,7 +50,8 @@ def strategy_class(name: str) -> type[ReleaseStrategy]:
         The class.
 
     Raises:
-        ValueError: On an unknown name (the message lists the known names).
+        ValueError: On an unknown name (the message lists the known names), or when what is registered under
+            ``name`` is not a concrete ``ReleaseStrategy`` subclass whose ``name`` is ``name``.
     """
     if isinstance(name, str) and name in DEPRECATED_NAMES:
         new = DEPRECATED_NAMES[name]
@@ -60,9 +61,25 @@ def strategy_class(name: str) -> type[ReleaseStrategy]:
             stacklevel=3,
         )
         name = new
-    if not isinstance(name, str) or name not in _REGISTRY:
-        raise ValueError(f"strategy must be one of {list(_REGISTRY)}, got {name!r}")
-    return _REGISTRY[name]
+    if not isinstance(name, str) or name not in STRATEGIES:
+        raise ValueError(f"strategy must be one of {strategy_names()}, got {name!r}")
+    cls = STRATEGIES.get(name)
+    if not _concrete(cls):
+        raise ValueError(
+            f"strategy {name!r} ({STRATEGIES.origin(name)}) must be a concrete ReleaseStrategy subclass, "
+            f"got {cls!r}"
+        )
+    if cls.name != name:
+        raise ValueError(
+            f"strategy {name!r} ({STRATEGIES.origin(name)}) is class {cls.__name__} whose name is "
+            f"{cls.name!r}: a strategy is registered under its own name"
+        )
+    return cls
+
+
+def _concrete(cls: Any) -> bool:
+    """Whether ``cls`` is a ``ReleaseStrategy`` subclass with no abstract method left."""
+    return isinstance(cls, type) and issubclass(cls, ReleaseStrategy) and not cls.__abstractmethods__
 
 
 def make_strategy(name: str, **options: Any) -> ReleaseStrategy:
@@ -90,6 +107,8 @@ def make_strategy(name: str, **options: Any) -> ReleaseStrategy:
 def register(cls: type[ReleaseStrategy], *, replace: bool = False) -> type[ReleaseStrategy]:
     """Register a strategy class under its ``name`` (usable as a class decorator).
 
+    The same as ``agentsim_env.register_strategy(cls.name, cls)``, with the class checked at once.
+
     Args:
         cls: A concrete ``ReleaseStrategy`` subclass with a non-empty ``name``.
         replace: Allow replacing a class already registered under that name.
@@ -101,28 +120,24 @@ def register(cls: type[ReleaseStrategy], *, replace: bool = False) -> type[Relea
         ValueError: ``cls`` is not a concrete ``ReleaseStrategy`` subclass, has no name, or its name is taken
             (without ``replace``) or is a deprecated name.
     """
-    if not (isinstance(cls, type) and issubclass(cls, ReleaseStrategy)) or getattr(
-        cls, "__abstractmethods__", None
-    ):
+    if not _concrete(cls):
         raise ValueError(f"cls must be a concrete ReleaseStrategy subclass, got {cls!r}")
     name = cls.name
     if not isinstance(name, str) or not name.isidentifier():
         raise ValueError(f"{cls.__name__}.name must be a non-empty identifier, got {name!r}")
-    if name in DEPRECATED_NAMES or (name in strategy_names() and not replace):
+    if name in DEPRECATED_NAMES or (name in STRATEGIES and not replace):
         raise ValueError(f"strategy name {name!r} is taken; registered: {strategy_names()}")
-    _REGISTRY[name] = cls
+    STRATEGIES.register(name, cls, replace=replace)
     return cls
 
 
 def unregister(name: str) -> None:
-    """Remove a registered strategy.
+    """Remove a strategy registered with :func:`register` (shipped and installed ones stay).
 
     Raises:
-        ValueError: ``name`` is not registered (the message lists the registered names).
+        ValueError: ``name`` was not registered (the message lists the registered names).
     """
-    if name not in strategy_names():
-        raise ValueError(f"strategy must be one of {strategy_names()}, got {name!r}")
-    del _REGISTRY[name]
+    STRATEGIES.unregister(name)
 
 
 def make_plan(
