@@ -108,7 +108,7 @@ def _fill_run(p: argparse.ArgumentParser) -> None:
 
 
 def _fill_evaluate(p: argparse.ArgumentParser) -> None:
-    from agentsim_env.evaluation.runner import TELEPORT, available_strategies
+    from agentsim_env.uav.evaluation.runner import TELEPORT, available_strategies
 
     names = [n for n in available_strategies() if n != TELEPORT]
     listed = textwrap.fill(", ".join(names), 100, initial_indent="  ", subsequent_indent="  ")
@@ -178,12 +178,12 @@ def _parse_seeds(tokens: list[str]) -> list[int]:
 def cmd_evaluate(args: argparse.Namespace) -> int:
     """Fly every strategy over every zone file and seed; write CSVs, plots and the Markdown ranking.
 
-    Nothing is written unless every run succeeds (see ``agentsim_env.evaluation.report``); the output folder
+    Nothing is written unless every run succeeds (see ``agentsim_env.uav.evaluation.report``); the output folder
     is created and probed before the first run, and removed again (when still empty) if a run fails.
     """
-    from agentsim_env.evaluation.report import ranking_table, write_outputs
-    from agentsim_env.evaluation.runner import resolve_strategies, resolve_zones, run_grid
-    from agentsim_env.evaluation.scoring import rank_strategies, run_rows
+    from agentsim_env.uav.evaluation.report import ranking_table, write_outputs
+    from agentsim_env.uav.evaluation.runner import resolve_strategies, resolve_zones, run_grid
+    from agentsim_env.uav.evaluation.scoring import rank_strategies, run_rows
     from agentsim_env.scenarios.registry import scenario_class
 
     # validate the cheap inputs before the first (slow) run

@@ -184,7 +184,7 @@ def _live(args: argparse.Namespace) -> int:
 def cmd_zones_design(args: argparse.Namespace) -> int:
     """Serve the hot-zone designer until Ctrl-C."""
     _check_network(args)
-    from agentsim_env.render.web.designer import run_designer
+    from agentsim_env.uav.designer import run_designer
 
     _warn_host(args.host, "edit and save the zones")
     run_designer(args.file, host=args.host, port=args.port, open_browser=args.open)
@@ -198,9 +198,9 @@ def cmd_zones_check(args: argparse.Namespace) -> int:
     with these zones); a fleet that cannot carry every sensor ends the check with one error line (exit 2).
     """
     from agentsim_env.cli_set import parse_set
-    from agentsim_env.scenarios.uav_capacity import capacity_text, default_fleet, fleet_capacity
-    from agentsim_env.scenarios.uav_config import UavReleaseConfig
-    from agentsim_env.scenarios.uav_zones import load_zones, overlaps
+    from agentsim_env.uav.capacity import capacity_text, default_fleet, fleet_capacity
+    from agentsim_env.uav.config import UavReleaseConfig
+    from agentsim_env.uav.zones import load_zones, overlaps
 
     overrides = parse_set(UavReleaseConfig, getattr(args, "set", None) or [])
     if "zones" in overrides:

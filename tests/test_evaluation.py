@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 
 from agentsim_env.cli import _parse_seeds, main
-from agentsim_env.evaluation import report, runner
-from agentsim_env.evaluation.mission import MissionLog
-from agentsim_env.evaluation.report import (
+from agentsim_env.uav.evaluation import report, runner
+from agentsim_env.uav.evaluation.mission import MissionLog
+from agentsim_env.uav.evaluation.report import (
     SENSOR_COLUMNS,
     composite_score,
     format_mean_std,
@@ -23,7 +23,7 @@ from agentsim_env.evaluation.report import (
     rank_strategies,
     ranking_table,
 )
-from agentsim_env.evaluation.runner import TELEPORT, resolve_zones, run_one, teleport_reference
+from agentsim_env.uav.evaluation.runner import TELEPORT, resolve_zones, run_one, teleport_reference
 
 # A small mission: the tiny zone file (one zone, 20 sensors) with exactly the payload it needs.
 TINY = ["--set", "n_uavs=2", "payload=10", "max_steps=2500"]

@@ -16,10 +16,10 @@ pytest.importorskip("websockets", reason="the viewer extra installs websockets")
 
 from websockets.asyncio.client import connect  # noqa: E402
 
-from agentsim_env.render.web import designer  # noqa: E402
-from agentsim_env.render.web.designer import designer_handlers, designer_hello  # noqa: E402
+from agentsim_env.uav import designer  # noqa: E402
+from agentsim_env.uav.designer import designer_handlers, designer_hello  # noqa: E402
 from agentsim_env.render.web.server import ClientError, WebServer  # noqa: E402
-from agentsim_env.scenarios.uav_zones import ZoneSet  # noqa: E402
+from agentsim_env.uav.zones import ZoneSet  # noqa: E402
 
 
 def one_zone(n_sensors: int) -> dict[str, Any]:

@@ -11,7 +11,7 @@ from agentsim_env.scenarios.base import Scenario
 # name -> module path; modules are imported on first use so `import agentsim_env` stays cheap.
 _SCENARIOS: dict[str, str] = {
     "navigation": "agentsim_env.scenarios.navigation",
-    "uav_release": "agentsim_env.scenarios.uav_release",
+    "uav_release": "agentsim_env.uav.scenario",
     "relay": "agentsim_env.scenarios.relay",
     "rendezvous": "agentsim_env.scenarios.rendezvous",
 }

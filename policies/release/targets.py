@@ -42,7 +42,7 @@ from agentsim_env.policies.release.planning import (
     plan_tour,
     sector_quota,
 )
-from agentsim_env.wsn.profiles import RadialProfile
+from agentsim_env.uav.wsn.profiles import RadialProfile
 
 __all__ = ["STRATEGIES", "cvt_points", "make_plan", "spiral_points"]
 

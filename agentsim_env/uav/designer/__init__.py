@@ -30,16 +30,16 @@ import numpy as np
 from agentsim_env.core.files import write_atomically
 from agentsim_env.render.web.frames import DENSITY_SAMPLES, density_curve
 from agentsim_env.render.web.server import Background, ClientError, Handler, WebServer
-from agentsim_env.scenarios import uav_zones
-from agentsim_env.scenarios.uav_capacity import capacity_text, default_fleet, fleet_capacity
-from agentsim_env.scenarios.uav_zones import (
+from agentsim_env.uav import zones as uav_zones
+from agentsim_env.uav.capacity import capacity_text, default_fleet, fleet_capacity
+from agentsim_env.uav.zones import (
     ZoneSet,
     load_zones,
     zones_from_dict,
     zones_to_dict,
     zones_to_json,
 )
-from agentsim_env.wsn.profiles import PROFILE_KINDS
+from agentsim_env.uav.wsn.profiles import PROFILE_KINDS
 
 __all__ = [
     "DENSITY_SAMPLES",

@@ -57,17 +57,17 @@ from typing import Any
 
 import numpy as np
 
-from agentsim_env.evaluation.mission import MISSION_KEYS, fly_mission, sensor_rows
-from agentsim_env.evaluation.strategies import (
+from agentsim_env.uav.evaluation.mission import MISSION_KEYS, fly_mission, sensor_rows
+from agentsim_env.uav.evaluation.strategies import (
     is_model_token,
     model_env,
     model_label,
     policy_factory,
     strategy_names,
 )
-from agentsim_env.scenarios.uav_outcome import oracle_points
-from agentsim_env.scenarios.uav_zones import ZoneSet, default_zones_path, load_zones, tiny_zones_path
-from agentsim_env.wsn.evaluate import WsnConfig, evaluate_deployment
+from agentsim_env.uav.outcome import oracle_points
+from agentsim_env.uav.zones import ZoneSet, default_zones_path, load_zones, tiny_zones_path
+from agentsim_env.uav.wsn.evaluate import WsnConfig, evaluate_deployment
 
 __all__ = [
     "SCENARIO",

@@ -33,9 +33,9 @@ from numpy.typing import ArrayLike, NDArray
 from scipy import sparse
 from scipy.sparse import csgraph
 
-from agentsim_env.wsn.connectivity import sink_edges, unit_disk_edges
-from agentsim_env.wsn.coverage import CoverageResult, ZoneGrid, check_points, cover_pairs
-from agentsim_env.wsn.radio import RadioParams, rx_energy, tx_energy
+from agentsim_env.uav.wsn.connectivity import sink_edges, unit_disk_edges
+from agentsim_env.uav.wsn.coverage import CoverageResult, ZoneGrid, check_points, cover_pairs
+from agentsim_env.uav.wsn.radio import RadioParams, rx_energy, tx_energy
 
 __all__ = [
     "LifetimeResult",

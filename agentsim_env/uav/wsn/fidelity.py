@@ -30,7 +30,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy import stats
 from scipy.spatial import cKDTree
 
-from agentsim_env.wsn.coverage import check_discs, check_points
+from agentsim_env.uav.wsn.coverage import check_discs, check_points
 
 __all__ = [
     "ZoneFidelity",

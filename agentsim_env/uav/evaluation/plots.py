@@ -22,8 +22,8 @@ import numpy as np
 from matplotlib.lines import Line2D
 from matplotlib.patches import Circle, Patch
 
-from agentsim_env.evaluation.scoring import composite_score, mean_std, rank_strategies, run_rows
-from agentsim_env.scenarios.uav_zones import ZoneSet
+from agentsim_env.uav.evaluation.scoring import composite_score, mean_std, rank_strategies, run_rows
+from agentsim_env.uav.zones import ZoneSet
 
 __all__ = ["BAR_METRICS", "DPI", "density_raster", "plot_landing_maps", "plot_metric_bars", "write_plots"]
 

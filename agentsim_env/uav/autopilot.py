@@ -22,11 +22,11 @@ import numpy as np
 
 from agentsim_env.payloads import FallParams
 from agentsim_env.payloads.ballistic import predict_landing
-from agentsim_env.scenarios.uav_tracking import DeploymentTracker
-from agentsim_env.scenarios.uav_zones import ZoneSet
+from agentsim_env.uav.tracking import DeploymentTracker
+from agentsim_env.uav.zones import ZoneSet
 
 if TYPE_CHECKING:
-    from agentsim_env.scenarios.uav_config import UavReleaseConfig
+    from agentsim_env.uav.config import UavReleaseConfig
     from agentsim_env.sim import World
 
 __all__ = ["ClaimMap", "SweepRoutes", "lane_segments", "throw_coefficients"]

@@ -5,8 +5,8 @@ by the ``strategies`` registry; ``scoring`` holds the composite score and the ra
 ``sensors.csv``, ``runs.csv`` and the Markdown ranking ``summary.md``, ``plots`` draws the PNG figures.
 """
 
-from agentsim_env.evaluation.report import write_outputs
-from agentsim_env.evaluation.runner import TELEPORT, GridResult, RunResult, run_grid, run_one
-from agentsim_env.evaluation.scoring import composite_score
+from agentsim_env.uav.evaluation.report import write_outputs
+from agentsim_env.uav.evaluation.runner import TELEPORT, GridResult, RunResult, run_grid, run_one
+from agentsim_env.uav.evaluation.scoring import composite_score
 
 __all__ = ["TELEPORT", "GridResult", "RunResult", "composite_score", "run_grid", "run_one", "write_outputs"]

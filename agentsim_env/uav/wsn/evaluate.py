@@ -38,8 +38,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from agentsim_env.core.validation import build_config, coerce_fields
-from agentsim_env.wsn.connectivity import connectivity, unit_disk_edges
-from agentsim_env.wsn.coverage import (
+from agentsim_env.uav.wsn.connectivity import connectivity, unit_disk_edges
+from agentsim_env.uav.wsn.coverage import (
     DensityProfile,
     check_discs,
     check_points,
@@ -48,9 +48,9 @@ from agentsim_env.wsn.coverage import (
     weighted_from_covered,
     zone_grid,
 )
-from agentsim_env.wsn.fidelity import CdfProfile, assign_zones, fidelity_per_zone
-from agentsim_env.wsn.lifetime import coverage_lifetime, simulate_lifetime
-from agentsim_env.wsn.radio import RadioParams
+from agentsim_env.uav.wsn.fidelity import CdfProfile, assign_zones, fidelity_per_zone
+from agentsim_env.uav.wsn.lifetime import coverage_lifetime, simulate_lifetime
+from agentsim_env.uav.wsn.radio import RadioParams
 
 __all__ = ["WsnConfig", "evaluate_deployment", "sink_positions"]
 

@@ -5,14 +5,14 @@ radio energy, minimum-energy routing lifetime and per-zone density fidelity. ``e
 all of it as one flat ``dict[str, float]``. Imports numpy, scipy and numba only.
 """
 
-from agentsim_env.wsn.connectivity import (
+from agentsim_env.uav.wsn.connectivity import (
     ConnectivityResult,
     connectivity,
     sink_edges,
     unit_disk_edges,
     unit_disk_graph,
 )
-from agentsim_env.wsn.coverage import (
+from agentsim_env.uav.wsn.coverage import (
     CoverageResult,
     ZoneGrid,
     area_coverage,
@@ -24,8 +24,8 @@ from agentsim_env.wsn.coverage import (
     weighted_from_covered,
     zone_grid,
 )
-from agentsim_env.wsn.evaluate import WsnConfig, evaluate_deployment, sink_positions
-from agentsim_env.wsn.fidelity import (
+from agentsim_env.uav.wsn.evaluate import WsnConfig, evaluate_deployment, sink_positions
+from agentsim_env.uav.wsn.fidelity import (
     ZoneFidelity,
     assign_zones,
     density_ratio,
@@ -36,15 +36,15 @@ from agentsim_env.wsn.fidelity import (
     target_density_ratio,
     zone_fidelity,
 )
-from agentsim_env.wsn.lifetime import (
+from agentsim_env.uav.wsn.lifetime import (
     LifetimeResult,
     coverage_lifetime,
     routing_tree,
     simulate_lifetime,
     simulate_lifetime_reference,
 )
-from agentsim_env.wsn.profiles import GOLDEN_ANGLE, PROFILE_KINDS, RadialProfile
-from agentsim_env.wsn.radio import RadioParams, aggregation_energy, rx_energy, tx_energy
+from agentsim_env.uav.wsn.profiles import GOLDEN_ANGLE, PROFILE_KINDS, RadialProfile
+from agentsim_env.uav.wsn.radio import RadioParams, aggregation_energy, rx_energy, tx_energy
 
 __all__ = [
     "GOLDEN_ANGLE",

@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from agentsim_env.evaluation.scoring import (
+from agentsim_env.uav.evaluation.scoring import (
     SCORE_TERMS,
     StrategySummary,
     composite_score,
@@ -266,7 +266,7 @@ def store_rows(grid: Any, con: sqlite3.Connection) -> tuple[list[dict[str, Any]]
         ValueError: A flown run that is not in the store, not complete, labelled otherwise, or whose recorded
             sensors or counts differ from the evaluation's.
     """
-    from agentsim_env.evaluation.runner import TELEPORT, mission_label
+    from agentsim_env.uav.evaluation.runner import TELEPORT, mission_label
 
     store = con.execute("PRAGMA database_list").fetchone()[2] or "the store"
     cols = ", ".join(f"s.{c}" for c in _FROM_STORE.values())
@@ -349,7 +349,7 @@ def write_outputs(
         write_csv(rows, out / "runs.csv"),
     ]
     if plots:
-        from agentsim_env.evaluation.plots import write_plots
+        from agentsim_env.uav.evaluation.plots import write_plots
 
         paths += write_plots(grid, out)
     text = summary_markdown(grid, [p.name for p in paths])

@@ -55,7 +55,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from agentsim_env.core.files import json_depth, parse_json, read_regular
 from agentsim_env.core.validation import check_choice, check_float, check_int, check_text, short_repr
-from agentsim_env.wsn.profiles import PROFILE_KINDS, RadialProfile
+from agentsim_env.uav.wsn.profiles import PROFILE_KINDS, RadialProfile
 
 __all__ = [
     "FORMAT_VERSION",
@@ -465,7 +465,7 @@ def overlaps(zs: ZoneSet) -> list[tuple[int, int]]:
 
 def _data_path(name: str) -> Path:
     """Filesystem path of a packaged data file."""
-    return Path(str(resources.files("agentsim_env").joinpath("data", name)))
+    return Path(str(resources.files("agentsim_env.uav").joinpath("data", name)))
 
 
 def default_zones_path() -> Path:

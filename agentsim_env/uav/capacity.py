@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from agentsim_env.scenarios.uav_zones import ZoneSet
+from agentsim_env.uav.zones import ZoneSet
 
 __all__ = ["MAX_N_UAVS", "MAX_PAYLOAD", "capacity_text", "default_fleet", "fleet_capacity"]
 
@@ -22,7 +22,7 @@ MAX_PAYLOAD = 100_000
 
 def default_fleet() -> tuple[int, int]:
     """The ``uav_release`` default fleet: ``(n_uavs, payload)`` from ``UavReleaseConfig``'s field defaults."""
-    from agentsim_env.scenarios.uav_config import UavReleaseConfig
+    from agentsim_env.uav.config import UavReleaseConfig
 
     f = UavReleaseConfig.__dataclass_fields__
     n_uavs, payload = f["n_agents"].default, f["payload"].default

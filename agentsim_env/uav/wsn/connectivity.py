@@ -16,7 +16,7 @@ from scipy import sparse
 from scipy.sparse import csgraph
 from scipy.spatial import cKDTree
 
-from agentsim_env.wsn.coverage import check_points
+from agentsim_env.uav.wsn.coverage import check_points
 
 __all__ = ["ConnectivityResult", "connectivity", "sink_edges", "unit_disk_edges", "unit_disk_graph"]
 
