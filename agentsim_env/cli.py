@@ -181,10 +181,10 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     Nothing is written unless every run succeeds (see ``agentsim_env.uav.evaluation.report``); the output folder
     is created and probed before the first run, and removed again (when still empty) if a run fails.
     """
+    from agentsim_env.scenarios.registry import scenario_class
     from agentsim_env.uav.evaluation.report import ranking_table, write_outputs
     from agentsim_env.uav.evaluation.runner import resolve_strategies, resolve_zones, run_grid
     from agentsim_env.uav.evaluation.scoring import rank_strategies, run_rows
-    from agentsim_env.scenarios.registry import scenario_class
 
     # validate the cheap inputs before the first (slow) run
     seeds = _parse_seeds(args.seeds)

@@ -147,8 +147,8 @@ def run_steps(steps: int, agents: int, every: int, seed: int, warmup: float, pro
 def run_missions(missions: int, zones: str, fresh: bool, warmup: float, progress: bool) -> Trace:
     """Phase 2: ``missions`` ``uav_release`` missions flown by the default baseline."""
     import agentsim_env
-    from agentsim_env.uav.evaluation.mission import fly_mission
     from agentsim_env.policies.registry import make_policy
+    from agentsim_env.uav.evaluation.mission import fly_mission
 
     def build() -> tuple[object, object]:
         env = agentsim_env.make("uav_release", zones=zones)

@@ -16,9 +16,9 @@ sys.path.insert(0, str(ROOT))
 
 import agentsim_env  # noqa: E402
 from agentsim_env.policies.registry import make_policy  # noqa: E402
-from agentsim_env.uav.designer import designer_handlers, designer_hello  # noqa: E402
 from agentsim_env.render.web.server import WebServer  # noqa: E402
 from agentsim_env.render.web.viewer import WebViewer  # noqa: E402
+from agentsim_env.uav.designer import designer_handlers, designer_hello  # noqa: E402
 from tests.browser import browser_page  # noqa: E402
 
 OUT = ROOT / "docs" / "images"

@@ -137,8 +137,8 @@ def test_wheel_installs_policies_and_train_inside_the_package(tmp_path: Path) ->
 # ------------------------------------------------------------------------------------------ registry
 # (the layering itself, no cycles and nothing below the CLI importing the policies, is tests/test_layers.py)
 def test_evaluation_finds_the_policies_through_its_registry() -> None:
-    from agentsim_env.uav.evaluation import strategies
     from agentsim_env.policies.registry import baseline_names, make_policy
+    from agentsim_env.uav.evaluation import strategies
 
     assert strategies.policy_factory() is make_policy
     assert strategies.strategy_names("uav_release") == baseline_names("uav_release")

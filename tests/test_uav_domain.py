@@ -14,7 +14,6 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from agentsim_env.uav.landed_grid import local_counts
 from agentsim_env.uav.energy import (
     DEFAULT_ROTOR,
     GRAVITY,
@@ -27,6 +26,8 @@ from agentsim_env.uav.energy import (
     min_power_speed,
     power,
 )
+from agentsim_env.uav.landed_grid import local_counts
+from agentsim_env.uav.wsn.profiles import RadialProfile
 from agentsim_env.uav.zones import (
     Zone,
     ZoneSet,
@@ -39,7 +40,6 @@ from agentsim_env.uav.zones import (
     zones_from_dict,
     zones_to_dict,
 )
-from agentsim_env.uav.wsn.profiles import RadialProfile
 
 # ---------------------------------------------------------------------------------------------- energy
 

@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 import agentsim_env
-from agentsim_env.uav.evaluation import runner
-from agentsim_env.uav.evaluation.strategies import is_model_token, model_env
 from agentsim_env.uav.autopilot import SweepRoutes, lane_segments
 from agentsim_env.uav.config import UavReleaseConfig
+from agentsim_env.uav.evaluation import runner
+from agentsim_env.uav.evaluation.strategies import is_model_token, model_env
 from agentsim_env.uav.zones import load_zones, tiny_zones_path
 
 TINY = {"zones": "tiny", "n_agents": 2, "payload": 12, "comms": None}

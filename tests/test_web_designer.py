@@ -12,6 +12,7 @@ import pytest
 
 pytest.importorskip("websockets", reason="the viewer extra installs websockets")
 
+from agentsim_env.render.web.server import ClientError, WebServer  # noqa: E402
 from agentsim_env.uav import designer  # noqa: E402
 from agentsim_env.uav.designer import (  # noqa: E402
     DENSITY_SAMPLES,
@@ -20,14 +21,13 @@ from agentsim_env.uav.designer import (  # noqa: E402
     designer_hello,
     run_designer,
 )
-from agentsim_env.render.web.server import ClientError, WebServer  # noqa: E402
+from agentsim_env.uav.wsn.profiles import PROFILE_KINDS  # noqa: E402
 from agentsim_env.uav.zones import (  # noqa: E402
     default_zones_path,
     load_zones,
     zones_from_dict,
     zones_to_dict,
 )
-from agentsim_env.uav.wsn.profiles import PROFILE_KINDS  # noqa: E402
 
 
 def default_dict() -> dict[str, Any]:

@@ -16,9 +16,9 @@ pytest.importorskip("websockets", reason="the viewer extra installs websockets")
 
 from websockets.asyncio.client import connect  # noqa: E402
 
+from agentsim_env.render.web.server import ClientError, WebServer  # noqa: E402
 from agentsim_env.uav import designer  # noqa: E402
 from agentsim_env.uav.designer import designer_handlers, designer_hello  # noqa: E402
-from agentsim_env.render.web.server import ClientError, WebServer  # noqa: E402
 from agentsim_env.uav.zones import ZoneSet  # noqa: E402
 
 

@@ -26,8 +26,8 @@ from agentsim_env.uav.tracking import DeploymentTracker
 from agentsim_env.uav.zones import ZoneSet
 
 if TYPE_CHECKING:
-    from agentsim_env.uav.config import UavReleaseConfig
     from agentsim_env.sim import World
+    from agentsim_env.uav.config import UavReleaseConfig
 
 __all__ = ["ClaimMap", "SweepRoutes", "lane_segments", "throw_coefficients"]
 

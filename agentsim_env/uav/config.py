@@ -18,8 +18,8 @@ from agentsim_env.core.validation import check_float, check_int, check_text, sho
 from agentsim_env.payloads import ScatterConfig, WindConfig
 from agentsim_env.scenarios.config import BodyConfig, ScenarioConfig, SensingConfig
 from agentsim_env.scenarios.rewards import RewardConfig
-from agentsim_env.uav.zones import ZoneSet, load_zones, validate_against_payload, zones_from_dict
 from agentsim_env.uav.wsn.evaluate import WsnConfig
+from agentsim_env.uav.zones import ZoneSet, load_zones, validate_against_payload, zones_from_dict
 
 ZONES_ACCEPTED = (
     "a zones JSON path (str or Path), a dict in the zones format (docs/zones.md), a ZoneSet, "

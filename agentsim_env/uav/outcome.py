@@ -11,10 +11,10 @@ from typing import Any
 import numpy as np
 
 from agentsim_env.payloads import PayloadSet
-from agentsim_env.uav.zones import ZoneSet
 from agentsim_env.uav.wsn.connectivity import connectivity
 from agentsim_env.uav.wsn.evaluate import WsnConfig, sink_positions
 from agentsim_env.uav.wsn.lifetime import simulate_lifetime
+from agentsim_env.uav.zones import ZoneSet
 
 LIFETIME_RATIO_CAP = 2.0  # a lucky layout can outlive the oracle; cap the bonus so it stays bounded
 

@@ -66,16 +66,16 @@ from agentsim_env.motion.actions import decode_velocity_unchecked
 from agentsim_env.payloads import FallParams
 from agentsim_env.payloads.stage import PayloadStage
 from agentsim_env.scenarios.base import Scenario, SlotState, StepResult, slot
-from agentsim_env.uav.landed_grid import local_counts
 from agentsim_env.scenarios.rewards import compose_rewards
+from agentsim_env.sensors.proximity import ProximitySensor
+from agentsim_env.sim import StepEvents, World, WorldConfig
 from agentsim_env.uav.autopilot import AutopilotMode, ClaimMap
 from agentsim_env.uav.config import UavReleaseConfig
 from agentsim_env.uav.energy import DEFAULT_ROTOR, energy_step
+from agentsim_env.uav.landed_grid import local_counts
 from agentsim_env.uav.outcome import final_bonus, oracle_fnd
 from agentsim_env.uav.tracking import DeploymentTracker
 from agentsim_env.uav.zones import ZoneSet
-from agentsim_env.sensors.proximity import ProximitySensor
-from agentsim_env.sim import StepEvents, World, WorldConfig
 
 
 @dataclass(slots=True)

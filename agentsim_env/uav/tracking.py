@@ -10,9 +10,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from agentsim_env.uav.zones import ZoneSet
 from agentsim_env.uav.wsn.coverage import zone_grid
 from agentsim_env.uav.wsn.fidelity import radial_w1
+from agentsim_env.uav.zones import ZoneSet
 
 EMPTY_W1 = 1.0
 

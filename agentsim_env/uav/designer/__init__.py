@@ -32,6 +32,7 @@ from agentsim_env.render.web.frames import DENSITY_SAMPLES, density_curve
 from agentsim_env.render.web.server import Background, ClientError, Handler, WebServer
 from agentsim_env.uav import zones as uav_zones
 from agentsim_env.uav.capacity import capacity_text, default_fleet, fleet_capacity
+from agentsim_env.uav.wsn.profiles import PROFILE_KINDS
 from agentsim_env.uav.zones import (
     ZoneSet,
     load_zones,
@@ -39,12 +40,12 @@ from agentsim_env.uav.zones import (
     zones_to_dict,
     zones_to_json,
 )
-from agentsim_env.uav.wsn.profiles import PROFILE_KINDS
 
 __all__ = [
     "DENSITY_SAMPLES",
     "MAX_POINTS_PER_ZONE",
     "MAX_POINTS_TOTAL",
+    "STATIC_DIR",
     "designer_handlers",
     "designer_hello",
     "preview",
@@ -54,6 +55,9 @@ __all__ = [
 #: Most layout points of each kind (B1, B8) sent per zone, and over all zones together.
 MAX_POINTS_PER_ZONE = 2000
 MAX_POINTS_TOTAL = 40_000
+
+#: The designer page's own files (``designer.html``, its script and style sheet), served by its ``WebServer``.
+STATIC_DIR = Path(__file__).resolve().parent / "static"
 
 _KEYS = {"zones.preview": ("cmd", "zones", "id"), "zones.save": ("cmd", "zones"), "zones.load": ("cmd",)}
 
@@ -301,6 +305,7 @@ def run_designer(
         title="Hot-zone designer",
         handlers=designer_handlers(target),
         on_connect=lambda: designer_hello(target),
+        static_dir=STATIC_DIR,
     )
     url = srv.start()
     try:

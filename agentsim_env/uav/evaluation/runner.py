@@ -66,8 +66,8 @@ from agentsim_env.uav.evaluation.strategies import (
     strategy_names,
 )
 from agentsim_env.uav.outcome import oracle_points
-from agentsim_env.uav.zones import ZoneSet, default_zones_path, load_zones, tiny_zones_path
 from agentsim_env.uav.wsn.evaluate import WsnConfig, evaluate_deployment
+from agentsim_env.uav.zones import ZoneSet, default_zones_path, load_zones, tiny_zones_path
 
 __all__ = [
     "SCENARIO",
