@@ -12,7 +12,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pytest
 
-from agentsim_env.cli import _parse_seeds, main
+from agentsim_env.cli import main
+from agentsim_env.uav.cli import parse_seeds
 from agentsim_env.uav.evaluation import report, runner
 from agentsim_env.uav.evaluation.mission import MissionLog
 from agentsim_env.uav.evaluation.report import (
@@ -277,14 +278,14 @@ def test_mission_log_path_and_near_misses() -> None:
     assert int(np.count_nonzero(log.near)) == 1
 
 
-def test_parse_seeds() -> None:
-    assert _parse_seeds(["3"]) == [0, 1, 2]
-    assert _parse_seeds(["0,4,9"]) == [0, 4, 9]
-    assert _parse_seeds(["5", "2"]) == [5, 2]
-    assert _parse_seeds(["7,"]) == [7]
+def testparse_seeds() -> None:
+    assert parse_seeds(["3"]) == [0, 1, 2]
+    assert parse_seeds(["0,4,9"]) == [0, 4, 9]
+    assert parse_seeds(["5", "2"]) == [5, 2]
+    assert parse_seeds(["7,"]) == [7]
     for bad in (["0"], ["a"], [","]):
         with pytest.raises(ValueError, match="--seeds"):
-            _parse_seeds(bad)
+            parse_seeds(bad)
 
 
 # ------------------------------------------------------------------------------------------ report

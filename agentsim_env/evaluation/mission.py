@@ -1,0 +1,15 @@
+"""Deprecated: this module moved to ``agentsim_env.uav.evaluation.mission``.
+
+The old path works for one release: importing it warns and re-exports the new module's public names.
+"""
+
+import warnings
+
+from agentsim_env.uav.evaluation.mission import *  # noqa: F403
+
+warnings.warn(
+    "agentsim_env.evaluation.mission is deprecated: import agentsim_env.uav.evaluation.mission instead "
+    "(this path is removed in the next release)",
+    DeprecationWarning,
+    stacklevel=2,
+)

@@ -1,0 +1,15 @@
+"""Deprecated: this module moved to ``agentsim_env.uav.designer``.
+
+The old path works for one release: importing it warns and re-exports the new module's public names.
+"""
+
+import warnings
+
+from agentsim_env.uav.designer import *  # noqa: F403
+
+warnings.warn(
+    "agentsim_env.render.web.designer is deprecated: import agentsim_env.uav.designer instead "
+    "(this path is removed in the next release)",
+    DeprecationWarning,
+    stacklevel=2,
+)

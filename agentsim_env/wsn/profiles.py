@@ -1,0 +1,15 @@
+"""Deprecated: this module moved to ``agentsim_env.uav.wsn.profiles``.
+
+The old path works for one release: importing it warns and re-exports the new module's public names.
+"""
+
+import warnings
+
+from agentsim_env.uav.wsn.profiles import *  # noqa: F403
+
+warnings.warn(
+    "agentsim_env.wsn.profiles is deprecated: import agentsim_env.uav.wsn.profiles instead "
+    "(this path is removed in the next release)",
+    DeprecationWarning,
+    stacklevel=2,
+)
