@@ -300,6 +300,7 @@ def serve(path: Path | None) -> WebServer:
         title="Hot-zone designer",
         handlers=designer_handlers(path),
         on_connect=lambda: designer_hello(path),
+        static_dir=designer.STATIC_DIR,
     )
     srv.start()
     return srv

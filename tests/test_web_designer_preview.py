@@ -55,7 +55,10 @@ def test_a_slow_preview_holds_up_neither_other_pages_nor_its_own_newest_request(
     path = tmp_path / "z.json"
     path.write_text(json.dumps(one_zone(5)), encoding="utf-8")
     srv = WebServer(
-        "designer.html", handlers=designer_handlers(path), on_connect=lambda: designer_hello(path)
+        "designer.html",
+        handlers=designer_handlers(path),
+        on_connect=lambda: designer_hello(path),
+        static_dir=designer.STATIC_DIR,
     )
     url = srv.start().replace("http", "ws") + "ws"
     result: dict[str, Any] = {}
@@ -102,7 +105,10 @@ def test_previews_of_one_page_do_not_wait_for_another_pages(
 
     monkeypatch.setattr(designer, "preview", held)
     srv = WebServer(
-        "designer.html", handlers=designer_handlers(None), on_connect=lambda: designer_hello(None)
+        "designer.html",
+        handlers=designer_handlers(None),
+        on_connect=lambda: designer_hello(None),
+        static_dir=designer.STATIC_DIR,
     )
     url = srv.start().replace("http", "ws") + "ws"
     got: list[dict[str, Any]] = []
