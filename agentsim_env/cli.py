@@ -5,12 +5,16 @@ Subcommands:
                draw the first episode's trajectories as PNG (named by scenario, policy, seed and --set values)
                (``cli_run``)
     scenarios  list the registered scenarios
-    evaluate   batch evaluation of the UAV sensor-release strategies (zone files x strategies x seeds):
-               sensors.csv, runs.csv, summary.md (ranking) and PNG plots
     warmup     compile and cache every simulation kernel the commands reach (``agentsim_env.warmup``);
                ``make install`` runs it
     view       the 3D web viewer: a live run with a policy, or a replay from the store (``cli_view``)
-    zones      the hot-zone designer page, and a zone-file check (``cli_view``)
+    train, replay, export, runs   (``agentsim_env.train.cli``, ``cli_replay``, ``cli_store``)
+    evaluate   batch evaluation of the UAV sensor-release strategies (zone files x strategies x seeds):
+               sensors.csv, runs.csv, summary.md (ranking) and PNG plots (``agentsim_env.uav.cli``)
+    zones      the hot-zone designer page, and a zone-file check (``agentsim_env.uav.cli``)
+
+The UAV case study's subcommands come from ``SUBCOMMAND_PROVIDERS`` (``"module:function"`` strings), so this
+module names no UAV function.
 
 ``--set KEY=VALUE`` values are parsed by the type of the config field they set (``agentsim_env.cli_set``).
 Bad input (counts, folders, config values) ends with one ``agentsim: error: ...`` line and exit code 2, before
@@ -20,15 +24,15 @@ any rollout. Help texts that need the registries are built only when shown, so `
 from __future__ import annotations
 
 import argparse
+import importlib
 import sys
 import textwrap
 from collections.abc import Callable
 from typing import Any
 
 from agentsim_env.cli_kernels import COMPILE_NOTICE, WARM_MARKER, announce_compile, kernels_cold, mark_warm
-from agentsim_env.cli_run import check_record, cmd_run, config_tag
-from agentsim_env.cli_set import parse_set
-from agentsim_env.outdirs import prepare_out, remove_created
+from agentsim_env.cli_run import cmd_run, config_tag
+from agentsim_env.outdirs import prepare_out
 
 __all__ = [
     "COMPILE_NOTICE",
@@ -107,18 +111,6 @@ def _fill_run(p: argparse.ArgumentParser) -> None:
     p.epilog = "baselines per scenario (--policy):\n" + "\n".join(lines) + "\n\n" + (p.epilog or "")
 
 
-def _fill_evaluate(p: argparse.ArgumentParser) -> None:
-    from agentsim_env.evaluation.runner import TELEPORT, available_strategies
-
-    listed = textwrap.fill(
-        ", ".join(available_strategies()), 100, initial_indent="  ", subsequent_indent="  "
-    )
-    p.epilog = (
-        f"release strategies (--strategies):\n{listed}\n  (the {TELEPORT} reference, placed without flying, is "
-        f"always added;\n  the flown {TELEPORT} strategy is labelled {TELEPORT}_flown)\n\n" + (p.epilog or "")
-    )
-
-
 RUN_EPILOG = """\
 The PNG of the first episode is OUT/SCENARIO_POLICY_seedSEED[_HASH].png, HASH being 6 hex digits of the --set
 values (none without --set), so different configs do not overwrite each other.
@@ -128,11 +120,6 @@ examples:
   agentsim run navigation --policy random --set n_agents=8 collisions=false body.max_speed=8
   agentsim run relay --set gap=12,20 comms.loss=0.1 --out outputs/relay
   agentsim run uav_release --set zones=tiny n_uavs=2 --episodes 1 --render"""
-EVALUATE_EPILOG = """\
-examples:
-  agentsim evaluate --zones default --strategies all --seeds 3
-  agentsim evaluate --zones tiny my_zones.json --strategies B2_rings B5_cvt --seeds 0,4,9 \\
-      --set n_uavs=2 payload=10 wind.mean_speed=3 --out outputs/eval_tiny"""
 MAIN_EPILOG = """\
 examples:
   agentsim scenarios
@@ -141,6 +128,22 @@ examples:
   agentsim train navigation
   agentsim warmup
 Run 'agentsim COMMAND --help' for a command's options."""
+
+
+#: The packages that add their own subcommands: ``"module:function"`` of a function ``(sub, set_help) -> None``
+#: registering them on the subparsers action ``sub`` (whose parsers take ``lazy=``, a filler of help texts run
+#: only when the help is shown). Named by strings, so the generic command line imports none of them until the
+#: parser is built; the module must import nothing heavy at its top (``agentsim --help`` stays fast).
+SUBCOMMAND_PROVIDERS: tuple[str, ...] = ("agentsim_env.uav.cli:add_commands",)
+
+
+def _provider(spec: str) -> Callable[[Any, str], None]:
+    """The function a ``"module:function"`` entry of ``SUBCOMMAND_PROVIDERS`` names."""
+    module, sep, attr = spec.partition(":")
+    if not sep or not module or not attr:
+        raise ValueError(f"subcommand provider {spec!r}: expected 'module:function'")
+    fn: Callable[[Any, str], None] = getattr(importlib.import_module(module), attr)
+    return fn
 
 
 # ------------------------------------------------------------------------------------------ commands
@@ -152,80 +155,6 @@ def cmd_scenarios(args: argparse.Namespace) -> int:
     for name in agentsim_env.list_scenarios():
         mod = sys.modules[scenario_class(name).__module__]
         print(f"{name:14s} {(mod.__doc__ or '').strip().splitlines()[0]}")
-    return 0
-
-
-def _parse_seeds(tokens: list[str]) -> list[int]:
-    """``N`` (one number: seeds 0..N-1) or an explicit list (``0,4,9``, ``0 4 9``, or ``7,`` for one seed)."""
-    explicit = len(tokens) > 1 or any("," in t for t in tokens)
-    parts = [p for t in tokens for p in t.split(",") if p.strip()]
-    try:
-        values = [int(p) for p in parts]
-    except ValueError:
-        raise ValueError(
-            f"--seeds must be a count N or a list of integers (e.g. 0,4,9), got {' '.join(tokens)!r}"
-        ) from None
-    if not values:
-        raise ValueError("--seeds must be a count N >= 1 or a list of integers, got nothing")
-    if explicit:
-        if min(values) < 0:
-            raise ValueError(f"--seeds must be integers >= 0, got {min(values)}")
-        return list(dict.fromkeys(values))
-    if values[0] < 1:
-        raise ValueError(f"--seeds N must be >= 1 (or give a list such as 0,4,9), got {values[0]}")
-    return list(range(values[0]))
-
-
-def cmd_evaluate(args: argparse.Namespace) -> int:
-    """Fly every strategy over every zone file and seed; write CSVs, plots and the Markdown ranking.
-
-    Nothing is written unless every run succeeds (see ``agentsim_env.evaluation.report``); the output folder
-    is created and probed before the first run, and removed again (when still empty) if a run fails.
-    """
-    from agentsim_env.evaluation.report import ranking_table, write_outputs
-    from agentsim_env.evaluation.runner import resolve_strategies, resolve_zones, run_grid
-    from agentsim_env.evaluation.scoring import rank_strategies, run_rows
-    from agentsim_env.scenarios.registry import scenario_class
-
-    # validate the cheap inputs before the first (slow) run
-    seeds = _parse_seeds(args.seeds)
-    overrides = parse_set(scenario_class("uav_release").config_cls, args.set or [])
-    resolve_zones(args.zones)
-    resolve_strategies(args.strategies)
-    store = getattr(args, "record", None) or None
-    check_record(store)
-    created = prepare_out(args.out)
-    try:
-        announce_compile()
-        if store is None:
-            grid = run_grid(args.zones, args.strategies, seeds, overrides, progress=not args.quiet)
-            paths, _ = write_outputs(grid, args.out, plots=not args.no_plots)
-        else:  # every mission recorded; sensors.csv and runs.csv read back from the store
-            from agentsim_env.recorder import record
-            from agentsim_env.recorder.read import open_store
-
-            def record_env(env: Any, label: str) -> Any:
-                return record(env, store, label=label)
-
-            grid = run_grid(
-                args.zones, args.strategies, seeds, overrides, progress=not args.quiet, record_env=record_env
-            )
-            with open_store(store) as st:
-                paths, _ = write_outputs(grid, args.out, plots=not args.no_plots, store=st.con)
-    except BaseException:
-        remove_created(created)
-        raise
-    mark_warm()
-    rows = run_rows(grid.runs)
-    for src in grid.sources:
-        print(f"\nRanking, zone file {src.label!r} ({len(seeds)} seed(s)):\n")
-        print(ranking_table(rank_strategies(rows, src.label)))
-    print("\nwritten:")
-    for p in paths:
-        print(f"  {p}")
-    if store:
-        flown = [r.store_run for r in grid.runs if r.store_run is not None]
-        print(f"  {store} ({len(flown)} missions recorded, runs {min(flown)}-{max(flown)})")
     return 0
 
 
@@ -312,50 +241,6 @@ def build_parser() -> argparse.ArgumentParser:
     r.set_defaults(func=cmd_run)
     s = sub.add_parser("scenarios", help="list the registered scenarios")
     s.set_defaults(func=cmd_scenarios)
-    e = sub.add_parser(
-        "evaluate",
-        help="batch evaluation of the UAV sensor-release strategies",
-        description="Fly every release strategy over every zone file and seed (scenario uav_release);\n"
-        "write sensors.csv, runs.csv, summary.md and PNG plots.",
-        epilog=EVALUATE_EPILOG,
-        lazy=_fill_evaluate,
-    )
-    e.add_argument(
-        "--zones",
-        nargs="+",
-        default=["default"],
-        metavar="ZONES",
-        help="zone files: 'default', 'tiny' or JSON paths (several allowed)",
-    )
-    e.add_argument(
-        "--strategies",
-        nargs="+",
-        default=["all"],
-        metavar="NAME",
-        help="release strategies (see below), or 'all'",
-    )
-    e.add_argument(
-        "--seeds",
-        nargs="+",
-        default=["3"],
-        metavar="SEED",
-        help="a count N >= 1 (seeds 0..N-1) or a list: 0,4,9 or 0 4 9 (one seed: 7,)",
-    )
-    e.add_argument(
-        "--set", nargs="*", metavar="KEY=VALUE", help="uav_release " + SET_HELP + "; for every run"
-    )
-    e.add_argument("--out", default="outputs/evaluation", help="output folder")
-    e.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
-    e.add_argument("--quiet", action="store_true", help="no progress bar")
-    e.add_argument(
-        "--record",
-        default=None,
-        metavar="PATH",
-        help="record every mission to this SQLite store "
-        "(a run each, labelled zones= strategy= seed=); sensors.csv and runs.csv are then read "
-        "back from it",
-    )
-    e.set_defaults(func=cmd_evaluate)
     w = sub.add_parser(
         "warmup",
         help="compile and cache the simulation kernels (done once; make install runs it)",
@@ -377,6 +262,8 @@ def build_parser() -> argparse.ArgumentParser:
     from agentsim_env.cli_view import add_view_commands
 
     add_view_commands(sub, SET_HELP, announce_compile)
+    for spec in SUBCOMMAND_PROVIDERS:
+        _provider(spec)(sub, SET_HELP)
     return p
 
 

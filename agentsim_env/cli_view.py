@@ -1,8 +1,9 @@
-"""``agentsim view`` (the 3D web viewer, live or replaying a store) and ``agentsim zones`` (design, check).
+"""``agentsim view``: the 3D web viewer, live or replaying a store.
 
-``agentsim_env.cli.build_parser`` registers both with :func:`add_view_commands`. The viewer and the designer are
-``agentsim_env.render.web``; replay is ``agentsim_env.recorder.web_replay``. Both serve on 127.0.0.1 unless
-``--host`` says otherwise, print the page's URL and run until Ctrl-C (or ``--episodes`` / ``--steps``).
+``agentsim_env.cli.build_parser`` registers it with :func:`add_view_commands`. The viewer is
+``agentsim_env.render.web``; replay is ``agentsim_env.recorder.web_replay``. It serves on 127.0.0.1 unless
+``--host`` says otherwise (``render.web.bind``), prints the page's URL and runs until Ctrl-C (or ``--episodes`` /
+``--steps``).
 """
 
 from __future__ import annotations
@@ -12,6 +13,8 @@ import sys
 import threading
 import webbrowser
 from typing import Any
+
+from agentsim_env.render.web.bind import check_network, network_options, warn_host
 
 VIEW_EPILOG = """\
 examples:
@@ -23,25 +26,10 @@ examples:
   agentsim view --replay runs.db --episode 0 --out replay.mp4   (the 3D view as a video, headless Chromium)
 open the printed URL in a browser; Ctrl-C stops. See docs/viewer.md."""
 
-ZONES_EPILOG = """\
-examples:
-  agentsim zones design my_zones.json    draw zones on the map; Save writes my_zones.json (only that file)
-  agentsim zones design                  start from the default zones; nothing is written (Download instead)
-  agentsim zones check my_zones.json     validate a zone file, list its zones, check the default fleet carries them
-  agentsim zones check my_zones.json --set n_uavs=6    ... for another fleet
-then: agentsim evaluate --zones my_zones.json --strategies B5_cvt"""
-
-
-def _check_network(args: argparse.Namespace) -> None:
-    if not isinstance(args.port, int) or not 0 <= args.port <= 65535:
-        raise ValueError(f"--port must be an integer in 0..65535 (0: a free port), got {args.port}")
-    if not args.host:
-        raise ValueError("--host must be an address such as 127.0.0.1 (this machine only) or 0.0.0.0")
-
 
 def cmd_view(args: argparse.Namespace) -> int:
     """Run a scenario with a policy and stream it to the page, or replay a store."""
-    _check_network(args)
+    check_network(args)
     if args.speed is not None:
         from agentsim_env.render.web.viewer import SPEED_RANGE, speed_ok
 
@@ -81,7 +69,7 @@ def _replay(args: argparse.Namespace) -> int:
         speed=args.speed,
     )
     url = viewer.start()
-    _warn_host(args.host)
+    warn_host(args.host)
     if args.open:
         webbrowser.open(url)
     try:
@@ -117,15 +105,6 @@ def _export(args: argparse.Namespace) -> int:
     return 0
 
 
-def _warn_host(host: str, what: str = "watch and control the simulation") -> None:
-    if host not in ("127.0.0.1", "localhost", "::1"):
-        print(
-            f"agentsim: WARNING: serving on {host}: any machine that reaches it can {what} (there is no "
-            "authentication)",
-            file=sys.stderr,
-        )
-
-
 def _live(args: argparse.Namespace) -> int:
     import agentsim_env
     from agentsim_env.cli_set import parse_set
@@ -154,7 +133,7 @@ def _live(args: argparse.Namespace) -> int:
         f"agentsim view: {args.scenario} with policy {policy_name} at {url}  (Ctrl-C stops{waits})",
         file=sys.stderr,
     )
-    _warn_host(args.host)
+    warn_host(args.host)
     if args.open:
         webbrowser.open(url)
     steps = 0
@@ -181,69 +160,8 @@ def _live(args: argparse.Namespace) -> int:
     return 0
 
 
-def cmd_zones_design(args: argparse.Namespace) -> int:
-    """Serve the hot-zone designer until Ctrl-C."""
-    _check_network(args)
-    from agentsim_env.render.web.designer import run_designer
-
-    _warn_host(args.host, "edit and save the zones")
-    run_designer(args.file, host=args.host, port=args.port, open_browser=args.open)
-    return 0
-
-
-def cmd_zones_check(args: argparse.Namespace) -> int:
-    """Validate a zone file; print its zones and whether the fleet carries their sensors.
-
-    The fleet is the ``uav_release`` default, or the ``--set`` values (checked as ``agentsim run`` checks them,
-    with these zones); a fleet that cannot carry every sensor ends the check with one error line (exit 2).
-    """
-    from agentsim_env.cli_set import parse_set
-    from agentsim_env.scenarios.uav_capacity import capacity_text, default_fleet, fleet_capacity
-    from agentsim_env.scenarios.uav_config import UavReleaseConfig
-    from agentsim_env.scenarios.uav_zones import load_zones, overlaps
-
-    overrides = parse_set(UavReleaseConfig, getattr(args, "set", None) or [])
-    if "zones" in overrides:
-        raise ValueError("--set zones=... is not allowed here: the zones are FILE's")
-    try:
-        zs = load_zones(args.file)
-    except OSError as exc:
-        raise ValueError(f"{args.file}: {exc.strerror or exc}") from None
-    w, h = zs.map_size
-    print(f"{args.file}: valid; map {w:g} x {h:g} m, {len(zs.zones)} zones, {zs.n_sensors} sensors")
-    print("| # | name | centre | radius | sensors | profile | weight |")
-    print("|---|---|---|---|---|---|---|")
-    for i, z in enumerate(zs.zones):
-        print(
-            f"| {i} | {z.name or ''} | ({z.centre[0]:g}, {z.centre[1]:g}) | {z.radius:g} | {z.n_sensors} | "
-            f"{z.profile} | {z.weight:g} |"
-        )
-    for i, j in overlaps(zs):
-        print(f"note: zones {i} and {j} overlap")
-    n_uavs, payload = default_fleet()
-    cap = fleet_capacity(zs, overrides.get("n_agents", n_uavs), overrides.get("payload", payload))
-    text = capacity_text(cap, "fleet (--set)" if overrides else "default fleet")
-    if not cap["carried"]:
-        raise ValueError(text)
-    print(text)
-    if overrides:  # the other values must build with these zones too
-        UavReleaseConfig(**{**overrides, "zones": zs})
-    return 0
-
-
-def _network_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument(
-        "--host",
-        default="127.0.0.1",
-        help="address to bind; anything but 127.0.0.1 is reachable "
-        "from other machines (a warning is printed)",
-    )
-    p.add_argument("--port", type=int, default=0, help="port (0: a free one)")
-    p.add_argument("--open", action="store_true", help="open the page in the default browser")
-
-
 def add_view_commands(sub: Any, set_help: str, announce: Any) -> None:
-    """Register ``agentsim view`` and ``agentsim zones`` on the subparsers action ``sub``.
+    """Register ``agentsim view`` on the subparsers action ``sub``.
 
     Args:
         sub: The subparsers action of the ``agentsim`` parser.
@@ -300,32 +218,8 @@ def add_view_commands(sub: Any, set_help: str, announce: Any) -> None:
     v.add_argument(
         "--every", type=int, default=None, help="--out: draw every K-th recorded step (and the last)"
     )
-    _network_options(v)
+    network_options(v)
     v.set_defaults(func=cmd_view, announce=announce)
-    z = sub.add_parser(
-        "zones",
-        help="hot-zone files: the designer page, or a check",
-        description="Design hot zones in the browser, or check a zone file (docs/zones.md).",
-        epilog=ZONES_EPILOG,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
-    zsub = z.add_subparsers(dest="zones_command", required=True, metavar="ACTION")
-    d = zsub.add_parser("design", help="the hot-zone designer page (saves only to FILE)")
-    d.add_argument(
-        "file", nargs="?", default=None, metavar="FILE", help="zone file to edit (created on Save)"
-    )
-    _network_options(d)
-    d.set_defaults(func=cmd_zones_design)
-    c = zsub.add_parser("check", help="validate a zone file, list its zones and check the fleet carries them")
-    c.add_argument("file", metavar="FILE", help="a zone file (JSON)")
-    c.add_argument(
-        "--set",
-        nargs="*",
-        metavar="KEY=VALUE",
-        help="uav_release config values for the fleet "
-        "(n_uavs=6 payload=50 ...; default: the scenario's defaults), checked with these zones",
-    )
-    c.set_defaults(func=cmd_zones_check)
 
 
-__all__ = ["add_view_commands", "cmd_view", "cmd_zones_check", "cmd_zones_design"]
+__all__ = ["add_view_commands", "cmd_view"]

@@ -82,7 +82,7 @@ while env.agents:
     obs, rewards, terminations, truncations, infos = env.step(policy.act({a: obs[a] for a in env.agents}))
 frame = env.render()
 
-from agentsim_env.wsn import evaluate_deployment
+from agentsim_env.uav.wsn import evaluate_deployment
 zones = env.scenario.zones
 metrics = evaluate_deployment(env.world.payloads.objects.landed_xy(), None, zones.centres(), zones.radii(),
                               [z.radial_profile() for z in zones.zones])

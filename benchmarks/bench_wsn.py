@@ -20,7 +20,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from agentsim_env.wsn import (  # noqa: E402
+from agentsim_env.uav.wsn import (  # noqa: E402
     RadialProfile,
     WsnConfig,
     ZoneGrid,
@@ -31,7 +31,7 @@ from agentsim_env.wsn import (  # noqa: E402
     simulate_lifetime,
     zone_grid,
 )
-from agentsim_env.wsn.coverage import _cached_grid  # noqa: E402
+from agentsim_env.uav.wsn.coverage import _cached_grid  # noqa: E402
 
 CENTRES = np.array([[0.0, 0.0], [250.0, 0.0], [120.0, 200.0]])
 RADII = np.array([100.0, 80.0, 120.0])

@@ -10,7 +10,7 @@ ten minutes on one core while the step time stays flat. Two phases, one process:
    steps (default: 200 samples over the run).
 2. **Missions.** ``--missions`` (200) ``uav_release`` missions on ``--zones`` (``tiny``) flown by the shipped
    default baseline (``agentsim_env.policies.registry.make_policy``, strategy B5_cvt) through
-   ``agentsim_env.evaluation.mission.fly_mission``, seeds 0, 1, 2, ...; one env and one policy serve every
+   ``agentsim_env.uav.evaluation.mission.fly_mission``, seeds 0, 1, 2, ...; one env and one policy serve every
    mission (each mission resets both), or a fresh pair per mission with ``--fresh-env``. RSS is sampled after
    each mission.
 
@@ -147,8 +147,8 @@ def run_steps(steps: int, agents: int, every: int, seed: int, warmup: float, pro
 def run_missions(missions: int, zones: str, fresh: bool, warmup: float, progress: bool) -> Trace:
     """Phase 2: ``missions`` ``uav_release`` missions flown by the default baseline."""
     import agentsim_env
-    from agentsim_env.evaluation.mission import fly_mission
     from agentsim_env.policies.registry import make_policy
+    from agentsim_env.uav.evaluation.mission import fly_mission
 
     def build() -> tuple[object, object]:
         env = agentsim_env.make("uav_release", zones=zones)

@@ -16,9 +16,10 @@ sys.path.insert(0, str(ROOT))
 
 import agentsim_env  # noqa: E402
 from agentsim_env.policies.registry import make_policy  # noqa: E402
-from agentsim_env.render.web.designer import designer_handlers, designer_hello  # noqa: E402
 from agentsim_env.render.web.server import WebServer  # noqa: E402
 from agentsim_env.render.web.viewer import WebViewer  # noqa: E402
+from agentsim_env.uav.designer import STATIC_DIR as DESIGNER_STATIC  # noqa: E402
+from agentsim_env.uav.designer import designer_handlers, designer_hello  # noqa: E402
 from tests.browser import browser_page  # noqa: E402
 
 OUT = ROOT / "docs" / "images"
@@ -72,6 +73,7 @@ def designer() -> None:
         title="designer",
         handlers=designer_handlers(None),
         on_connect=lambda: designer_hello(None),
+        static_dir=DESIGNER_STATIC,
     )
     url = srv.start()
     with browser_page(1300, 800) as (page, _):

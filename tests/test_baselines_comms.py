@@ -17,7 +17,7 @@ import pytest
 import agentsim_env
 from agentsim_env.cli import main
 from agentsim_env.policies.registry import baseline_names, make_policy
-from agentsim_env.scenarios.uav_zones import tiny_zones_path
+from agentsim_env.uav.zones import tiny_zones_path
 
 SCENARIOS = agentsim_env.list_scenarios()
 CASES = [(s, b) for s in SCENARIOS for b in baseline_names(s)]

@@ -17,11 +17,11 @@ import agentsim_env
 from agentsim_env import cli_kernels
 from agentsim_env.cli import COMPILE_NOTICE, WARM_MARKER, config_tag, main, prepare_out
 from agentsim_env.cli_set import parse_set
-from agentsim_env.evaluation import runner
 from agentsim_env.policies.registry import BASELINES, make_policy
 from agentsim_env.policies.rollout import run_episode
 from agentsim_env.render.trajectories import OUTCOMES, TrajectoryRecorder, plot_trajectories
 from agentsim_env.scenarios.registry import scenario_class
+from agentsim_env.uav.evaluation import runner
 
 NAV = scenario_class("navigation").config_cls
 RELAY = scenario_class("relay").config_cls

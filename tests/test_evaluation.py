@@ -12,10 +12,11 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pytest
 
-from agentsim_env.cli import _parse_seeds, main
-from agentsim_env.evaluation import report, runner
-from agentsim_env.evaluation.mission import MissionLog
-from agentsim_env.evaluation.report import (
+from agentsim_env.cli import main
+from agentsim_env.uav.cli import parse_seeds
+from agentsim_env.uav.evaluation import report, runner
+from agentsim_env.uav.evaluation.mission import MissionLog
+from agentsim_env.uav.evaluation.report import (
     SENSOR_COLUMNS,
     composite_score,
     format_mean_std,
@@ -23,7 +24,7 @@ from agentsim_env.evaluation.report import (
     rank_strategies,
     ranking_table,
 )
-from agentsim_env.evaluation.runner import TELEPORT, resolve_zones, run_one, teleport_reference
+from agentsim_env.uav.evaluation.runner import TELEPORT, resolve_zones, run_one, teleport_reference
 
 # A small mission: the tiny zone file (one zone, 20 sensors) with exactly the payload it needs.
 TINY = ["--set", "n_uavs=2", "payload=10", "max_steps=2500"]
@@ -281,14 +282,14 @@ def test_mission_log_path_and_near_misses() -> None:
     assert int(np.count_nonzero(log.near)) == 1
 
 
-def test_parse_seeds() -> None:
-    assert _parse_seeds(["3"]) == [0, 1, 2]
-    assert _parse_seeds(["0,4,9"]) == [0, 4, 9]
-    assert _parse_seeds(["5", "2"]) == [5, 2]
-    assert _parse_seeds(["7,"]) == [7]
+def testparse_seeds() -> None:
+    assert parse_seeds(["3"]) == [0, 1, 2]
+    assert parse_seeds(["0,4,9"]) == [0, 4, 9]
+    assert parse_seeds(["5", "2"]) == [5, 2]
+    assert parse_seeds(["7,"]) == [7]
     for bad in (["0"], ["a"], [","]):
         with pytest.raises(ValueError, match="--seeds"):
-            _parse_seeds(bad)
+            parse_seeds(bad)
 
 
 # ------------------------------------------------------------------------------------------ report

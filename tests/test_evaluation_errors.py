@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 from agentsim_env.cli import main
-from agentsim_env.scenarios.uav_config import UavReleaseConfig
+from agentsim_env.uav.config import UavReleaseConfig
 
 
 def _one_error_line(capsys: pytest.CaptureFixture[str]) -> str:

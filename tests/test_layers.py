@@ -7,41 +7,74 @@ import ast
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-# package -> layer; a package may import its own modules and packages of lower layers only
-LAYERS: dict[str, float] = {
-    "_numba_cache": 0,
-    "_compile_notice": 0,  # the one-line notice when a kernel compiles; imports only numba and the standard library
+# package -> layer; a package may import its own modules and packages of lower layers only. A top-level module
+# (cli_run.py, ...) is a package of its own here.
+LAYERS: dict[str, int] = {
+    # 0: nothing of ours
+    "_numba_cache": 0,  # where numba caches the package's kernels
+    "_compile_notice": 0,  # the one-line notice when a kernel compiles; numba and the standard library only
     "core": 0,
+    "outdirs": 0,  # output folders checked before work (cli, uav's evaluate, the store's export)
+    "cli_set": 0,  # the --set parser (KEY=VALUE against a config class) of cli, train and uav's subcommands
+    # 1: the subsystems, over core
     "motion": 1,
     "physics": 1,
     "payloads": 1,
     "sensors": 1,
     "comms": 1,
     "groups": 1,
-    "wsn": 1,
-    "sim": 2,
-    "scenarios": 3,
-    "render": 4,
-    "env": 5,
-    "": 5.5,  # agentsim_env/__init__.py: the public entry points (make, list_scenarios) over env and scenarios
-    "recorder": 6,
-    "evaluation": 6,
-    "distributed": 6,
-    "policies": 7,
-    "train": 8,
-    "cli": 9,  # the command line: over everything, train's subcommand included
-    "outdirs": 0.5,  # output folders checked before work (cli and the store's export); imports nothing of ours
-    "cli_set": 7.5,  # the --set parser of cli; imports nothing from the package
-    "cli_replay": 7.5,  # the replay subcommand of cli; over the recorder and render
-    "cli_store": 7.5,  # the export and runs subcommands of cli; over the recorder
-    "cli_view": 7.7,  # the view and zones subcommands of cli; over the recorder, render, policies and cli_set
-    "warmup": 7.6,
-    "cli_live": 4.5,  # the run's display check and signal handling of cli; over render
-    "cli_kernels": 5.6,  # whether numba's cache is warm, the compile notice; over the package's version
-    "cli_run": 8.5,  # the run subcommand of cli; over policies, render, the recorder, distributed and cli_live
-    "gymnasium_envs": 5.6,
-    "zoo": 5.6,  # each scenario as a PettingZoo-style module (navigation_v0, ...); over env  # importing it registers the Gymnasium ids; over env  # agentsim warmup's runs; over env, distributed and policies
+    "sim": 2,  # the World: the step's pipeline over the subsystems
+    "scenarios": 3,  # the Scenario contract, the registry and the generic scenarios; over sim
+    "render": 4,  # rgb_array renderer, the web viewer's server (and bind options); over sim, not scenarios
+    "env": 5,  # the PettingZoo env, spaces, batched env; over scenarios, sim and render
+    "cli_live": 5,  # the run's display check and signal handling of cli; over render
+    "": 6,  # agentsim_env/__init__.py: the public entry points (make, list_scenarios) over env and scenarios
+    "distributed": 6,  # one simulation over Ray shards; over env
+    "gymnasium_envs": 6,  # importing it registers the Gymnasium ids; over env
+    "zoo": 6,  # each scenario as a PettingZoo-style module (navigation_v0, ...); over env
+    "recorder": 7,  # the store, replay and export; over the package's make, env and render
+    "cli_kernels": 7,  # whether numba's cache is warm, the compile notice; over the package's version
+    "uav": 8,  # the UAV case study; over scenarios, render, env, the recorder, cli_kernels and cli_set
+    "cli_replay": 8,  # the replay subcommand of cli; over the recorder and render
+    "cli_store": 8,  # the export and runs subcommands of cli; over the recorder
+    "policies": 9,  # the algorithms library; over env and uav (the release strategies)
+    "train": 10,  # training entry points; over policies
+    "warmup": 10,  # agentsim warmup's runs; over env, distributed and policies
+    "cli_view": 10,  # the view subcommand of cli; over the recorder, render, policies and cli_set
+    "cli_run": 10,  # the run subcommand of cli; over policies, render, the recorder, distributed and cli_live
+    "cli": 11,  # the command line: over everything (train's subcommand, uav's by name: SUBCOMMAND_PROVIDERS)
 }
+# the old paths of modules that moved into uav: shims that warn and re-export (old module -> new module); each
+# may import only its counterpart, and nothing of ours imports them
+DEPRECATED: dict[str, str] = {
+    **{
+        f"agentsim_env.scenarios.{old}": f"agentsim_env.uav.{new}"
+        for old, new in [
+            ("uav_release", "scenario"),
+            ("uav_config", "config"),
+            ("uav_zones", "zones"),
+            ("uav_energy", "energy"),
+            ("uav_autopilot", "autopilot"),
+            ("uav_tracking", "tracking"),
+            ("uav_outcome", "outcome"),
+            ("uav_capacity", "capacity"),
+            ("landed_grid", "landed_grid"),
+        ]
+    },
+    "agentsim_env.wsn": "agentsim_env.uav.wsn",
+    **{
+        f"agentsim_env.wsn.{m}": f"agentsim_env.uav.wsn.{m}"
+        for m in ("connectivity", "coverage", "evaluate", "fidelity", "lifetime", "profiles", "radio")
+    },
+    "agentsim_env.evaluation": "agentsim_env.uav.evaluation",
+    **{
+        f"agentsim_env.evaluation.{m}": f"agentsim_env.uav.evaluation.{m}"
+        for m in ("mission", "plots", "report", "runner", "scoring", "strategies")
+    },
+    "agentsim_env.render.web.designer": "agentsim_env.uav.designer",
+}
+# the only modules outside uav that import it (besides the shims): the release strategies
+UAV_IMPORTERS = "agentsim_env.policies.release"
 # folders installed under the package's name (pyproject's package-dir)
 MAPPED = {"policies": ROOT / "policies", "train": ROOT / "train"}
 
@@ -101,19 +134,54 @@ def graph() -> dict[str, set[str]]:
 
 
 def test_every_package_has_a_layer() -> None:
-    missing = sorted({package_of(m) for m in modules()} - set(LAYERS))
+    missing = sorted({package_of(m) for m in modules() if m not in DEPRECATED} - set(LAYERS))
     assert not missing, f"packages without a layer in this test: {missing}"
 
 
 def test_each_package_imports_only_lower_layers() -> None:
     bad = []
     for mod, targets in graph().items():
+        if mod in DEPRECATED:
+            continue  # test_deprecated_shims_import_only_their_counterpart
         src = package_of(mod)
         for t in targets:
             dst = package_of(t)
             if dst != src and LAYERS[dst] >= LAYERS[src]:
                 bad.append(f"{mod} (layer {LAYERS[src]}) -> {t} (layer {LAYERS[dst]})")
     assert not bad, "layer violations:\n" + "\n".join(sorted(bad))
+
+
+def test_layers_are_whole_numbers() -> None:
+    assert all(type(v) is int and v >= 0 for v in LAYERS.values()), LAYERS
+
+
+def test_deprecated_shims_import_only_their_counterpart() -> None:
+    g = graph()
+    assert set(DEPRECATED) <= set(g), f"shims missing: {sorted(set(DEPRECATED) - set(g))}"
+    bad = []
+    for old, new in DEPRECATED.items():
+        # the counterpart, its parent packages, and (for a shim package) its own shim submodules
+        allowed = {new, *(new.rsplit(".", k)[0] for k in range(1, new.count(".")))}
+        extra = {t for t in g[old] if t not in allowed and not t.startswith(old + ".")}
+        bad += [f"{old} -> {t}" for t in sorted(extra)]
+        if new not in g[old]:
+            bad.append(f"{old} does not import {new}")
+    importers = sorted(m for m, ts in g.items() if m not in DEPRECATED and set(ts) & set(DEPRECATED))
+    assert not bad, "shims importing more than their counterpart:\n" + "\n".join(bad)
+    assert not importers, f"modules importing a deprecated path: {importers}"
+
+
+def test_only_the_release_strategies_import_uav() -> None:
+    outside = sorted(
+        f"{m} -> {t}"
+        for m, ts in graph().items()
+        for t in ts
+        if package_of(t) == "uav"
+        and package_of(m) != "uav"
+        and m not in DEPRECATED
+        and not (m == UAV_IMPORTERS or m.startswith(UAV_IMPORTERS + "."))
+    )
+    assert not outside, "generic code importing the UAV case study:\n" + "\n".join(outside)
 
 
 def test_no_import_cycles() -> None:

@@ -126,18 +126,19 @@ def test_wheel_installs_policies_and_train_inside_the_package(tmp_path: Path) ->
         for f in (ROOT / top).rglob("*.py"):
             rel = f.relative_to(ROOT / top).as_posix()
             assert f"{dotted.replace('.', '/')}/{rel}" in names
-    assert "agentsim_env/data/zones_default.json" in names
+    assert "agentsim_env/uav/data/zones_default.json" in names
     # the web pages and three.js ship in the package (the viewer works with no network)
     static = ROOT / "agentsim_env" / "render" / "web" / "static"
-    for f in [*static.glob("*.*"), *(static / "vendor").glob("*.*")]:
+    designer = ROOT / "agentsim_env" / "uav" / "designer" / "static"
+    for f in [*static.glob("*.*"), *(static / "vendor").glob("*.*"), *designer.glob("*.*")]:
         assert f"agentsim_env/{f.relative_to(ROOT / 'agentsim_env').as_posix()}" in names, f
 
 
 # ------------------------------------------------------------------------------------------ registry
 # (the layering itself, no cycles and nothing below the CLI importing the policies, is tests/test_layers.py)
 def test_evaluation_finds_the_policies_through_its_registry() -> None:
-    from agentsim_env.evaluation import strategies
     from agentsim_env.policies.registry import baseline_names, make_policy
+    from agentsim_env.uav.evaluation import strategies
 
     assert strategies.policy_factory() is make_policy
     assert strategies.strategy_names("uav_release") == baseline_names("uav_release")

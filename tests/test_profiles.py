@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import integrate, stats
 
-from agentsim_env.wsn.profiles import GOLDEN_ANGLE, PROFILE_KINDS, RadialProfile
+from agentsim_env.uav.wsn.profiles import GOLDEN_ANGLE, PROFILE_KINDS, RadialProfile
 
 R = 25.0
 PROFILES = [

@@ -19,7 +19,7 @@ from agentsim_env.policies.release.planning import (
     split_sectors,
 )
 from agentsim_env.policies.release.registry import make_plan, strategy_names
-from agentsim_env.wsn.profiles import RadialProfile
+from agentsim_env.uav.wsn.profiles import RadialProfile
 
 R = 100.0
 CENTRE = np.array([250.0, -40.0])

@@ -24,7 +24,7 @@ from agentsim_env.policies.release.coordination import (
     encode,
 )
 from agentsim_env.policies.release.planning import in_sector
-from agentsim_env.wsn import evaluate_deployment
+from agentsim_env.uav.wsn import evaluate_deployment
 
 CALM = {"wind": {"mean_speed": 0.0}, "scatter": {"sigma_gnss": 0.5, "sigma_timing": 0.0, "sigma_bounce": 0.0}}
 TINY = {"zones": "tiny", "n_uavs": 2, "payload": 12, **CALM}

@@ -14,7 +14,6 @@ import numpy as np
 import pytest
 
 import agentsim_env
-from agentsim_env.evaluation import runner
 from agentsim_env.policies.registry import baseline_names, make_policy, resolve_policy
 from agentsim_env.policies.release import (
     Bound,
@@ -31,7 +30,8 @@ from agentsim_env.policies.release import (
     unregister,
 )
 from agentsim_env.policies.release.baselines import B5Cvt, B6DropClusters, B8Teleport
-from agentsim_env.wsn.profiles import RadialProfile
+from agentsim_env.uav.evaluation import runner
+from agentsim_env.uav.wsn.profiles import RadialProfile
 
 SHIPPED = [
     "B0_uniform",

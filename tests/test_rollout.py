@@ -260,7 +260,7 @@ def test_run_prints_steps_per_second(tmp_path: Path, capsys: pytest.CaptureFixtu
 
 def _old_fly_mission(env: Any, policy: Any, seed: int) -> dict[str, float]:
     """``fly_mission`` as it stepped through ``step()`` with dicts: what the rollout path must equal."""
-    from agentsim_env.evaluation import mission
+    from agentsim_env.uav.evaluation import mission
 
     obs, _ = env.reset(seed=seed)
     policy.reset(seed)
@@ -277,7 +277,7 @@ def _old_fly_mission(env: Any, policy: Any, seed: int) -> dict[str, float]:
 
 def test_evaluate_flies_missions_through_rollout(monkeypatch: pytest.MonkeyPatch) -> None:
     from agentsim_env.env.parallel_env import AgentSimParallelEnv
-    from agentsim_env.evaluation.mission import fly_mission
+    from agentsim_env.uav.evaluation.mission import fly_mission
 
     config = {"zones": "tiny", "n_uavs": 2, "payload": 10, "max_steps": 1500}
     env = agentsim_env.make("uav_release", **config)

@@ -111,14 +111,14 @@ def _recording(db: Path) -> Any:
 
 
 def _write(grid: Any, db: Path, out: Path) -> None:
-    from agentsim_env.evaluation.report import write_outputs
+    from agentsim_env.uav.evaluation.report import write_outputs
 
     with open_store(db) as store:
         write_outputs(grid, out, plots=False, store=store.con)
 
 
 def test_store_rows_refuse_a_store_that_disagrees(tmp_path: Path) -> None:
-    from agentsim_env.evaluation.runner import run_grid
+    from agentsim_env.uav.evaluation.runner import run_grid
 
     db = tmp_path / "eval.db"
     grid = run_grid(["tiny"], ["B2_rings"], [0], TINY_OVERRIDES, progress=False, record_env=_recording(db))
@@ -143,7 +143,7 @@ def test_store_rows_refuse_a_store_that_disagrees(tmp_path: Path) -> None:
 def test_a_recording_that_fails_mid_mission_fails_the_run(tmp_path: Path) -> None:
     """The recorder detaches and the mission flies on, but its rows in the store are incomplete: the run fails
     (rather than sensors.csv being read from a partial recording)."""
-    from agentsim_env.evaluation.runner import resolve_zones, run_one
+    from agentsim_env.uav.evaluation.runner import resolve_zones, run_one
 
     db = tmp_path / "full.db"
 
@@ -172,7 +172,7 @@ def test_cli_bad_record_path_fails_before_any_rollout(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch, command: list[str]
 ) -> None:
     from agentsim_env.cli import main
-    from agentsim_env.evaluation import runner
+    from agentsim_env.uav.evaluation import runner
 
     def boom(*args: Any, **kwargs: Any) -> None:
         raise AssertionError("a rollout started")

@@ -14,8 +14,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from agentsim_env.scenarios.landed_grid import local_counts
-from agentsim_env.scenarios.uav_energy import (
+from agentsim_env.uav.energy import (
     DEFAULT_ROTOR,
     GRAVITY,
     BatteryParams,
@@ -27,7 +26,9 @@ from agentsim_env.scenarios.uav_energy import (
     min_power_speed,
     power,
 )
-from agentsim_env.scenarios.uav_zones import (
+from agentsim_env.uav.landed_grid import local_counts
+from agentsim_env.uav.wsn.profiles import RadialProfile
+from agentsim_env.uav.zones import (
     Zone,
     ZoneSet,
     default_zones_path,
@@ -39,7 +40,6 @@ from agentsim_env.scenarios.uav_zones import (
     zones_from_dict,
     zones_to_dict,
 )
-from agentsim_env.wsn.profiles import RadialProfile
 
 # ---------------------------------------------------------------------------------------------- energy
 

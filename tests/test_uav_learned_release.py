@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 
 import agentsim_env
-from agentsim_env.evaluation import runner
-from agentsim_env.evaluation.strategies import is_model_token, model_env
-from agentsim_env.scenarios.uav_autopilot import SweepRoutes, lane_segments
-from agentsim_env.scenarios.uav_config import UavReleaseConfig
-from agentsim_env.scenarios.uav_zones import load_zones, tiny_zones_path
+from agentsim_env.uav.autopilot import SweepRoutes, lane_segments
+from agentsim_env.uav.config import UavReleaseConfig
+from agentsim_env.uav.evaluation import runner
+from agentsim_env.uav.evaluation.strategies import is_model_token, model_env
+from agentsim_env.uav.zones import load_zones, tiny_zones_path
 
 TINY = {"zones": "tiny", "n_agents": 2, "payload": 12, "comms": None}
 PILOT = {**TINY, "autopilot": True}

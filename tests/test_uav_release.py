@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import agentsim_env
-from agentsim_env.scenarios.uav_zones import default_zones_path
+from agentsim_env.uav.zones import default_zones_path
 
 
 def _idle(env, release=None):  # type: ignore[no-untyped-def]

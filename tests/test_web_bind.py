@@ -100,7 +100,7 @@ def test_render_mode_web_listens_on_loopback_only() -> None:
 
 
 def test_agentsim_zones_design_listens_on_loopback_only(monkeypatch: pytest.MonkeyPatch) -> None:
-    from agentsim_env.render.web import designer
+    from agentsim_env.uav import designer
 
     before = {s.inode for s in listeners()}
     seen: list[list[Listener]] = []

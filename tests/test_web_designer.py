@@ -12,22 +12,22 @@ import pytest
 
 pytest.importorskip("websockets", reason="the viewer extra installs websockets")
 
-from agentsim_env.render.web import designer  # noqa: E402
-from agentsim_env.render.web.designer import (  # noqa: E402
+from agentsim_env.render.web.server import ClientError, WebServer  # noqa: E402
+from agentsim_env.uav import designer  # noqa: E402
+from agentsim_env.uav.designer import (  # noqa: E402
     DENSITY_SAMPLES,
     MAX_POINTS_PER_ZONE,
     designer_handlers,
     designer_hello,
     run_designer,
 )
-from agentsim_env.render.web.server import ClientError, WebServer  # noqa: E402
-from agentsim_env.scenarios.uav_zones import (  # noqa: E402
+from agentsim_env.uav.wsn.profiles import PROFILE_KINDS  # noqa: E402
+from agentsim_env.uav.zones import (  # noqa: E402
     default_zones_path,
     load_zones,
     zones_from_dict,
     zones_to_dict,
 )
-from agentsim_env.wsn.profiles import PROFILE_KINDS  # noqa: E402
 
 
 def default_dict() -> dict[str, Any]:
@@ -300,6 +300,7 @@ def serve(path: Path | None) -> WebServer:
         title="Hot-zone designer",
         handlers=designer_handlers(path),
         on_connect=lambda: designer_hello(path),
+        static_dir=designer.STATIC_DIR,
     )
     srv.start()
     return srv

@@ -16,10 +16,10 @@ pytest.importorskip("websockets", reason="the viewer extra installs websockets")
 
 from websockets.asyncio.client import connect  # noqa: E402
 
-from agentsim_env.render.web import designer  # noqa: E402
-from agentsim_env.render.web.designer import designer_handlers, designer_hello  # noqa: E402
 from agentsim_env.render.web.server import ClientError, WebServer  # noqa: E402
-from agentsim_env.scenarios.uav_zones import ZoneSet  # noqa: E402
+from agentsim_env.uav import designer  # noqa: E402
+from agentsim_env.uav.designer import designer_handlers, designer_hello  # noqa: E402
+from agentsim_env.uav.zones import ZoneSet  # noqa: E402
 
 
 def one_zone(n_sensors: int) -> dict[str, Any]:
@@ -55,7 +55,10 @@ def test_a_slow_preview_holds_up_neither_other_pages_nor_its_own_newest_request(
     path = tmp_path / "z.json"
     path.write_text(json.dumps(one_zone(5)), encoding="utf-8")
     srv = WebServer(
-        "designer.html", handlers=designer_handlers(path), on_connect=lambda: designer_hello(path)
+        "designer.html",
+        handlers=designer_handlers(path),
+        on_connect=lambda: designer_hello(path),
+        static_dir=designer.STATIC_DIR,
     )
     url = srv.start().replace("http", "ws") + "ws"
     result: dict[str, Any] = {}
@@ -102,7 +105,10 @@ def test_previews_of_one_page_do_not_wait_for_another_pages(
 
     monkeypatch.setattr(designer, "preview", held)
     srv = WebServer(
-        "designer.html", handlers=designer_handlers(None), on_connect=lambda: designer_hello(None)
+        "designer.html",
+        handlers=designer_handlers(None),
+        on_connect=lambda: designer_hello(None),
+        static_dir=designer.STATIC_DIR,
     )
     url = srv.start().replace("http", "ws") + "ws"
     got: list[dict[str, Any]] = []

@@ -16,9 +16,9 @@ import pytest
 
 pytest.importorskip("websockets", reason="the viewer extra installs websockets")
 
-from agentsim_env.render.web.designer import designer_handlers  # noqa: E402
 from agentsim_env.render.web.server import ClientError  # noqa: E402
-from agentsim_env.scenarios.uav_zones import load_zones, zones_from_dict  # noqa: E402
+from agentsim_env.uav.designer import designer_handlers  # noqa: E402
+from agentsim_env.uav.zones import load_zones, zones_from_dict  # noqa: E402
 
 NOBODY = 65534
 ZONES = {

@@ -359,7 +359,7 @@ def test_view_and_zones_bad_input_is_one_clear_line(argv: list[str], message: st
 
 
 def test_zones_check_lists_the_zones(capsys: Any) -> None:
-    from agentsim_env.scenarios.uav_zones import default_zones_path
+    from agentsim_env.uav.zones import default_zones_path
 
     assert main(["zones", "check", str(default_zones_path())]) == 0
     out = capsys.readouterr().out

@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 from scipy import stats
 from scipy.spatial import cKDTree
 
-from agentsim_env.wsn import (
+from agentsim_env.uav.wsn import (
     RadialProfile,
     RadioParams,
     WsnConfig,

@@ -9,8 +9,8 @@ from typing import Any
 import pytest
 
 from agentsim_env.cli import main
-from agentsim_env.scenarios.uav_capacity import default_fleet, fleet_capacity
-from agentsim_env.scenarios.uav_zones import default_zones_path, load_zones
+from agentsim_env.uav.capacity import default_fleet, fleet_capacity
+from agentsim_env.uav.zones import default_zones_path, load_zones
 
 
 def big_zones(tmp_path: Path, n_sensors: int = 200) -> Path:
@@ -81,7 +81,7 @@ def test_check_with_set_values(
 
 # ------------------------------------------------------------------------------------------ designer
 def _preview(d: dict[str, Any]) -> dict[str, Any]:
-    from agentsim_env.render.web.designer import designer_handlers
+    from agentsim_env.uav.designer import designer_handlers
 
     reply = designer_handlers(None)["zones.preview"]({"cmd": "zones.preview", "zones": d})
     assert reply is not None
@@ -91,7 +91,7 @@ def _preview(d: dict[str, Any]) -> dict[str, Any]:
 
 def test_designer_hello_and_preview_carry_the_fleet(tmp_path: Path) -> None:
     pytest.importorskip("websockets", reason="the viewer extra installs websockets")
-    from agentsim_env.render.web.designer import designer_hello
+    from agentsim_env.uav.designer import designer_hello
 
     (hello,) = designer_hello(None)
     assert hello["fleet"] == {"n_uavs": 4, "payload": 40, "capacity": 160}

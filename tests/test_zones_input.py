@@ -17,8 +17,8 @@ import pytest
 import agentsim_env
 from agentsim_env.cli import main
 from agentsim_env.core import validation
-from agentsim_env.scenarios import uav_zones
-from agentsim_env.scenarios.uav_zones import load_zones, zones_from_dict
+from agentsim_env.uav import zones as uav_zones
+from agentsim_env.uav.zones import load_zones, zones_from_dict
 
 ZONE = {"centre": [100, 100], "radius": 30, "n_sensors": 10}
 
@@ -185,13 +185,13 @@ def _store_naming(zones: Path, tmp_path: Path) -> Path:
 
 
 def _designer_load(path: Path) -> None:
-    from agentsim_env.render.web.designer import designer_handlers
+    from agentsim_env.uav.designer import designer_handlers
 
     designer_handlers(path)["zones.load"]({"cmd": "zones.load"})
 
 
 def _designer_hello(path: Path) -> list[dict[str, Any]]:
-    from agentsim_env.render.web.designer import designer_hello
+    from agentsim_env.uav.designer import designer_hello
 
     return designer_hello(path)
 
@@ -245,7 +245,7 @@ _DEVICE_SCRIPT = """
 import io, contextlib, resource
 import agentsim_env
 from agentsim_env.cli import main
-from agentsim_env.scenarios.uav_zones import load_zones
+from agentsim_env.uav.zones import load_zones
 vm = int(open("/proc/self/status").read().split("VmSize:")[1].split()[0]) * 1024
 resource.setrlimit(resource.RLIMIT_AS, (vm + (768 << 20), resource.RLIM_INFINITY))  # reading /dev/zero stops
 for name, call in [("load", lambda: load_zones("/dev/zero")),

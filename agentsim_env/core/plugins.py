@@ -305,7 +305,7 @@ SCENARIOS = Registry(
         "navigation": "agentsim_env.scenarios.navigation:SCENARIO",
         "relay": "agentsim_env.scenarios.relay:SCENARIO",
         "rendezvous": "agentsim_env.scenarios.rendezvous:SCENARIO",
-        "uav_release": "agentsim_env.scenarios.uav_release:SCENARIO",
+        "uav_release": "agentsim_env.uav.scenario:SCENARIO",
     },
     _is_scenario_class,
     "a Scenario subclass",

@@ -1,12 +1,17 @@
-"""Batch evaluation of the UAV sensor-release case study (``agentsim evaluate``).
+"""Deprecated: this package moved to ``agentsim_env.uav.evaluation``.
 
-``runner`` flies every (zone file, strategy, seed) and evaluates the landed network, with the policies named
-by the ``strategies`` registry; ``scoring`` holds the composite score and the ranking, ``report`` writes
-``sensors.csv``, ``runs.csv`` and the Markdown ranking ``summary.md``, ``plots`` draws the PNG figures.
+The old path works for one release: importing it warns and re-exports the new package's public names.
+
+Its submodules are shims too (``agentsim_env.evaluation.NAME`` -> ``agentsim_env.uav.evaluation.NAME``).
 """
 
-from agentsim_env.evaluation.report import write_outputs
-from agentsim_env.evaluation.runner import TELEPORT, GridResult, RunResult, run_grid, run_one
-from agentsim_env.evaluation.scoring import composite_score
+import warnings
 
-__all__ = ["TELEPORT", "GridResult", "RunResult", "composite_score", "run_grid", "run_one", "write_outputs"]
+from agentsim_env.uav.evaluation import *  # noqa: F403
+
+warnings.warn(
+    "agentsim_env.evaluation is deprecated: import agentsim_env.uav.evaluation instead "
+    "(this path is removed in the next release)",
+    DeprecationWarning,
+    stacklevel=2,
+)

@@ -1,87 +1,17 @@
-"""Wireless-sensor-network evaluation of a sensor deployment over circular hot zones.
+"""Deprecated: this package moved to ``agentsim_env.uav.wsn``.
 
-Coverage (binary disc, k-coverage, density-weighted), unit-disk connectivity to the sink(s), first-order
-radio energy, minimum-energy routing lifetime and per-zone density fidelity. ``evaluate_deployment`` returns
-all of it as one flat ``dict[str, float]``. Imports numpy, scipy and numba only.
+The old path works for one release: importing it warns and re-exports the new package's public names.
+
+Its submodules are shims too (``agentsim_env.wsn.NAME`` -> ``agentsim_env.uav.wsn.NAME``).
 """
 
-from agentsim_env.wsn.connectivity import (
-    ConnectivityResult,
-    connectivity,
-    sink_edges,
-    unit_disk_edges,
-    unit_disk_graph,
-)
-from agentsim_env.wsn.coverage import (
-    CoverageResult,
-    ZoneGrid,
-    area_coverage,
-    cover_counts,
-    cover_pairs,
-    coverage_from_counts,
-    k_coverage,
-    weighted_coverage,
-    weighted_from_covered,
-    zone_grid,
-)
-from agentsim_env.wsn.evaluate import WsnConfig, evaluate_deployment, sink_positions
-from agentsim_env.wsn.fidelity import (
-    ZoneFidelity,
-    assign_zones,
-    density_ratio,
-    fidelity_per_zone,
-    knn_monotonicity,
-    radial_ks,
-    radial_w1,
-    target_density_ratio,
-    zone_fidelity,
-)
-from agentsim_env.wsn.lifetime import (
-    LifetimeResult,
-    coverage_lifetime,
-    routing_tree,
-    simulate_lifetime,
-)
-from agentsim_env.wsn.profiles import GOLDEN_ANGLE, PROFILE_KINDS, RadialProfile
-from agentsim_env.wsn.radio import RadioParams, aggregation_energy, rx_energy, tx_energy
+import warnings
 
-__all__ = [
-    "GOLDEN_ANGLE",
-    "PROFILE_KINDS",
-    "ConnectivityResult",
-    "CoverageResult",
-    "LifetimeResult",
-    "RadialProfile",
-    "RadioParams",
-    "WsnConfig",
-    "ZoneFidelity",
-    "ZoneGrid",
-    "aggregation_energy",
-    "area_coverage",
-    "assign_zones",
-    "connectivity",
-    "cover_counts",
-    "cover_pairs",
-    "coverage_from_counts",
-    "coverage_lifetime",
-    "density_ratio",
-    "evaluate_deployment",
-    "fidelity_per_zone",
-    "k_coverage",
-    "knn_monotonicity",
-    "radial_ks",
-    "radial_w1",
-    "routing_tree",
-    "rx_energy",
-    "simulate_lifetime",
-    "sink_edges",
-    "sink_positions",
-    "target_density_ratio",
-    "tx_energy",
-    "unit_disk_edges",
-    "unit_disk_graph",
-    "weighted_coverage",
-    "weighted_from_covered",
-    "zone_fidelity",
-    "zone_grid",
-]
+from agentsim_env.uav.wsn import *  # noqa: F403
+
+warnings.warn(
+    "agentsim_env.wsn is deprecated: import agentsim_env.uav.wsn instead "
+    "(this path is removed in the next release)",
+    DeprecationWarning,
+    stacklevel=2,
+)

@@ -56,7 +56,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from agentsim_env.policies.release.planning import assemble_plan, plan_tour
 from agentsim_env.policies.release.strategy import ReleaseStrategy
-from agentsim_env.scenarios.uav_zones import Zone, ZoneSet
+from agentsim_env.uav.zones import Zone, ZoneSet
 
 __all__ = [
     "FLY",

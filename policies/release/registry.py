@@ -18,7 +18,7 @@ from agentsim_env.core.plugins import STRATEGIES
 from agentsim_env.policies.release.baselines import SHIPPED
 from agentsim_env.policies.release.planning import ReleasePlan
 from agentsim_env.policies.release.strategy import ReleaseStrategy
-from agentsim_env.wsn.profiles import RadialProfile
+from agentsim_env.uav.wsn.profiles import RadialProfile
 
 __all__ = [
     "DEPRECATED_NAMES",

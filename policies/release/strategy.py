@@ -30,7 +30,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from agentsim_env.core.validation import check_choice, check_float, coerce_fields
 from agentsim_env.policies.release.planning import MODES, ReleasePlan, assemble_plan, normalise_sector
-from agentsim_env.wsn.profiles import RadialProfile
+from agentsim_env.uav.wsn.profiles import RadialProfile
 
 __all__ = ["Bound", "Choice", "Pattern", "PlanContext", "ReleaseStrategy"]
 

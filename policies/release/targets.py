@@ -40,7 +40,7 @@ from agentsim_env.policies.release.planning import (
     plan_tour,
     sector_quota,
 )
-from agentsim_env.wsn.profiles import RadialProfile
+from agentsim_env.uav.wsn.profiles import RadialProfile
 
 __all__ = [
     "GOLDEN_ANGLE",

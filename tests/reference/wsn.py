@@ -1,4 +1,4 @@
-"""Plain reference of the network-lifetime simulation (:func:`agentsim_env.wsn.lifetime.simulate_lifetime`):
+"""Plain reference of the network-lifetime simulation (:func:`agentsim_env.uav.wsn.lifetime.simulate_lifetime`):
 scipy re-routing of the whole network after every death instead of the kernel's decremental one."""
 
 from __future__ import annotations
@@ -8,7 +8,7 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike
 
-from agentsim_env.wsn.lifetime import (
+from agentsim_env.uav.wsn.lifetime import (
     _DEFAULT_RADIO,
     _ROUND_SLACK,
     CAUSE_DISCONNECTED,
@@ -18,7 +18,7 @@ from agentsim_env.wsn.lifetime import (
     _summary,
     routing_tree,
 )
-from agentsim_env.wsn.radio import RadioParams
+from agentsim_env.uav.wsn.radio import RadioParams
 
 
 def simulate_lifetime_reference(

@@ -2,10 +2,11 @@
 
 With ``http_pages``, the only importer of ``websockets`` (the ``viewer`` extra). One asyncio loop on a daemon thread serves:
 
-* ``GET /``: the page the server was made for (``viewer.html`` or ``designer.html``);
-* ``GET /static/NAME`` and ``/static/vendor/NAME``: the package's own files, looked up by exact name in a table
-  built at start-up; any other path (``..``, encoded slashes, absolute paths) is a 404, so nothing outside the
-  package's ``static`` folder can be read; other methods, request bodies and pipelined requests get one 4xx
+* ``GET /``: the page the server was made for (``viewer.html``, or a page of another folder: the UAV zone
+  designer's ``designer.html``);
+* ``GET /static/NAME`` and ``/static/vendor/NAME``: the files of the server's static folder (the package's own
+  by default), looked up by exact name in a table built at start-up; any other path (``..``, encoded slashes,
+  absolute paths) is a 404, so nothing outside that folder can be read; other methods, request bodies and pipelined requests get one 4xx
   (``http_pages``);
 * ``/ws``: a WebSocket per page. JSON texts from the page are commands, dispatched to handlers; the server sends
   JSON texts (scene, log, status, replies) and binary frames (the packed state, ``frames.pack_frame``).
@@ -36,6 +37,7 @@ from collections.abc import Callable, Mapping
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from itertools import islice
+from pathlib import Path
 from typing import Any
 
 from agentsim_env.render.web.http_pages import STATIC_DIR, answer, guarded_connection, static_files
@@ -113,7 +115,7 @@ class WebServer:
     """A local web server for one page, with a WebSocket for state frames, logs and commands.
 
     Args:
-        page: The page served at ``/`` (a file of the package's ``static`` folder).
+        page: The page served at ``/`` (a file of ``static_dir``).
         host: Address to bind; ``127.0.0.1`` (default) is reachable from this machine only.
         port: Port; 0 picks a free one.
         title: Shown in the terminal message.
@@ -123,6 +125,8 @@ class WebServer:
         max_fps: Most frames a second offered to the simulation (``wants_frame``); pages get at most this many.
         on_tick: Called on the server's thread every ``TICK_S`` seconds (the live viewer sends the last step of
             a burst that the frame-rate cap held back); exceptions are ignored.
+        static_dir: The folder whose files (and whose ``vendor`` sub-folder's) are served under ``/static/``:
+            the package's own ``static`` folder, or a page's own (the UAV zone designer's).
     """
 
     def __init__(
@@ -136,10 +140,11 @@ class WebServer:
         on_connect: Callable[[], list[dict[str, Any]]] | None = None,
         max_fps: float = 60.0,
         on_tick: Callable[[], None] | None = None,
+        static_dir: Path = STATIC_DIR,
     ) -> None:
-        self._files = static_files()
+        self._files = static_files(static_dir)
         if f"/static/{page}" not in self._files:
-            raise ValueError(f"page {page!r} is not a file of {STATIC_DIR}")
+            raise ValueError(f"page {page!r} is not a file of {static_dir}")
         if not isinstance(port, int) or isinstance(port, bool) or not 0 <= port <= 65535:
             raise ValueError(f"port must be an integer in 0..65535, got {port!r}")
         self.page = page

@@ -1,6 +1,6 @@
 // Hot-zone designer page: a top-down map on which zones are drawn (press at the centre, drag out the radius),
 // a form for the selected zone, and previews of the density and the expected sensor layouts from the server
-// (agentsim_env/render/web/designer.py). The server validates; its messages are shown verbatim in #error.
+// (agentsim_env/uav/designer/__init__.py). The server validates; its messages are shown verbatim in #error.
 
 const $ = (id) => document.getElementById(id);
 const PALETTE = ["#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#17becf", "#8c564b", "#e377c2"];
