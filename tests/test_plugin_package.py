@@ -119,6 +119,12 @@ def test_installed_plugin_runs_from_the_command_line(installed: None, tmp_path: 
     assert len(list(out.glob("beacon_to_beacon_seed0_*.png"))) == 1  # the trajectories of the first episode
     bad = _run(agentsim, "run", "beacon", "--policy", "meet", "--episodes", "1", "--out", "")
     assert bad.returncode != 0 and "--policy must be one of ['to_beacon'] for 'beacon'" in bad.stderr
+    evaluated = tmp_path / "evaluation"
+    ev = ("evaluate", "--zones", "tiny", "--strategies", "beacon_ring", "B2_rings", "--seeds", "1")
+    _check(_run(agentsim, *ev, "--out", str(evaluated), "--no-plots", "--quiet"))
+    summary = (evaluated / "summary.md").read_text(encoding="utf-8")
+    assert "| `beacon_ring` |" in summary and "| `B2_rings` |" in summary  # ranked beside a shipped one
+    assert "beacon_ring" in _check(_run(agentsim, "evaluate", "--help"))
 
 
 @pytest.mark.slow
@@ -140,7 +146,23 @@ def test_installed_plugin_through_the_python_api(installed: None) -> None:
     assert arrived == 3
     assert env.rollout("to_beacon", 60, seed=0).info_sums["arrived"] == 3  # by name, as a shard builds it
     assert "beacon_ring" in STRATEGIES.names()
-    ring = STRATEGIES.get("beacon_ring")(4, 10.0)
-    assert ring.shape == (4, 2) and abs(ring[1, 1] - 10.0) < 1e-9
+    from agentsim_env.policies.release import strategy_class, strategy_names
+
+    assert strategy_names()[-1] == "beacon_ring" and "beacon_ring" in baseline_names("uav_release")
+    ring_cls = strategy_class("beacon_ring")
+    assert ring_cls is STRATEGIES.get("beacon_ring") and ring_cls().radius_share == 0.6
+    with pytest.raises(ValueError, match="radius_share"):
+        ring_cls(radius_share=1.5)
+    uav = agentsim_env.make("uav_release", zones="tiny", n_uavs=2, payload=12, wind={"mean_speed": 0.0})
+    flown = make_policy("uav_release", uav, "beacon_ring")
+    obs, _ = uav.reset(seed=0)
+    flown.reset(0)
+    for _ in range(3000):
+        obs, *_ = uav.step(flown.act({a: obs[a] for a in uav.agents}))
+        if flown.mission_complete and uav.world.payloads.objects.n_falling == 0:  # type: ignore[attr-defined]
+            break
+    objects = uav.world.payloads.objects
+    assert int(objects.get("landed")[: objects.count].sum()) == 20  # every sensor of the tiny zone landed
+    uav.close()
     with pytest.raises(ValueError, match=r"'beacon' is already taken \(entry point "):
         agentsim_env.register_scenario("beacon", "agentsim_beacon.scenario:Beacon")

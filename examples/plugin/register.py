@@ -5,7 +5,7 @@ from agentsim_env.policies.registry import make_policy
 
 agentsim_env.register_scenario("beacon", "agentsim_beacon.scenario:Beacon")
 agentsim_env.register_policy("to_beacon", "agentsim_beacon.policy:ToBeaconPolicy", scenario="beacon")
-agentsim_env.register_strategy("beacon_ring", "agentsim_beacon.strategy:ring_targets")
+agentsim_env.register_strategy("beacon_ring", "agentsim_beacon.strategy:BeaconRing")
 
 env = agentsim_env.make("beacon", n_agents=3, max_steps=60)
 policy = make_policy("beacon", env, "to_beacon")
