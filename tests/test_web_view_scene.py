@@ -16,6 +16,7 @@ import agentsim_env
 from agentsim_env.render.web import frames
 from agentsim_env.render.web.frames import log_lines, scene_message, unpack_frame
 from agentsim_env.render.web.viewer import WebViewer
+from agentsim_env.uav.zones import DENSITY_SAMPLES
 from tests.web_client import talk
 
 
@@ -53,7 +54,7 @@ def test_uav_release_scene_marks_its_zones_with_density_profiles() -> None:
     zs = env.scenario.zones.zones
     assert len(zones) == len(zs) == len(scene["zones"])
     assert np.allclose([m["pos"][:2] for m in zones], [z.centre for z in zs])
-    assert all(len(m["density"]) == frames.DENSITY_SAMPLES for m in zones)
+    assert all(len(m["density"]) == DENSITY_SAMPLES for m in zones)
 
 
 def test_frames_asks_the_scenario_and_never_checks_its_type() -> None:

@@ -75,7 +75,7 @@ from agentsim_env.uav.energy import DEFAULT_ROTOR, energy_step
 from agentsim_env.uav.landed_grid import local_counts
 from agentsim_env.uav.outcome import final_bonus, oracle_fnd
 from agentsim_env.uav.tracking import DeploymentTracker
-from agentsim_env.uav.zones import ZoneSet
+from agentsim_env.uav.zones import DENSITY_SAMPLES, ZoneSet
 
 
 @dataclass(slots=True)
@@ -396,13 +396,7 @@ class UavReleaseScenario(Scenario[UavReleaseConfig]):
         """The hot zones, each with its areal density sampled from the centre to the rim (scaled to max 1)."""
         out = []
         for i, z in enumerate(self.zones.zones):
-            r = np.linspace(0.0, z.radius, ZONE_SAMPLES)
-            prof = z.radial_profile()
-            d = np.asarray(prof.density(r), dtype=np.float64)
-            if not np.isfinite(d[0]):  # a power law is infinite at the centre: take the value half a step out
-                d[0] = float(prof.density(0.5 * r[1]))
-            top = float(d.max())
-            d = d / top if top > 0.0 and np.isfinite(top) else np.ones_like(d)
+            d = z.density_curve(DENSITY_SAMPLES)
             out.append(
                 {
                     "kind": "zone",
@@ -418,5 +412,4 @@ class UavReleaseScenario(Scenario[UavReleaseConfig]):
         return out
 
 
-ZONE_SAMPLES = 64  # density samples per zone sent to the viewer
 SCENARIO = UavReleaseScenario

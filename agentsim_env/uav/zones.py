@@ -58,6 +58,7 @@ from agentsim_env.core.validation import check_choice, check_float, check_int, c
 from agentsim_env.uav.wsn.profiles import PROFILE_KINDS, RadialProfile
 
 __all__ = [
+    "DENSITY_SAMPLES",
     "FORMAT_VERSION",
     "MAX_ALTITUDE",
     "MAX_FILE_BYTES",
@@ -92,6 +93,10 @@ MAX_JSON_DEPTH = 16
 
 _REQUIRED = ("centre", "radius", "n_sensors")
 _TOP_FIELDS = ("version", "description", "map_size", "base", "zones")
+
+
+#: Radii at which a zone's density curve is sampled for the viewer and the designer.
+DENSITY_SAMPLES = 64
 
 
 def _pair(label: str, value: Any) -> tuple[float, float]:
@@ -183,6 +188,20 @@ class Zone:
     def radial_profile(self) -> RadialProfile:
         """The zone's normalised radial density (``RadialProfile``) over its disc."""
         return RadialProfile(self.profile, self.radius, alpha=self.alpha, sigma=self.sigma, floor=self.floor)
+
+    def density_curve(self, samples: int = DENSITY_SAMPLES) -> np.ndarray:
+        """The areal density at ``samples`` radii from the centre to the rim, scaled to a maximum of 1.
+
+        What the viewer and the designer draw. A power law is infinite at the centre: the first sample takes the
+        value half a step out.
+        """
+        prof = self.radial_profile()
+        r = np.linspace(0.0, self.radius, samples)
+        d = np.asarray(prof.density(r), dtype=np.float64)
+        if not np.isfinite(d[0]):
+            d[0] = float(prof.density(0.5 * r[1]))
+        top = float(d.max())
+        return d / top if top > 0.0 and np.isfinite(top) else np.ones_like(d)
 
 
 @dataclass(frozen=True)

@@ -48,7 +48,6 @@ STATUS_NAMES = ("active", "arrived", "collided", "offline", "ended")
 ACTIVE, ARRIVED, COLLIDED, OFFLINE, ENDED = range(len(STATUS_NAMES))
 MAX_MESSAGE_LINES = 40  # message log lines per step (the rest are counted in one line)
 MAX_DRAWN_MESSAGES = 4000  # message segments per frame
-DENSITY_SAMPLES = 64
 
 
 def pack_frame(seq: int, step: int, episode: int, arrays: dict[str, np.ndarray]) -> bytes:
@@ -109,20 +108,6 @@ def unpack_frame(frame: bytes) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
         count = int(np.prod(m["shape"])) if m["shape"] else 1
         out[name] = np.frombuffer(frame, dtype=dt, count=count, offset=m["offset"]).reshape(m["shape"])
     return header, out
-
-
-def density_curve(zone: Any, samples: int = DENSITY_SAMPLES) -> np.ndarray:
-    """A zone's areal density at ``samples`` radii from its centre to its rim, scaled to a maximum of 1.
-
-    A power law is infinite at the centre: the first sample takes the value half a step out.
-    """
-    prof = zone.radial_profile()
-    r = np.linspace(0.0, zone.radius, samples)
-    d = np.asarray(prof.density(r), dtype=np.float64)
-    if not np.isfinite(d[0]):
-        d[0] = float(prof.density(0.5 * r[1]))
-    top = float(d.max())
-    return d / top if top > 0.0 and np.isfinite(top) else np.ones_like(d)
 
 
 def _zones(markers: list[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -439,7 +424,6 @@ __all__ = [
     "track_status",
     "page_kinds",
     "agent_message",
-    "density_curve",
     "log_lines",
     "pack_frame",
     "scene_message",

@@ -28,12 +28,12 @@ from typing import Any
 import numpy as np
 
 from agentsim_env.core.files import write_atomically
-from agentsim_env.render.web.frames import DENSITY_SAMPLES, density_curve
 from agentsim_env.render.web.server import Background, ClientError, Handler, WebServer
 from agentsim_env.uav import zones as uav_zones
 from agentsim_env.uav.capacity import capacity_text, default_fleet, fleet_capacity
 from agentsim_env.uav.wsn.profiles import PROFILE_KINDS
 from agentsim_env.uav.zones import (
+    DENSITY_SAMPLES,
     ZoneSet,
     load_zones,
     zones_from_dict,
@@ -123,7 +123,7 @@ def preview(zs: ZoneSet) -> dict[str, Any]:
     out = []
     for z in zs.zones:
         prof = z.radial_profile()
-        dens = density_curve(z, DENSITY_SAMPLES)
+        dens = z.density_curve(DENSITY_SAMPLES)
         n, shown = z.n_sensors, _point_count(z.n_sensors, len(zs.zones))
         centre = np.asarray(z.centre, dtype=np.float64)
         b1 = prof.sample(shown, np.random.default_rng(0)) + centre
