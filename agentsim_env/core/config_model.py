@@ -93,8 +93,8 @@ def _bool(value: Any) -> Any:
 #: Characters no text field takes: C0 controls, DEL and C1 controls (a terminal acts on them), the
 #: bidirectional embeddings, overrides and isolates (they reorder what is shown), and surrogates (in a Python
 #: string they are always unpaired, and no UTF-8 encoder writes them).
-_BAD_TEXT = re.compile("[\x00-\x1f\x7f-\x9f\u202a-\u202e\u2066-\u2069\ud800-\udfff]")
-_BAD_TEXT_OR_NEWLINE = re.compile("[\x00-\x08\x0b-\x1f\x7f-\x9f\u202a-\u202e\u2066-\u2069\ud800-\udfff]")
+BAD_TEXT = re.compile("[\x00-\x1f\x7f-\x9f\u202a-\u202e\u2066-\u2069\ud800-\udfff]")
+BAD_TEXT_OR_NEWLINE = re.compile("[\x00-\x08\x0b-\x1f\x7f-\x9f\u202a-\u202e\u2066-\u2069\ud800-\udfff]")
 
 
 def printable(value: str, *, allow_newlines: bool = False) -> str:
@@ -114,7 +114,7 @@ def printable(value: str, *, allow_newlines: bool = False) -> str:
         pydantic_core.PydanticCustomError: ``printable_text``, naming the first refused character (as
             ``U+XXXX``) and its position; the message never contains the character itself.
     """
-    bad = (_BAD_TEXT_OR_NEWLINE if allow_newlines else _BAD_TEXT).search(value)
+    bad = (BAD_TEXT_OR_NEWLINE if allow_newlines else BAD_TEXT).search(value)
     if bad is not None:
         raise PydanticCustomError(
             "printable_text",
@@ -364,7 +364,7 @@ def describe(error: Mapping[str, Any], annotation: Any = None) -> str:
         return f"must hold {'at most' if kind == 'too_long' else 'at least'} {n} values, {got}"
     if kind in ("dataclass_type", "dataclass_exact_type", "model_type"):
         name = getattr(_config_class(annotation), "__name__", "config")
-        return f"must be a {name} or a dict of its fields, {got}"
+        return f"must be a mapping of {name} fields (or a {name}), {got}"
     if kind in ("printable_text", "pair_order"):
         return error["msg"]
     if kind in ("missing", "missing_argument"):
