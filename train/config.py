@@ -26,7 +26,7 @@ from typing import Annotated, Any, ClassVar, Literal
 
 from pydantic import Field
 
-from agentsim_env.core.config_model import Int, Real, Text, config
+from agentsim_env.core.config_model import Choice, Int, Real, Text, config
 from agentsim_env.core.validation import short_repr
 
 __all__ = [
@@ -43,12 +43,12 @@ __all__ = [
 
 #: Where the shipped configs live (``<name>.yaml``).
 CONFIG_DIR = Path(__file__).resolve().parent / "configs"
-VecKind = Literal["native", "supersuit"]
+VecKind = Annotated[Literal["native", "supersuit"], Choice]
 #: Vector-env paths ``vec`` may name.
-VEC_KINDS: tuple[str, ...] = typing.get_args(VecKind)
-Activation = Literal["tanh", "relu"]
+VEC_KINDS: tuple[str, ...] = typing.get_args(typing.get_args(VecKind)[0])
+Activation = Annotated[Literal["tanh", "relu"], Choice]
 #: Activation functions ``ppo.activation`` may name.
-ACTIVATIONS: tuple[str, ...] = typing.get_args(Activation)
+ACTIVATIONS: tuple[str, ...] = typing.get_args(typing.get_args(Activation)[0])
 Fraction = Annotated[Real, Field(ge=0.0, le=1.0)]
 """A number in [0, 1]."""
 Steps = Annotated[Int, Field(ge=0, le=10_000_000_000)]
@@ -81,7 +81,7 @@ class PPOConfig:
     batch_size: Annotated[Int, Field(ge=1, le=10_000_000)] = 512
     n_epochs: Annotated[Int, Field(ge=1, le=1000)] = 10
     learning_rate: Annotated[Real, Field(gt=0.0, le=1.0)] = 3e-4
-    lr_schedule: Literal["constant", "linear"] = "constant"
+    lr_schedule: Annotated[Literal["constant", "linear"], Choice] = "constant"
     gamma: Fraction = 0.98
     gae_lambda: Fraction = 0.95
     clip_range: Annotated[Real, Field(gt=0.0, le=10.0)] = 0.2

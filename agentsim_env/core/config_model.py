@@ -41,6 +41,7 @@ from agentsim_env.core.short_text import short_repr
 
 __all__ = [
     "CONFIG",
+    "Choice",
     "FieldError",
     "Flag",
     "FreeText",
@@ -146,6 +147,14 @@ def ordered(pair: tuple[float, float]) -> tuple[float, float]:
     return pair
 
 
+def _printable_if_text(value: Any) -> Any:
+    """Text checked by :func:`printable` before a ``Literal`` compares it (errors never echo a control code)."""
+    return printable(value) if isinstance(value, str) else value
+
+
+#: Put on a ``Literal`` of choices (``Annotated[Literal["a", "b"], Choice]``): text given is checked to be
+#: printable first, so an error names a control character by its code point instead of echoing it.
+Choice = BeforeValidator(_printable_if_text)
 #: An integer (numpy integers accepted, stored as ``int``; bools and floats refused).
 Int = Annotated[int, BeforeValidator(_number), Strict()]
 #: A finite real number (numpy numbers and ints accepted, stored as ``float``; bools refused).

@@ -26,13 +26,13 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from pydantic import AfterValidator, Field
 
-from agentsim_env.core.config_model import FieldError, Real, config, ordered
+from agentsim_env.core.config_model import Choice, FieldError, Real, config, ordered
 
 __all__ = ["WIND_PROFILES", "WindConfig", "WindModel"]
 
-WindProfile = Literal["log", "power", "uniform"]
+WindProfile = Annotated[Literal["log", "power", "uniform"], Choice]
 """Height profiles of the mean wind."""
-WIND_PROFILES: tuple[str, ...] = typing.get_args(WindProfile)
+WIND_PROFILES: tuple[str, ...] = typing.get_args(typing.get_args(WindProfile)[0])
 Speed = Annotated[Real, Field(ge=0.0)]
 """A wind speed in m/s, >= 0."""
 

@@ -17,14 +17,14 @@ from typing import Annotated, ClassVar, Literal
 from pydantic import AfterValidator, Field
 
 from agentsim_env.comms.stack import CommsConfig
-from agentsim_env.core.config_model import FieldError, Flag, Int, Real, config, ordered
+from agentsim_env.core.config_model import Choice, FieldError, Flag, Int, Real, config, ordered
 from agentsim_env.core.validation import build_config
 from agentsim_env.scenarios.rewards import RewardConfig
 from agentsim_env.sim.config import Physics
 
-ActionMode = Literal["velocity", "primitive"]
+ActionMode = Annotated[Literal["velocity", "primitive"], Choice]
 """How actions move agents: a target velocity, or a motion primitive and its parameters."""
-ACTION_MODES: tuple[str, ...] = typing.get_args(ActionMode)
+ACTION_MODES: tuple[str, ...] = typing.get_args(typing.get_args(ActionMode)[0])
 MAX_AGENTS = 1_000_000
 """Most agents a world may hold (memory is also checked against the machine before allocating)."""
 MAX_STEPS = 10**9

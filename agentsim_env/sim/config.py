@@ -7,11 +7,11 @@ from typing import Annotated, Literal
 
 from pydantic import Field
 
-from agentsim_env.core.config_model import FieldError, Flag, Int, Real, config
+from agentsim_env.core.config_model import Choice, FieldError, Flag, Int, Real, config
 
-Physics = Literal["kinematic", "pymunk"]
+Physics = Annotated[Literal["kinematic", "pymunk"], Choice]
 """The physics modes (``"kinematic"``: motion only; ``"pymunk"``: planar contact resolution)."""
-PHYSICS_MODES: tuple[str, ...] = typing.get_args(Physics)
+PHYSICS_MODES: tuple[str, ...] = typing.get_args(typing.get_args(Physics)[0])
 
 
 @config()
