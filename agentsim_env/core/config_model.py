@@ -220,7 +220,7 @@ def _unknown(cls: type, keys: Mapping[str, Any], label: str) -> None:
 
 def _shallow(obj: Any) -> dict[str, Any]:
     """A config instance's fields as a dict (sub-configs kept as instances)."""
-    return {name: getattr(obj, name) for name in _field_names(type(obj))}
+    return {name: getattr(obj, name) for name in _field_names(type(obj))}  # type: ignore[arg-type]
 
 
 def _merge_nested(cls: type, values: dict[str, Any], where: str) -> dict[str, Any]:
@@ -241,6 +241,7 @@ def _merge_nested(cls: type, values: dict[str, Any], where: str) -> dict[str, An
     return out
 
 
+@typing.dataclass_transform(frozen_default=True, field_specifiers=(dataclasses.field, pydantic.Field))
 def config(label: str = "") -> Callable[[type[T]], type[T]]:
     """Class decorator: a frozen pydantic dataclass whose construction errors are the project's ``ValueError``.
 
@@ -269,9 +270,9 @@ def config(label: str = "") -> Callable[[type[T]], type[T]]:
                 raise config_error(exc, top, getattr(top, "_label", "")) from None
 
         __init__.__doc__ = init.__doc__
-        built.__init__ = __init__  # type: ignore[misc]
+        built.__init__ = __init__  # type: ignore[method-assign]
         built._label = label  # type: ignore[attr-defined]
-        return built
+        return typing.cast("type[T]", built)
 
     return wrap
 

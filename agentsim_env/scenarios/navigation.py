@@ -206,7 +206,7 @@ class NavigationConfig(ScenarioConfig):
     def __post_init__(self) -> None:
         if self.n_groups is None:
             object.__setattr__(self, "n_groups", min(2, self.n_agents))
-        in_range("n_groups", self.n_groups, 1, self.n_agents)
+        in_range("n_groups", int(self.n_groups or 0), 1, self.n_agents)
         max_side = MAX_SIDE_PYMUNK if self.physics == "pymunk" else MAX_SIDE
         if self.map_size is not None:
             in_range("map_size", self.map_size, 10.0, max_side)
