@@ -97,7 +97,7 @@ def test_a_bad_option_value_raises_naming_the_option_the_value_and_the_allowed_o
         ("B2_rings", {"n_rings": 2.5}, "n_rings must be an integer"),
         ("B5_cvt", {"lloyd_iters": True}, "lloyd_iters must be an integer"),
         ("B0_uniform", {"two_opt": 1}, "two_opt must be True or False"),
-        ("B7_ergodic", {"spacing": "wide"}, "spacing must be a number"),
+        ("B7_ergodic", {"spacing": "wide"}, "spacing must be a finite number"),
     ],
 )
 def test_option_types_are_checked(name: str, options: dict[str, Any], needle: str) -> None:

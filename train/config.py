@@ -19,11 +19,15 @@ A config file (shipped ones live in ``train/configs/``, installed as ``agentsim_
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass, field
+import typing
+from dataclasses import field
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import Annotated, Any, ClassVar, Literal
 
-from agentsim_env.core.validation import check_float, check_int, coerce_fields, short_repr
+from pydantic import Field
+
+from agentsim_env.core.config_model import Choice, Int, Real, Text, config
+from agentsim_env.core.validation import short_repr
 
 __all__ = [
     "ACTIVATIONS",
@@ -39,13 +43,19 @@ __all__ = [
 
 #: Where the shipped configs live (``<name>.yaml``).
 CONFIG_DIR = Path(__file__).resolve().parent / "configs"
+VecKind = Annotated[Literal["native", "supersuit"], Choice]
 #: Vector-env paths ``vec`` may name.
-VEC_KINDS = ("native", "supersuit")
+VEC_KINDS: tuple[str, ...] = typing.get_args(typing.get_args(VecKind)[0])
+Activation = Annotated[Literal["tanh", "relu"], Choice]
 #: Activation functions ``ppo.activation`` may name.
-ACTIVATIONS = ("tanh", "relu")
+ACTIVATIONS: tuple[str, ...] = typing.get_args(typing.get_args(Activation)[0])
+Fraction = Annotated[Real, Field(ge=0.0, le=1.0)]
+"""A number in [0, 1]."""
+Steps = Annotated[Int, Field(ge=0, le=10_000_000_000)]
+"""Agent-steps, 0..10^10."""
 
 
-@dataclass(frozen=True)
+@config("ppo")
 class PPOConfig:
     """PPO hyperparameters (``stable_baselines3.PPO`` keyword arguments of the same names).
 
@@ -67,46 +77,29 @@ class PPOConfig:
         log_std_init: Initial log standard deviation of the Gaussian actions, -10..10.
     """
 
-    n_steps: int = 64
-    batch_size: int = 512
-    n_epochs: int = 10
-    learning_rate: float = 3e-4
-    lr_schedule: str = "constant"
-    gamma: float = 0.98
-    gae_lambda: float = 0.95
-    clip_range: float = 0.2
-    ent_coef: float = 0.0
-    vf_coef: float = 0.5
-    max_grad_norm: float = 0.5
-    target_kl: float | None = None
-    net_arch: tuple[int, ...] = (64, 64)
-    activation: str = "tanh"
-    log_std_init: float = 0.0
-
-    def __post_init__(self) -> None:
-        coerce_fields(self)
-        check_int("ppo.n_steps", self.n_steps, 1, 100_000)
-        check_int("ppo.batch_size", self.batch_size, 1, 10_000_000)
-        check_int("ppo.n_epochs", self.n_epochs, 1, 1000)
-        check_float("ppo.learning_rate", self.learning_rate, 0.0, 1.0, lo_open=True)
-        _choice("ppo.lr_schedule", self.lr_schedule, ("constant", "linear"))
-        check_float("ppo.gamma", self.gamma, 0.0, 1.0)
-        check_float("ppo.gae_lambda", self.gae_lambda, 0.0, 1.0)
-        check_float("ppo.clip_range", self.clip_range, 0.0, 10.0, lo_open=True)
-        check_float("ppo.ent_coef", self.ent_coef, 0.0, 10.0)
-        check_float("ppo.vf_coef", self.vf_coef, 0.0, 100.0)
-        check_float("ppo.max_grad_norm", self.max_grad_norm, 0.0, 1e6, lo_open=True)
-        if self.target_kl is not None:
-            check_float("ppo.target_kl", self.target_kl, 0.0, 10.0, lo_open=True)
-        if not 1 <= len(self.net_arch) <= 8:
-            raise ValueError(f"ppo.net_arch must list 1..8 layer widths, got {list(self.net_arch)}")
-        for width in self.net_arch:
-            check_int("ppo.net_arch[i]", width, 1, 4096)
-        _choice("ppo.activation", self.activation, ACTIVATIONS)
-        check_float("ppo.log_std_init", self.log_std_init, -10.0, 10.0)
+    n_steps: Annotated[Int, Field(ge=1, le=100_000)] = 64
+    batch_size: Annotated[Int, Field(ge=1, le=10_000_000)] = 512
+    n_epochs: Annotated[Int, Field(ge=1, le=1000)] = 10
+    learning_rate: Annotated[Real, Field(gt=0.0, le=1.0)] = 3e-4
+    lr_schedule: Annotated[Literal["constant", "linear"], Choice] = "constant"
+    gamma: Fraction = 0.98
+    gae_lambda: Fraction = 0.95
+    clip_range: Annotated[Real, Field(gt=0.0, le=10.0)] = 0.2
+    ent_coef: Annotated[Real, Field(ge=0.0, le=10.0)] = 0.0
+    vf_coef: Annotated[Real, Field(ge=0.0, le=100.0)] = 0.5
+    max_grad_norm: Annotated[Real, Field(gt=0.0, le=1e6)] = 0.5
+    target_kl: Annotated[Real, Field(gt=0.0, le=10.0)] | None = None
+    net_arch: Annotated[
+        tuple[Annotated[Int, Field(ge=1, le=4096)], ...], Field(min_length=1, max_length=8)
+    ] = (
+        64,
+        64,
+    )
+    activation: Activation = "tanh"
+    log_std_init: Annotated[Real, Field(ge=-10.0, le=10.0)] = 0.0
 
 
-@dataclass(frozen=True)
+@config("eval")
 class EvalConfig:
     """The evaluation at the end of training (and of ``agentsim train --eval-only``).
 
@@ -120,23 +113,18 @@ class EvalConfig:
             baseline), ``none``, or a comma-separated list (``agentsim train --eval-baselines`` sets it).
     """
 
-    seeds: int = 20
-    first_seed: int = 1000
+    seeds: Annotated[Int, Field(ge=1, le=10_000)] = 20
+    first_seed: Annotated[Int, Field(ge=0, le=2**63 - 1)] = 1000
     env: dict[str, Any] = field(default_factory=dict)
     baseline_env: dict[str, Any] = field(default_factory=dict)
-    baselines: str = "all"
-
-    def __post_init__(self) -> None:
-        coerce_fields(self)
-        check_int("eval.seeds", self.seeds, 1, 10_000)
-        check_int("eval.first_seed", self.first_seed, 0, 2**63 - 1)
+    baselines: Text = "all"
 
     def seed_list(self) -> list[int]:
         """The evaluation seeds."""
         return list(range(self.first_seed, self.first_seed + self.seeds))
 
 
-@dataclass(frozen=True)
+@config()
 class TrainConfig:
     """One training run: scenario, budget, PPO, checkpoints and the final evaluation.
 
@@ -154,36 +142,22 @@ class TrainConfig:
 
     nested: ClassVar[dict[str, type]] = {"ppo": PPOConfig, "eval": EvalConfig}
 
-    scenario: str = "navigation"
-    timesteps: int = 1_000_000
-    worlds: int = 16
-    seed: int = 0
-    vec: str = "native"
+    scenario: Text = "navigation"
+    timesteps: Annotated[Steps, Field(ge=1)] = 1_000_000
+    worlds: Annotated[Int, Field(ge=1, le=4096)] = 16
+    seed: Annotated[Int, Field(ge=0, le=2**32 - 1)] = 0
+    vec: VecKind = "native"
     env: dict[str, Any] = field(default_factory=dict)
     ppo: PPOConfig = field(default_factory=PPOConfig)
-    checkpoint_every: int = 500_000
+    checkpoint_every: Steps = 500_000  # 0: only the final model
     eval: EvalConfig = field(default_factory=EvalConfig)
 
     def __post_init__(self) -> None:
-        for name, cls in self.nested.items():  # sections given as dicts (YAML, --set) become dataclasses
-            value = getattr(self, name)
-            if isinstance(value, dict):
-                object.__setattr__(self, name, _build(cls, value, name + "."))
-            elif not isinstance(value, cls):
-                raise ValueError(
-                    f"{name} must be a mapping of {cls.__name__} fields, got {type(value).__name__}"
-                )
-        coerce_fields(self)
         from agentsim_env.scenarios.registry import list_scenarios, make_scenario
 
         names = list_scenarios()
         if self.scenario not in names:
             raise ValueError(f"scenario must be one of {names}, got {short_repr(self.scenario)}")
-        check_int("timesteps", self.timesteps, 1, 10_000_000_000)
-        check_int("worlds", self.worlds, 1, 4096)
-        check_int("seed", self.seed, 0, 2**32 - 1)
-        _choice("vec", self.vec, VEC_KINDS)
-        check_int("checkpoint_every", self.checkpoint_every, 0, 10_000_000_000)
         checked: list[dict[str, Any]] = []
         for where, keys in (
             ("env", self.env),
@@ -218,11 +192,6 @@ class TrainConfig:
         return _build(TrainConfig, merged, "")
 
 
-def _choice(name: str, value: str, allowed: tuple[str, ...]) -> None:
-    if value not in allowed:
-        raise ValueError(f"{name} must be one of {list(allowed)}, got {short_repr(value)}")
-
-
 def _plain(value: Any) -> Any:
     if isinstance(value, dict):
         return {k: _plain(v) for k, v in value.items()}
@@ -232,7 +201,13 @@ def _plain(value: Any) -> Any:
 
 
 def _build(cls: type, data: Any, where: str) -> Any:
-    """``cls(**data)`` with unknown keys and non-mappings reported by name."""
+    """``cls(**data)`` with unknown keys and non-mappings reported by name (sections too, as ``ppo.lr``)."""
+    _check_keys(cls, data, where)
+    return cls(**data)
+
+
+def _check_keys(cls: type, data: Any, where: str) -> None:
+    """Raise on a non-mapping or an unknown key of ``cls`` or of one of its sections given as a mapping."""
     if not isinstance(data, dict):
         raise ValueError(
             f"{where.rstrip('.') or 'the config'} must be a mapping of keys, got {type(data).__name__}"
@@ -251,7 +226,9 @@ def _build(cls: type, data: Any, where: str) -> Any:
             raise ValueError(
                 f"{where}{key} must be a mapping of scenario config keys, got {type(value).__name__}"
             )
-    return cls(**data)
+        section = getattr(cls, "nested", {}).get(key)
+        if section is not None and isinstance(value, dict):
+            _check_keys(section, value, f"{where}{key}.")
 
 
 def shipped_configs() -> dict[str, Path]:

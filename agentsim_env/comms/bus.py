@@ -62,10 +62,10 @@ Event records, ``DueRows`` and the in-flight queue live in ``comms.events``, seq
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
-from typing import Any
+from typing import Annotated, Any
 
 import numpy as np
+from pydantic import Field
 
 from agentsim_env.comms.bus_kernels import bandwidth_kernel, keyed_draws
 from agentsim_env.comms.checks import bool_mask, int_vector, validate_send, world_arrays
@@ -81,7 +81,7 @@ from agentsim_env.comms.messages import (
 )
 from agentsim_env.comms.routing import expand, filter_pairs, group_members
 from agentsim_env.comms.sequence import Sequencer, inbox_order
-from agentsim_env.core.validation import coerce_fields
+from agentsim_env.core.config_model import Int, Real, config
 
 __all__ = ["BUS_KINDS", "ChannelConfig", "DeliveryEvents", "DueRows", "MessageBus", "MessageLog"]
 
@@ -93,7 +93,17 @@ _ALL_SEEN = np.zeros(0, dtype=bool)
 _ZERO_HOPS = np.zeros(1, dtype=np.int16)
 
 
-@dataclass(frozen=True, slots=True)
+Latency = Annotated[Int, Field(ge=0)]
+"""Steps between send and delivery, >= 0."""
+Probability = Annotated[Real, Field(ge=0.0, le=1.0)]
+"""A probability, in [0, 1]."""
+Bandwidth = Annotated[Int, Field(ge=0)]
+"""Messages per agent and step, >= 0 (0: unlimited)."""
+Range = Annotated[Real, Field(gt=0.0)]
+"""A distance in metres, > 0."""
+
+
+@config("comms")
 class ChannelConfig:
     """Channel model of a bus.
 
@@ -104,27 +114,10 @@ class ChannelConfig:
         max_range: Largest sender-receiver distance in metres (> 0), or None for no limit.
     """
 
-    latency: int = 0
-    loss: float = 0.0
-    bandwidth: int = 0
-    max_range: float | None = None
-
-    def __post_init__(self) -> None:
-        """Validate every field; errors name the field and the allowed values."""
-        coerce_fields(self, "comms.")
-        for name in ("latency", "bandwidth"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
-                raise ValueError(f"{name} must be an integer >= 0, got {v!r}")
-        if (
-            isinstance(self.loss, bool)
-            or not isinstance(self.loss, (int, float))
-            or not 0.0 <= self.loss <= 1.0
-        ):
-            raise ValueError(f"loss must be a probability in [0, 1], got {self.loss!r}")
-        r = self.max_range
-        if r is not None and (isinstance(r, bool) or not isinstance(r, (int, float)) or not (0 < r < np.inf)):
-            raise ValueError(f"max_range must be a finite number > 0 or None, got {r!r}")
+    latency: Latency = 0
+    loss: Probability = 0.0
+    bandwidth: Bandwidth = 0
+    max_range: Range | None = None
 
 
 class MessageBus:

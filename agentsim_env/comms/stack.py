@@ -30,12 +30,21 @@ row each, kind ENV), so the data store records every message an agent receives.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Annotated, Protocol
 
 import numba as nb
 import numpy as np
+from pydantic import Field
 
-from agentsim_env.comms.bus import ChannelConfig, DeliveryEvents, MessageBus
+from agentsim_env.comms.bus import (
+    Bandwidth,
+    ChannelConfig,
+    DeliveryEvents,
+    Latency,
+    MessageBus,
+    Probability,
+    Range,
+)
 from agentsim_env.comms.events import MessageLog
 from agentsim_env.comms.messages import (
     AGENT,
@@ -50,10 +59,10 @@ from agentsim_env.comms.messages import (
 )
 from agentsim_env.comms.overlay import Deliveries, Overlay
 from agentsim_env.comms.rangegraph import RangeGraph
+from agentsim_env.core.config_model import FieldError, Flag, Int, config
 from agentsim_env.core.pipeline import StepContext
 from agentsim_env.core.spatial import Grid
 from agentsim_env.core.threads import RowThreads
-from agentsim_env.core.validation import check_float, check_int, coerce_fields
 
 CHANNELS = ("none", "group", "nearest", "named", "overlay")
 N_CHANNELS = len(CHANNELS)
@@ -136,7 +145,7 @@ def _comm_rows(sel, group, near, named, hops, comm, n_agents, sent):  # type: ig
     return kind, snd, tgt, wld, pay, o_org, o_hops, o_pay
 
 
-@dataclass(frozen=True)
+@config("comms")
 class CommsConfig:
     """Communication settings of a scenario.
 
@@ -155,41 +164,30 @@ class CommsConfig:
         heartbeat_timeout: Steps without an answer before an agent is declared offline.
     """
 
-    payload_dim: int = 4
-    inbox_size: int = 4
-    latency: int = 0
-    loss: float = 0.0
-    bandwidth: int = 0
-    max_range: float | None = None
-    overlay_range: float = 30.0
-    overlay_full: bool = False
-    max_hops: int = 6
-    nearest_range: float = 30.0
-    heartbeat_period: int = 0
-    heartbeat_timeout: int = 10
+    payload_dim: Annotated[Int, Field(ge=0, le=64)] = 4
+    inbox_size: Annotated[Int, Field(ge=1, le=64)] = 4
+    latency: Latency = 0
+    loss: Probability = 0.0
+    bandwidth: Bandwidth = 0
+    max_range: Range | None = None
+    overlay_range: Range = 30.0
+    overlay_full: Flag = False
+    max_hops: Annotated[Int, Field(ge=1, le=255)] = 6
+    nearest_range: Range = 30.0
+    heartbeat_period: Annotated[Int, Field(ge=0)] = 0
+    heartbeat_timeout: Annotated[Int, Field(ge=1)] = 10
 
     def __post_init__(self) -> None:
-        coerce_fields(self, "comms.")
-        check_int("comms.payload_dim", self.payload_dim, 0, 64)
-        check_int("comms.inbox_size", self.inbox_size, 1, 64)
-        check_int("comms.max_hops", self.max_hops, 1, 255)
-        check_int("comms.heartbeat_period", self.heartbeat_period, 0)
-        check_int("comms.heartbeat_timeout", self.heartbeat_timeout, 1)
-        check_float("comms.overlay_range", self.overlay_range, 0.0, lo_open=True)
-        check_float("comms.nearest_range", self.nearest_range, 0.0, lo_open=True)
         if self.heartbeat_period and self.heartbeat_timeout < self.heartbeat_period + 2 * self.latency:
-            raise ValueError(
-                f"comms.heartbeat_timeout must be >= heartbeat_period + 2 * latency "
-                f"({self.heartbeat_period + 2 * self.latency}), got {self.heartbeat_timeout}"
+            raise FieldError(
+                "heartbeat_timeout",
+                f"must be >= heartbeat_period + 2 * latency ({self.heartbeat_period + 2 * self.latency}), "
+                f"got {self.heartbeat_timeout}",
             )
-        self.channel()  # validates latency, loss, bandwidth, max_range with their names
 
     def channel(self) -> ChannelConfig:
         """The bus channel model."""
-        try:
-            return ChannelConfig(self.latency, self.loss, self.bandwidth, self.max_range)
-        except ValueError as exc:
-            raise ValueError(f"comms.{exc}") from None
+        return ChannelConfig(self.latency, self.loss, self.bandwidth, self.max_range)
 
     @property
     def action_dim(self) -> int:

@@ -23,10 +23,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Annotated
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from pydantic import Field
 
+from agentsim_env.core.config_model import Flag, Real, config
 from agentsim_env.payloads.ballistic import FallParams
 from agentsim_env.payloads.kernels import PROFILE_CODES, fall_substeps
 from agentsim_env.payloads.wind import RngLike, WindModel, normals
@@ -58,7 +61,7 @@ _SPEC: dict[str, tuple[type, tuple[int, ...], float | int | bool]] = {
 PAYLOAD_FIELDS: tuple[str, ...] = tuple(_SPEC)
 
 
-@dataclass(frozen=True)
+@config("scatter")
 class ScatterConfig:
     """Release and landing errors (domain reference 3.1, landing-scatter model).
 
@@ -69,19 +72,10 @@ class ScatterConfig:
         gust_drift: Apply the wind model's per-object gusts while falling.
     """
 
-    sigma_gnss: float = 0.0
-    sigma_timing: float = 0.0
-    sigma_bounce: float = 0.0
-    gust_drift: bool = True
-
-    def __post_init__(self) -> None:
-        """Validate the fields."""
-        for name in ("sigma_gnss", "sigma_timing", "sigma_bounce"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0.0):
-                raise ValueError(f"{name} must be a finite number >= 0, got {value!r}")
-        if not isinstance(self.gust_drift, (bool, np.bool_)):
-            raise ValueError(f"gust_drift must be True or False, got {self.gust_drift!r}")
+    sigma_gnss: Annotated[Real, Field(ge=0.0)] = 0.0
+    sigma_timing: Annotated[Real, Field(ge=0.0)] = 0.0
+    sigma_bounce: Annotated[Real, Field(ge=0.0)] = 0.0
+    gust_drift: Flag = True
 
 
 @dataclass(eq=False)

@@ -18,20 +18,26 @@ Conventions:
 from __future__ import annotations
 
 import math
+import typing
 from collections.abc import Sequence
-from dataclasses import dataclass
+from typing import Annotated, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from pydantic import AfterValidator, Field
 
-from agentsim_env.core.validation import coerce_fields
+from agentsim_env.core.config_model import Choice, FieldError, Real, config, ordered
 
 __all__ = ["WIND_PROFILES", "WindConfig", "WindModel"]
 
-WIND_PROFILES: tuple[str, ...] = ("log", "power", "uniform")
+WindProfile = Annotated[Literal["log", "power", "uniform"], Choice]
+"""Height profiles of the mean wind."""
+WIND_PROFILES: tuple[str, ...] = typing.get_args(typing.get_args(WindProfile)[0])
+Speed = Annotated[Real, Field(ge=0.0)]
+"""A wind speed in m/s, >= 0."""
 
 
-@dataclass(frozen=True)
+@config("wind")
 class WindConfig:
     """Wind configuration (validated).
 
@@ -46,39 +52,23 @@ class WindConfig:
         gust_tau: Gust correlation time in seconds (> 0).
     """
 
-    mean_speed: float = 0.0
-    direction: float | None = None
-    randomise_speed: tuple[float, float] | None = None
-    profile: str = "log"
-    z0: float = 0.03
-    z_ref: float = 10.0
-    gust_sigma_frac: float = 0.2
-    gust_tau: float = 2.0
+    mean_speed: Speed = 0.0
+    direction: Real | None = None
+    randomise_speed: Annotated[tuple[Speed, Speed], AfterValidator(ordered)] | None = None
+    profile: WindProfile = "log"
+    z0: Annotated[Real, Field(ge=1e-4, le=10.0)] = 0.03
+    z_ref: Annotated[Real, Field(le=1e3)] = 10.0  # at least max(2 x z0, 0.1)
+    gust_sigma_frac: Annotated[Real, Field(ge=0.0)] = 0.2
+    gust_tau: Annotated[Real, Field(gt=0.0)] = 2.0
 
     def __post_init__(self) -> None:
-        """Validate the fields."""
-        coerce_fields(self, "wind.")
-        if not (math.isfinite(self.mean_speed) and self.mean_speed >= 0.0):
-            raise ValueError(f"mean_speed must be a finite number >= 0, got {self.mean_speed!r}")
-        if self.direction is not None and not math.isfinite(self.direction):
-            raise ValueError(f"direction must be None or a finite angle in radians, got {self.direction!r}")
-        if self.randomise_speed is not None:
-            rs = self.randomise_speed
-            if len(rs) != 2 or not all(math.isfinite(x) for x in rs) or not 0.0 <= rs[0] <= rs[1]:
-                raise ValueError(f"randomise_speed must be None or (lo, hi) with 0 <= lo <= hi, got {rs!r}")
-        if self.profile not in WIND_PROFILES:
-            raise ValueError(f"profile must be one of {WIND_PROFILES}, got {self.profile!r}")
-        if not (math.isfinite(self.z0) and 1e-4 <= self.z0 <= 10.0):
-            raise ValueError(f"wind.z0 must be a number in [0.0001, 10] (metres), got {self.z0!r}")
-        if not (math.isfinite(self.z_ref) and max(2.0 * self.z0, 0.1) <= self.z_ref <= 1e3):
-            raise ValueError(
-                f"wind.z_ref must be a number in [max(2 x z0, 0.1), 1000] = [{max(2.0 * self.z0, 0.1):g}, 1000] "
-                f"(metres), got {self.z_ref!r}"
+        """The rule across fields: ``z_ref`` lies above the roughness length."""
+        if self.z_ref < max(2.0 * self.z0, 0.1):
+            raise FieldError(
+                "z_ref",
+                f"must be a number in [max(2 x z0, 0.1), 1000] = [{max(2.0 * self.z0, 0.1):g}, 1000] "
+                f"(metres), got {self.z_ref!r}",
             )
-        if not (math.isfinite(self.gust_sigma_frac) and self.gust_sigma_frac >= 0.0):
-            raise ValueError(f"gust_sigma_frac must be a finite number >= 0, got {self.gust_sigma_frac!r}")
-        if not (math.isfinite(self.gust_tau) and self.gust_tau > 0.0):
-            raise ValueError(f"gust_tau must be a finite number > 0, got {self.gust_tau!r}")
 
     def profile_factor(self, z: ArrayLike) -> NDArray[np.float64]:
         """Ratio ``u(z) / u(z_ref)`` of the height profile (0 at and below the ground or ``z0``).

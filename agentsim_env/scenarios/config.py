@@ -10,23 +10,21 @@ Unknown keys and bad values raise ``ValueError`` naming the field and the allowe
 
 from __future__ import annotations
 
-import dataclasses
-from dataclasses import dataclass, field
-from typing import Any, ClassVar
+import typing
+from dataclasses import field
+from typing import Annotated, ClassVar, Literal
+
+from pydantic import AfterValidator, Field
 
 from agentsim_env.comms.stack import CommsConfig
-from agentsim_env.core.validation import (
-    build_config,
-    check_choice,
-    check_float,
-    check_int,
-    check_pair,
-    coerce_fields,
-)
+from agentsim_env.core.config_model import Choice, FieldError, Flag, Int, Real, config, ordered
+from agentsim_env.core.validation import build_config
 from agentsim_env.scenarios.rewards import RewardConfig
-from agentsim_env.sim.config import PHYSICS_MODES
+from agentsim_env.sim.config import Physics
 
-ACTION_MODES = ("velocity", "primitive")
+ActionMode = Annotated[Literal["velocity", "primitive"], Choice]
+"""How actions move agents: a target velocity, or a motion primitive and its parameters."""
+ACTION_MODES: tuple[str, ...] = typing.get_args(typing.get_args(ActionMode)[0])
 MAX_AGENTS = 1_000_000
 """Most agents a world may hold (memory is also checked against the machine before allocating)."""
 MAX_STEPS = 10**9
@@ -34,8 +32,23 @@ MAX_STEPS = 10**9
 MAX_RINGS = 64
 """Most elevation rings of the proximity sensor."""
 
+Limit = Annotated[Real, Field(ge=0.01, le=1e4)]
+"""A body size or motion limit, 0.01..1e4."""
+Height = Annotated[Real, Field(ge=0.0, le=1e4)]
+"""An altitude in metres, 0..1e4."""
+Elevation = Annotated[Real, Field(ge=-90.0, le=90.0)]
+"""A ray elevation in degrees, -90..90."""
+HalfWidth = Annotated[Real, Field(ge=0.01, le=100.0)]
+"""An obstacle half-width in metres, 0.01..100."""
+ObstacleHeight = Annotated[Real, Field(ge=0.01, le=1e4)]
+"""An obstacle height in metres, 0.01..1e4."""
+ObstacleSizes = Annotated[tuple[HalfWidth, HalfWidth], AfterValidator(ordered)]
+"""``(low, high)`` obstacle half-widths, ``0.01 <= low <= high <= 100``."""
+ObstacleHeights = Annotated[tuple[ObstacleHeight, ObstacleHeight], AfterValidator(ordered)]
+"""``(low, high)`` obstacle heights, ``0.01 <= low <= high <= 1e4``."""
 
-@dataclass(frozen=True)
+
+@config("body")
 class BodyConfig:
     """An agent's body and motion limits.
 
@@ -46,23 +59,18 @@ class BodyConfig:
         altitude: Flight band ``(low, high)`` in metres: ``0 <= low``, ``high <= 1e4``, ``high - low >= 0.1``.
     """
 
-    radius: float = 0.5
-    max_speed: float = 5.0
-    max_accel: float = 10.0
-    altitude: tuple[float, float] = (2.0, 12.0)
+    radius: Limit = 0.5
+    max_speed: Limit = 5.0
+    max_accel: Limit = 10.0
+    altitude: tuple[Height, Height] = (2.0, 12.0)
 
     def __post_init__(self) -> None:
-        coerce_fields(self, "body.")
-        for name in ("radius", "max_speed", "max_accel"):
-            check_float(f"body.{name}", getattr(self, name), 0.01, 1e4)
-        lo, hi = check_pair("body.altitude", self.altitude, 0.0, 1e4, strict=True)
+        lo, hi = self.altitude
         if hi - lo < 0.1:
-            raise ValueError(
-                f"body.altitude must span at least 0.1 m (high - low >= 0.1), got {self.altitude}"
-            )
+            raise FieldError("altitude", f"must span at least 0.1 m (high - low >= 0.1), got {self.altitude}")
 
 
-@dataclass(frozen=True)
+@config("sensing")
 class SensingConfig:
     """The proximity sensor (a laser-scanner-like fan of rays).
 
@@ -73,24 +81,18 @@ class SensingConfig:
             rings.
     """
 
-    range: float = 10.0
-    n_azimuth: int = 16
-    elevations_deg: tuple[float, ...] = (0.0, -25.0)
+    range: Annotated[Real, Field(ge=0.01, le=1e5)] = 10.0
+    n_azimuth: Annotated[Int, Field(ge=1, le=1024)] = 16
+    elevations_deg: tuple[Elevation, ...] = (0.0, -25.0)
 
     def __post_init__(self) -> None:
-        coerce_fields(self, "sensing.")
-        check_float("sensing.range", self.range, 0.01, 1e5)
-        check_int("sensing.n_azimuth", self.n_azimuth, 1, 1024)
         if not 1 <= len(self.elevations_deg) <= MAX_RINGS:
-            raise ValueError(
-                f"sensing.elevations_deg must hold 1..{MAX_RINGS} elevations, got {self.elevations_deg!r}"
+            raise FieldError(
+                "elevations_deg", f"must hold 1..{MAX_RINGS} elevations, got {self.elevations_deg!r}"
             )
-        for i, e in enumerate(self.elevations_deg):
-            check_float(f"sensing.elevations_deg[{i}]", e, -90.0, 90.0)
-        object.__setattr__(self, "elevations_deg", tuple(float(e) for e in self.elevations_deg))
 
 
-@dataclass(frozen=True)
+@config()
 class ScenarioConfig:
     """Fields every scenario config has (extend it; redeclare a field to change its default).
 
@@ -117,45 +119,24 @@ class ScenarioConfig:
         "comms": CommsConfig,
     }
 
-    n_agents: int = 4
+    n_agents: Annotated[Int, Field(ge=1, le=MAX_AGENTS)] = 4
     body: BodyConfig = field(default_factory=BodyConfig)
     sensing: SensingConfig = field(default_factory=SensingConfig)
-    action_mode: str = "velocity"
-    physics: str = "kinematic"
-    collisions: bool = True
-    dt: float = 0.1
-    max_steps: int = 400
+    action_mode: ActionMode = "velocity"
+    physics: Physics = "kinematic"
+    collisions: Flag = True
+    dt: Annotated[Real, Field(ge=1e-3, le=10.0)] = 0.1
+    max_steps: Annotated[Int, Field(ge=1, le=MAX_STEPS)] = 400
     reward: RewardConfig = field(default_factory=RewardConfig)
     comms: CommsConfig | None = None
 
-    def __post_init__(self) -> None:
-        self._coerce_nested()
-        coerce_fields(self)
-        check_int("n_agents", self.n_agents, 1, MAX_AGENTS)
-        check_choice("action_mode", self.action_mode, ACTION_MODES)
-        check_choice("physics", self.physics, PHYSICS_MODES)
-        check_float("dt", self.dt, 1e-3, 10.0)
-        check_int("max_steps", self.max_steps, 1, MAX_STEPS)
 
-    def _coerce_nested(self) -> None:
-        """Turn dicts given for sub-configs into validated instances (merged over the field's default)."""
-        for f in dataclasses.fields(self):
-            cls = self.nested.get(f.name)
-            if cls is None:
-                continue
-            value = getattr(self, f.name)
-            if isinstance(value, dict):
-                base = f.default_factory() if f.default_factory is not dataclasses.MISSING else f.default
-                start = _shallow(base) if isinstance(base, cls) else {}
-                value = build_config(cls, {**start, **value}, label=f.name)
-                object.__setattr__(self, f.name, value)
-            elif not isinstance(value, cls) and not (value is None and "None" in str(f.type)):
-                raise ValueError(f"{f.name} must be a {cls.__name__} or a dict of its fields, got {value!r}")
-
-
-def _shallow(obj: Any) -> dict[str, Any]:
-    """A dataclass instance's fields as a dict (sub-dataclasses kept as instances)."""
-    return {f.name: getattr(obj, f.name) for f in dataclasses.fields(obj)}
-
-
-__all__ = ["ACTION_MODES", "BodyConfig", "ScenarioConfig", "SensingConfig", "build_config"]
+__all__ = [
+    "ACTION_MODES",
+    "BodyConfig",
+    "ObstacleHeights",
+    "ObstacleSizes",
+    "ScenarioConfig",
+    "SensingConfig",
+    "build_config",
+]

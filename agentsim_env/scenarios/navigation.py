@@ -40,17 +40,18 @@ Version history: v0, first release.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, ClassVar
+from typing import Annotated, Any, ClassVar
 
 import numba as nb
 import numpy as np
+from pydantic import Field
 
+from agentsim_env.core.config_model import Int, Real, config, in_range
 from agentsim_env.core.pipeline import Sensor
 from agentsim_env.core.threads import light_min_rows
-from agentsim_env.core.validation import check_float, check_int, check_pair
 from agentsim_env.motion import MotionLimits
 from agentsim_env.scenarios.base import Scenario, SlotState, StepResult, comms_width, slot, write_comms
-from agentsim_env.scenarios.config import ScenarioConfig
+from agentsim_env.scenarios.config import ObstacleHeights, ObstacleSizes, ScenarioConfig
 from agentsim_env.scenarios.placement import jittered_points, obstacle_layout, placement_problem
 from agentsim_env.scenarios.rewards import RewardConfig, compose_rewards, task_partials
 from agentsim_env.sensors.gnss import GnssConfig, GnssSensor
@@ -167,7 +168,7 @@ def _observe_rows_kernel(rows, pos, vel, heading, goal, distance, hit_kind, side
         _observe_row(rows[r], r, pos, vel, heading, goal, distance, hit_kind, side, lo, hi, vmax, out)
 
 
-@dataclass(frozen=True)
+@config()
 class NavigationConfig(ScenarioConfig):
     """Configuration of ``navigation`` (every field validated at construction; shared fields in ``ScenarioConfig``).
 
@@ -189,31 +190,24 @@ class NavigationConfig(ScenarioConfig):
 
     nested: ClassVar[dict[str, type]] = {**ScenarioConfig.nested, "gnss": GnssConfig}
 
-    n_groups: int | None = None  # None: min(2, n_agents)
-    map_size: float | None = None  # None: grows with n_agents (area_per_agent), at least 60 m
-    area_per_agent: float = 150.0
-    obstacle_density: float = 1.0 / 600.0  # obstacles per square metre
-    obstacle_size: tuple[float, float] = (1.0, 3.0)
-    obstacle_height: tuple[float, float] = (4.0, 24.0)
-    goal_radius: float = 1.5
-    arrival_bonus: float = 10.0
+    n_groups: Annotated[Int, Field(ge=1)] | None = None  # None: min(2, n_agents)
+    map_size: Annotated[Real, Field(ge=10.0)] | None = None  # None: grows with n_agents, at least 60 m
+    area_per_agent: Annotated[Real, Field(ge=10.0, le=1e6)] = 150.0
+    obstacle_density: Annotated[Real, Field(ge=0.0, le=0.01)] = 1.0 / 600.0  # obstacles per square metre
+    obstacle_size: ObstacleSizes = (1.0, 3.0)
+    obstacle_height: ObstacleHeights = (4.0, 24.0)
+    goal_radius: Annotated[Real, Field(gt=0.0, le=1e4)] = 1.5
+    arrival_bonus: Annotated[Real, Field(ge=0.0, le=1e6)] = 10.0
     reward: RewardConfig = field(default_factory=lambda: RewardConfig(group_share=0.5, energy_weight=0.001))
     gnss: GnssConfig | None = None  # a GnssConfig (or dict) adds the noisy GNSS sensor and its ``gnss`` part
 
     def __post_init__(self) -> None:
-        super().__post_init__()
         if self.n_groups is None:
             object.__setattr__(self, "n_groups", min(2, self.n_agents))
-        check_int("n_groups", self.n_groups, 1, self.n_agents)
+        in_range("n_groups", int(self.n_groups or 0), 1, self.n_agents)
         max_side = MAX_SIDE_PYMUNK if self.physics == "pymunk" else MAX_SIDE
         if self.map_size is not None:
-            check_float("map_size", self.map_size, 10.0, max_side)
-        check_float("area_per_agent", self.area_per_agent, 10.0, 1e6)
-        check_float("obstacle_density", self.obstacle_density, 0.0, 0.01)
-        check_float("goal_radius", self.goal_radius, 0.0, 1e4, lo_open=True)
-        check_float("arrival_bonus", self.arrival_bonus, 0.0, 1e6)
-        check_pair("obstacle_size", self.obstacle_size, 0.01, 100.0)
-        check_pair("obstacle_height", self.obstacle_height, 0.01, 1e4)
+            in_range("map_size", self.map_size, 10.0, max_side)
         side = self.side
         if side > max_side:
             raise ValueError(

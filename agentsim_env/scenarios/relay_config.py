@@ -5,11 +5,20 @@ Field meanings and the layouts they produce are documented in ``agentsim_env.sce
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import field
+from typing import Annotated
+
+from pydantic import AfterValidator, Field
 
 from agentsim_env.comms.stack import CommsConfig
-from agentsim_env.core.validation import check_float, check_int, check_pair, coerce_fields
-from agentsim_env.scenarios.config import BodyConfig, ScenarioConfig, SensingConfig
+from agentsim_env.core.config_model import FieldError, Int, Real, config, in_range, ordered
+from agentsim_env.scenarios.config import (
+    BodyConfig,
+    ObstacleHeights,
+    ObstacleSizes,
+    ScenarioConfig,
+    SensingConfig,
+)
 from agentsim_env.scenarios.rewards import RewardConfig
 
 RELAY_COMMS = CommsConfig(
@@ -18,7 +27,13 @@ RELAY_COMMS = CommsConfig(
 """The default communication settings (a ``comms`` dict overrides some of these fields)."""
 
 
-@dataclass(frozen=True)
+Distance = Annotated[Real, Field(ge=0.0, le=1e3)]
+"""A distance in metres, 0..1e3."""
+Distances = Annotated[tuple[Distance, Distance], AfterValidator(ordered)]
+"""``(low, high)`` distances, ``0 <= low <= high <= 1e3``."""
+
+
+@config()
 class RelayConfig(ScenarioConfig):
     """Configuration of ``relay`` (every field validated at construction; shared fields in ``ScenarioConfig``).
 
@@ -43,18 +58,18 @@ class RelayConfig(ScenarioConfig):
     (2e4 m with ``physics="pymunk"``).
     """
 
-    n_agents: int | None = None  # type: ignore[assignment]  # None: n_groups x group_size
-    n_groups: int = 3
-    group_size: int | None = None  # the scout plus group_size - 1 members that must reach the target
-    corridor_width: float = 40.0
-    gap: tuple[float, float] = (12.0, 22.0)  # distance along x between consecutive start points
-    lateral_spread: float = 8.0  # start points lie within this distance of the corridor's centre line
-    target_offset: tuple[float, float] = (4.0, 10.0)  # distance scout -> target
-    obstacle_density: float = 1.0 / 1000.0
-    obstacle_size: tuple[float, float] = (1.0, 2.5)
-    obstacle_height: tuple[float, float] = (4.0, 20.0)
-    arrival_radius: float = 3.0
-    arrival_bonus: float = 10.0
+    n_agents: Int | None = None  # type: ignore[assignment]  # None: n_groups x group_size
+    n_groups: Annotated[Int, Field(ge=1, le=64)] = 3
+    group_size: Annotated[Int, Field(ge=2, le=256)] | None = None  # the scout plus group_size - 1 members
+    corridor_width: Annotated[Real, Field(le=1e4)] = 40.0  # at least 2 x lateral_spread + 4
+    gap: Distances = (12.0, 22.0)  # distance along x between consecutive start points
+    lateral_spread: Distance = 8.0  # start points lie within this distance of the corridor's centre line
+    target_offset: Distances = (4.0, 10.0)  # distance scout -> target
+    obstacle_density: Annotated[Real, Field(ge=0.0, le=0.01)] = 1.0 / 1000.0
+    obstacle_size: ObstacleSizes = (1.0, 2.5)
+    obstacle_height: ObstacleHeights = (4.0, 20.0)
+    arrival_radius: Annotated[Real, Field(gt=0.0, le=1e3)] = 3.0
+    arrival_bonus: Annotated[Real, Field(ge=0.0, le=1e6)] = 10.0
     body: BodyConfig = field(default_factory=lambda: BodyConfig(max_speed=6.0, altitude=(4.0, 10.0)))
     sensing: SensingConfig = field(
         default_factory=lambda: SensingConfig(range=8.0, n_azimuth=12, elevations_deg=(0.0,))
@@ -65,16 +80,12 @@ class RelayConfig(ScenarioConfig):
     comms: CommsConfig = RELAY_COMMS  # type: ignore[assignment]  # a dict overrides fields of RELAY_COMMS
 
     def __post_init__(self) -> None:
-        coerce_fields(self)
-        check_int("n_groups", self.n_groups, 1, 64)
-        if self.group_size is not None:
-            check_int("group_size", self.group_size, 2, 256)
         if self.n_agents is None:
             size = 4 if self.group_size is None else self.group_size
             object.__setattr__(self, "group_size", size)
             object.__setattr__(self, "n_agents", self.n_groups * size)
         else:
-            check_int("n_agents", self.n_agents, 2 * self.n_groups, 256 * self.n_groups)
+            in_range("n_agents", self.n_agents, 2 * self.n_groups, 256 * self.n_groups)
             if self.n_agents % self.n_groups:
                 raise ValueError(
                     f"n_agents ({self.n_agents}) must be a multiple of n_groups ({self.n_groups})"
@@ -86,20 +97,12 @@ class RelayConfig(ScenarioConfig):
                     f"({self.n_groups} x {self.group_size}); give one of the two"
                 )
             object.__setattr__(self, "group_size", size)
-        super().__post_init__()
         if self.comms is None:
-            raise ValueError(
-                "comms must be a CommsConfig or a dict of its fields (relay needs comms), got None"
+            raise FieldError(
+                "comms", "must be a CommsConfig or a dict of its fields (relay needs comms), got None"
             )
-        check_float("lateral_spread", self.lateral_spread, 0.0, 1e3)
-        check_float("corridor_width", self.corridor_width, 2.0 * self.lateral_spread + 4.0, 1e4)
-        check_float("obstacle_density", self.obstacle_density, 0.0, 0.01)
-        check_float("arrival_radius", self.arrival_radius, 0.0, 1e3, lo_open=True)
-        check_float("arrival_bonus", self.arrival_bonus, 0.0, 1e6)
-        check_pair("gap", self.gap, 2.0 * self.body.radius + 0.5, 1e3)  # neighbours start clear of each other
-        check_pair("target_offset", self.target_offset, 0.0, 1e3)
-        check_pair("obstacle_size", self.obstacle_size, 0.01, 100.0)
-        check_pair("obstacle_height", self.obstacle_height, 0.01, 1e4)
+        in_range("corridor_width", self.corridor_width, 2.0 * self.lateral_spread + 4.0)
+        in_range("gap[0]", self.gap[0], 2.0 * self.body.radius + 0.5)  # neighbours start clear of each other
         limit = 2e4 if self.physics == "pymunk" else 1e5
         if self.length > limit:
             raise ValueError(

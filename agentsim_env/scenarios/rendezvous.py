@@ -9,29 +9,25 @@ which ends the episode for all. Version history: v0, first release.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Annotated
 
 import numpy as np
+from pydantic import Field
 
-from agentsim_env.core.validation import check_float
+from agentsim_env.core.config_model import Real, config
 from agentsim_env.scenarios.base import Scenario, SlotState, StepResult, slot
 from agentsim_env.scenarios.config import ScenarioConfig
 from agentsim_env.sensors.proximity import ProximitySensor
 from agentsim_env.sim import StepEvents, World, WorldConfig
 
 
-@dataclass(frozen=True)
+@config()
 class RendezvousConfig(ScenarioConfig):
     """``rendezvous``: the shared fields plus the map side (10..1e4 m), the meeting radius (0.1..1e4 m), the bonus."""
 
-    side: float = 60.0
-    radius: float = 4.0
-    bonus: float = 10.0
-
-    def __post_init__(self) -> None:
-        super().__post_init__()  # the shared fields; then ours, each error naming the field and its range
-        check_float("side", self.side, 10.0, 1e4)
-        check_float("radius", self.radius, 0.1, 1e4)
-        check_float("bonus", self.bonus, 0.0, 1e6)
+    side: Annotated[Real, Field(ge=10.0, le=1e4)] = 60.0
+    radius: Annotated[Real, Field(ge=0.1, le=1e4)] = 4.0
+    bonus: Annotated[Real, Field(ge=0.0, le=1e6)] = 10.0
 
 
 @dataclass(slots=True)

@@ -15,18 +15,23 @@ as a float apart: exact within one process, possibly not in the last bits over s
 from __future__ import annotations
 
 from collections.abc import Iterable
-from dataclasses import dataclass
+from typing import Annotated
 
 import numba as nb
 import numpy as np
+from pydantic import Field
 
+from agentsim_env.core.config_model import Real, config
 from agentsim_env.core.threads import RowThreads, light_min_rows
-from agentsim_env.core.validation import check_float, coerce_fields
 
 _ONE_THREAD = RowThreads(1)
 
 
-@dataclass(frozen=True)
+Weight = Annotated[Real, Field(ge=0.0)]
+"""A reward weight, >= 0."""
+
+
+@config("reward")
 class RewardConfig:
     """Weights of the reward terms (all >= 0).
 
@@ -38,16 +43,11 @@ class RewardConfig:
         message_cost: Subtracted per message the agent sent this step.
     """
 
-    task_weight: float = 1.0
-    group_share: float = 0.0
-    collision_penalty: float = 10.0
-    energy_weight: float = 0.0
-    message_cost: float = 0.0
-
-    def __post_init__(self) -> None:
-        coerce_fields(self, "reward.")
-        for name in ("task_weight", "group_share", "collision_penalty", "energy_weight", "message_cost"):
-            check_float(f"reward.{name}", getattr(self, name), 0.0)
+    task_weight: Weight = 1.0
+    group_share: Weight = 0.0
+    collision_penalty: Weight = 10.0
+    energy_weight: Weight = 0.0
+    message_cost: Weight = 0.0
 
 
 FIXED_POINT_BITS = 32

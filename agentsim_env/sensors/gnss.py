@@ -24,16 +24,20 @@ before the episode's reset; reading the same state twice gives the same noise.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from typing import Annotated
 
 import numpy as np
+from pydantic import Field
 
+from agentsim_env.core.config_model import Real, config
 from agentsim_env.core.keyed import keyed_normal
 from agentsim_env.core.pipeline import Part, StepContext
-from agentsim_env.core.validation import check_float, coerce_fields
+
+Sigma = Annotated[Real, Field(ge=0.0, le=1e3)]
+"""A standard deviation in metres, 0..1e3."""
 
 
-@dataclass(frozen=True)
+@config("gnss")
 class GnssConfig:
     """Errors of the GNSS sensor.
 
@@ -42,13 +46,8 @@ class GnssConfig:
         sigma_v: Altimeter error (standard deviation) in metres, >= 0.
     """
 
-    sigma_h: float = 1.5
-    sigma_v: float = 0.5
-
-    def __post_init__(self) -> None:
-        coerce_fields(self, "gnss.")
-        check_float("gnss.sigma_h", self.sigma_h, 0.0, 1e3)
-        check_float("gnss.sigma_v", self.sigma_v, 0.0, 1e3)
+    sigma_h: Sigma = 1.5
+    sigma_v: Sigma = 0.5
 
 
 class GnssSensor:

@@ -29,14 +29,16 @@ from __future__ import annotations
 
 import operator
 from dataclasses import dataclass
+from typing import Annotated
 
 import numba as nb
 import numpy as np
+from pydantic import Field
 
+from agentsim_env.core.config_model import Flag, Int, Real, config
 from agentsim_env.core.pipeline import Part, StepContext
 from agentsim_env.core.spatial import Grid, cell_of
 from agentsim_env.core.threads import RowThreads
-from agentsim_env.core.validation import coerce_fields
 from agentsim_env.sensors.raycast import (
     _BOX,
     _CYL,
@@ -50,7 +52,7 @@ from agentsim_env.sensors.raycast import (
 )
 
 
-@dataclass(frozen=True)
+@config()
 class ProximityConfig:
     """Ray layout and what the sensor detects.
 
@@ -62,28 +64,13 @@ class ProximityConfig:
         detect_ground: Whether the ground plane is seen (also needs the scene's ground flag).
     """
 
-    n_azimuth: int = 32
-    elevations_deg: tuple[float, ...] = (0.0,)
-    detect_agents: bool = True
-    detect_objects: bool = True
-    detect_ground: bool = True
-
-    def __post_init__(self) -> None:
-        coerce_fields(self, "")
-        if isinstance(self.n_azimuth, bool) or not isinstance(self.n_azimuth, (int, np.integer)):
-            raise ValueError(f"n_azimuth must be an int >= 1, got {self.n_azimuth!r}")
-        if not 1 <= int(self.n_azimuth) <= 4096:
-            raise ValueError(f"n_azimuth must be in [1, 4096], got {self.n_azimuth}")
-        object.__setattr__(self, "n_azimuth", int(self.n_azimuth))
-        elev = tuple(float(e) for e in np.atleast_1d(np.asarray(self.elevations_deg, dtype=np.float64)))
-        if len(elev) == 0:
-            raise ValueError("elevations_deg must hold at least one elevation in [-90, 90] degrees")
-        if not all(np.isfinite(e) and -90.0 <= e <= 90.0 for e in elev):
-            raise ValueError(f"elevations_deg must be finite and in [-90, 90] degrees, got {elev}")
-        object.__setattr__(self, "elevations_deg", elev)
-        for name in ("detect_agents", "detect_objects", "detect_ground"):
-            if not isinstance(getattr(self, name), (bool, np.bool_)):
-                raise ValueError(f"{name} must be True or False, got {getattr(self, name)!r}")
+    n_azimuth: Annotated[Int, Field(ge=1, le=4096)] = 32
+    elevations_deg: Annotated[tuple[Annotated[Real, Field(ge=-90.0, le=90.0)], ...], Field(min_length=1)] = (
+        0.0,
+    )
+    detect_agents: Flag = True
+    detect_objects: Flag = True
+    detect_ground: Flag = True
 
     @property
     def n_rays(self) -> int:

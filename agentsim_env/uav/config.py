@@ -10,11 +10,14 @@ from __future__ import annotations
 
 import math
 import os
-from dataclasses import dataclass, field
-from typing import Any, ClassVar
+from dataclasses import field
+from typing import Annotated, Any, ClassVar
+
+from pydantic import Field
 
 from agentsim_env.comms.stack import CommsConfig
-from agentsim_env.core.validation import check_float, check_int, check_text, short_repr
+from agentsim_env.core.config_model import Flag, Int, Real, config, in_range
+from agentsim_env.core.validation import check_text, short_repr
 from agentsim_env.payloads import ScatterConfig, WindConfig
 from agentsim_env.scenarios.config import BodyConfig, ScenarioConfig, SensingConfig
 from agentsim_env.scenarios.rewards import RewardConfig
@@ -28,18 +31,11 @@ ZONES_ACCEPTED = (
 """What the ``zones`` field accepts (named in its errors)."""
 
 
-_RANGES = {
-    "sensor_mass": (1e-4, 100.0),  # kg
-    "sensor_cd": (0.01, 10.0),
-    "sensor_area": (1e-6, 10.0),  # m^2
-    "battery_j": (1.0, 1e9),  # J
-    "target_scale": (1e-3, 1e6),
-    "grid_extent": (1.0, 1e5),  # m
-}
-"""Allowed ``(low, high)`` of the physical fields (outside them the physics and rewards overflow)."""
+Weight = Annotated[Real, Field(ge=0.0, le=1e6)]
+"""A reward weight, 0..1e6."""
 
 
-@dataclass(frozen=True)
+@config()
 class UavReleaseConfig(ScenarioConfig):
     """Configuration of ``uav_release`` (validated; nested parts accept dicts of their fields).
 
@@ -66,15 +62,17 @@ class UavReleaseConfig(ScenarioConfig):
     zones: Any = (
         None  # a zones JSON path, a dict in that format, a ZoneSet, "tiny", or None / "default" (shipped)
     )
-    payload: int = 40
-    sensor_mass: float = 0.05
-    sensor_cd: float = 1.05
-    sensor_area: float = 0.0025
-    battery_j: float = 321_000.0
-    target_scale: float = 60.0
-    grid_cells: int = 8
-    grid_extent: float = 80.0
-    max_steps: int = 6000
+    n_agents: Annotated[Int, Field(ge=1, le=1024)] = 4
+    payload: Annotated[Int, Field(ge=1, le=100_000)] = 40
+    # the physical fields' ranges: outside them the physics and rewards overflow
+    sensor_mass: Annotated[Real, Field(ge=1e-4, le=100.0)] = 0.05  # kg
+    sensor_cd: Annotated[Real, Field(ge=0.01, le=10.0)] = 1.05
+    sensor_area: Annotated[Real, Field(ge=1e-6, le=10.0)] = 0.0025  # m^2
+    battery_j: Annotated[Real, Field(ge=1.0, le=1e9)] = 321_000.0  # J
+    target_scale: Annotated[Real, Field(ge=1e-3, le=1e6)] = 60.0
+    grid_cells: Annotated[Int, Field(ge=1, le=64)] = 8
+    grid_extent: Annotated[Real, Field(ge=1.0, le=1e5)] = 80.0  # m
+    max_steps: Annotated[Int, Field(ge=1, le=10**9)] = 6000
     body: BodyConfig = field(
         default_factory=lambda: BodyConfig(radius=0.6, max_speed=15.0, max_accel=4.0, altitude=(5.0, 60.0))
     )
@@ -90,34 +88,22 @@ class UavReleaseConfig(ScenarioConfig):
     comms: CommsConfig | None = field(
         default_factory=lambda: CommsConfig(payload_dim=6, inbox_size=8, overlay_range=150.0)
     )
-    w_coverage: float = 10.0
-    w_fidelity: float = 1.0
-    w_energy: float = 1.0
-    w_miss: float = 0.1
-    w_out: float = 1.0
-    w_lcc: float = 5.0
-    w_lifetime: float = 5.0
-    autopilot: bool = False
-    autopilot_speed: float = 8.0
-    autopilot_altitude: float = 10.0
-    autopilot_lane: float = 16.0
-    release_cost: float = 1.0
+    w_coverage: Weight = 10.0
+    w_fidelity: Weight = 1.0
+    w_energy: Weight = 1.0
+    w_miss: Weight = 0.1
+    w_out: Weight = 1.0
+    w_lcc: Weight = 5.0
+    w_lifetime: Weight = 5.0
+    autopilot: Flag = False
+    autopilot_speed: Real = 8.0  # 0.5..body.max_speed
+    autopilot_altitude: Real = 10.0  # inside body.altitude
+    autopilot_lane: Annotated[Real, Field(ge=1.0, le=1e4)] = 16.0
+    release_cost: Annotated[Real, Field(ge=0.0, le=100.0)] = 1.0
 
     def __post_init__(self) -> None:
-        super().__post_init__()
-        check_int("n_agents", self.n_agents, 1, 1024)
-        check_int("payload", self.payload, 1, 100_000)
-        for name, (lo, hi) in _RANGES.items():
-            check_float(name, getattr(self, name), lo, hi)
-        for name in ("w_coverage", "w_fidelity", "w_energy", "w_miss", "w_out", "w_lcc", "w_lifetime"):
-            check_float(name, getattr(self, name), 0.0, 1e6)
-        check_int("grid_cells", self.grid_cells, 1, 64)
-        if not isinstance(self.autopilot, bool):
-            raise ValueError(f"autopilot must be true or false; got {short_repr(self.autopilot)}")
-        check_float("autopilot_speed", self.autopilot_speed, 0.5, float(self.body.max_speed))
-        check_float("autopilot_altitude", self.autopilot_altitude, *map(float, self.body.altitude))
-        check_float("autopilot_lane", self.autopilot_lane, 1.0, 1e4)
-        check_float("release_cost", self.release_cost, 0.0, 100.0)
+        in_range("autopilot_speed", self.autopilot_speed, 0.5, self.body.max_speed)
+        in_range("autopilot_altitude", self.autopilot_altitude, *self.body.altitude)
         v_t = math.sqrt(2.0 * self.sensor_mass * 9.81 / (1.225 * self.sensor_cd * self.sensor_area))
         if v_t < 1.0:
             raise ValueError(

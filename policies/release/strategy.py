@@ -19,16 +19,21 @@ its **behaviour** is class attributes and one method:
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
+import types
+import typing
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 import numpy as np
+import pydantic
 from numpy.typing import ArrayLike, NDArray
 
-from agentsim_env.core.validation import check_choice, check_float, coerce_fields
+from agentsim_env.core.config_model import Flag, Int, Real, Text, describe
+from agentsim_env.core.validation import check_choice, check_float
 from agentsim_env.policies.release.planning import MODES, ReleasePlan, assemble_plan, normalise_sector
 from agentsim_env.uav.wsn.profiles import RadialProfile
 
@@ -113,6 +118,29 @@ class Pattern:
     info: dict[str, Any] = field(default_factory=dict)
 
 
+#: The declared type (``core.config_model``) that checks an option annotated with a plain Python type.
+_DECLARED: dict[Any, Any] = {int: Int, float: Real, bool: Flag, str: Text}
+
+
+def _declared(tp: Any) -> Any:
+    """``tp`` with ``int``/``float``/``bool``/``str`` replaced by the declared types, inside unions and tuples."""
+    if tp in _DECLARED:
+        return _DECLARED[tp]
+    origin, args = typing.get_origin(tp), typing.get_args(tp)
+    if origin in (typing.Union, types.UnionType):
+        return typing.Union[tuple(_declared(a) for a in args)]  # noqa: UP007 - built from a tuple
+    if origin is tuple:
+        return tuple[tuple(a if a is Ellipsis else _declared(a) for a in args)]  # type: ignore[misc]
+    return tp
+
+
+@functools.cache
+def _adapters(cls: type) -> dict[str, pydantic.TypeAdapter[Any]]:
+    """One pydantic adapter per option field of strategy class ``cls``, from its annotations."""
+    hints = typing.get_type_hints(cls)
+    return {f.name: pydantic.TypeAdapter(_declared(hints[f.name])) for f in dataclasses.fields(cls)}
+
+
 @dataclass(frozen=True, kw_only=True)
 class ReleaseStrategy(ABC):
     """Base of every release strategy: the common options, validation and the plan assembly.
@@ -156,7 +184,12 @@ class ReleaseStrategy(ABC):
 
     def __post_init__(self) -> None:
         try:
-            coerce_fields(self)  # a string for an int option is refused, numpy numbers become Python ones
+            for opt, adapter in _adapters(type(self)).items():  # declared types: no str for an int, ...
+                try:
+                    value = adapter.validate_python(getattr(self, opt))
+                except pydantic.ValidationError as exc:
+                    raise ValueError(f"{opt} {describe(exc.errors(include_url=False)[0])}") from None
+                object.__setattr__(self, opt, value)  # numpy numbers stored as Python ones
             for opt in self.options():
                 rule = self.option_rule(opt)
                 if rule is not None:

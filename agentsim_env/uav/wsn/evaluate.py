@@ -31,13 +31,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
-from typing import Protocol
+from dataclasses import field
+from typing import Annotated, Any, ClassVar, Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from pydantic import Field
 
-from agentsim_env.core.validation import build_config, coerce_fields
+from agentsim_env.core.config_model import FieldError, Int, Real, Text, config
 from agentsim_env.uav.wsn.connectivity import connectivity, unit_disk_edges
 from agentsim_env.uav.wsn.coverage import (
     DensityProfile,
@@ -59,17 +60,11 @@ class ZoneProfile(DensityProfile, CdfProfile, Protocol):
     """A target profile with a vectorised ``density(r)`` and ``cdf(r)`` (e.g. ``RadialProfile``)."""
 
 
-def _positive(value: float, name: str) -> None:
-    """Raise unless ``value`` is a finite number > 0."""
-    if (
-        isinstance(value, bool)
-        or not isinstance(value, (int, float))
-        or not (math.isfinite(value) and value > 0)
-    ):
-        raise ValueError(f"{name} must be a finite number > 0, got {value!r}")
+Positive = Annotated[Real, Field(gt=0.0)]
+"""A finite number > 0."""
 
 
-@dataclass(frozen=True)
+@config("wsn")
 class WsnConfig:
     """Evaluation settings.
 
@@ -87,42 +82,26 @@ class WsnConfig:
         zone_weights: Zone weights for the overall weighted coverage, or ``None`` for equal weights.
     """
 
-    r_s: float = 10.0
-    r_c: float = 25.0
-    radio: RadioParams = RadioParams()
-    sink: str | tuple = "centroid"
-    coverage_resolution: float = 1.0
-    k: int = 2
-    coverage_lifetime_threshold: float = 0.9
-    knn_k: int = 5
-    fiedler_max_n: int = 300
-    zone_weights: tuple[float, ...] | None = None
+    nested: ClassVar[dict[str, type]] = {"radio": RadioParams}
+
+    r_s: Positive = 10.0
+    r_c: Positive = 25.0
+    radio: RadioParams = field(default_factory=RadioParams)
+    sink: Text | tuple[Any, ...] = "centroid"  # "centroid", (x, y) or a tuple of (x, y): see sink_positions
+    coverage_resolution: Positive = 1.0
+    k: Annotated[Int, Field(ge=1)] = 2
+    coverage_lifetime_threshold: Annotated[Real, Field(gt=0.0, le=1.0)] = 0.9
+    knn_k: Annotated[Int, Field(ge=1)] = 5
+    fiedler_max_n: Annotated[Int, Field(ge=0)] = 300
+    zone_weights: tuple[Real, ...] | None = None
 
     def __post_init__(self) -> None:
-        """Validate every field."""
-        coerce_fields(self, "wsn.")
-        _positive(self.r_s, "r_s")
-        _positive(self.r_c, "r_c")
-        _positive(self.coverage_resolution, "coverage_resolution")
-        if isinstance(self.radio, dict):  # e.g. a config read back from JSON (a recorded run)
-            object.__setattr__(self, "radio", build_config(RadioParams, self.radio, label="wsn.radio"))
-        if not isinstance(self.radio, RadioParams):
-            raise ValueError(
-                f"wsn.radio must be a RadioParams or a dict of its fields, got {type(self.radio).__name__}"
-            )
-        for name in ("k", "knn_k"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
-                raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
-        fmax = self.fiedler_max_n
-        if isinstance(fmax, bool) or not isinstance(fmax, (int, np.integer)) or fmax < 0:
-            raise ValueError(f"fiedler_max_n must be an integer >= 0, got {self.fiedler_max_n!r}")
-        thr = self.coverage_lifetime_threshold
-        if not (isinstance(thr, (int, float)) and 0.0 < thr <= 1.0):
-            raise ValueError(f"coverage_lifetime_threshold must be in (0, 1], got {thr!r}")
+        """The sink: ``"centroid"`` or positions."""
         if isinstance(self.sink, str):
             if self.sink != "centroid":
-                raise ValueError(f"sink must be 'centroid', (x, y) or a tuple of (x, y), got {self.sink!r}")
+                raise FieldError(
+                    "sink", f"must be 'centroid', (x, y) or a tuple of (x, y), got {self.sink!r}"
+                )
         else:
             sink_positions(self.sink, np.zeros((1, 2)))  # raises on a malformed position
 

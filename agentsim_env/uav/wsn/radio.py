@@ -9,15 +9,24 @@ aggregating costs ``k E_DA``. With the default constants ``d0`` is about 87.7 m 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from typing import Annotated
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from pydantic import Field
+
+from agentsim_env.core.config_model import Int, Real, config
 
 __all__ = ["RadioParams", "aggregation_energy", "rx_energy", "tx_energy"]
 
 
-@dataclass(frozen=True)
+Positive = Annotated[Real, Field(gt=0.0)]
+"""A finite number > 0."""
+NonNegative = Annotated[Real, Field(ge=0.0)]
+"""A finite number >= 0."""
+
+
+@config("wsn.radio")
 class RadioParams:
     """Constants of the first-order radio model, SI units.
 
@@ -30,27 +39,12 @@ class RadioParams:
         e0: Initial energy of a node, J (> 0).
     """
 
-    e_elec: float = 50e-9
-    eps_fs: float = 10e-12
-    eps_mp: float = 0.0013e-12
-    e_da: float = 5e-9
-    packet_bits: int = 4000
-    e0: float = 0.5
-
-    def __post_init__(self) -> None:
-        """Validate the constants."""
-        for name, strict in (("e_elec", True), ("eps_fs", False), ("eps_mp", True), ("e_da", False)):
-            value = getattr(self, name)
-            ok = math.isfinite(value) and (value > 0.0 if strict else value >= 0.0)
-            if not ok:
-                bound = "> 0" if strict else ">= 0"
-                raise ValueError(f"{name} must be a finite number {bound}, got {value!r}")
-        if isinstance(self.packet_bits, bool) or not isinstance(self.packet_bits, (int, np.integer)):
-            raise ValueError(f"packet_bits must be an integer > 0, got {self.packet_bits!r}")
-        if self.packet_bits <= 0:
-            raise ValueError(f"packet_bits must be an integer > 0, got {self.packet_bits!r}")
-        if not (math.isfinite(self.e0) and self.e0 > 0.0):
-            raise ValueError(f"e0 must be a finite number > 0, got {self.e0!r}")
+    e_elec: Positive = 50e-9
+    eps_fs: NonNegative = 10e-12
+    eps_mp: Positive = 0.0013e-12
+    e_da: NonNegative = 5e-9
+    packet_bits: Annotated[Int, Field(gt=0)] = 4000
+    e0: Positive = 0.5
 
     @property
     def d0(self) -> float:
