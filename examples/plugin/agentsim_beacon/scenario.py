@@ -8,30 +8,26 @@ beacon (metres) + ``bonus`` on arrival within ``radius``, which ends that agent'
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Annotated
 
 import numpy as np
+from pydantic import Field
 
 from agentsim_env import Scenario, World
-from agentsim_env.core.validation import check_float
+from agentsim_env.core.config_model import Real, config
 from agentsim_env.scenarios.base import SlotState, StepResult, slot
 from agentsim_env.scenarios.config import ScenarioConfig
 from agentsim_env.sensors.proximity import ProximitySensor
 from agentsim_env.sim import StepEvents, WorldConfig
 
 
-@dataclass(frozen=True)
+@config()
 class BeaconConfig(ScenarioConfig):
     """``beacon``: the shared fields plus the map side (10..1e4 m), the arrival radius (0.1..1e4 m), the bonus."""
 
-    side: float = 40.0
-    radius: float = 3.0
-    bonus: float = 10.0
-
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        check_float("side", self.side, 10.0, 1e4)
-        check_float("radius", self.radius, 0.1, 1e4)
-        check_float("bonus", self.bonus, 0.0, 1e6)
+    side: Annotated[Real, Field(ge=10.0, le=1e4)] = 40.0
+    radius: Annotated[Real, Field(ge=0.1, le=1e4)] = 3.0
+    bonus: Annotated[Real, Field(ge=0.0, le=1e6)] = 10.0
 
 
 @dataclass(slots=True)
