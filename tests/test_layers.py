@@ -21,6 +21,7 @@ LAYERS: dict[str, float] = {
     "wsn": 1,
     "sim": 2,
     "scenarios": 3,
+    "wrappers": 3.5,  # the wrapper bases (ParallelEnvWrapper, BatchedEnvWrapper): below render's RecordVideo
     "render": 4,
     "env": 5,
     "": 5.5,  # agentsim_env/__init__.py: the public entry points (make, list_scenarios) over env and scenarios
