@@ -19,7 +19,7 @@ from agentsim_env.recorder.read import Store
 from agentsim_env.render.record_video import RecordVideo
 from agentsim_env.wrappers import BatchedEnvWrapper, ParallelEnvWrapper
 
-CONFIG = {"n_agents": 3, "max_steps": 8}
+CONFIG: dict[str, Any] = {"n_agents": 3, "max_steps": 8}
 
 # Public names of an env that the base does not forward, each with its reason. Empty for the plain envs: a new
 # public method or attribute on AgentSimParallelEnv or BatchedEnv fails the tests below until the base forwards it
@@ -171,13 +171,14 @@ def test_sb3_drives_a_recorded_batched_env(tmp_path: Path) -> None:
     pytest.importorskip("stable_baselines3")
     from agentsim_env.env.sb3 import AgentSimVecEnv
 
-    vec = AgentSimVecEnv(
-        "navigation", 2, batch=record(BatchedEnv("navigation", 2, **CONFIG), tmp_path / "v.db")
-    )
+    batch = record(BatchedEnv("navigation", 2, **CONFIG), tmp_path / "v.db")
+    vec = AgentSimVecEnv("navigation", 2, batch=batch)
     obs = vec.reset()
-    assert obs.shape == (6, vec.observation_space.shape[0])
-    vec.step(np.zeros((6, vec.action_space.shape[0]), dtype=np.float32))
+    assert obs.shape == (6, batch.obs_dim)
+    vec.step(np.zeros((6, batch.act_dim), dtype=np.float32))
     vec.close()
+    with Store(tmp_path / "v.db") as store:
+        assert store.steps().index.get_level_values("step").max() == 1
 
 
 @pytest.mark.filterwarnings("ignore::DeprecationWarning")  # pettingzoo.test imports its old API
