@@ -25,24 +25,25 @@ LAYERS: dict[str, int] = {
     "groups": 1,
     "sim": 2,  # the World: the step's pipeline over the subsystems
     "scenarios": 3,  # the Scenario contract, the registry and the generic scenarios; over sim
-    "render": 4,  # rgb_array renderer, the web viewer's server (and bind options); over sim, not scenarios
-    "env": 5,  # the PettingZoo env, spaces, batched env; over scenarios, sim and render
-    "cli_live": 5,  # the run's display check and signal handling of cli; over render
-    "": 6,  # agentsim_env/__init__.py: the public entry points (make, list_scenarios) over env and scenarios
-    "distributed": 6,  # one simulation over Ray shards; over env
-    "gymnasium_envs": 6,  # importing it registers the Gymnasium ids; over env
-    "zoo": 6,  # each scenario as a PettingZoo-style module (navigation_v0, ...); over env
-    "recorder": 7,  # the store, replay and export; over the package's make, env and render
-    "cli_kernels": 7,  # whether numba's cache is warm, the compile notice; over the package's version
-    "uav": 8,  # the UAV case study; over scenarios, render, env, the recorder, cli_kernels and cli_set
-    "cli_replay": 8,  # the replay subcommand of cli; over the recorder and render
-    "cli_store": 8,  # the export and runs subcommands of cli; over the recorder
-    "policies": 9,  # the algorithms library; over env and uav (the release strategies)
-    "train": 10,  # training entry points; over policies
-    "warmup": 10,  # agentsim warmup's runs; over env, distributed and policies
-    "cli_view": 10,  # the view subcommand of cli; over the recorder, render, policies and cli_set
-    "cli_run": 10,  # the run subcommand of cli; over policies, render, the recorder, distributed and cli_live
-    "cli": 11,  # the command line: over everything (train's subcommand, uav's by name: SUBCOMMAND_PROVIDERS)
+    "wrappers": 4,  # the wrapper bases (ParallelEnvWrapper, BatchedEnvWrapper); below render's RecordVideo
+    "render": 5,  # rgb_array renderer, the web viewer's server (and bind options); over sim, not scenarios
+    "env": 6,  # the PettingZoo env, spaces, batched env; over scenarios, sim and render
+    "cli_live": 6,  # the run's display check and signal handling of cli; over render
+    "": 7,  # agentsim_env/__init__.py: the public entry points (make, list_scenarios) over env and scenarios
+    "distributed": 7,  # one simulation over Ray shards; over env
+    "gymnasium_envs": 7,  # importing it registers the Gymnasium ids; over env
+    "zoo": 7,  # each scenario as a PettingZoo-style module (navigation_v0, ...); over env
+    "recorder": 8,  # the store, replay and export; over the package's make, env and render
+    "cli_kernels": 8,  # whether numba's cache is warm, the compile notice; over the package's version
+    "uav": 9,  # the UAV case study; over scenarios, render, env, the recorder, cli_kernels and cli_set
+    "cli_replay": 9,  # the replay subcommand of cli; over the recorder and render
+    "cli_store": 9,  # the export and runs subcommands of cli; over the recorder
+    "policies": 10,  # the algorithms library; over env and uav (the release strategies)
+    "train": 11,  # training entry points; over policies
+    "warmup": 11,  # agentsim warmup's runs; over env, distributed and policies
+    "cli_view": 11,  # the view subcommand of cli; over the recorder, render, policies and cli_set
+    "cli_run": 11,  # the run subcommand of cli; over policies, render, the recorder, distributed and cli_live
+    "cli": 12,  # the command line: over everything (train's subcommand, uav's by name: SUBCOMMAND_PROVIDERS)
 }
 # the old paths of modules that moved into uav: shims that warn and re-export (old module -> new module); each
 # may import only its counterpart, and nothing of ours imports them

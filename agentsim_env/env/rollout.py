@@ -239,7 +239,8 @@ def run_rollout(
     """Reset ``env`` with ``seed`` and run ``policy`` for up to ``steps`` steps (module docstring).
 
     Args:
-        env: An ``AgentSimParallelEnv`` (or a subclass that keeps its ``_step_core`` contract).
+        env: An ``AgentSimParallelEnv`` (or a subclass that keeps its ``_step_core`` contract); with
+            ``through_step``, also a wrapper of one (``agentsim_env.wrappers.ParallelEnvWrapper``).
         policy: An :class:`ArrayPolicy`, a baseline name, a trained model folder or a dict ``Policy``.
         steps: Steps to run, >= 1 (fewer when every agent ends first).
         seed: Reset seed (None: a fresh episode, as ``reset()`` starts one); also given to ``policy.reset``.
@@ -355,29 +356,34 @@ def scatter_part_checked(
 def _dict_loop(
     env: Any, policy: ArrayPolicy, steps: int, seed: int | None, on_step: RolloutCallback | None, t0: float
 ) -> RolloutResult:
-    """The rollout through ``reset`` and ``step`` (a front end that overrides them, e.g. a recording one)."""
+    """The rollout through ``reset`` and ``step`` (a front end that overrides them, e.g. a recording one).
+
+    ``env`` may be a wrapper (``agentsim_env.wrappers``): its ``reset`` and ``step`` are called, and the layout
+    and bookkeeping are read from the innermost env (``env.unwrapped``).
+    """
+    inner = env.unwrapped
     obs, _ = env.reset(seed=seed)
     policy.reset(seed)
-    index = env._index
+    index = inner._index
     returns = np.zeros(len(env.possible_agents), dtype=np.float64)
     events = dict.fromkeys(EVENT_KEYS, 0)
     acc: dict[str, np.ndarray] = {}
     taken = agent_steps = 0
-    keys = env._obs_keys
+    keys = inner._obs_keys
     n_slots = env.world.state.n_slots
     if on_step is not None:
         on_step(env, 0, None)
-    while taken < steps and env._live:
-        live = list(env._live)
+    while taken < steps and inner._live:
+        live = list(inner._live)
         slots = np.array([index[a] for a in live], dtype=np.int64)
         parts = {
             k: np.stack(
-                [np.asarray(obs[a][k] if isinstance(obs[a], dict) else _part(env, obs[a], k)) for a in live]
+                [np.asarray(obs[a][k] if isinstance(obs[a], dict) else _part(inner, obs[a], k)) for a in live]
             )
             for k in keys
         }
         acts = policy.act_rows(parts, slots, taken)
-        act_keys = list(env._act_parts)
+        act_keys = list(inner._act_parts)
         actions: dict[str, Any] = {
             a: {k: np.asarray(acts[k][i]) for k in act_keys} for i, a in enumerate(live)
         }
@@ -398,7 +404,7 @@ def _dict_loop(
                     if k not in acc:
                         acc[k] = np.zeros(len(env.possible_agents), dtype=np.float64)
                     acc[k][index[a]] += float(v)
-        if on_step is not None and on_step(env, taken, _view(env, slots, infos, n_slots)):
+        if on_step is not None and on_step(env, taken, _view(inner, slots, infos, n_slots)):
             break
     sums = {k: float(v.sum()) for k, v in acc.items()}
     return _result(env, taken, returns, events, sums, agent_steps, t0)

@@ -15,6 +15,7 @@ import numpy as np
 from gymnasium import spaces
 
 from agentsim_env.env.vector import BatchedEnv
+from agentsim_env.wrappers import BatchedEnvWrapper
 
 try:
     from stable_baselines3.common.vec_env import VecEnv
@@ -30,7 +31,8 @@ class AgentSimVecEnv(VecEnv):
         n_worlds: Worlds B.
         seed: Seed of the first reset.
         batch: A batched env to drive instead of building one from ``name`` and ``n_worlds`` (e.g. a
-            ``distributed.DistributedBatchedEnv``: the same training over shards); ``close()`` closes it.
+            ``distributed.DistributedBatchedEnv``: the same training over shards, or a wrapper of one such as a
+            recorded env); ``close()`` closes it.
         **config: Scenario config keys.
     """
 
@@ -40,15 +42,17 @@ class AgentSimVecEnv(VecEnv):
         n_worlds: int,
         seed: int | None = 0,
         *,
-        batch: BatchedEnv | None = None,
+        batch: BatchedEnv | BatchedEnvWrapper | None = None,
         **config: Any,
     ) -> None:
         self.batch = batch if batch is not None else BatchedEnv(name, n_worlds, **config)
         b = self.batch
         n_worlds = b.n_worlds
-        obs_space = spaces.Box(-np.inf, np.inf, shape=(b.obs_dim,), dtype=np.float32)
-        lows = np.concatenate([np.full(p.size, p.low) for p in b._obs_parts.values()]).astype(np.float32)
-        highs = np.concatenate([np.full(p.size, p.high) for p in b._obs_parts.values()]).astype(np.float32)
+        obs_parts = (
+            b.scenario.obs_parts()
+        )  # through the public API: a wrapped batched env has no private parts
+        lows = np.concatenate([np.full(p.size, p.low) for p in obs_parts.values()]).astype(np.float32)
+        highs = np.concatenate([np.full(p.size, p.high) for p in obs_parts.values()]).astype(np.float32)
         obs_space = spaces.Box(lows, highs, dtype=np.float32)
         act_space = spaces.Box(-1.0, 1.0, shape=(b.act_dim,), dtype=np.float32)
         super().__init__(n_worlds * b.n_agents, obs_space, act_space)

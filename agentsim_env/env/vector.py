@@ -104,6 +104,14 @@ class BatchedEnv:
         self._obs_out = Recycled((self.world.state.n_slots, self.obs_dim), np.float32)
         self._guard = CallGuard()  # reset and step: one thread at a time
 
+    @property
+    def unwrapped(self) -> BatchedEnv:
+        """This env (a wrapper's ``unwrapped`` is the innermost env: see ``agentsim_env.wrappers``)."""
+        return self
+
+    def close(self) -> None:
+        """Release what the env holds: nothing here (a sharded batched env stops its shards)."""
+
     def _flat_obs(
         self, rows: np.ndarray | None = None, step: int = 0, result: Any = None, out: np.ndarray | None = None
     ) -> np.ndarray:

@@ -1,8 +1,9 @@
 """Recording front ends: ``record(env_or_world, path)`` for a ``ParallelEnv``, a ``BatchedEnv`` or a ``World``.
 
-The ParallelEnv wrapper is a PettingZoo ``ParallelEnv`` itself (spaces, agents and every extra method are the
-wrapped env's), so anything that trains or runs on the env runs on the recorded one. Nothing is added to an env
-that is not recorded: the recorder is a stage-10 hook of the env's world, attached here and removed on ``close``.
+The front ends are wrappers (``agentsim_env.wrappers``): the ParallelEnv one is a PettingZoo ``ParallelEnv`` whose
+spaces, agents and every other method are the wrapped env's, so anything that trains or runs on the env runs on
+the recorded one. Nothing is added to an env that is not recorded: the recorder is a stage-10 hook of the env's
+world, attached here and removed on ``close``.
 """
 
 from __future__ import annotations
@@ -14,25 +15,28 @@ from typing import Any
 import numpy as np
 
 from agentsim_env.env.parallel_env import AgentSimParallelEnv
+from agentsim_env.env.rollout import RolloutCallback, RolloutResult, run_rollout
 from agentsim_env.env.vector import BatchedEnv, BatchStep
 from agentsim_env.recorder.writer import Recorder
 from agentsim_env.sim.world import World
+from agentsim_env.wrappers import BatchedEnvWrapper, ParallelEnvWrapper
 
 
-class RecordedParallelEnv(AgentSimParallelEnv):
+class RecordedParallelEnv(ParallelEnvWrapper):
     """A ``ParallelEnv`` whose every episode is written to a store (see ``record``).
 
     Args:
-        env: The env to record (its world gets the recorder's hook).
+        env: The env to record (its world gets the recorder's hook), or a wrapper of one.
         recorder: An open recorder.
+
+    Attributes:
+        recorder: The recorder (its ``run``, ``error``, ``path``; ``close`` finishes it).
     """
 
-    def __init__(self, env: AgentSimParallelEnv, recorder: Recorder) -> None:  # noqa: D107 - documented above
-        # share the wrapped env's whole state: one env, seen through a recording front end
-        self.__dict__.update(env.__dict__)
-        self.env = env
+    def __init__(self, env: AgentSimParallelEnv | ParallelEnvWrapper, recorder: Recorder) -> None:  # noqa: D107
+        super().__init__(env)
         self.recorder = recorder
-        self._seed_arg: int | None = None
+        self._slot = {a: i for i, a in enumerate(env.possible_agents)}
         recorder.begin(env.world, scenario=env.scenario)
 
     def reset(
@@ -40,7 +44,6 @@ class RecordedParallelEnv(AgentSimParallelEnv):
     ) -> tuple[dict[str, Any], dict[str, dict[str, Any]]]:
         """Reset the env and start a recorded episode (its step-0 state is written)."""
         obs, infos = self.env.reset(seed=seed, options=options)
-        self.__dict__.update({k: v for k, v in self.env.__dict__.items() if k not in ("env", "recorder")})
         self.recorder.reset([0], [seed])
         self._record_obs(obs)
         return obs, infos
@@ -48,22 +51,29 @@ class RecordedParallelEnv(AgentSimParallelEnv):
     def step(self, actions: dict[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
         """Step the env; the world's stage-10 hook writes the step."""
         out = self.env.step(actions)
-        self.__dict__.update({k: v for k, v in self.env.__dict__.items() if k not in ("env", "recorder")})
         self._record_obs(out[0])
         return out
+
+    def rollout(
+        self, policy: Any, steps: int, seed: int | None = None, *, on_step: RolloutCallback | None = None
+    ) -> RolloutResult:
+        """``AgentSimParallelEnv.rollout`` run through this front end's ``reset`` and ``step`` (same results),
+        so that its episode and observations are written."""
+        return run_rollout(self, policy, steps, seed, on_step=on_step, through_step=True)
 
     def _record_obs(self, obs: dict[str, Any]) -> None:
         rec = self.recorder
         if rec.observe_agents is None or not obs:
             return
-        names = [a for a in obs if self._index[a] in set(rec.observe_agents.tolist())]
+        observed = set(rec.observe_agents.tolist())
+        names = [a for a in obs if self._slot[a] in observed]
         if not names:
             return
         flat = [
             np.concatenate([np.ravel(v) for v in o.values()]) if isinstance(o, dict) else np.ravel(o)
             for o in (obs[a] for a in names)
         ]
-        rec.observations(np.array([self._index[a] for a in names]), np.stack(flat))
+        rec.observations(np.array([self._slot[a] for a in names]), np.stack(flat))
 
     def close(self) -> None:
         """Mark the run complete, detach the recorder and close the env."""
@@ -71,19 +81,21 @@ class RecordedParallelEnv(AgentSimParallelEnv):
         self.env.close()
 
 
-class RecordedBatchedEnv:
+class RecordedBatchedEnv(BatchedEnvWrapper):
     """A ``BatchedEnv`` whose worlds are recorded (automatic resets start new episodes); see ``record``.
 
-    Every attribute not defined here is the wrapped env's.
+    Args:
+        env: The batched env to record (its world gets the recorder's hook), or a wrapper of one.
+        recorder: An open recorder.
+
+    Attributes:
+        recorder: The recorder (``close`` finishes it).
     """
 
-    def __init__(self, env: BatchedEnv, recorder: Recorder) -> None:
-        self.env = env
+    def __init__(self, env: BatchedEnv | BatchedEnvWrapper, recorder: Recorder) -> None:  # noqa: D107
+        super().__init__(env)
         self.recorder = recorder
         recorder.begin(env.world, scenario=env.scenario)
-
-    def __getattr__(self, name: str) -> Any:
-        return getattr(self.env, name)
 
     def reset(self, seed: int | Sequence[int] | None = None) -> np.ndarray:
         """Reset every world; each starts a recorded episode."""
@@ -102,7 +114,7 @@ class RecordedBatchedEnv:
 
     def step(self, actions: np.ndarray) -> BatchStep:
         """Step every world (the hook writes the step); worlds reset automatically start new episodes."""
-        out = self.env.step(actions)
+        out: BatchStep = self.env.step(actions)
         if out.reset_worlds.any():
             self.recorder.reset(np.flatnonzero(out.reset_worlds))
         self._record_obs(out.obs, np.ones(self.env.n_worlds, dtype=bool))
@@ -118,8 +130,9 @@ class RecordedBatchedEnv:
         rec.observations(slots, obs.reshape(-1, obs.shape[-1])[slots])
 
     def close(self) -> None:
-        """Mark the run complete and detach the recorder."""
+        """Mark the run complete, detach the recorder and close the env (a sharded one stops its shards)."""
         self.recorder.finish("complete")
+        self.env.close()
 
 
 def record(
@@ -133,8 +146,8 @@ def record(
     """Record ``target`` to the SQLite store at ``path``.
 
     Args:
-        target: An ``AgentSimParallelEnv`` (returns a recording ParallelEnv), a ``BatchedEnv`` (returns a
-            recording batched env) or a ``World`` (returns the ``Recorder``; its hook records every step of
+        target: An ``AgentSimParallelEnv`` or a wrapper of one (returns a recording ParallelEnv), a
+            ``BatchedEnv`` or a wrapper of one (returns a recording batched env) or a ``World`` (returns the ``Recorder``; its hook records every step of
             every world as episode 0 onwards, ``recorder.reset(worlds)`` marks new episodes).
         path: The store file (created with its tables when missing; its folder must exist).
         commit_every: Steps per transaction (1: every step is durable once ``step`` returns).
@@ -149,9 +162,9 @@ def record(
         TypeError: For a target that is none of the three.
     """
     rec = Recorder(path, commit_every=commit_every, observations=observations, label=label)
-    if isinstance(target, AgentSimParallelEnv):
+    if isinstance(target, (AgentSimParallelEnv, ParallelEnvWrapper)):
         return RecordedParallelEnv(target, rec)
-    if isinstance(target, BatchedEnv):
+    if isinstance(target, (BatchedEnv, BatchedEnvWrapper)):
         return RecordedBatchedEnv(target, rec)
     if isinstance(target, World):
         rec.begin(target)
@@ -159,7 +172,7 @@ def record(
         return rec
     rec.finish("incomplete")
     raise TypeError(
-        f"record() takes an AgentSimParallelEnv, a BatchedEnv or a World, got {type(target).__name__}"
+        f"record() takes an AgentSimParallelEnv, a BatchedEnv (or a wrapper of either) or a World, got {type(target).__name__}"
     )
 
 

@@ -7,8 +7,9 @@ agents are done, at the next ``reset`` (an episode cut short) or on ``close``. M
 come; GIF frames are kept (8-bit) until the file is written. Videos need the ``video`` extra
 (``pip install "agentsim-env[video]"``), checked when the wrapper is built.
 
-Everything else (spaces, agents, ``state``, the env's own methods) is the wrapped env's, so the wrapper is a
-PettingZoo ``ParallelEnv`` that runs anywhere the env does.
+Everything else (spaces, agents, ``state``, the env's own methods) is the wrapped env's, forwarded by the base
+``agentsim_env.wrappers.ParallelEnvWrapper``, so the wrapper is a PettingZoo ``ParallelEnv`` that runs anywhere the
+env does. ``rollout`` is the wrapped env's: it runs on arrays and renders no frames.
 """
 
 from __future__ import annotations
@@ -19,18 +20,19 @@ from pathlib import Path
 from typing import Any
 
 from pettingzoo.utils.env import ParallelEnv
-from pettingzoo.utils.wrappers import BaseParallelWrapper
 
 from agentsim_env.render.video import VIDEO_FORMATS, VideoWriter, check_video_support
+from agentsim_env.wrappers import ParallelEnvWrapper
 
 __all__ = ["RecordVideo"]
 
 
-class RecordVideo(BaseParallelWrapper):
+class RecordVideo(ParallelEnvWrapper):
     """Film the episodes of a ``ParallelEnv`` that ``episode_trigger`` picks.
 
     Args:
-        env: A ParallelEnv built with ``render_mode="rgb_array"`` (its ``render()`` returns an RGB frame).
+        env: An env built with ``render_mode="rgb_array"`` (its ``render()`` returns an RGB frame), or a
+            wrapper of one.
         video_folder: Folder of the videos (created when missing).
         episode_trigger: ``f(k) -> bool`` over episode numbers (0, 1, ...); None: every ``every_n``-th episode.
         every_n: The period of the default trigger (episodes 0, every_n, 2 * every_n, ...), >= 1.
@@ -145,10 +147,3 @@ class RecordVideo(BaseParallelWrapper):
             path = writer.close()
             if path is not None:
                 self.written.append(path)
-
-    def __getattr__(self, name: str) -> Any:
-        # the env's public attributes (agents, possible_agents, metadata, render_mode, world, ...)
-        env = self.__dict__.get("env")
-        if name.startswith("_") or env is None:
-            raise AttributeError(f"{type(self).__name__} has no attribute {name!r}")
-        return getattr(env, name)
