@@ -123,13 +123,16 @@ def _zone_label(index: int | None, name: Any) -> str:
 _Z = TypeVar("_Z")
 
 
-class ZoneFieldError(FieldError):
-    """A bad field of one zone: ``<label>: field '<name>' <problem>`` (``field`` and ``problem`` kept)."""
+class ZoneFieldError(ValueError):
+    """A bad field of one zone: ``<label>: field '<name>' <problem>`` (``field`` and ``problem`` kept).
+
+    Not a ``FieldError``: a config holding a zone file reports it whole (``zones: zones[0] 'a': ...``).
+    """
 
     def __init__(self, label: str, field: str, problem: str) -> None:
         name, bracket, rest = field.partition("[")
         item = f" (item {rest.rstrip(']')})" if bracket else ""
-        ValueError.__init__(self, f"{label}: field {name!r}{item} {problem}")
+        super().__init__(f"{label}: field {name!r}{item} {problem}")
         self.label, self.field, self.problem = label, field, problem
 
 
