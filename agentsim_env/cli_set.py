@@ -1,27 +1,42 @@
-"""Typed parsing of the command line's ``--set KEY=VALUE`` pairs.
+"""The command line's ``--set KEY=VALUE`` pairs, each value converted by the declaration of the field it sets.
 
-Each value is parsed by the type of the config field it sets (read from the config dataclass with
-``typing.get_type_hints``), not guessed from its spelling:
+The value of a key is converted by pydantic from the declared type of the config field it sets (its
+annotation and bounds, read from the config class): this module has no rules of its own for any type, so a
+field declared with a new type is parsed as declared. The text is tried, in this order, as:
+
+1. ``None`` when it is ``none`` or ``null`` (any case) and the field takes ``None``;
+2. JSON (``8``, ``0.1``, ``true``, ``[12, 20]``, ``{"a": 1}``) of the field's JSON type (pydantic's strict
+   JSON mode: ``2e6`` is a number, not an integer);
+3. comma-separated values (``12,20``; one value: ``7,``), each part JSON when it parses, for list fields;
+4. the text itself, converted by pydantic's lax rules.
+
+The first that the field's declaration accepts is the value. What that gives for the usual declarations:
 
 =====================  ==============================================================================
-field type             accepted values
+declared type          accepted values
 =====================  ==============================================================================
-``bool``               ``true``/``false``/``1``/``0``/``yes``/``no`` (any case), nothing else
-``int``                integers only (``8``, ``-1``; not ``1.5``)
-``float``              finite numbers (``0.1``, ``2``, ``1e-3``)
-``str``                the text as given
+``Flag`` (bool)        ``true``/``false``/``1``/``0``/``yes``/``no``/``on``/``off``/``t``/``f``/``y``/``n``
+                       (any case), nothing else
+``Int``                integers (``8``, ``-1``, ``1_000``; ``1.0`` is 1; not ``1.5`` or ``2e6``)
+``Real``               finite numbers (``0.1``, ``2``, ``1e-3``)
+``Text``               the text as given (a JSON string ``"x"`` loses its quotes)
+``Literal[...]``       one of the choices
 ``tuple[...]``         a JSON list (``[12, 20]``) or comma-separated values (``12,20``; one value: ``7,``)
 ``X | None``           ``none`` or ``null`` (any case), or a value of ``X``
 sub-config             a JSON object of its fields (``body={"radius": 1.0}``), or dotted keys
                        (``body.radius=1.0``), merged into one dict per sub-config
-``Any`` (and others)   JSON when it parses (lists become tuples), else the text
+``Any``                JSON when it parses, else the text
 =====================  ==============================================================================
 
+Lists in the values are returned as tuples. Bounds declared on the field (``Field(ge=0)``, ``ordered``, ...)
+are checked here too; the config class checks them again at construction, with the rules across fields.
+
 Sub-configs are the fields named in the config class's ``nested`` ClassVar (field name -> sub-config
-dataclass); dotted keys recurse into them, and the leaf is parsed by the sub-config field's type. Alias keys
-(the class's ``aliases`` ClassVar, e.g. ``n_uavs`` -> ``n_agents``, and PettingZoo's ``max_cycles`` ->
-``max_steps``) are resolved before the type is looked up. An unknown key raises ``ValueError`` listing the
-allowed keys. Values are only parsed here; the config classes still validate ranges and choices.
+dataclass); dotted keys recurse into them, and a JSON object's values are converted (lax) by the sub-config's
+declarations. Alias keys (the class's ``aliases`` ClassVar, e.g. ``n_uavs`` -> ``n_agents``, and PettingZoo's
+``max_cycles`` -> ``max_steps``) are resolved before the declaration is looked up. An unknown key raises
+``ValueError`` listing the allowed keys; a value the declaration refuses raises ``ValueError`` naming the
+dotted key, the value and what is accepted.
 
 JSON values refuse a key given twice and nesting deeper than ``MAX_JSON_DEPTH`` (32) levels, and an error
 quotes at most about 80 characters of the value it refuses (an argument may be 100 KB long).
@@ -34,31 +49,21 @@ from __future__ import annotations
 import dataclasses
 import functools
 import json
-import math
-import re
-import types
 import typing
 from collections.abc import Iterable, Mapping
-from typing import Any
+from typing import Annotated, Any
 
-__all__ = ["BOOL_WORDS", "MAX_JSON_DEPTH", "NONE_WORDS", "TOP_ALIASES", "canonical", "parse_set"]
+import pydantic
 
-#: Accepted spellings of booleans (compared lower-case).
-BOOL_WORDS: dict[str, bool] = {"true": True, "false": False, "1": True, "0": False, "yes": True, "no": False}
-#: Accepted spellings of ``None`` for optional fields (compared lower-case).
+__all__ = ["MAX_JSON_DEPTH", "NONE_WORDS", "TOP_ALIASES", "canonical", "parse_set"]
+
+#: Accepted spellings of ``None`` for fields that take it (compared lower-case).
 NONE_WORDS: tuple[str, ...] = ("none", "null")
 #: Aliases every scenario config accepts (PettingZoo's name for the episode length).
 TOP_ALIASES: dict[str, str] = {"max_cycles": "max_steps"}
 
-_INT = re.compile(r"[+-]?\d+")
-_NoneType = type(None)
 
-
-class _Bad(Exception):
-    """A value that does not fit a type (turned into a ``ValueError`` naming the key by the caller)."""
-
-
-class _Refused(_Bad):
+class _Refused(Exception):
     """JSON that parses but is refused (a duplicate key, nesting too deep); ``str()`` says why."""
 
 
@@ -66,6 +71,11 @@ class _Refused(_Bad):
 MAX_JSON_DEPTH = 32
 #: Characters of a command-line value quoted in an error (an argument may be 100 KB long).
 _SHOWN = 80
+#: Pydantic error kinds that mean "not of the declared type" (the rest: a value of the type broke a rule).
+_TYPE_ERRORS = frozenset(
+    {"literal_error", "int_from_float", "finite_number", "too_short", "too_long", "missing", "json_invalid"}
+    | {"none_required", "is_instance_of", "union_tag_invalid", "enum", "json_type", "unexpected_positional"}
+)
 
 
 def _shown(value: Any) -> str:
@@ -111,13 +121,129 @@ def _json(text: str) -> Any:
 
 
 @functools.cache
-def _field_types(cls: type) -> dict[str, Any]:
-    """Field name -> resolved type of a config dataclass (``Any`` where an annotation cannot be resolved)."""
+def _annotations(cls: type) -> dict[str, Any]:
+    """Field name -> declared type of a config class, bounds included (``Any`` where none can be read)."""
+    declared = getattr(cls, "__pydantic_fields__", None)
+    if declared is not None:
+        return {
+            n: Annotated[(f.annotation, *f.metadata)] if f.metadata else f.annotation
+            for n, f in declared.items()
+        }
     try:
-        hints = typing.get_type_hints(cls)
-    except Exception:  # an annotation that does not evaluate: parse those fields like Any
+        hints = typing.get_type_hints(cls, include_extras=True)
+    except Exception:  # an annotation that does not evaluate: such a field takes any value
         hints = {}
     return {f.name: hints.get(f.name, Any) for f in dataclasses.fields(cls)}
+
+
+@functools.cache
+def _adapter(cls: type, name: str) -> pydantic.TypeAdapter[Any]:
+    """Pydantic's validator of field ``name`` of ``cls`` (built once per field)."""
+    tp = _annotations(cls)[name]
+    try:
+        return pydantic.TypeAdapter(tp, config=pydantic.ConfigDict(arbitrary_types_allowed=True))
+    except pydantic.PydanticUserError:  # a dataclass or model: it has a config of its own
+        return pydantic.TypeAdapter(tp)
+
+
+_WORDS = {
+    "boolean": "one of true/false/1/0/yes/no/on/off/t/f/y/n (any case)",
+    "integer": "an integer",
+    "number": "a finite number",
+    "string": "text",
+    "null": "none/null",
+    "object": "a JSON object",
+}
+_PLURAL = {"integer": "integers", "number": "numbers", "boolean": "booleans", "string": "strings"}
+
+
+def _words(schema: Mapping[str, Any]) -> str:
+    """What a field accepts on the command line, in words, read from its JSON schema."""
+    if "anyOf" in schema:
+        return " or ".join(_words(s) for s in schema["anyOf"])
+    if "enum" in schema or "const" in schema:
+        return "one of " + "/".join(str(c) for c in schema.get("enum", [schema.get("const")]))
+    kind = schema.get("type")
+    if kind == "array":
+        items = schema.get("prefixItems") or [schema.get("items") or {}]
+        what = _PLURAL.get(items[0].get("type"), "values")
+        lo, hi = schema.get("minItems"), schema.get("maxItems")
+        n = f"{lo} " if lo is not None and lo == hi else f"{lo or 0} to {hi} " if hi is not None else ""
+        return f"a list of {n}{what} (JSON [a, b] or a,b)"
+    return _WORDS.get(kind, "a value") if isinstance(kind, str) else "a value"
+
+
+@functools.cache
+def _accepts(cls: type, name: str) -> str:
+    """What field ``name`` of ``cls`` accepts, in words (``"a value"`` when its schema cannot be written)."""
+    try:
+        return _words(_adapter(cls, name).json_schema())
+    except Exception:  # a type without a JSON schema (an arbitrary class)
+        return "a value"
+
+
+def _tuples(value: Any) -> Any:
+    """Lists as tuples (recursively)."""
+    if isinstance(value, list | tuple):
+        return tuple(_tuples(v) for v in value)
+    if isinstance(value, dict):
+        return {k: _tuples(v) for k, v in value.items()}
+    return value
+
+
+def _or_text(part: str) -> Any:
+    """One comma-separated part: its JSON value when it is JSON, else the text."""
+    try:
+        return json.loads(part)
+    except ValueError:
+        return part
+
+
+def _problem(error: Mapping[str, Any]) -> str:
+    """One pydantic error of a value of the right type as ``must be ..., got ...``."""
+    msg = str(error["msg"])
+    if msg.startswith("Input should"):
+        return f"must{msg[len('Input should') :]}, got {_shown(error.get('input'))}"
+    return msg
+
+
+def _convert(cls: type, name: str, text: str, key: str) -> Any:
+    """The value of field ``name`` of ``cls`` that ``text`` means (see the module docstring for the order)."""
+    adapter, s = _adapter(cls, name), text.strip()
+    tries: list[tuple[Any, bool | None]] = []  # (input, strict); strict None: JSON text
+    if s.lower() in NONE_WORDS:
+        tries.append((None, False))
+    try:
+        _json(s)
+        tries.append((s, None))
+    except ValueError:
+        pass
+    except _Refused as exc:
+        raise ValueError(f"--set {key}: {exc}") from None
+    if "," in s and not s.startswith("["):
+        parts = [p.strip() for p in s.split(",")]
+        if parts[-1] == "":
+            parts.pop()  # "7," is a one-element list
+        if parts and all(parts):
+            tries += [([_or_text(p) for p in parts], False), (parts, False)]
+    tries += [(text, False)] + ([(s, False)] if s != text else [])
+    broken: Mapping[str, Any] | None = None  # the first rule a value of the right type broke
+    for value, strict in tries:
+        try:
+            if strict is None:
+                return _tuples(adapter.validate_json(value, strict=True))
+            return _tuples(adapter.validate_python(value, strict=strict))
+        except pydantic.ValidationError as exc:
+            rule = [e for e in exc.errors(include_url=False) if not _is_type_error(e["type"])]
+            broken = broken or (rule[0] if rule else None)
+    if broken is not None:
+        raise ValueError(f"--set {key}: {_problem(broken)}")
+    raise ValueError(f"--set {key}: expected {_accepts(cls, name)}, got {_shown(text)}")
+
+
+def _is_type_error(kind: str) -> bool:
+    """Whether a pydantic error kind says the value is not of the declared type."""
+    return kind.endswith(("_type", "_parsing")) or kind in _TYPE_ERRORS
 
 
 def _aliases(cls: type, top: bool) -> dict[str, str]:
@@ -131,187 +257,11 @@ def _nested(cls: type) -> dict[str, type]:
     return dict(getattr(cls, "nested", None) or {})
 
 
-def _describe(tp: Any) -> str:
-    """What a type accepts, in words (for error messages)."""
-    if tp is bool:
-        return "one of true/false/1/0/yes/no (any case)"
-    if tp is int:
-        return "an integer"
-    if tp is float:
-        return "a finite number"
-    if tp is str:
-        return "text"
-    if tp is _NoneType:
-        return "none/null"
-    origin, args = typing.get_origin(tp), typing.get_args(tp)
-    if origin in (typing.Union, types.UnionType):
-        return " or ".join(_describe(a) for a in args)
-    if _is_tuple(tp):
-        if len(args) == 2 and args[1] is Ellipsis:
-            return f"a list of {_plural(args[0])} (JSON [a, b] or a,b)"
-        if args:
-            return f"a list of {len(args)} {_plural(args[0])} (JSON [a, b] or a,b)"
-        return "a list (JSON [a, b] or a,b)"
-    if origin is typing.Literal:
-        return "one of " + "/".join(str(a) for a in args)
-    return "a value"
-
-
-def _plural(tp: Any) -> str:
-    return {int: "integers", float: "numbers", bool: "booleans", str: "strings"}.get(tp, "values")
-
-
-def _legacy(text: str) -> Any:
-    """JSON when it parses (lists become tuples), else the text: the rule for ``Any`` fields."""
-    try:
-        value = _json(text)
-    except json.JSONDecodeError:
-        return text
-    return _tuples(value)
-
-
-def _tuples(value: Any) -> Any:
-    """JSON lists as tuples (recursively)."""
-    if isinstance(value, list):
-        return tuple(_tuples(v) for v in value)
-    if isinstance(value, dict):
-        return {k: _tuples(v) for k, v in value.items()}
-    return value
-
-
-def _is_tuple(tp: Any) -> bool:
-    """Whether ``tp`` is ``tuple`` or ``tuple[...]``."""
-    return tp is tuple or typing.get_origin(tp) is tuple
-
-
-def _union_members(tp: Any) -> list[Any] | None:
-    """The member types of a union (``X | None``, ``Optional[X]``), non-str ones first; None otherwise."""
-    if typing.get_origin(tp) not in (typing.Union, types.UnionType):
-        return None
-    return sorted(typing.get_args(tp), key=lambda a: a is str)  # str accepts anything: try it last
-
-
-def _elements(tp: Any, n: int) -> list[Any]:
-    """The element type of each of ``n`` items of tuple type ``tp`` (raises ``_Bad`` on a length mismatch)."""
-    args = typing.get_args(tp)
-    if not args:
-        return [Any] * n
-    if len(args) == 2 and args[1] is Ellipsis:
-        return [args[0]] * n
-    if len(args) != n:
-        raise _Bad
-    return list(args)
-
-
-def _parse_text(tp: Any, text: str) -> Any:
-    """Parse one command-line value by type ``tp`` (raises ``_Bad`` when it does not fit)."""
-    s = text.strip()
-    members = _union_members(tp)
-    if members is not None:
-        if _NoneType in members and s.lower() in NONE_WORDS:
-            return None
-        listy = s.startswith("[") or "," in s
-        for member in members:
-            if member is _NoneType or (_is_tuple(member) and not listy):
-                continue  # in a union, a list must look like one ("7," for one element)
-            try:
-                return _parse_text(member, text)
-            except _Bad:
-                pass
-        raise _Bad
-    if tp is bool:
-        if s.lower() not in BOOL_WORDS:
-            raise _Bad
-        return BOOL_WORDS[s.lower()]
-    if tp is int:
-        if not _INT.fullmatch(s):
-            raise _Bad
-        return int(s)
-    if tp is float:
-        try:
-            x = float(s)
-        except ValueError:
-            raise _Bad from None
-        if not math.isfinite(x):
-            raise _Bad
-        return x
-    if tp is str:
-        return text
-    if tp is _NoneType:
-        if s.lower() not in NONE_WORDS:
-            raise _Bad
-        return None
-    origin = typing.get_origin(tp)
-    if _is_tuple(tp):
-        if s.startswith("["):
-            try:
-                items = _json(s)
-            except json.JSONDecodeError:
-                raise _Bad from None
-            return _coerce(tp, items)
-        parts = [p.strip() for p in s.split(",")] if s else []
-        if parts and parts[-1] == "":
-            parts.pop()  # "7," is a one-element list
-        if any(p == "" for p in parts):
-            raise _Bad
-        types_ = _elements(tp, len(parts))
-        return tuple(_legacy(p) if t is Any else _parse_text(t, p) for t, p in zip(types_, parts))
-    if origin is typing.Literal:
-        for choice in typing.get_args(tp):
-            if str(choice) == s:
-                return choice
-        raise _Bad
-    return _legacy(text)
-
-
-def _coerce(tp: Any, value: Any) -> Any:
-    """Check and convert a JSON-decoded value to type ``tp`` (raises ``_Bad`` when it does not fit)."""
-    members = _union_members(tp)
-    if members is not None:
-        if value is None and _NoneType in members:
-            return None
-        for member in members:
-            if member is _NoneType:
-                continue
-            try:
-                return _coerce(member, value)
-            except _Bad:
-                pass
-        raise _Bad
-    if tp is bool:
-        if isinstance(value, bool):
-            return value
-        if isinstance(value, str) and value.strip().lower() in BOOL_WORDS:
-            return BOOL_WORDS[value.strip().lower()]
-        raise _Bad
-    if tp is int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise _Bad
-        return value
-    if tp is float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-            raise _Bad
-        return float(value)
-    if tp is str:
-        if not isinstance(value, str):
-            raise _Bad
-        return value
-    if tp is _NoneType:
-        if value is not None:
-            raise _Bad
-        return None
-    if _is_tuple(tp):
-        if not isinstance(value, (list, tuple)):
-            raise _Bad
-        return tuple(_coerce(t, v) for t, v in zip(_elements(tp, len(value)), value))
-    return _tuples(value)
-
-
 def _resolve(cls: type, name: str, where: str, top: bool) -> str:
     """The field ``name`` means in ``cls`` (aliases resolved); raises ``ValueError`` on an unknown key."""
     aliases = _aliases(cls, top)
     field_name = aliases.get(name, name)
-    fields = _field_types(cls)
+    fields = _annotations(cls)
     if field_name not in fields:
         also = (
             f" (aliases: {', '.join(f'{a} -> {k}' for a, k in sorted(aliases.items()))})" if aliases else ""
@@ -332,51 +282,55 @@ def _merge(old: Any, new: Any) -> Any:
     return new
 
 
-def _object(cls: type, value: Any, where: str) -> dict[str, Any]:
-    """Check a JSON object given for sub-config ``cls`` key by key (values converted by field type)."""
+def _object(cls: type, value: Mapping[str, Any], where: str) -> dict[str, Any]:
+    """A JSON object given for sub-config ``cls``, key by key (values converted by the declarations, lax)."""
     out: dict[str, Any] = {}
     for key, item in value.items():
         name = _resolve(cls, str(key), where, top=False)
         sub = _nested(cls).get(name)
-        tp = _field_types(cls)[name]
         if sub is not None and isinstance(item, dict):
             out[name] = _object(sub, item, f"{where}{name}.")
             continue
         try:
-            out[name] = _coerce(tp, item)
-        except _Bad:
-            raise ValueError(f"--set {where + name}: expected {_describe(tp)}, got {_shown(item)}") from None
+            out[name] = _tuples(_adapter(cls, name).validate_python(item, strict=False))
+        except pydantic.ValidationError as exc:
+            rule = [e for e in exc.errors(include_url=False) if not _is_type_error(e["type"])]
+            problem = _problem(rule[0]) if rule else f"expected {_accepts(cls, name)}, got {_shown(item)}"
+            raise ValueError(f"--set {where + name}: {problem}") from None
     return out
 
 
 def _leaf(cls: type, name: str, text: str, where: str) -> Any:
     """Parse the value of field ``name`` of ``cls`` from the command line."""
-    tp = _field_types(cls)[name]
     sub = _nested(cls).get(name)
     key = where + name
     if sub is None:
-        try:
-            return _parse_text(tp, text)
-        except _Refused as exc:
-            raise ValueError(f"--set {key}: {exc}") from None
-        except _Bad:
-            raise ValueError(f"--set {key}: expected {_describe(tp)}, got {_shown(text)}") from None
-    members = _union_members(tp) or [tp]
-    if _NoneType in members and text.strip().lower() in NONE_WORDS:
+        return _convert(cls, name, text, key)
+    takes_none = _takes_none(cls, name)
+    if takes_none and text.strip().lower() in NONE_WORDS:
         return None
     try:
         value = _json(text)
-    except json.JSONDecodeError:
+    except ValueError:
         value = None
     except _Refused as exc:
         raise ValueError(f"--set {key}: {exc}") from None
     if not isinstance(value, dict):
-        none = " or none" if _NoneType in members else ""
+        none = " or none" if takes_none else ""
         raise ValueError(
             f'--set {key}: expected a JSON object of {sub.__name__} fields{none} (e.g. {key}={{"field": 1}}) '
             f"or dotted keys ({key}.FIELD=VALUE), got {_shown(text)}"
         )
     return _object(sub, value, f"{key}.")
+
+
+def _takes_none(cls: type, name: str) -> bool:
+    """Whether field ``name`` of ``cls`` is declared to take ``None``."""
+    try:
+        _adapter(cls, name).validate_python(None)
+    except pydantic.ValidationError:
+        return False
+    return True
 
 
 def _assign(cls: type, target: dict[str, Any], path: list[str], text: str, where: str, top: bool) -> None:
@@ -399,10 +353,10 @@ def _assign(cls: type, target: dict[str, Any], path: list[str], text: str, where
 
 
 def parse_set(config_cls: type, pairs: Iterable[str]) -> dict[str, Any]:
-    """Parse ``--set KEY=VALUE`` pairs into config values, each by the type of the field it sets.
+    """Parse ``--set KEY=VALUE`` pairs into config values, each by the declaration of the field it sets.
 
     Args:
-        config_cls: The scenario's config dataclass (``scenario_class(name).config_cls``); its ``nested``
+        config_cls: The scenario's config class (``scenario_class(name).config_cls``); its ``nested``
             ClassVar names the sub-config fields, its ``aliases`` ClassVar the alias keys.
         pairs: ``KEY=VALUE`` strings; ``KEY`` may be dotted (``body.radius``) to set one field of a sub-config.
             Later pairs override earlier ones; a sub-config's dotted keys and JSON objects merge.
@@ -413,8 +367,8 @@ def parse_set(config_cls: type, pairs: Iterable[str]) -> dict[str, Any]:
 
     Raises:
         ValueError: On a pair without ``=``, an unknown key (listing the allowed ones), an alias given with
-            its field, or a value that does not fit the field's type (naming the key, the value and what
-            the field accepts).
+            its field, or a value the field's declaration refuses (naming the dotted key, the value and what
+            the field accepts or the rule it breaks).
     """
     out: dict[str, Any] = {}
     spelled: dict[str, str] = {}  # field -> the top-level key that set it (to catch alias + field)

@@ -27,12 +27,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from typing import Annotated
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from pydantic import Field
 from scipy.optimize import minimize_scalar
 
+from agentsim_env.core.config_model import Real, config
 from agentsim_env.core.validation import check_float
 
 __all__ = [
@@ -53,8 +55,13 @@ __all__ = [
 #: Standard gravity used to turn masses into weights (m/s^2), the same value as the ballistic payload model.
 GRAVITY: float = 9.81
 
+#: A finite number > 0 (most primitives).
+Positive = Annotated[Real, Field(gt=0.0)]
+#: A finite number >= 0 (``k``, ``d0``).
+NonNegative = Annotated[Real, Field(ge=0.0)]
 
-@dataclass(frozen=True)
+
+@config("RotorParams")
 class RotorParams:
     """Primitive rotorcraft constants of the Zeng-Xu-Zhang model (defaults: the paper's table).
 
@@ -70,22 +77,15 @@ class RotorParams:
         d0: Fuselage drag ratio.
     """
 
-    delta: float = 0.012
-    rho: float = 1.225
-    s: float = 0.05
-    A: float = 0.503
-    omega: float = 300.0
-    R: float = 0.4
-    k: float = 0.1
-    W: float = 20.0
-    d0: float = 0.6
-
-    def __post_init__(self) -> None:
-        """Validate the primitives (all finite; ``k`` and ``d0`` >= 0, the others > 0)."""
-        for name in ("delta", "rho", "s", "A", "omega", "R", "W"):
-            check_float(f"RotorParams.{name}", getattr(self, name), 0.0, lo_open=True)
-        for name in ("k", "d0"):
-            check_float(f"RotorParams.{name}", getattr(self, name), 0.0)
+    delta: Positive = 0.012
+    rho: Positive = 1.225
+    s: Positive = 0.05
+    A: Positive = 0.503
+    omega: Positive = 300.0
+    R: Positive = 0.4
+    k: NonNegative = 0.1
+    W: Positive = 20.0
+    d0: NonNegative = 0.6
 
     @property
     def P0(self) -> float:
@@ -113,7 +113,7 @@ class RotorParams:
         return self.W / GRAVITY
 
 
-@dataclass(frozen=True)
+@config("BatteryParams")
 class BatteryParams:
     """Battery capacity and the reserve kept for the return to base.
 
@@ -124,15 +124,8 @@ class BatteryParams:
         reserve_frac: Fraction of the capacity that must be left on landing, in ``[0, 1)``.
     """
 
-    capacity_j: float = 321_000.0
-    reserve_frac: float = 0.2
-
-    def __post_init__(self) -> None:
-        """Validate the capacity and the reserve fraction."""
-        check_float("BatteryParams.capacity_j", self.capacity_j, 0.0, lo_open=True)
-        check_float("BatteryParams.reserve_frac", self.reserve_frac, 0.0)
-        if self.reserve_frac >= 1.0:
-            raise ValueError(f"BatteryParams.reserve_frac must be < 1, got {self.reserve_frac}")
+    capacity_j: Positive = 321_000.0
+    reserve_frac: Annotated[Real, Field(ge=0.0, lt=1.0)] = 0.2
 
     @property
     def reserve_j(self) -> float:

@@ -45,17 +45,19 @@ from __future__ import annotations
 import difflib
 import json
 import os
-from dataclasses import dataclass, fields
+from dataclasses import fields
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any, Literal, TypeVar
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from pydantic import Field
 
+from agentsim_env.core.config_model import Choice, FieldError, Int, Real, Text, config, in_range
 from agentsim_env.core.files import json_depth, parse_json, read_regular
-from agentsim_env.core.validation import check_choice, check_float, check_int, check_text, short_repr
-from agentsim_env.uav.wsn.profiles import PROFILE_KINDS, RadialProfile
+from agentsim_env.core.validation import check_float, check_int, check_text, short_repr
+from agentsim_env.uav.wsn.profiles import RadialProfile
 
 __all__ = [
     "DENSITY_SAMPLES",
@@ -67,6 +69,7 @@ __all__ = [
     "MAX_SENSORS_PER_ZONE",
     "MAX_ZONES",
     "Zone",
+    "ZoneFieldError",
     "ZoneSet",
     "default_zones_path",
     "load_zones",
@@ -95,6 +98,9 @@ _REQUIRED = ("centre", "radius", "n_sensors")
 _TOP_FIELDS = ("version", "description", "map_size", "base", "zones")
 
 
+#: A side of the map (m).
+Side = Annotated[Real, Field(gt=0.0, le=MAX_MAP_SIDE)]
+
 #: Radii at which a zone's density curve is sampled for the viewer and the designer.
 DENSITY_SAMPLES = 64
 
@@ -108,82 +114,83 @@ def _pair(label: str, value: Any) -> tuple[float, float]:
     return float(value[0]), float(value[1])
 
 
-def _check_zone_values(label: str, v: dict[str, Any]) -> None:
-    """Validate every field of one zone; messages read ``<label>: field '<name>' ...``."""
-
-    def f(name: str) -> str:
-        return f"{label}: field {name!r}"
-
-    _pair(f("centre"), v["centre"])
-    check_float(f("radius"), v["radius"], 0.5, MAX_MAP_SIDE)
-    check_int(f("n_sensors"), v["n_sensors"], 1, MAX_SENSORS_PER_ZONE)
-    if not isinstance(v["profile"], str):
-        raise ValueError(
-            f"{f('profile')} must be a string, one of {PROFILE_KINDS}, got {short_repr(v['profile'])}"
-        )
-    check_choice(f("profile"), v["profile"], PROFILE_KINDS)
-    check_float(f("alpha"), v["alpha"], 0.0)
-    if v["alpha"] >= 2.0:
-        raise ValueError(f"{f('alpha')} must satisfy 0 <= alpha < 2, got {v['alpha']}")
-    if v["sigma"] is not None:  # a narrower or wider Gaussian is a point or a uniform disc in all but name
-        r = float(v["radius"])
-        check_float(f("sigma"), v["sigma"], r / 1000.0, 1000.0 * r)
-    check_float(f("floor"), v["floor"], 0.0)
-    if v["floor"] >= 1.0:
-        raise ValueError(f"{f('floor')} must satisfy 0 <= floor < 1, got {v['floor']}")
-    check_float(f("weight"), v["weight"], 1e-3, 1e3)
-    if v["altitude"] is not None:
-        check_float(f("altitude"), v["altitude"], 0.0, MAX_ALTITUDE, lo_open=True)
-    if v["name"] is not None:
-        if not isinstance(v["name"], str):
-            raise ValueError(f"{f('name')} must be a string or null, got {short_repr(v['name'])}")
-        check_text(f("name"), v["name"])  # names reach terminals, logs and plots
-
-
 def _zone_label(index: int | None, name: Any) -> str:
     """``zones[3] 'north'``-style label used in every zone error."""
     head = "zone" if index is None else f"zones[{index}]"
     return head if name is None else f"{head} {short_repr(name, 60)}"
 
 
-@dataclass(frozen=True)
+_Z = TypeVar("_Z")
+
+
+class ZoneFieldError(ValueError):
+    """A bad field of one zone: ``<label>: field '<name>' <problem>`` (``field`` and ``problem`` kept).
+
+    Not a ``FieldError``: a config holding a zone file reports it whole (``zones: zones[0] 'a': ...``).
+    """
+
+    def __init__(self, label: str, field: str, problem: str) -> None:
+        name, bracket, rest = field.partition("[")
+        item = f" (item {rest.rstrip(']')})" if bracket else ""
+        super().__init__(f"{label}: field {name!r}{item} {problem}")
+        self.label, self.field, self.problem = label, field, problem
+
+
+def _labelled(cls: type[_Z]) -> type[_Z]:
+    """Zone errors name the zone (``zone 'north'``) and the field in the zone file's words."""
+    init = cls.__init__
+    at = [f.name for f in fields(cls)].index("name")  # type: ignore[arg-type]
+
+    def __init__(self: Any, *args: Any, **kwargs: Any) -> None:
+        try:
+            init(self, *args, **kwargs)
+        except FieldError as exc:
+            name = args[at] if len(args) > at else kwargs.get("name")
+            raise ZoneFieldError(_zone_label(None, name), exc.field, exc.problem) from None
+
+    __init__.__doc__ = init.__doc__
+    cls.__init__ = __init__  # type: ignore[method-assign]
+    return cls
+
+
+#: Radial density kinds a zone takes (``PROFILE_KINDS``).
+Profile = Annotated[Literal["uniform", "power", "gauss", "linear"], Choice]
+
+
+@_labelled
+@config()
 class Zone:
-    """One circular hot zone.
+    """One circular hot zone (bounds as in the module docstring's table; errors name the zone and the field).
 
     Attributes:
         centre: Centroid ``(x, y)`` in map metres.
-        radius: Disc radius in metres (> 0).
-        n_sensors: Sensors allotted to the zone (>= 1).
+        radius: Disc radius in metres, ``[0.5, 100000]``.
+        n_sensors: Sensors allotted to the zone, ``[1, 100000]``.
         profile: Radial density kind, one of ``PROFILE_KINDS``.
         alpha: Power-law exponent in ``[0, 2)`` (``"power"`` only).
-        sigma: Gaussian width in metres (> 0) or ``None`` for ``radius / 2`` (``"gauss"`` only).
+        sigma: Gaussian width in metres, ``radius / 1000 .. 1000 x radius``, or ``None`` for ``radius / 2``
+            (``"gauss"`` only).
         floor: Uniform share of the mass in ``[0, 1)``.
-        weight: Allocation priority (> 0).
+        weight: Allocation priority, ``[0.001, 1000]``.
         altitude: Release altitude in m AGL, ``(0, 120]``, or ``None`` for the scenario default.
-        name: Optional label.
+        name: Optional label (printable text).
     """
 
-    centre: tuple[float, float]
-    radius: float
-    n_sensors: int
-    profile: str = "gauss"
-    alpha: float = 1.0
-    sigma: float | None = None
-    floor: float = 0.0
-    weight: float = 1.0
-    altitude: float | None = None
-    name: str | None = None
+    centre: tuple[Real, Real]
+    radius: Annotated[Real, Field(ge=0.5, le=MAX_MAP_SIDE)]
+    n_sensors: Annotated[Int, Field(ge=1, le=MAX_SENSORS_PER_ZONE)]
+    profile: Profile = "gauss"
+    alpha: Annotated[Real, Field(ge=0.0, lt=2.0)] = 1.0
+    sigma: Real | None = None
+    floor: Annotated[Real, Field(ge=0.0, lt=1.0)] = 0.0
+    weight: Annotated[Real, Field(ge=1e-3, le=1e3)] = 1.0
+    altitude: Annotated[Real, Field(gt=0.0, le=MAX_ALTITUDE)] | None = None
+    name: Text | None = None
 
     def __post_init__(self) -> None:
-        """Validate the fields and normalise numbers to floats (so a round trip compares equal)."""
-        values = {fl.name: getattr(self, fl.name) for fl in fields(self)}
-        _check_zone_values(_zone_label(None, self.name), values)
-        object.__setattr__(self, "centre", (float(self.centre[0]), float(self.centre[1])))
-        for key in ("radius", "alpha", "floor", "weight"):
-            object.__setattr__(self, key, float(values[key]))
-        for key in ("sigma", "altitude"):
-            if values[key] is not None:
-                object.__setattr__(self, key, float(values[key]))
+        """The Gaussian width against the radius (a narrower or wider one is a point or a uniform disc)."""
+        if self.sigma is not None:
+            in_range("sigma", self.sigma, self.radius / 1000.0, 1000.0 * self.radius)
 
     def radial_profile(self) -> RadialProfile:
         """The zone's normalised radial density (``RadialProfile``) over its disc."""
@@ -204,40 +211,30 @@ class Zone:
         return d / top if top > 0.0 and np.isfinite(top) else np.ones_like(d)
 
 
-@dataclass(frozen=True)
+@config()
 class ZoneSet:
     """The hot zones of one map, the map extent and the UAV base.
 
     Attributes:
-        zones: The zones (at least one); a zone's id is its index here.
-        map_size: ``(width, height)`` in metres; the map spans ``[0, width] x [0, height]``.
+        zones: The zones (1 to ``MAX_ZONES``); a zone's id is its index here.
+        map_size: ``(width, height)`` in metres, each in ``(0, 100000]``; the map spans
+            ``[0, width] x [0, height]``.
         base: UAV take-off point ``(x, y)`` inside the map, or ``None``.
     """
 
-    zones: tuple[Zone, ...]
-    map_size: tuple[float, float]
-    base: tuple[float, float] | None = None
+    zones: Annotated[tuple[Zone, ...], Field(min_length=1, max_length=MAX_ZONES)]
+    map_size: tuple[Side, Side]
+    base: tuple[Real, Real] | None = None
 
     def __post_init__(self) -> None:
-        """Validate the map, the base and that every zone lies fully inside the map."""
-        width, height = _pair("map_size", self.map_size)
-        check_float("map_size[0] (width)", width, 0.0, MAX_MAP_SIDE, lo_open=True)
-        check_float("map_size[1] (height)", height, 0.0, MAX_MAP_SIDE, lo_open=True)
-        object.__setattr__(self, "map_size", (width, height))
-        if not isinstance(self.zones, (tuple, list)) or len(self.zones) == 0:
-            raise ValueError(f"zones must be a non-empty sequence of Zone, got {short_repr(self.zones)}")
-        if len(self.zones) > MAX_ZONES:
-            raise ValueError(f"a zone set holds at most {MAX_ZONES:,} zones, got {len(self.zones):,}")
-        object.__setattr__(self, "zones", tuple(self.zones))
+        """Check that every zone lies fully inside the map, and the base too."""
+        width, height = self.map_size
         for i, z in enumerate(self.zones):
-            if not isinstance(z, Zone):
-                raise ValueError(f"zones[{i}] must be a Zone, got {type(z).__name__}")
             _check_inside(_zone_label(i, z.name), z, width, height)
         if self.base is not None:
-            bx, by = _pair("base", self.base)
+            bx, by = self.base
             if not (0.0 <= bx <= width and 0.0 <= by <= height):
                 raise ValueError(f"base ({bx}, {by}) must lie inside the map [0, {width}] x [0, {height}]")
-            object.__setattr__(self, "base", (bx, by))
 
     @property
     def n_sensors(self) -> int:
@@ -337,16 +334,16 @@ def zones_from_dict(d: dict[str, Any]) -> ZoneSet:
     if len(raw) > MAX_ZONES:
         raise ValueError(f"field 'zones' holds {len(raw):,} zones; at most {MAX_ZONES:,} are allowed")
     zone_fields = tuple(fl.name for fl in fields(Zone))
-    defaults = {fl.name: fl.default for fl in fields(Zone) if fl.name not in _REQUIRED}
     zones = []
     for i, zd in enumerate(raw):
         if not isinstance(zd, dict):
             raise ValueError(f"zones[{i}] must be a JSON object, got {short_repr(zd)}")
         label = _zone_label(i, zd.get("name"))
         _check_keys(label, zd, zone_fields, _REQUIRED)
-        values = {**defaults, **zd}
-        _check_zone_values(label, values)  # here, so that the message carries the index as well
-        zones.append(Zone(**{**values, "centre": tuple(values["centre"])}))
+        try:
+            zones.append(Zone(**zd))
+        except ZoneFieldError as exc:  # named again with the index (the zone's own message has its name only)
+            raise ZoneFieldError(label, exc.field, exc.problem) from None
     base = d.get("base")
     return ZoneSet(
         zones=tuple(zones),
