@@ -108,7 +108,9 @@ def record_comm_traffic(policy: Any, scenario_config: Mapping[str, Any], seeds: 
     act = _policy_fn(policy)
     env = agentsim_env.make("relay", obs_format="flat", action_format="flat", **dict(scenario_config))
     cfg = env.scenario.config
-    motion = int(env.action_space(env.possible_agents[0]).shape[0]) - cfg.comms.action_dim
+    shape = env.action_space(env.possible_agents[0]).shape
+    assert shape is not None  # a flat Box
+    motion = int(shape[0]) - cfg.comms.action_dim
     index = {a: i for i, a in enumerate(env.possible_agents)}
     cols: dict[str, list[Any]] = {
         k: [] for k in ("step", "episode", "scout", "channel", "sent", "payload", "target")

@@ -79,7 +79,11 @@ def strategy_class(name: str) -> type[ReleaseStrategy]:
 
 def _concrete(cls: Any) -> bool:
     """Whether ``cls`` is a ``ReleaseStrategy`` subclass with no abstract method left."""
-    return isinstance(cls, type) and issubclass(cls, ReleaseStrategy) and not cls.__abstractmethods__
+    return (
+        isinstance(cls, type)
+        and issubclass(cls, ReleaseStrategy)
+        and not getattr(cls, "__abstractmethods__", ())
+    )
 
 
 def make_strategy(name: str, **options: Any) -> ReleaseStrategy:
