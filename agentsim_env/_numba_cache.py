@@ -60,9 +60,7 @@ def _source_dirs(root: str) -> Iterator[str]:
         yield d
         try:
             with os.scandir(d) as entries:
-                subs = [
-                    e.path for e in entries if e.is_dir(follow_symlinks=False) and e.name != "__pycache__"
-                ]
+                subs = [e.path for e in entries if e.is_dir(follow_symlinks=False) and e.name != "__pycache__"]
         except OSError:
             continue
         stack.extend(p for p in subs if os.path.isfile(os.path.join(p, "__init__.py")))
@@ -121,9 +119,7 @@ def _compile_uncached() -> None:
     Dispatcher.enable_caching = enable_caching  # type: ignore[method-assign]
 
 
-def ensure_numba_cache(
-    root: str = PACKAGE_DIR, temp_dir: Callable[[], str] = tempfile.gettempdir
-) -> str | None:
+def ensure_numba_cache(root: str = PACKAGE_DIR, temp_dir: Callable[[], str] = tempfile.gettempdir) -> str | None:
     """Give numba a writable cache directory when its default ones are unusable (see the module docstring).
 
     Args:

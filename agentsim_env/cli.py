@@ -173,9 +173,7 @@ def cmd_warmup(args: argparse.Namespace) -> int:
 # -------------------------------------------------------------------------------------------- parser
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``agentsim``."""
-    p = _LazyParser(
-        prog="agentsim", description="agentsim-env command line", epilog=MAIN_EPILOG, lazy=_fill_main
-    )
+    p = _LazyParser(prog="agentsim", description="agentsim-env command line", epilog=MAIN_EPILOG, lazy=_fill_main)
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
     r = sub.add_parser(
         "run",

@@ -67,7 +67,7 @@ def _cause(exc: BaseException) -> BaseException | None:
 
 
 def is_stop(exc: BaseException) -> bool:
-    """Whether ``exc`` asks the run to end (``StopRun``, ``WindowClosed`` or ``KeyboardInterrupt``, or caused by one)."""
+    """Whether ``exc`` asks the run to end (``StopRun``, ``WindowClosed``, ``KeyboardInterrupt``, or caused by one)."""
     return _cause(exc) is not None
 
 
@@ -107,9 +107,7 @@ class LiveStop:
                 self._saved[sig] = signal.signal(sig, self._handle)
         return self
 
-    def __exit__(
-        self, kind: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
-    ) -> None:
+    def __exit__(self, kind: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None) -> None:
         for sig, previous in self._saved.items():
             signal.signal(sig, previous)
         self._saved.clear()

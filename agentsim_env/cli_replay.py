@@ -87,9 +87,7 @@ def add_replay_command(sub: Any) -> argparse.ArgumentParser:
     p.add_argument("--run", type=int, default=None, help="run id (default: the last run in the store)")
     p.add_argument("--episode", type=int, required=True, help="episode of the run (0: the first)")
     p.add_argument("--world", type=int, default=0, help="world of a batched run")
-    p.add_argument(
-        "--every", type=int, default=1, help="draw every K-th step (the last step is always drawn)"
-    )
+    p.add_argument("--every", type=int, default=1, help="draw every K-th step (the last step is always drawn)")
     p.add_argument("--fps", type=float, default=None, help="video frames per second (default: real time)")
     p.add_argument("--size", type=int, default=512, help="longest side of the map in pixels")
     p.add_argument(

@@ -85,9 +85,7 @@ class _AgentSteps:
             self.inner(env, infos)
 
 
-def _rollout_row(
-    env: Any, policy: Any, seed: int, recorder: Any, bar: Any, check: Callable[[], None] | None
-) -> tuple:
+def _rollout_row(env: Any, policy: Any, seed: int, recorder: Any, bar: Any, check: Callable[[], None] | None) -> tuple:
     """One episode through ``env.rollout`` (arrays, no per-step dicts): a row of the run's summary table."""
 
     def on_step(env: Any, step: int, view: Any) -> None:
@@ -174,18 +172,14 @@ def _run(args: argparse.Namespace, config: dict[str, Any], policy_name: str) -> 
     if getattr(args, "shards", None) is not None:
         from agentsim_env.distributed import make as make_sharded
 
-        env = make_sharded(
-            args.scenario, shards=args.shards, ray_address=args.ray_address, render_mode=mode, **config
-        )
+        env = make_sharded(args.scenario, shards=args.shards, ray_address=args.ray_address, render_mode=mode, **config)
         print(
             f"{args.scenario}: {args.shards} shards ({env.coordinator.backend.address}), halo "
             f"{env.coordinator.strips.halo:.1f} m",
             flush=True,
         )
     else:
-        env = agentsim_env.make(
-            args.scenario, render_mode=mode, num_threads=getattr(args, "threads", 1), **config
-        )
+        env = agentsim_env.make(args.scenario, render_mode=mode, num_threads=getattr(args, "threads", 1), **config)
     if args.fps is not None:
         env.metadata["render_fps"] = args.fps  # the live window paces itself with this rate
     store = getattr(args, "record", None)

@@ -125,10 +125,7 @@ def _annotations(cls: type) -> dict[str, Any]:
     """Field name -> declared type of a config class, bounds included (``Any`` where none can be read)."""
     declared = getattr(cls, "__pydantic_fields__", None)
     if declared is not None:
-        return {
-            n: Annotated[(f.annotation, *f.metadata)] if f.metadata else f.annotation
-            for n, f in declared.items()
-        }
+        return {n: Annotated[(f.annotation, *f.metadata)] if f.metadata else f.annotation for n, f in declared.items()}
     try:
         hints = typing.get_type_hints(cls, include_extras=True)
     except Exception:  # an annotation that does not evaluate: such a field takes any value
@@ -263,9 +260,7 @@ def _resolve(cls: type, name: str, where: str, top: bool) -> str:
     field_name = aliases.get(name, name)
     fields = _annotations(cls)
     if field_name not in fields:
-        also = (
-            f" (aliases: {', '.join(f'{a} -> {k}' for a, k in sorted(aliases.items()))})" if aliases else ""
-        )
+        also = f" (aliases: {', '.join(f'{a} -> {k}' for a, k in sorted(aliases.items()))})" if aliases else ""
         raise ValueError(
             f"unknown --set key {_shown(where + name)} for {cls.__name__}; allowed keys: {sorted(fields)}{also}"
         )
@@ -377,14 +372,10 @@ def parse_set(config_cls: type, pairs: Iterable[str]) -> dict[str, Any]:
         key = key.strip()
         path = key.split(".")
         if not sep or not key or any(not p for p in path):
-            raise ValueError(
-                f"--set expects KEY=VALUE (e.g. n_agents=8 or body.radius=1.0), got {_shown(pair)}"
-            )
+            raise ValueError(f"--set expects KEY=VALUE (e.g. n_agents=8 or body.radius=1.0), got {_shown(pair)}")
         name = _resolve(config_cls, path[0], "", top=True)
         if spelled.setdefault(name, path[0]) != path[0]:
-            raise ValueError(
-                f"--set: give {name!r} under one name only, got {spelled[name]!r} and {path[0]!r}"
-            )
+            raise ValueError(f"--set: give {name!r} under one name only, got {spelled[name]!r} and {path[0]!r}")
         _assign(config_cls, out, path, text, "", top=True)
     return out
 

@@ -38,8 +38,7 @@ def cmd_view(args: argparse.Namespace) -> int:
     export = [f"--{n}" for n in ("fps", "size", "every") if getattr(args, n) is not None]
     if (args.out is None or not args.replay) and (export or args.out is not None):
         raise ValueError(
-            f"{' '.join(export or ['--out'])}: --out exports a replay to a video; give --replay RUN.db "
-            "--out VIDEO.mp4"
+            f"{' '.join(export or ['--out'])}: --out exports a replay to a video; give --replay RUN.db --out VIDEO.mp4"
         )
     if args.replay:
         if args.scenario or args.policy or args.set:
@@ -176,12 +175,8 @@ def add_view_commands(sub: Any, set_help: str, announce: Any) -> None:
         epilog=VIEW_EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    v.add_argument(
-        "scenario", nargs="?", metavar="SCENARIO", help="a registered scenario ('agentsim scenarios')"
-    )
-    v.add_argument(
-        "--policy", default=None, help="baseline name (default: the scenario's first) or a trained model"
-    )
+    v.add_argument("scenario", nargs="?", metavar="SCENARIO", help="a registered scenario ('agentsim scenarios')")
+    v.add_argument("--policy", default=None, help="baseline name (default: the scenario's first) or a trained model")
     v.add_argument("--set", nargs="*", metavar="KEY=VALUE", help=set_help)
     v.add_argument("--seed", type=int, default=0, help="seed of the first episode")
     v.add_argument(
@@ -190,9 +185,7 @@ def add_view_commands(sub: Any, set_help: str, announce: Any) -> None:
         default=None,
         help="steps per second, 0.1..10000 (default: real time; 0: as fast as it runs)",
     )
-    v.add_argument(
-        "--episodes", type=int, default=None, help="stop after this many episodes (default: run on)"
-    )
+    v.add_argument("--episodes", type=int, default=None, help="stop after this many episodes (default: run on)")
     v.add_argument("--steps", type=int, default=None, help="stop after this many steps (default: run on)")
     v.add_argument(
         "--no-wait",
@@ -208,16 +201,11 @@ def add_view_commands(sub: Any, set_help: str, announce: Any) -> None:
         "--out",
         default=None,
         metavar="VIDEO",
-        help="replay: write the 3D view to VIDEO (.mp4 or .gif) "
-        "through headless Chromium instead of serving it",
+        help="replay: write the 3D view to VIDEO (.mp4 or .gif) through headless Chromium instead of serving it",
     )
     v.add_argument("--fps", type=float, default=None, help="--out: frames per second (default: real time)")
-    v.add_argument(
-        "--size", type=int, default=None, help="--out: video width in pixels, 160..1920 (16:9; 960)"
-    )
-    v.add_argument(
-        "--every", type=int, default=None, help="--out: draw every K-th recorded step (and the last)"
-    )
+    v.add_argument("--size", type=int, default=None, help="--out: video width in pixels, 160..1920 (16:9; 960)")
+    v.add_argument("--every", type=int, default=None, help="--out: draw every K-th recorded step (and the last)")
     network_options(v)
     v.set_defaults(func=cmd_view, announce=announce)
 

@@ -34,9 +34,7 @@ def prepare_out(out: str | os.PathLike[str], option: str = "--out") -> list[Path
         probe.unlink()
     except OSError as exc:
         remove_created(created)
-        raise ValueError(
-            f"{option} {str(path)!r} cannot be created or written: {exc.strerror or exc}"
-        ) from None
+        raise ValueError(f"{option} {str(path)!r} cannot be created or written: {exc.strerror or exc}") from None
     return created
 
 

@@ -187,7 +187,8 @@ def coldstart_rows(
         Dicts with the keys ``case`` (label), ``warm_s`` (median wall seconds, import to end of the first step,
         on the warmed cache), ``warm_cpu_s`` (median CPU seconds of the process at that point),
         ``warm_process_s`` (median wall seconds of the whole process), ``warm_runs``, ``warm_runs_compiled``
-        (how many warm runs compiled a package kernel; 0 when the warm-up covers the case), ``cold_s`` (median of the same on an empty cache),
+        (how many warm runs compiled a package kernel; 0 when the warm-up covers the case), ``cold_s`` (median of the
+        same on an empty cache),
         ``cold_runs``, ``warmup_s`` (median wall seconds of ``agentsim warmup`` on an empty cache, the same in
         every row), ``target_s`` (3.0, or None for the information row) and ``passed`` (``warm_s <= target_s``,
         or None without a target).
@@ -280,13 +281,9 @@ def table(rows: list[dict[str, Any]]) -> str:
 def main(argv: list[str] | None = None) -> dict[str, Any]:
     """Measure, print the machine line and the table, and return the rows."""
     ap = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
-    ap.add_argument(
-        "--quick", action="store_true", help="3 warm runs and 1 empty-cache run per case, 1 warm-up"
-    )
+    ap.add_argument("--quick", action="store_true", help="3 warm runs and 1 empty-cache run per case, 1 warm-up")
     ap.add_argument("--runs", type=int, default=None, help="warm runs per case (default 7, quick 3)")
-    ap.add_argument(
-        "--cold-runs", type=int, default=None, help="empty-cache runs per case (default 3, quick 1)"
-    )
+    ap.add_argument("--cold-runs", type=int, default=None, help="empty-cache runs per case (default 3, quick 1)")
     args = ap.parse_args(argv)
     if (args.runs is not None and args.runs < 1) or (args.cold_runs is not None and args.cold_runs < 1):
         ap.error("--runs and --cold-runs must be at least 1")

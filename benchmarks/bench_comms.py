@@ -213,9 +213,7 @@ def delivery_table(counts: list[int], rounds: int) -> str:
     rows = []
     for k in counts:
         per = stats[str(k)].step_s / k
-        rows.append(
-            [fmt_num(k), fmt_num(stats[str(k)].step_s * 1e3), fmt_num(per * 1e9), f"{per / base:.2f}"]
-        )
+        rows.append([fmt_num(k), fmt_num(stats[str(k)].step_s * 1e3), fmt_num(per * 1e9), f"{per / base:.2f}"])
     return markdown_table(["messages / step", "send + deliver ms", "ns / message", "vs smallest"], rows)
 
 
@@ -268,9 +266,7 @@ def main(argv: list[str] | None = None) -> int:
     br = {n: stage_breakdown(n, 40 if args.quick else (400 if n <= 1000 else 60)) for n in sizes}
     keys = list(br[sizes[0]])
     print(
-        markdown_table(
-            ["stage"] + [f"1x{n}" for n in sizes], [[k] + [fmt_num(br[n][k]) for n in sizes] for k in keys]
-        )
+        markdown_table(["stage"] + [f"1x{n}" for n in sizes], [[k] + [fmt_num(br[n][k]) for n in sizes] for k in keys])
     )
     print("\n# Bus delivery cost per message\n")
     counts = [500, 1000, 2000] if args.quick else [1000, 2000, 4000, 8000, 16000]

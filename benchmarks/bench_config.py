@@ -51,9 +51,7 @@ def rows(rounds: int, make_rounds: int) -> list[list[str]]:
             mean_us(lambda cls=cls: cls(body={"radius": 0.6}), rounds),
             mean_us(lambda d=default: dataclasses.replace(d, max_steps=123), rounds),
         ]
-        made = (
-            mean_us(lambda name=name: agentsim_env.make(name), make_rounds) if make_rounds else float("nan")
-        )
+        made = mean_us(lambda name=name: agentsim_env.make(name), make_rounds) if make_rounds else float("nan")
         verdict = "yes" if max(times) < TARGET_US else "NO"
         made_cell = fmt_num(made) if make_rounds else "-"
         out.append([name, *(fmt_num(t) for t in times), made_cell, verdict])

@@ -42,9 +42,7 @@ import numpy as np  # noqa: E402  (after common: it pins the thread pools before
 
 import bench_comms as bc  # noqa: E402
 
-SHARD_TIMEOUT_S = (
-    120.0  # per call: a loaded shared machine must not declare a slow shard offline mid-benchmark
-)
+SHARD_TIMEOUT_S = 120.0  # per call: a loaded shared machine must not declare a slow shard offline mid-benchmark
 GHOST_BYTES = 80  # a ghost: its int64 slot id, x and 3 float64 coordinates, posted by its shard and routed on
 TRAFFIC = ("full", "silent")
 
@@ -129,9 +127,7 @@ def build(n: int, shards: int | None, backend: str = "ray", api: str = "step") -
     else:
         from agentsim_env.distributed import DistributedBatchedEnv
 
-        env = DistributedBatchedEnv(
-            "navigation", shards, backend=backend, timeout_s=SHARD_TIMEOUT_S, **config(n)
-        )
+        env = DistributedBatchedEnv("navigation", shards, backend=backend, timeout_s=SHARD_TIMEOUT_S, **config(n))
     env.reset(seed=0)
     return env
 
@@ -225,9 +221,7 @@ def same_result(a: Any, b: Any) -> bool:
     )
 
 
-def speed_table(
-    sizes: list[int], steps: int, ray: Any
-) -> tuple[str, dict[tuple[int, str, str], dict[str, Any]]]:
+def speed_table(sizes: list[int], steps: int, ray: Any) -> tuple[str, dict[tuple[int, str, str], dict[str, Any]]]:
     """Table a and its measurements by (agents, API, system)."""
     res: dict[tuple[int, str, str], dict[str, Any]] = {}
     for n in sizes:
@@ -494,9 +488,7 @@ def scaling_table(n: int, shard_counts: list[int], steps: int) -> str:
     )
 
 
-def border_bytes(
-    sizes: list[int], steps: int, shards: int = 2, traffic: str = "full"
-) -> list[dict[str, float]]:
+def border_bytes(sizes: list[int], steps: int, shards: int = 2, traffic: str = "full") -> list[dict[str, float]]:
     """Table c's rows: bytes per step (mean over ``steps`` steps after one warm-up step), local backend.
 
     Returns:
@@ -665,6 +657,9 @@ def main(argv: list[str] | None = None) -> int:
             )
             print(f"\n## On paper: {PAPER_N:,} agents on {PAPER_K} machines\n")
             print(paper_table(res, sizes[0], floor, by_k, n_small))
+            one = (
+                res[sizes[-1], "rollout", "one process"]["step_ms"] / res[sizes[0], "rollout", "one process"]["step_ms"]
+            )
             print(
                 f"\nAssumptions: one shard per machine; its busy time = a part per own agent (measured above at "
                 f"{sizes[0]:,} agents over 2 shards, minus the fixed part) x ({PAPER_N:,} / {PAPER_K} agents + 8 % "
@@ -672,11 +667,12 @@ def main(argv: list[str] | None = None) -> int:
                 f"shard's profile; 0 with shard worlds sized to their agents); the barriers' latency as measured "
                 f"above with no simulation; the bytes through the exchange at {max(ks)} shards (table above), "
                 f"those of the edge phases (halo, hand-overs, offline) times sqrt({PAPER_N:,} / {n_small:,}), the "
-                f"others (bus, positions, groups) times {PAPER_N:,} / {n_small:,}, routed at the CPU cost per byte measured above and sent over "
+                f"others (bus, positions, groups) times {PAPER_N:,} / {n_small:,}, routed at the CPU cost per byte "
+                f"measured above and sent over "
                 f"10 Gb/s links (one exchange: every byte on its one CPU and link; shards exchanging directly: "
                 f"each carries 1 / {PAPER_K} of them); the coordinator's share linear in the number of shards; "
                 f"one process linear in N, the choice that favours one process (measured here: worse than linear, "
-                f"{res[sizes[-1], 'rollout', 'one process']['step_ms'] / res[sizes[0], 'rollout', 'one process']['step_ms']:.2f}x "
+                f"{one:.2f}x "
                 f"for {sizes[-1] / sizes[0]:.0f}x the agents)."
             )
         print(

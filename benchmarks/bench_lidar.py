@@ -97,9 +97,7 @@ def scan_kdtree(cfg: ProximityConfig, pos, heading, srange, radius, online, worl
         bound = [np.linalg.norm(half, axis=1), np.hypot(half[:, 0], half[:, 2])]
         b3 = np.select([scene.kind == _BOX, scene.kind == _CYL], bound, half[:, 0])
         p_obj = scene.centre + scene.world[:, None] * sep
-        sdm = cKDTree(p_on).sparse_distance_matrix(
-            cKDTree(p_obj), srange[on].max() + b3.max(), output_type="ndarray"
-        )
+        sdm = cKDTree(p_on).sparse_distance_matrix(cKDTree(p_obj), srange[on].max() + b3.max(), output_type="ndarray")
         a, o = sdm["i"], sdm["j"]
         keep = sdm["v"] - b3[o] <= srange[on[a]]
         a, o = a[keep], o[keep]

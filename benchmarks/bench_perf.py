@@ -109,16 +109,12 @@ def small_worlds(rounds: int, block_s: float) -> tuple[list[Row], dict[str, floa
             v = _vmas(b, n)
             if v is not None:
                 cases["vmas"] = v
-        st = measure_interleaved(
-            cases, rounds=rounds, block_s=block_s, max_block_steps=bench_step.MAX_BLOCK_STEPS
-        )
+        st = measure_interleaved(cases, rounds=rounds, block_s=block_s, max_block_steps=bench_step.MAX_BLOCK_STEPS)
         for k, s in st.items():
             rates[f"{k} {b}x{n}"] = s.agent_steps_per_s
     vm = {k: rates.get(f"vmas {k}") for k in ("1x64", "512x4")}
     note = {k: (f"VMAS CPU {fmt_num(v)} ag-st/s" if v else "VMAS not installed") for k, v in vm.items()}
-    rows.append(
-        Row("navigation 1x64, array API", rates["array 1x64"], "ag-st/s", 1_000_000, note=note["1x64"])
-    )
+    rows.append(Row("navigation 1x64, array API", rates["array 1x64"], "ag-st/s", 1_000_000, note=note["1x64"]))
     rows.append(Row("navigation 1x64, dict API", rates["dict 1x64"], "ag-st/s", 700_000, note=note["1x64"]))
     rows.append(
         Row(
@@ -180,14 +176,10 @@ def big_world(n: int, rounds: int) -> list[Row]:
     cases = {"1": _array(n, 1), "2": _array(n, 2)}
     st = measure_interleaved(cases, rounds=rounds, block_s=0.3, warmup=2)
     tgt = 1.7 if n >= 100_000 else None
-    rows = [
-        Row(f"1x{n:,} array API, no comms, 1 core", 1.0 / st["1"].step_s, "env-steps/s", 25 if tgt else None)
-    ]
+    rows = [Row(f"1x{n:,} array API, no comms, 1 core", 1.0 / st["1"].step_s, "env-steps/s", 25 if tgt else None)]
     cores = available_cores()
     if cores < 2:
-        rows.append(
-            Row(f"1x{n:,}: 2 threads vs 1 (wall)", None, "x", tgt, note=f"only {cores} core available")
-        )
+        rows.append(Row(f"1x{n:,}: 2 threads vs 1 (wall)", None, "x", tgt, note=f"only {cores} core available"))
     else:
         ratio = st["1"].wall_step_s / st["2"].wall_step_s
         rows.append(
@@ -249,9 +241,7 @@ def cold_start(quick: bool) -> list[Row]:
 
     rows = []
     # fewer runs than bench_coldstart's own table (which make bench prints too): the medians barely move
-    for r in bench_coldstart.coldstart_rows(
-        quick, runs=3 if quick else 5, cold_runs=1, whole_quickstart=False
-    ):
+    for r in bench_coldstart.coldstart_rows(quick, runs=3 if quick else 5, cold_runs=1, whole_quickstart=False):
         rows.append(
             Row(
                 f"cold start: {r['case']} (warm cache)",
@@ -323,9 +313,7 @@ def _timed(label: str, fn: Callable[[], T]) -> T:
 def main(argv: list[str] | None = None) -> int:
     """Print the targets table, the per-core table and the scaling curve."""
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument(
-        "--quick", action="store_true", help="small sizes, few rounds (smoke test; targets not comparable)"
-    )
+    p.add_argument("--quick", action="store_true", help="small sizes, few rounds (smoke test; targets not comparable)")
     p.add_argument("--plot", default=None, help="write the scaling curve to this PNG")
     p.add_argument("--no-coldstart", action="store_true", help="skip the cold-start rows")
     p.add_argument(
@@ -342,9 +330,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.threads_only:
         return threads_report(q, args.thread_plot)
     print(f"machine: {machine_description()}")
-    print(
-        f"mode: {'quick' if q else 'full'}; CPU time, one thread unless stated; medians of interleaved rounds\n"
-    )
+    print(f"mode: {'quick' if q else 'full'}; CPU time, one thread unless stated; medians of interleaved rounds\n")
     rows: list[Row] = []
     small, rates = _timed("small worlds", lambda: small_worlds(rounds, block))
     rows += small
@@ -354,9 +340,7 @@ def main(argv: list[str] | None = None) -> int:
     if not args.no_coldstart:
         rows += _timed("cold start", lambda: cold_start(q))
     print("## Targets\n")
-    print(
-        markdown_table(["case", "result", "target", "met", "measured alongside"], [r.cells() for r in rows])
-    )
+    print(markdown_table(["case", "result", "target", "met", "measured alongside"], [r.cells() for r in rows]))
     met = sum(1 for r in rows if r.cells()[3] == "PASS")
     print(f"\n{met} of {len(rows)} rows met.\n")
 
@@ -401,9 +385,7 @@ def threads_report(quick: bool, plot: str | None) -> int:
     print(f"machine: {machine_description()}\n")
     sizes = [1_000, 5_000] if quick else [10_000, 100_000]
     rows = _timed("full stack, threads", lambda: full_stack_threads(sizes, 2 if quick else 7))
-    print(
-        markdown_table(["case", "result", "target", "met", "measured alongside"], [r.cells() for r in rows])
-    )
+    print(markdown_table(["case", "result", "target", "met", "measured alongside"], [r.cells() for r in rows]))
     _print_thread_curve(quick, plot)
     return 0
 

@@ -174,16 +174,12 @@ def mpe2_case(b: int, n: int, seed: int) -> common.Case:
     """mpe2 ``simple_spread`` ParallelEnv with N agents, continuous actions; B envs stepped in a loop."""
     from mpe2 import simple_spread_v3
 
-    envs = [
-        simple_spread_v3.parallel_env(N=n, max_cycles=LONG_EPISODE, continuous_actions=True) for _ in range(b)
-    ]
+    envs = [simple_spread_v3.parallel_env(N=n, max_cycles=LONG_EPISODE, continuous_actions=True) for _ in range(b)]
     rng = np.random.default_rng(seed)
     pools = []
     for i, env in enumerate(envs):
         env.reset(seed=seed + i)
-        pools.append(
-            _cycle([{a: rng.uniform(0, 1, 5).astype(np.float32) for a in env.agents} for _ in range(POOL)])
-        )
+        pools.append(_cycle([{a: rng.uniform(0, 1, 5).astype(np.float32) for a in env.agents} for _ in range(POOL)]))
 
     def step() -> int:
         for env, nxt in zip(envs, pools):
@@ -260,9 +256,7 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--rounds", type=int, default=None, help="timed rounds per size (default 15, quick 3)")
     ap.add_argument("--block-s", type=float, default=None, help="seconds per timed block (default 0.15)")
     ap.add_argument("--max-step-s", type=float, default=None, help="skip a quadratic system above this")
-    ap.add_argument(
-        "--pymunk-size", type=parse_size, default=(1, 64), help="size of the pymunk-vs-kinematic check"
-    )
+    ap.add_argument("--pymunk-size", type=parse_size, default=(1, 64), help="size of the pymunk-vs-kinematic check")
     ap.add_argument(
         "--ratio-sizes",
         type=parse_size,
@@ -337,9 +331,7 @@ def main(argv: list[str] | None = None) -> dict:
     print()
     print(common.markdown_table(headers, rows))
     print()
-    print(
-        "ag-st/s = agent-steps per second (live agents only); dict API and mpe2 step B envs in a loop when B > 1."
-    )
+    print("ag-st/s = agent-steps per second (live agents only); dict API and mpe2 step B envs in a loop when B > 1.")
     checks = []
     res = results["sizes"]
     small, big = (tuple(s) for s in args.ratio_sizes)
@@ -368,9 +360,7 @@ def main(argv: list[str] | None = None) -> dict:
     if ps in res and "array pymunk" in res[ps]["stats"]:
         st = res[ps]["stats"]
         r = st["array pymunk"].step_s / st["array"].step_s
-        checks.append(
-            [label, f"{r:.3g}", f"<= {PYMUNK_TARGET:.3g}", "PASS" if r <= PYMUNK_TARGET else "FAIL"]
-        )
+        checks.append([label, f"{r:.3g}", f"<= {PYMUNK_TARGET:.3g}", "PASS" if r <= PYMUNK_TARGET else "FAIL"])
     else:
         checks.append([label, "skipped (size not measured)", f"<= {PYMUNK_TARGET:.3g}", "skipped"])
     results["checks"] = checks

@@ -96,10 +96,7 @@ def dict_case(n: int, seed: int, path: Path | None = None, commit_every: int = 1
 
         world.hooks[world.hooks.index(hook)] = timed  # the same hook, timed
     rng = np.random.default_rng(seed)
-    pool = [
-        {a: {"motion": rng.uniform(-1, 1, 3).astype(np.float32)} for a in env.possible_agents}
-        for _ in range(POOL)
-    ]
+    pool = [{a: {"motion": rng.uniform(-1, 1, 3).astype(np.float32)} for a in env.possible_agents} for _ in range(POOL)]
     nxt: Callable[[], dict] = itertools.cycle(pool).__next__
     seeds = itertools.count(seed * 1_000_003)
     first = [True]

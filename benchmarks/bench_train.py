@@ -6,13 +6,15 @@ Both paths give SB3 one entry per agent (parameter sharing): the native one step
 ``concat_vec_envs_v1``. Slots = W x 4 entries. Every measurement trains a fresh PPO with the hyperparameters of a
 training config (``--ppo shipped``, the default: ``train/configs/navigation.yaml``, built by the training runner's
 ``make_model``; ``--ppo small``: SB3 defaults except ``n_steps=64``, ``batch_size=512``, ``n_epochs=10``; seed =
-the round) for ``--timesteps`` agent-steps with one thread; the learn() call is timed end to end (process CPU time). A thin
+the round) for ``--timesteps`` agent-steps with one thread; the learn() call is timed end to end (process CPU time). A
+thin
 ``VecEnvWrapper`` times the env's ``reset`` and ``step_wait`` and the model's ``train`` is timed too, which
 gives the env's and the PPO update's shares of the learn() time. Rounds are interleaved (each round trains
 every system at every size in turn) and the table shows medians over rounds; the ratio is of the medians.
 ``ratio ceiling`` is what the native/SuperSuit ratio would be if the native env cost nothing (SuperSuit learn
 time over native learn time minus its env time); ``rollout ratio`` compares the rollout phase alone (learn time
-minus update time, per agent-step), the part of PPO that the env's speed can change. Env-only rows step each vec env with random actions (a pool of
+minus update time, per agent-step), the part of PPO that the env's speed can change. Env-only rows step each vec env
+with random actions (a pool of
 16, cycled) through ``common.measure_interleaved``, counting every entry as one agent-step.
 
 Run: ``.venv/bin/python benchmarks/bench_train.py [--quick] [--rounds 3] [--slots 16 64] [--timesteps N]``
@@ -208,9 +210,7 @@ def machine_lines() -> list[str]:
 def main(argv: list[str] | None = None) -> dict:
     """Measure both paths at every size, print the table, and return the raw results."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument(
-        "--quick", action="store_true", help="one rollout per learn() and short env blocks (smoke)"
-    )
+    ap.add_argument("--quick", action="store_true", help="one rollout per learn() and short env blocks (smoke)")
     ap.add_argument("--rounds", type=int, default=None, help="interleaved rounds (default 3, quick 1)")
     ap.add_argument("--slots", type=int, nargs="+", default=list(SLOTS), help="entries (multiples of 4)")
     ap.add_argument("--timesteps", type=int, default=None, help="agent-steps per learn() (default 32768)")
@@ -232,8 +232,7 @@ def main(argv: list[str] | None = None) -> dict:
         print(line)
     p = ppo_config(args.ppo).ppo
     budget = {
-        s: args.timesteps or (p.n_steps * s if args.quick else max(65_536, 4 * p.n_steps * s))
-        for s in args.slots
+        s: args.timesteps or (p.n_steps * s if args.quick else max(65_536, 4 * p.n_steps * s)) for s in args.slots
     }
     print(
         f"mode: {'quick' if args.quick else 'full'}; PPO ({args.ppo}) MlpPolicy n_steps={p.n_steps} "

@@ -73,11 +73,7 @@ class Sim:
         while time.perf_counter() - t0 < seconds:
             if not env.agents:
                 env.reset()
-            acts = (
-                self.actions
-                if len(env.agents) == len(self.actions)
-                else {a: self.actions[a] for a in env.agents}
-            )
+            acts = self.actions if len(env.agents) == len(self.actions) else {a: self.actions[a] for a in env.agents}
             env.step(acts)
             n += 1
         return n / (time.perf_counter() - t0)
@@ -172,11 +168,7 @@ def main(argv: list[str] | None = None) -> int:
             slow = 1.0 - r["page"] / r["alone"]
             slow_slow = 1.0 - r["slow"] / r["alone"]
             target = TARGET_UPDATES.get(n)
-            ok = (
-                (target is None or r["updates"] >= target)
-                and slow <= MAX_SLOWDOWN
-                and slow_slow <= MAX_SLOWDOWN
-            )
+            ok = (target is None or r["updates"] >= target) and slow <= MAX_SLOWDOWN and slow_slow <= MAX_SLOWDOWN
             rows.append(
                 [
                     f"{n:,}",

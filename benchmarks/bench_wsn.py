@@ -64,15 +64,11 @@ def median_time(fn, repeats: int) -> float:
 def bench_row(n: int, cfg: WsnConfig, grid: ZoneGrid, rng: np.random.Generator, repeats: int) -> tuple:
     """Timings (ms) of the whole evaluation and of its parts for one deployment of ``n`` sensors."""
     land, zone, targets = deployment(n, rng)
-    total = median_time(
-        lambda: evaluate_deployment(land, zone, CENTRES, RADII, PROFILES, cfg, targets), repeats
-    )
+    total = median_time(lambda: evaluate_deployment(land, zone, CENTRES, RADII, PROFILES, cfg, targets), repeats)
     cov = median_time(lambda: cover_pairs(grid, land, cfg.r_s), repeats)
     con = median_time(lambda: connectivity(land, cfg.r_c, CENTRES, cfg.fiedler_max_n), repeats)
     life = median_time(lambda: simulate_lifetime(land, CENTRES, cfg.r_c, cfg.radio), repeats)
-    fid = median_time(
-        lambda: fidelity_per_zone(land, zone, CENTRES, RADII, PROFILES, targets, cfg.knn_k), repeats
-    )
+    fid = median_time(lambda: fidelity_per_zone(land, zone, CENTRES, RADII, PROFILES, targets, cfg.knn_k), repeats)
     res = simulate_lifetime(land, CENTRES, cfg.r_c, cfg.radio)
     return (
         n,

@@ -217,23 +217,15 @@ def plot(traces: list[Trace], path: str) -> None:
 def main(argv: list[str] | None = None) -> int:
     """Run the phases, print the machine line and the table; 0 when every phase passes, else 1."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument(
-        "--quick", action="store_true", help=f"{QUICK_STEPS:,} steps and {QUICK_MISSIONS} missions"
-    )
+    ap.add_argument("--quick", action="store_true", help=f"{QUICK_STEPS:,} steps and {QUICK_MISSIONS} missions")
     ap.add_argument("--steps", type=int, default=None, help=f"navigation steps (default {STEPS:,}; 0 skips)")
-    ap.add_argument(
-        "--missions", type=int, default=None, help=f"uav_release missions (default {MISSIONS}; 0 skips)"
-    )
+    ap.add_argument("--missions", type=int, default=None, help=f"uav_release missions (default {MISSIONS}; 0 skips)")
     ap.add_argument("--agents", type=int, default=100, help="navigation agents (default 100)")
-    ap.add_argument(
-        "--sample-every", type=int, default=None, help="steps between RSS samples (default steps/200)"
-    )
+    ap.add_argument("--sample-every", type=int, default=None, help="steps between RSS samples (default steps/200)")
     ap.add_argument("--zones", default="tiny", help="uav_release zones (default 'tiny')")
     ap.add_argument("--fresh-env", action="store_true", help="a new uav_release env and policy per mission")
     ap.add_argument("--warmup", type=float, default=0.1, help="warm-up fraction of each phase (default 0.1)")
-    ap.add_argument(
-        "--max-growth", type=float, default=5.0, help="PASS threshold on RSS growth, %% (default 5)"
-    )
+    ap.add_argument("--max-growth", type=float, default=5.0, help="PASS threshold on RSS growth, %% (default 5)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--plot", metavar="PATH", default=None, help="write a PNG of RSS over time")
     ap.add_argument("--no-progress", action="store_true", help="no progress bars")

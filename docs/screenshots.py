@@ -38,9 +38,7 @@ def live(
     """Run ``steps`` steps of ``name`` with ``policy`` while the page watches; screenshot the last one."""
     from agentsim_env.policies.registry import resolve_policy
 
-    policy, config = resolve_policy(
-        name, policy, dict(config)
-    )  # as `agentsim view NAME --policy POLICY` does
+    policy, config = resolve_policy(name, policy, dict(config))  # as `agentsim view NAME --policy POLICY` does
     env = agentsim_env.make(name, **config)
     pol = make_policy(name, env, policy)
     viewer = WebViewer(quiet=True, title=f"{name} | {policy}")

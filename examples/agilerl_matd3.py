@@ -153,9 +153,7 @@ def train(frames: int, envs: int, agents: int, max_steps: int, pop_size: int, se
     env.close()
     last = [float(np.asarray(f[-1] if isinstance(f, list | tuple) else f).mean()) for f in fitnesses]
     if not np.all(np.isfinite(last)):
-        raise SystemExit(
-            f"non-finite fitness {last}: episode scores should be finite with ended_agents='stay'"
-        )
+        raise SystemExit(f"non-finite fitness {last}: episode scores should be finite with ended_agents='stay'")
     print(
         f"trained AgileRL MATD3 (population {pop_size}) on navigation ({agents} agents, {envs} copies) for "
         f"{frames} frames in {time.perf_counter() - start:.1f} s; fitnesses {np.round(last, 2).tolist()}; "

@@ -65,9 +65,7 @@ def main() -> None:
     p.add_argument("--agents", type=int, default=4)
     p.add_argument("--max-steps", type=int, default=100, help="episode length")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument(
-        "--out", type=Path, default=Path("outputs/benchmarl"), help="BenchMARL's experiment folder"
-    )
+    p.add_argument("--out", type=Path, default=Path("outputs/benchmarl"), help="BenchMARL's experiment folder")
     a = p.parse_args()
     start = time.perf_counter()
     exp = experiment(a.frames, a.iterations, a.envs, a.agents, a.max_steps, a.seed, a.out)

@@ -90,8 +90,7 @@ def train(frames: int, rollouts: int, agents: int, max_steps: int, seed: int, ou
     device = env.device
 
     memories = {
-        name: RandomMemory(memory_size=rollouts, num_envs=env.num_envs, device=device)
-        for name in env.possible_agents
+        name: RandomMemory(memory_size=rollouts, num_envs=env.num_envs, device=device) for name in env.possible_agents
     }
     models = {
         name: {
@@ -150,9 +149,7 @@ def main() -> None:
     p.add_argument("--agents", type=int, default=4)
     p.add_argument("--max-steps", type=int, default=100, help="episode length")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument(
-        "--out", default="outputs/skrl", help="skrl's experiment folder (TensorBoard, checkpoints)"
-    )
+    p.add_argument("--out", default="outputs/skrl", help="skrl's experiment folder (TensorBoard, checkpoints)")
     a = p.parse_args()
     train(a.frames, min(a.rollouts, a.frames), a.agents, a.max_steps, a.seed, a.out)
 

@@ -87,9 +87,7 @@ def table(rows: list[dict[str, float]], agents: int) -> str:
 def main(argv: list[str] | None = None) -> int:
     """Train, save, evaluate, print the table."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument(
-        "--timesteps", type=int, default=200_000, help="agent-steps to train (all agents of all copies)"
-    )
+    ap.add_argument("--timesteps", type=int, default=200_000, help="agent-steps to train (all agents of all copies)")
     ap.add_argument("--envs", type=int, default=8, help="copies of the ParallelEnv")
     ap.add_argument("--agents", type=int, default=4, help="agents per copy")
     ap.add_argument("--episodes", type=int, default=5, help="evaluation episodes (seeds 1000, 1001, ...)")

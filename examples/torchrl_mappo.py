@@ -59,9 +59,7 @@ def build(n_agents: int, max_steps: int, seed: int) -> tuple[TransformedEnv, Pro
         NormalParamExtractor(),
     )
     actor = ProbabilisticActor(
-        TensorDictModule(
-            actor_net, in_keys=[(GROUP, "observation")], out_keys=[(GROUP, "loc"), (GROUP, "scale")]
-        ),
+        TensorDictModule(actor_net, in_keys=[(GROUP, "observation")], out_keys=[(GROUP, "loc"), (GROUP, "scale")]),
         spec=env.full_action_spec_unbatched,
         in_keys=[(GROUP, "loc"), (GROUP, "scale")],
         out_keys=[env.action_key],
@@ -99,11 +97,7 @@ def train(frames: int, frames_per_batch: int, n_agents: int, max_steps: int, epo
     torch.manual_seed(seed)
     env, actor, loss = build(n_agents, max_steps, seed)
     # the policy needs no environment transform; TorchRL >= 0.14 asks to be told so (a FutureWarning otherwise)
-    quiet = (
-        {"auto_register_policy_transforms": False}
-        if "auto_register_policy_transforms" in COLLECTOR_ARGS
-        else {}
-    )
+    quiet = {"auto_register_policy_transforms": False} if "auto_register_policy_transforms" in COLLECTOR_ARGS else {}
     collector = Collector(env, actor, frames_per_batch=frames_per_batch, total_frames=frames, **quiet)
     minibatch = max(1, frames_per_batch // 4)
     buffer = ReplayBuffer(
@@ -120,9 +114,7 @@ def train(frames: int, frames_per_batch: int, n_agents: int, max_steps: int, epo
             # agent-steps after an agent ended carry no signal: zero advantage, value target = own value
             acted = data[GROUP, "mask"].unsqueeze(-1)
             data[GROUP, "advantage"] = torch.where(acted, data[GROUP, "advantage"], 0.0)
-            data[GROUP, "value_target"] = torch.where(
-                acted, data[GROUP, "value_target"], data[GROUP, "state_value"]
-            )
+            data[GROUP, "value_target"] = torch.where(acted, data[GROUP, "value_target"], data[GROUP, "state_value"])
         buffer.extend(data.reshape(-1))
         for _ in range(epochs):
             for _ in range(frames_per_batch // minibatch):

@@ -97,8 +97,6 @@ def build_policy(
         raise ValueError(f"policy must be {_allowed(scenario)}; got {name!r}")
     if env is None:
         if not hasattr(policy_class(scenario, name), "act_rows"):
-            raise ValueError(
-                f"policy {name!r} of {scenario!r} reads the env it drives: pass env= to build it"
-            )
+            raise ValueError(f"policy {name!r} of {scenario!r} reads the env it drives: pass env= to build it")
         env = PolicyEnv(scenario, config)
     return _rows(make_policy(scenario, env, name), env)

@@ -66,9 +66,7 @@ def model_files(path: str | Path) -> tuple[Path, Path]:
     if p.is_dir():
         zip_path = p / "model.zip"
         if not zip_path.is_file():
-            raise ValueError(
-                f"trained model folder {str(p)!r} has no model.zip (train one with 'agentsim train')"
-            )
+            raise ValueError(f"trained model folder {str(p)!r} has no model.zip (train one with 'agentsim train')")
     elif p.suffix == ".zip":
         if not p.is_file():
             raise ValueError(f"trained model {str(p)!r} does not exist")
@@ -78,18 +76,14 @@ def model_files(path: str | Path) -> tuple[Path, Path]:
     for folder in (zip_path.parent, zip_path.parent.parent):
         if (folder / "config.json").is_file():
             return zip_path, folder / "config.json"
-    raise ValueError(
-        f"no config.json next to {str(zip_path)!r} (it names the scenario the model was trained on)"
-    )
+    raise ValueError(f"no config.json next to {str(zip_path)!r} (it names the scenario the model was trained on)")
 
 
 def _read_config(path: Path) -> dict[str, Any]:
     from agentsim_env.core.files import parse_json, read_regular
 
     try:  # bounded like every config file: size, regular file, duplicate keys, depth
-        meta = parse_json(
-            read_regular(path, MAX_CONFIG_JSON_BYTES, "a model's config.json").decode("utf-8"), 32
-        )
+        meta = parse_json(read_regular(path, MAX_CONFIG_JSON_BYTES, "a model's config.json").decode("utf-8"), 32)
     except (OSError, ValueError) as exc:
         raise ValueError(f"{str(path)!r} is not a readable JSON file: {exc}") from None
     if not isinstance(meta, dict) or not isinstance(meta.get("scenario"), str):
@@ -186,9 +180,7 @@ def load_model(path: str | Path, **kwargs: Any) -> Any:
     try:
         from stable_baselines3 import PPO
     except ImportError as exc:  # pragma: no cover - depends on the installation
-        raise ImportError(
-            'trained policies need stable-baselines3: pip install "agentsim-env[train]"'
-        ) from exc
+        raise ImportError('trained policies need stable-baselines3: pip install "agentsim-env[train]"') from exc
     p = Path(path)
     reason = _damage(p)
     if reason is not None:
@@ -268,9 +260,7 @@ class LearnedPolicy:
             ``{part: (n, *shape)}`` float32 arrays, clipped to [-1, 1] as ``act`` clips them.
         """
         n = int(np.asarray(slots).shape[0])
-        batch = np.concatenate(
-            [np.asarray(obs[k], dtype=np.float32).reshape(n, -1) for k in self._obs_keys], axis=1
-        )
+        batch = np.concatenate([np.asarray(obs[k], dtype=np.float32).reshape(n, -1) for k in self._obs_keys], axis=1)
         actions = self._predict(batch)
         return {k: actions[:, sl].reshape(n, *self._act_shapes[k]) for k, sl in self._act_layout.items()}
 

@@ -47,9 +47,7 @@ class ActionParts:
     def __init__(self, shapes: dict[str, tuple[int, ...]], owner: str = "this baseline") -> None:
         unknown = [k for k in shapes if k not in ("motion", "comm")]
         if unknown:
-            raise ValueError(
-                f"{owner} fills the action parts 'motion' and 'comm' only; this env also has {unknown}"
-            )
+            raise ValueError(f"{owner} fills the action parts 'motion' and 'comm' only; this env also has {unknown}")
         motion = shapes.get("motion")
         if motion not in ((VELOCITY_ACTION_DIM,), (PRIMITIVE_ACTION_DIM,)):
             raise ValueError(f"{owner} needs a 'motion' part of shape (3,) or (8,), got {motion}")
@@ -102,9 +100,7 @@ class ActionParts:
         Returns:
             ``{agent: {"motion": ..., "comm": ...}}`` with exactly the env's parts.
         """
-        return rows_to_dicts(
-            names, self.arrays(np.reshape(velocity, (len(names), VELOCITY_ACTION_DIM)), comm)
-        )
+        return rows_to_dicts(names, self.arrays(np.reshape(velocity, (len(names), VELOCITY_ACTION_DIM)), comm))
 
 
 def rows_to_dicts(names: list[str], parts: dict[str, np.ndarray]) -> dict[str, dict[str, np.ndarray]]:
@@ -114,8 +110,6 @@ def rows_to_dicts(names: list[str], parts: dict[str, np.ndarray]) -> dict[str, d
     return {a: {k: c[i] for k, c in zip(keys, cols)} for i, a in enumerate(names)}
 
 
-def stack_parts(
-    observations: dict[str, Any], names: list[str], keys: tuple[str, ...]
-) -> dict[str, np.ndarray]:
+def stack_parts(observations: dict[str, Any], names: list[str], keys: tuple[str, ...]) -> dict[str, np.ndarray]:
     """The observation parts ``keys`` of agents ``names`` stacked into ``(n, ...)`` arrays."""
     return {k: np.stack([observations[a][k] for a in names]) for k in keys}

@@ -192,9 +192,7 @@ class FloodPolicy(_RelayBase):
         own = np.where(scout[:, None], pos + task[:, 1:3] * self.diag, np.nan)
         # newest report of my own group in the inbox (rows are newest first)
         pay = inbox[:, :, _PAYLOAD0:]
-        ok = (inbox[:, :, 0] > 0.5) & (
-            inbox[:, :, [_KIND_AGENT, _KIND_GROUP, _KIND_OVERLAY]].max(axis=2) > 0.5
-        )
+        ok = (inbox[:, :, 0] > 0.5) & (inbox[:, :, [_KIND_AGENT, _KIND_GROUP, _KIND_OVERLAY]].max(axis=2) > 0.5)
         ok &= (np.abs(pay[:, :, 3] - 1.0) < 1e-3) & (
             np.abs(pay[:, :, 2] - selfp[:, None, 8]) < 0.5 / max(self.n_groups, 2)
         )

@@ -31,10 +31,7 @@ class Trace:
 def random_actions(env: Any, rng: np.random.Generator) -> dict[str, Any]:
     """Uniform actions in [-1, 1] for every live agent (every action part)."""
     return {
-        a: {
-            k: rng.uniform(-1.0, 1.0, sp.shape).astype(np.float32)
-            for k, sp in env.action_space(a).spaces.items()
-        }
+        a: {k: rng.uniform(-1.0, 1.0, sp.shape).astype(np.float32) for k, sp in env.action_space(a).spaces.items()}
         for a in env.agents
     }
 
@@ -71,13 +68,9 @@ def run(env: Any, steps: int, seed: int = 3, hook: Any = None) -> Trace:
         tr.collisions += len(ev.collisions)
         if ev.comms is not None:
             d = ev.comms.bus.delivered
-            tr.bus.append(
-                set(zip(d.sender.tolist(), d.receiver.tolist(), d.kind.tolist(), d.created.tolist()))
-            )
+            tr.bus.append(set(zip(d.sender.tolist(), d.receiver.tolist(), d.kind.tolist(), d.created.tolist())))
             ov = ev.comms.overlay
-            tr.overlay.append(
-                set(zip(ov.receiver.tolist(), ov.origin.tolist(), ov.created.tolist(), ov.hops.tolist()))
-            )
+            tr.overlay.append(set(zip(ov.receiver.tolist(), ov.origin.tolist(), ov.created.tolist(), ov.hops.tolist())))
         co = getattr(env, "coordinator", None)
         if co is not None:
             tr.handovers += int(co.traffic.handover > 0)

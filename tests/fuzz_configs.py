@@ -41,9 +41,7 @@ def real(
     return st.one_of(options)
 
 
-def positive(
-    hi: float, typical: tuple[float, float], edges: tuple[float, ...] = ()
-) -> st.SearchStrategy[float]:
+def positive(hi: float, typical: tuple[float, float], edges: tuple[float, ...] = ()) -> st.SearchStrategy[float]:
     """A float in ``(0, hi]`` with tiny edge values."""
     return real(0.0, hi, lo_open=True, typical=typical, edges=(1e-300, 1e-9, 1e-3, *edges))
 

@@ -272,9 +272,7 @@ def test_spaces_are_built_once() -> None:
 
 
 def test_numpy_scalars_are_numbers() -> None:
-    e = agentsim_env.make(
-        "navigation", n_agents=np.int64(3), dt=np.float32(0.1), body={"radius": np.float64(0.4)}
-    )
+    e = agentsim_env.make("navigation", n_agents=np.int64(3), dt=np.float32(0.1), body={"radius": np.float64(0.4)})
     c = e.scenario.config
     assert type(c.n_agents) is int and type(c.dt) is float and type(c.body.radius) is float
     use(e)

@@ -33,9 +33,7 @@ def test_bytes_through_the_exchange_grow_with_the_shards() -> None:
     assert set(by_k) == {2, 3}
     for b in by_k.values():
         assert b["total"] > 0 and b["bus"] > 0 and b["groups"] > 0
-        assert (
-            b["total"] >= sum(b[f] for f in ("halo", "handover", "offline", "bus", "positions", "groups")) - 1
-        )
+        assert b["total"] >= sum(b[f] for f in ("halo", "handover", "offline", "bus", "positions", "groups")) - 1
     assert by_k[3]["groups"] > by_k[2]["groups"]  # every shard posts and gets every group's sums
     table = bd.hub_table(by_k, 2000)
     assert table.count("\n") == 3

@@ -207,9 +207,7 @@ def test_perf_benchmark_quick_run_prints_every_row_with_target_and_result(tmp_pa
     assert all(_number_or_skipped(c) for r in scale_rows for c in r[1:])
     assert plot.stat().st_size > 1000
     # the thread curve: one thread first (speed-up 1), then as many counts as the machine has cores for
-    assert (
-        thr_head == ["threads", "ms/step", "speed-up"] and thr_rows[0][0] == "1" and thr_rows[0][2] == "1.00"
-    )
+    assert thr_head == ["threads", "ms/step", "speed-up"] and thr_rows[0][0] == "1" and thr_rows[0][2] == "1.00"
     assert [int(r[0]) for r in thr_rows] == [k for k in (1, 2, 4, 8, 16) if k <= available_cores()]
     assert thread_plot.stat().st_size > 1000
 
@@ -241,9 +239,7 @@ def test_compose_rewards_kernel_equals_numpy_reference(seed: int) -> None:
         "messages_sent": rng.integers(0, 3, s) if rng.random() < 0.5 else None,
     }
     task = rng.normal(size=s)
-    np.testing.assert_array_equal(
-        compose_rewards(cfg, task, **kw), compose_rewards_reference(cfg, task, **kw)
-    )
+    np.testing.assert_array_equal(compose_rewards(cfg, task, **kw), compose_rewards_reference(cfg, task, **kw))
 
 
 @given(st.integers(0, 2**32 - 1))
@@ -294,9 +290,7 @@ def test_navigation_observe_kernel_equals_numpy_statement() -> None:
     expected = {
         "self": np.clip(selfp, -1, 1).astype(np.float32),
         "lidar": np.stack([scan.distance, scan.hit_kind / 3.0], axis=-1).astype(np.float32),
-        "task": np.clip(np.column_stack([d / diag, np.linalg.norm(d, axis=1) / diag]), -1, 1).astype(
-            np.float32
-        ),
+        "task": np.clip(np.column_stack([d / diag, np.linalg.norm(d, axis=1) / diag]), -1, 1).astype(np.float32),
     }
     got = sc.observe(world)
     assert list(got) == list(expected)
@@ -311,9 +305,7 @@ def test_soak_tiny_run_prints_its_table_and_plot(tmp_path: Path, capsys: pytest.
     import soak
 
     png = tmp_path / "rss.png"
-    rc = soak.main(
-        ["--steps", "2000", "--missions", "2", "--agents", "20", "--no-progress", "--plot", str(png)]
-    )
+    rc = soak.main(["--steps", "2000", "--missions", "2", "--agents", "20", "--no-progress", "--plot", str(png)])
     out = capsys.readouterr().out
     assert rc in (0, 1)  # growth over so short a run is noise: only the output is checked here
     assert out.startswith("machine: ") and png.stat().st_size > 0

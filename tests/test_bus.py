@@ -114,9 +114,7 @@ def test_latency_exact(latency: int) -> None:
 def test_inbox_order_newest_first_and_overflow() -> None:
     ib = Inbox(3, 4, 1)
     # Several messages to one receiver in one call keep their order: the last is the newest (row 0).
-    ib.push(
-        np.array([1, 0, 1, 1]), AGENT, 2, 0, np.array([0, 0, 1, 2]), np.array([[0.0], [9.0], [1.0], [2.0]])
-    )
+    ib.push(np.array([1, 0, 1, 1]), AGENT, 2, 0, np.array([0, 0, 1, 2]), np.array([[0.0], [9.0], [1.0], [2.0]]))
     assert ib.payload[1, :3, 0].tolist() == [2, 1, 0] and ib.valid[1].tolist() == [True, True, True, False]
     assert ib.payload[0, 0, 0] == 9 and ib.valid[0].sum() == 1
     ib.push(np.array([1, 1]), AGENT, 2, 0, 3, np.array([[3.0], [4.0]]))
@@ -385,9 +383,7 @@ def test_bus_invariants(sc) -> None:  # type: ignore[no-untyped-def]
         assert max(accepted.values(), default=0) <= ch.bandwidth
     # every (message, receiver) pair ends in exactly one delivered or dropped row
     rows = defaultdict(list)
-    for m, r in zip(
-        np.concatenate([dl.msg, dr.msg]), np.concatenate([dl.receiver, dr.receiver]), strict=True
-    ):
+    for m, r in zip(np.concatenate([dl.msg, dr.msg]), np.concatenate([dl.receiver, dr.receiver]), strict=True):
         rows[int(m)].append(int(r))
     bw_dropped = set(dr.msg[dr.reason == DROP_BANDWIDTH].tolist())
     for i in range(len(se)):
@@ -405,10 +401,7 @@ def test_bus_invariants(sc) -> None:  # type: ignore[no-untyped-def]
         if why == DROP_OFFLINE:
             assert not online_at[int(t)][r]
         elif why == DROP_RANGE:
-            assert (
-                ch.max_range is not None
-                and np.linalg.norm(pos_at[int(t)][snd] - pos_at[int(t)][r]) > ch.max_range
-            )
+            assert ch.max_range is not None and np.linalg.norm(pos_at[int(t)][snd] - pos_at[int(t)][r]) > ch.max_range
         elif why == DROP_LOSS:
             assert ch.loss > 0
     if ch.loss == 1.0:

@@ -71,9 +71,7 @@ def _step_traffic(rng: np.random.Generator, b: int, n: int, grp: np.ndarray, ste
             w = int(rng.integers(0, b))
             g = grp[w * n : (w + 1) * n]
             if (g >= 0).any():
-                calls.append(
-                    (GROUP, np.array([-1]), np.array([int(rng.choice(g[g >= 0]))]), np.array([w]), pay[:1])
-                )
+                calls.append((GROUP, np.array([-1]), np.array([int(rng.choice(g[g >= 0]))]), np.array([w]), pay[:1]))
     return calls
 
 
@@ -131,9 +129,7 @@ def run_split(seed: int, b: int, n: int, k: int, channel: ChannelConfig, steps: 
                 rows = due[0][q].concat([d[q] for d in due], 2)
                 mine = owner == q
                 evs.append(
-                    bus.deliver_rows(
-                        rows, step, pos, online, grp, mine=mine, seen=_seen(pos, mine, channel.max_range)
-                    )
+                    bus.deliver_rows(rows, step, pos, online, grp, mine=mine, seen=_seen(pos, mine, channel.max_range))
                 )
         for log, a, c in zip(("sent", "delivered", "dropped"), _events([ev_one]), _events(evs)):
             assert a == c, f"step {step}: {log} differs"
@@ -272,15 +268,11 @@ def test_keyed_draws_are_a_function_of_the_pair() -> None:
             "kind": kind,
         }
         a.update(change)
-        return keyed_draws(
-            rep, a["recv"], a["keys"], a["world"], n, a["created"], a["snd"], a["seq"], a["kind"]
-        )
+        return keyed_draws(rep, a["recv"], a["keys"], a["world"], n, a["created"], a["snd"], a["seq"], a["kind"])
 
     u = draw()
     perm = rng.permutation(q)  # a pair's value does not depend on its place in the batch
-    np.testing.assert_array_equal(
-        keyed_draws(perm, recv[perm], keys, world, n, created, snd, seq, kind), u[perm]
-    )
+    np.testing.assert_array_equal(keyed_draws(perm, recv[perm], keys, world, n, created, snd, seq, kind), u[perm])
     assert ((u >= 0) & (u < 1)).all() and abs(u.mean() - 0.5) < 0.03
     # the world's place in the batch does not matter (slots are indices within the world), its key does
     shifted = draw(

@@ -81,9 +81,7 @@ def test_out_under_a_file_is_rejected_before_any_rollout(
     assert "--out" in err and str(out) in err and "Not a directory" in err
 
 
-def test_out_that_is_a_file_is_rejected(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str], no_rollout: None
-) -> None:
+def test_out_that_is_a_file_is_rejected(tmp_path: Path, capsys: pytest.CaptureFixture[str], no_rollout: None) -> None:
     blocker = tmp_path / "a_file"
     blocker.write_text("x")
     assert main(["run", "navigation", "--out", str(blocker), "--quiet"]) == 2
@@ -92,9 +90,7 @@ def test_out_that_is_a_file_is_rejected(
 
 
 @pytest.mark.skipif(not hasattr(os, "geteuid") or os.geteuid() == 0, reason="root writes anywhere")
-def test_read_only_out_is_rejected(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str], no_rollout: None
-) -> None:
+def test_read_only_out_is_rejected(tmp_path: Path, capsys: pytest.CaptureFixture[str], no_rollout: None) -> None:
     ro = tmp_path / "ro"
     ro.mkdir(mode=0o500)
     try:
@@ -223,9 +219,7 @@ def test_parse_set_by_field_type(cls: type, pairs: list[str], expected: dict[str
         (NAV, ["=3"], ["KEY=VALUE"]),
     ],
 )
-def test_parse_set_errors_name_the_key_and_allowed_values(
-    cls: type, pairs: list[str], needles: list[str]
-) -> None:
+def test_parse_set_errors_name_the_key_and_allowed_values(cls: type, pairs: list[str], needles: list[str]) -> None:
     with pytest.raises(ValueError) as exc:
         parse_set(cls, pairs)
     msg = str(exc.value)
@@ -264,16 +258,11 @@ def test_run_writes_one_png_per_config(tmp_path: Path, capsys: pytest.CaptureFix
     assert config_tag({}) == ""
 
 
-def test_run_without_set_has_no_hash_and_names_the_policy(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
+def test_run_without_set_has_no_hash_and_names_the_policy(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     real = agentsim_env.make  # a tiny default config, so that the run without --set stays fast
     monkeypatch.setattr(agentsim_env, "make", lambda name, **kw: real(name, n_agents=2, max_steps=10, **kw))
     out = tmp_path / "png"
-    assert (
-        main(["run", "rendezvous", "--policy", "random", "--episodes", "2", "--out", str(out), "--quiet"])
-        == 0
-    )
+    assert main(["run", "rendezvous", "--policy", "random", "--episodes", "2", "--out", str(out), "--quiet"]) == 0
     assert [p.name for p in out.iterdir()] == ["rendezvous_random_seed0.png"]
 
 

@@ -87,10 +87,7 @@ def test_collision_env_message_names_object() -> None:
     rows = _rows(obs, "agent_2")
     env_rows = rows[rows[:, KIND_COL[ENV]] == 1]
     assert len(env_rows) == 1
-    assert (
-        env_rows[0, FEATURES_PER_MESSAGE] == ENV_COLLISION_OBJECT
-        and env_rows[0, FEATURES_PER_MESSAGE + 1] == oid
-    )
+    assert env_rows[0, FEATURES_PER_MESSAGE] == ENV_COLLISION_OBJECT and env_rows[0, FEATURES_PER_MESSAGE + 1] == oid
 
 
 def test_heartbeat_timeouts_on_dead_channel() -> None:

@@ -312,9 +312,7 @@ def test_a_local_cluster_off_loopback_warns_naming_what_listens(caplog: pytest.L
 
     flag = constants.ENABLE_RAY_CLUSTER
     for node, warned in (("127.0.0.1", False), ("192.0.2.7", True)):
-        fake = SimpleNamespace(
-            init=init, util=SimpleNamespace(get_node_ip_address=lambda n=node: n), __version__="9.9"
-        )
+        fake = SimpleNamespace(init=init, util=SimpleNamespace(get_node_ip_address=lambda n=node: n), __version__="9.9")
         caplog.clear()
         with caplog.at_level(logging.WARNING, logger="agentsim_env.distributed"):
             assert start_local_cluster(fake, num_cpus=2) == node
@@ -400,9 +398,7 @@ ROLLOUTS = [
 
 @pytest.mark.parametrize("shards", [1, 2, 4])
 @pytest.mark.parametrize(("name", "policy", "config"), ROLLOUTS, ids=[f"{n}-{p}" for n, p, _ in ROLLOUTS])
-def test_a_rollout_inside_the_shards_equals_one_process(
-    name: str, policy: str, config: dict, shards: int
-) -> None:
+def test_a_rollout_inside_the_shards_equals_one_process(name: str, policy: str, config: dict, shards: int) -> None:
     ref = agentsim_env.make(name, **config).rollout(policy, 120, seed=5)
     env = make_sharded(name, shards=shards, backend="local", **config)
     try:
@@ -458,8 +454,6 @@ def test_a_policy_object_is_copied_to_every_shard() -> None:
     ref = agentsim_env.make("relay", **cfg).rollout("flood", 80, seed=2)
     env = make_sharded("relay", shards=2, backend="local", **cfg)
     policy = make_policy("relay", env, "flood")
-    got = env.rollout(
-        policy, 80, seed=2
-    )  # each shard acts with its own copy (its state apart from the other's)
+    got = env.rollout(policy, 80, seed=2)  # each shard acts with its own copy (its state apart from the other's)
     env.close()
     assert np.array_equal(got.returns, ref.returns) and got.events == ref.events

@@ -25,9 +25,7 @@ D = 2
 HALO = 12.0
 
 
-def _links(
-    pos: np.ndarray, online: np.ndarray, reach: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _links(pos: np.ndarray, online: np.ndarray, reach: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The range graph over the slots flagged in ``online`` (a part's known slots: own and ghosts)."""
     s = pos.shape[0]
     i, j = np.triu_indices(s, 1)
@@ -73,10 +71,7 @@ class _Run:
         self.pos[:, :2] += self.rng.normal(0.0, sigma, (self.n, 2))
         self.pos[:, 0] = np.clip(self.pos[:, 0], 0.0, self.side)
         new = self.strips.owner_of(self.pos[:, 0])
-        moved = [
-            part.take_leaving(np.flatnonzero((self.owner == p) & (new != p)))
-            for p, part in enumerate(self.parts)
-        ]
+        moved = [part.take_leaving(np.flatnonzero((self.owner == p) & (new != p))) for p, part in enumerate(self.parts)]
         for p, part in enumerate(self.parts):
             part.add(FloodEntries.concat([_where(e, new[e.slot] == p) for e in moved], D))
         self.owner = new
@@ -88,9 +83,7 @@ class _Run:
         ghosts = [self.strips.ghosts(self.pos[:, 0], slots, p) for p in range(self.k)]
         # the exchange before the hop: each part's frontier entries at its neighbours' ghosts
         received = [
-            FloodEntries.concat(
-                [q.frontier_of(g[self.owner[g] == i]) for i, q in enumerate(self.parts) if i != p], D
-            )
+            FloodEntries.concat([q.frontier_of(g[self.owner[g] == i]) for i, q in enumerate(self.parts) if i != p], D)
             for p, g in enumerate(ghosts)
         ]
         got = []

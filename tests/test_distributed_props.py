@@ -23,9 +23,7 @@ from agentsim_env.distributed.partition import Strips
     k=st.integers(1, 6),
     halo=st.floats(0.5, 15.0),
 )
-def test_every_agent_within_the_halo_of_an_own_agent_is_a_ghost(
-    seed: int, n: int, k: int, halo: float
-) -> None:
+def test_every_agent_within_the_halo_of_an_own_agent_is_a_ghost(seed: int, n: int, k: int, halo: float) -> None:
     side = max(100.0, k * halo)
     strips = Strips.build((0.0, side, 0.0, side), k, halo)
     rng = np.random.default_rng(seed)

@@ -42,8 +42,8 @@ def test_every_port_of_the_local_cluster_is_on_loopback(running: tuple[Any, list
     _, opened = running
     names = {s.process for s in opened}
     # the walk found every kind of Ray process that listens, and the driver (else the check would prove nothing)
-    assert {"gcs_server", "raylet", "ray::RuntimeEnvAgent", "ray::Shard", "ray::ExchangeActor"} <= names, (
-        sorted(map(str, opened))
+    assert {"gcs_server", "raylet", "ray::RuntimeEnvAgent", "ray::Shard", "ray::ExchangeActor"} <= names, sorted(
+        map(str, opened)
     )
     assert any(s.pid == os.getpid() for s in opened), sorted(map(str, opened))
     assert sum(s.process == "ray::Shard" for s in opened) == 2  # one worker per shard

@@ -91,9 +91,7 @@ def test_every_port_of_the_two_node_cluster_is_on_loopback(two_nodes: TwoNodes) 
         env.close()
     names = [s.process for s in opened]
     # both nodes' servers, the head's GCS, the shard workers and the driver (else the check proves nothing)
-    assert {"gcs_server", "raylet", "ray::RuntimeEnvAgent", "ray::Shard"} <= set(names), sorted(
-        map(str, opened)
-    )
+    assert {"gcs_server", "raylet", "ray::RuntimeEnvAgent", "ray::Shard"} <= set(names), sorted(map(str, opened))
     assert len({s.pid for s in opened if s.process == "raylet"}) == 2, sorted(map(str, opened))
     assert names.count("ray::Shard") == 2 and any(s.pid == os.getpid() for s in opened)
     exposed = [str(s) for s in opened if not s.loopback]
@@ -119,9 +117,7 @@ def test_a_dead_node_ends_only_its_shards_agents(two_nodes: TwoNodes) -> None:  
         t0 = time.perf_counter()
         _, _, term, _, _ = env.step(random_actions(env, rng))
         took = time.perf_counter() - t0
-        assert took < timeout_s + 10.0, (
-            f"the step waited {took:.1f} s for a dead node (deadline {timeout_s} s)"
-        )
+        assert took < timeout_s + 10.0, f"the step waited {took:.1f} s for a dead node (deadline {timeout_s} s)"
         ended = {a for a, t in term.items() if t}
         assert ended and len(ended) < 200, len(ended)
         assert not env.shards[doomed_shard].alive and env.shards[1 - doomed_shard].alive

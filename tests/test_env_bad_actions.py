@@ -129,9 +129,7 @@ TENSOR_FORMS = {
     "float16": lambda v: _tensor(v, dtype=torch.float16),
     "bfloat16": lambda v: _tensor(v, dtype=torch.float32).to(torch.bfloat16),
     "int64": lambda v: _tensor(np.round(v), dtype=torch.int64),
-    "requires_grad view": lambda v: (
-        _tensor(np.tile(v, 2), dtype=torch.float32, requires_grad=True)[::2] * 1.0
-    ),
+    "requires_grad view": lambda v: _tensor(np.tile(v, 2), dtype=torch.float32, requires_grad=True)[::2] * 1.0,
     "device": _DeviceTensor,
 }
 

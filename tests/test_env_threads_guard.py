@@ -111,9 +111,7 @@ def test_close_during_a_step_is_refused() -> None:
     worker.start()
     try:
         assert inside.wait(10.0)
-        with pytest.raises(
-            RuntimeError, match=r"close\(\) called from thread 'MainThread' while step\(\) runs"
-        ):
+        with pytest.raises(RuntimeError, match=r"close\(\) called from thread 'MainThread' while step\(\) runs"):
             env.close()
     finally:
         release.set()

@@ -113,9 +113,7 @@ def test_runs_csv_has_one_row_per_run_with_every_metric(evaluated: tuple[Path, i
         assert math.isfinite(float(r["score"]))
         assert float(r["score"]) == pytest.approx(composite_score(r), abs=1e-8)
         if r["strategy"] != TELEPORT:
-            assert (
-                float(r["energy_j"]) > 0 and float(r["path_length_m"]) > 0 and float(r["mission_time_s"]) > 0
-            )
+            assert float(r["energy_j"]) > 0 and float(r["path_length_m"]) > 0 and float(r["mission_time_s"]) > 0
             assert float(r["sensors_released"]) >= 1 and float(r["messages_sent"]) > 0
             assert float(r["completed"]) == 1.0 and float(r["collisions"]) == 0.0
     ref = [r for r in rows if r["strategy"] == TELEPORT]
@@ -178,9 +176,7 @@ def test_bad_input_exits_2_naming_the_value(
     assert not out.exists()
 
 
-def test_bad_strategy_message_lists_the_allowed_names(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
-) -> None:
+def test_bad_strategy_message_lists_the_allowed_names(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["evaluate", "--strategies", "B9_nope", "--out", str(tmp_path / "o"), "--quiet"]) == 2
     err = capsys.readouterr().err
     assert "B0_uniform" in err and "B8_teleport" in err and "'all'" in err
@@ -188,13 +184,9 @@ def test_bad_strategy_message_lists_the_allowed_names(
 
 def test_bad_zone_file_exits_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     bad = tmp_path / "zones_bad.json"
-    bad.write_text(
-        json.dumps({"map_size": [100, 100], "zones": [{"centre": [50, 50], "radius": 80, "n_sensors": 5}]})
-    )
+    bad.write_text(json.dumps({"map_size": [100, 100], "zones": [{"centre": [50, 50], "radius": 80, "n_sensors": 5}]}))
     out = tmp_path / "ev"
-    assert (
-        main(["evaluate", "--zones", str(bad), "--strategies", "B2_rings", "--out", str(out), "--quiet"]) == 2
-    )
+    assert main(["evaluate", "--zones", str(bad), "--strategies", "B2_rings", "--out", str(out), "--quiet"]) == 2
     err = capsys.readouterr().err
     assert str(bad) in err and "radius" in err
     assert not out.exists()
@@ -344,9 +336,7 @@ def test_ranking_order_and_table() -> None:
     ]
     ranked = rank_strategies(rows)
     assert [s.strategy for s in ranked] == ["best", "aa_tie", "mid", "worst"]
-    assert ranked[-1].score_mean == pytest.approx(0.4) and ranked[-1].score_std == pytest.approx(
-        math.sqrt(0.02)
-    )
+    assert ranked[-1].score_mean == pytest.approx(0.4) and ranked[-1].score_std == pytest.approx(math.sqrt(0.02))
     table = ranking_table(ranked).splitlines()
     assert len(table) == 2 + 4
     assert table[2].startswith("| 1 | `best` | 1.000 ± 0.000 |")

@@ -44,13 +44,9 @@ def test_fleet_too_small_names_the_config_keys(tmp_path: Path, capsys: pytest.Ca
     assert not out.exists()
 
 
-def test_missing_model_path_says_it_does_not_exist(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
-) -> None:
+def test_missing_model_path_says_it_does_not_exist(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     missing = tmp_path / "nonexistent" / "foo"
-    assert (
-        main(["evaluate", "--strategies", "all", str(missing), "--out", str(tmp_path / "ev"), "--quiet"]) == 2
-    )
+    assert main(["evaluate", "--strategies", "all", str(missing), "--out", str(tmp_path / "ev"), "--quiet"]) == 2
     err = _one_error_line(capsys)
     assert "does not exist" in err and "not a folder" not in err
     a_file = tmp_path / "model.zip"

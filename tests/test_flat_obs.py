@@ -13,14 +13,10 @@ from agentsim_env.scenarios.base import INBOX_CLIP, flat_parts, reset_worlds, ru
 from agentsim_env.scenarios.registry import scenario_class
 
 CASES = [(name, cfg) for name in agentsim_env.list_scenarios() for cfg in scenario_class(name).test_configs]
-CASES += [
-    ("navigation", {"n_agents": 12, "n_groups": 3, "gnss": {}, "comms": {"loss": 0.2, "heartbeat_period": 3}})
-]
+CASES += [("navigation", {"n_agents": 12, "n_groups": 3, "gnss": {}, "comms": {"loss": 0.2, "heartbeat_period": 3}})]
 
 
-def _flat_and_parts(
-    name: str, cfg: dict[str, Any], steps: int, seed: int = 0
-) -> list[tuple[np.ndarray, ...]]:
+def _flat_and_parts(name: str, cfg: dict[str, Any], steps: int, seed: int = 0) -> list[tuple[np.ndarray, ...]]:
     scenario = agentsim_env.make(name, **cfg).scenario
     world = scenario.build(2)
     reset_worlds(scenario, world, [0, 1], [np.random.SeedSequence(seed), np.random.SeedSequence(seed + 1)])

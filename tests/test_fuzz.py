@@ -172,9 +172,7 @@ def check_box(box: spaces.Box, x: Any, where: str) -> None:
     out = (x < box.low) | (x > box.high)
     if out.any():
         idx = np.argwhere(out)[:4]
-        vals = [
-            (i.tolist(), float(x[tuple(i)]), float(box.low[tuple(i)]), float(box.high[tuple(i)])) for i in idx
-        ]
+        vals = [(i.tolist(), float(x[tuple(i)]), float(box.low[tuple(i)]), float(box.high[tuple(i)])) for i in idx]
         raise AssertionError(f"{where}: outside the space (index, value, low, high): {vals}")
 
 

@@ -22,9 +22,7 @@ def tick(ctrl, bus, step, online):  # type: ignore[no-untyped-def]
     """The groups stage, then what the comms stage does with its requests: heartbeats over the bus."""
     timed, ping = ctrl.tick(step, online, bus.take_answers())
     if ping.size:
-        bus.send(
-            HEARTBEAT, np.full(ping.size, -1), ping, np.zeros((ping.size, bus.payload_dim), np.float32), step
-        )
+        bus.send(HEARTBEAT, np.full(ping.size, -1), ping, np.zeros((ping.size, bus.payload_dim), np.float32), step)
     return timed
 
 

@@ -16,9 +16,7 @@ def test_keyed_draws_are_pure_functions_of_their_words() -> None:
     a = keyed_uniform(7, 3, slots)
     b = keyed_uniform(7, 3, slots[::-1])[::-1]  # another order, the same numbers
     np.testing.assert_array_equal(a, b)
-    np.testing.assert_array_equal(
-        a[250:300], keyed_uniform(7, 3, slots[250:300])
-    )  # a subset draws its own rows
+    np.testing.assert_array_equal(a[250:300], keyed_uniform(7, 3, slots[250:300]))  # a subset draws its own rows
     assert keyed_uniform(7, 3, 5) == a[5]
     assert not np.array_equal(a, keyed_uniform(8, 3, slots))  # the key matters
     assert not np.array_equal(a, keyed_uniform(7, 4, slots))  # and every word
@@ -44,9 +42,7 @@ def test_keyed_words_must_be_integers() -> None:
 
 
 def _gnss_world(n_agents: int = 6):
-    scenario = agentsim_env.make(
-        "navigation", n_agents=n_agents, gnss={"sigma_h": 2.0, "sigma_v": 1.0}
-    ).scenario
+    scenario = agentsim_env.make("navigation", n_agents=n_agents, gnss={"sigma_h": 2.0, "sigma_v": 1.0}).scenario
     world = scenario.build(1)
     reset_worlds(scenario, world, [0], [np.random.SeedSequence(11)])
     return scenario, world

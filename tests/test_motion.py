@@ -59,9 +59,7 @@ class World:
     online: np.ndarray
 
     @classmethod
-    def make(
-        cls, n: int, pos: np.ndarray | None = None, max_speed: float = 10.0, max_accel: float = 5.0
-    ) -> World:
+    def make(cls, n: int, pos: np.ndarray | None = None, max_speed: float = 10.0, max_accel: float = 5.0) -> World:
         return cls(
             pos=np.zeros((n, 3)) if pos is None else np.array(pos, dtype=np.float64),
             vel=np.zeros((n, 3)),
@@ -73,10 +71,7 @@ class World:
 
     def copy(self) -> World:
         return World(
-            *(
-                a.copy()
-                for a in (self.pos, self.vel, self.heading, self.max_speed, self.max_accel, self.online)
-            )
+            *(a.copy() for a in (self.pos, self.vel, self.heading, self.max_speed, self.max_accel, self.online))
         )
 
     def step(self, ms: MotionState, fn=integrate) -> None:
@@ -119,9 +114,7 @@ def test_linear_closed_form_then_hold():
     d = np.array([[1.0, 0, 0], [0, 3, 4], [1, 1, 0]])
     speed, dur = np.array([2.0, 5.0, 30.0]), np.array([1.0, 2.5, 10.0])
     set_linear(ms, np.arange(3), w.pos, d, speed, dur)
-    v = (
-        d / np.linalg.norm(d, axis=1)[:, None] * np.minimum(speed, 10.0)[:, None]
-    )  # slot 2 clipped to max_speed
+    v = d / np.linalg.norm(d, axis=1)[:, None] * np.minimum(speed, 10.0)[:, None]  # slot 2 clipped to max_speed
     for n in range(1, 121):
         w.step(ms)
         t = n * DT
@@ -326,9 +319,7 @@ def test_kernel_matches_reference(seed: int):
 def test_selector_bins_and_keep_continues_circle():
     for c in range(6):
         ms = MotionState.create(1)
-        sel = decode_primitive(
-            ms, [0], np.r_[selector_action(c), np.zeros(7)][None], np.zeros((1, 3)), LIMITS
-        )
+        sel = decode_primitive(ms, [0], np.r_[selector_action(c), np.zeros(7)][None], np.zeros((1, 3)), LIMITS)
         assert sel[0] == c
     expect = [SEL_KEEP, SEL_VELOCITY, SEL_LINEAR, SEL_CIRCULAR, SEL_PARABOLIC, SEL_GOTO]
     kinds = [HOLD, VELOCITY, LINEAR, CIRCULAR, PARABOLIC, PATH]

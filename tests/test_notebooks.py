@@ -151,7 +151,5 @@ def test_notebook_runs(path: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPat
     print(f"{path.name}: {elapsed:.1f} s")
     assert elapsed < NOTEBOOK_BUDGET_S, f"{path.name} took {elapsed:.0f} s (budget {NOTEBOOK_BUDGET_S} s)"
     assert not list(work.iterdir()), f"{path.name} wrote into its working folder: {list(work.iterdir())}"
-    images = sum(
-        "image/png" in out.get("data", {}) for c in nb.cells if c.cell_type == "code" for out in c.outputs
-    )
+    images = sum("image/png" in out.get("data", {}) for c in nb.cells if c.cell_type == "code" for out in c.outputs)
     assert images, f"{path.name} displayed no figure"

@@ -141,9 +141,7 @@ def test_the_action_segment_is_its_owners_only_and_gone_after_close() -> None:
 
 
 @pytest.mark.parametrize(("region", "n_shards", "n_slots"), [(2, 2, 10), (-1, 2, 10), (0, 3, 10), (0, 2, 11)])
-def test_a_reader_refuses_a_region_the_action_segment_does_not_hold(
-    region: int, n_shards: int, n_slots: int
-) -> None:
+def test_a_reader_refuses_a_region_the_action_segment_does_not_hold(region: int, n_shards: int, n_slots: int) -> None:
     seg = ActionSegment(2, 10, LAYOUT)
     try:
         with pytest.raises(ValueError, match="action segment"):

@@ -71,8 +71,7 @@ def _start_random(ov: Overlay, rng: np.random.Generator, online: np.ndarray, k: 
     ids = ov.start(origin, limit, payload, step)
     assert len(set(ids.tolist())) == k
     return {
-        int(f): (int(o), int(h), step, payload[q])
-        for q, (f, o, h) in enumerate(zip(ids, origin, limit, strict=True))
+        int(f): (int(o), int(h), step, payload[q]) for q, (f, o, h) in enumerate(zip(ids, origin, limit, strict=True))
     }
 
 
@@ -318,14 +317,10 @@ def _stack_graph(n: int) -> RangeGraph:
 
 
 def _grid(pos: np.ndarray, world: np.ndarray, online: np.ndarray, cell: float = 5.0) -> Grid:
-    return build_grid(
-        GridSpec.for_bounds((0.0, 200.0, 0.0, 200.0), cell, int(world.max()) + 1), pos, world, online
-    )
+    return build_grid(GridSpec.for_bounds((0.0, 200.0, 0.0, 200.0), cell, int(world.max()) + 1), pos, world, online)
 
 
-def _flood_over_graph(
-    ov: Overlay, graph: RangeGraph, pos, online, world, grid: Grid, calls: int
-) -> list[Deliveries]:
+def _flood_over_graph(ov: Overlay, graph: RangeGraph, pos, online, world, grid: Grid, calls: int) -> list[Deliveries]:
     """``calls`` steps of the comms stack's overlay path: grid scan, then one hop over its links."""
     out = []
     for _ in range(calls):
@@ -579,15 +574,11 @@ def test_deliveries_read_late_keep_their_values_after_flood_rows_are_reused(thre
             ov.threads = RowThreads(threads)
             kept = []
             for step in range(12):
-                if (
-                    step % 3 != 1
-                ):  # some steps start no flood: older unread deliveries must keep their rows too
+                if step % 3 != 1:  # some steps start no flood: older unread deliveries must keep their rows too
                     _start_random(ov, rng, online, int(rng.integers(1, 30)), step)
                 d = ov.advance(pos, online, world, _pairs(pos, world, 25.0), step)
                 kept.append((d, (d.origin.copy(), d.created.copy(), d.payload.copy()) if read_now else None))
-            return [
-                (d.receiver, d.flood, d.hops, *(now or (d.origin, d.created, d.payload))) for d, now in kept
-            ]
+            return [(d.receiver, d.flood, d.hops, *(now or (d.origin, d.created, d.payload))) for d, now in kept]
 
     now, late = run(True), run(False)
     assert sum(len(x[0]) for x in now) > 100 and any(len(set(x[1].tolist())) < len(x[1]) for x in now)

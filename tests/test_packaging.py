@@ -86,9 +86,7 @@ def _package_folders() -> set[str]:
 
 def test_pyproject_lists_every_package() -> None:
     tomllib = pytest.importorskip("tomllib")
-    setuptools_cfg = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))["tool"][
-        "setuptools"
-    ]
+    setuptools_cfg = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))["tool"]["setuptools"]
     assert setuptools_cfg["package-dir"] == {v: k for k, v in MOVED.items()}
     listed = set(setuptools_cfg["packages"])
     assert listed == _package_folders(), "add the new package folders to [tool.setuptools] packages"

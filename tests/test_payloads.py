@@ -39,9 +39,7 @@ def _drop_all(ps: PayloadSet, wind: WindModel | None, rng: np.random.Generator, 
     return steps
 
 
-def _still_wind(
-    speed: float, direction: float = 0.0, profile: str = "uniform", sigma: float = 0.0
-) -> WindModel:
+def _still_wind(speed: float, direction: float = 0.0, profile: str = "uniform", sigma: float = 0.0) -> WindModel:
     cfg = WindConfig(mean_speed=speed, direction=direction, profile=profile, gust_sigma_frac=sigma)
     return WindModel(cfg, np.random.default_rng(0))
 
@@ -85,9 +83,7 @@ def test_vertical_drag_fall_time() -> None:
     np.testing.assert_allclose(fall_time_vertical_drag(h, VACUUM), np.sqrt(2 * h / 9.81))
     # Far beyond terminal speed: t -> h / v_t + (v_t / g) ln 2, and no overflow.
     vt = CUBE.terminal_speed
-    assert fall_time_vertical_drag(1e5, CUBE) == pytest.approx(
-        1e5 / vt + vt / 9.81 * math.log(2.0), rel=1e-12
-    )
+    assert fall_time_vertical_drag(1e5, CUBE) == pytest.approx(1e5 / vt + vt / 9.81 * math.log(2.0), rel=1e-12)
     # The vertical-only time is slightly below the coupled fall with forward speed.
     _, t_coupled = predict_landing([0.0, 0.0, 30.0], [10.0, 0.0, 0.0], CUBE)
     assert fall_time_vertical_drag(30.0, CUBE) < t_coupled[0] < 1.05 * fall_time_vertical_drag(30.0, CUBE)
@@ -154,9 +150,7 @@ def test_wind_draws_per_episode() -> None:
     before = wm.mean
     wm.reset(np.random.default_rng(4), world=[5])
     after = wm.mean
-    assert not np.allclose(before[5], after[5]) and np.array_equal(
-        np.delete(before, 5, 0), np.delete(after, 5, 0)
-    )
+    assert not np.allclose(before[5], after[5]) and np.array_equal(np.delete(before, 5, 0), np.delete(after, 5, 0))
     assert np.array_equal(WindModel(cfg, np.random.default_rng(3), 64).mean, before)
     with pytest.raises(ValueError, match="world"):
         wm.velocity_at(np.array([1.0]))
@@ -238,9 +232,7 @@ def test_kernel_matches_numpy_integrator(profile: str) -> None:
     _drop_all(ps, wm, rng)
     for w in range(3):
         sel = world == w
-        xy, t = predict_landing(
-            p0[sel], v0[sel], SPHERE, lambda z, w=w: wm.mean_velocity_at(z, world=w), dt=0.01
-        )
+        xy, t = predict_landing(p0[sel], v0[sel], SPHERE, lambda z, w=w: wm.mean_velocity_at(z, world=w), dt=0.01)
         np.testing.assert_allclose(ps.landed_xy(world=w), xy, atol=1e-9)
         np.testing.assert_allclose(ps.get("land_t")[sel], t, atol=1e-9)
 

@@ -22,9 +22,7 @@ WALL = ([0], [[5.0, 0.0, 5.0]], [[0.2, 20.0, 5.0]], [0])
 NO_OBJ = (np.zeros(0, np.int8), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, np.int32))
 
 
-def make(
-    n: int = 1, obstacles=WALL, world_id=None, n_worlds: int = 1, radius: float = R
-) -> PymunkPlanarBackend:
+def make(n: int = 1, obstacles=WALL, world_id=None, n_worlds: int = 1, radius: float = R) -> PymunkPlanarBackend:
     wid = np.zeros(n, dtype=np.int64) if world_id is None else np.asarray(world_id)
     return PymunkPlanarBackend(np.full(n, radius), wid, n_worlds, *obstacles)
 

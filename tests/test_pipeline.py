@@ -37,12 +37,7 @@ def test_step_hooks_run_after_every_step_with_the_events() -> None:
         env.step({a: {"motion": np.zeros(3)} for a in env.agents})
     assert [t for t, _ in seen] == [1, 2, 3] and "proximity" in seen[-1][1].readings
     scores = seen[-1][1].scores  # stage 10 runs after stage 9: the hook sees the step's rewards
-    assert (
-        scores is not None
-        and scores.acting.all()
-        and scores.rewards.shape == (3,)
-        and "arrived" in scores.info
-    )
+    assert scores is not None and scores.acting.all() and scores.rewards.shape == (3,) and "arrived" in scores.info
     env.world.remove_hook(hook)
     env.step({a: {"motion": np.zeros(3)} for a in env.agents})
     assert len(seen) == 3

@@ -71,9 +71,7 @@ def _is_class(obj: object) -> bool:
 
 # ------------------------------------------------------------------------------------------ Registry
 def test_register_by_object_and_by_reference_loaded_on_first_get(module_dir: Path) -> None:
-    reg = Registry(
-        "widget", "agentsim_env.test_widgets", {"base": "plugmod_things:Thing"}, _is_class, "a class"
-    )
+    reg = Registry("widget", "agentsim_env.test_widgets", {"base": "plugmod_things:Thing"}, _is_class, "a class")
     reg.register("obj", dict)
     reg.register("nested", "plugmod_things:Thing.Inner")
     assert reg.names() == ["base", "nested", "obj"] and "nested" in reg and "other" not in reg
@@ -98,9 +96,7 @@ def test_bad_references_name_the_reference_and_what_was_expected(module_dir: Pat
     reg.register("number", "plugmod_things:NUMBER")
     with pytest.raises(ValueError, match=r"'plugmod_nowhere.sub:Thing': no module named 'plugmod_nowhere'"):
         reg.get("missing_module")
-    with pytest.raises(
-        ValueError, match=r"'plugmod_things:Nothing': 'plugmod_things' has no attribute 'Nothing'"
-    ):
+    with pytest.raises(ValueError, match=r"'plugmod_things:Nothing': 'plugmod_things' has no attribute 'Nothing'"):
         reg.get("missing_attr")
     with pytest.raises(ValueError, match=r"'plugmod_things:helper' is a function, expected a class"):
         reg.get("function")
@@ -164,9 +160,7 @@ def test_entry_points_of_installed_distributions(
     assert "'base'" in messages and "taken by a built-in" in messages and "'bad name'" in messages
     assert reg.get("thing").__name__ == "Thing" and reg.get("base") is int
     assert reg.origin("thing") == "entry point 'plugmod_things:Thing' of widget_plugin"
-    with pytest.raises(
-        ValueError, match=r"'thing' is already taken \(entry point 'plugmod_things:Thing' of "
-    ):
+    with pytest.raises(ValueError, match=r"'thing' is already taken \(entry point 'plugmod_things:Thing' of "):
         reg.register("thing", float)
     reg.register("thing", float, replace=True)  # a registration wins over the entry point
     assert reg.get("thing") is float
@@ -205,9 +199,7 @@ def test_registered_scenario_is_made_listed_and_checked() -> None:
     env = agentsim_env.make("meet_again", n_agents=3, max_steps=5)
     assert type(env.scenario) is Meet and len(env.possible_agents) == 3
     agentsim_env.register_scenario("other_name", Meet)
-    with pytest.raises(
-        ValueError, match=r"'other_name' \(registered\) is the class .*Meet whose name is 'meet_ag"
-    ):
+    with pytest.raises(ValueError, match=r"'other_name' \(registered\) is the class .*Meet whose name is 'meet_ag"):
         scenario_class("other_name")
     with pytest.raises(ValueError, match="unknown scenario 'nowhere'; registered scenarios: "):
         agentsim_env.make("nowhere")
@@ -269,9 +261,7 @@ def test_policy_without_scenario_or_with_a_builtin_name_is_refused() -> None:
         baseline_names("rendezvous")
     POLICIES.unregister("meet")
     agentsim_env.register_policy("untagged", MeetPolicy)
-    with pytest.raises(
-        ValueError, match=r"'untagged' \(registered\) names no scenario: give register_policy"
-    ):
+    with pytest.raises(ValueError, match=r"'untagged' \(registered\) names no scenario: give register_policy"):
         baseline_names("navigation")
 
 

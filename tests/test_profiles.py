@@ -64,14 +64,10 @@ def test_closed_form_inverses() -> None:
     u = np.linspace(0.0, 1.0, 101)
     np.testing.assert_allclose(RadialProfile("uniform", R).inverse_cdf(u), R * np.sqrt(u), rtol=1e-14)
     np.testing.assert_allclose(RadialProfile("power", R, alpha=1.0).inverse_cdf(u), R * u, rtol=1e-14)
-    np.testing.assert_allclose(
-        RadialProfile("power", R, alpha=0.5).inverse_cdf(u), R * u ** (1 / 1.5), rtol=1e-14
-    )
+    np.testing.assert_allclose(RadialProfile("power", R, alpha=0.5).inverse_cdf(u), R * u ** (1 / 1.5), rtol=1e-14)
     s = 6.0
     expected = s * np.sqrt(-2.0 * np.log(1.0 - u * (1.0 - np.exp(-(R**2) / (2 * s * s)))))
-    np.testing.assert_allclose(
-        RadialProfile("gauss", R, sigma=s).inverse_cdf(u), expected, rtol=1e-12, atol=1e-12
-    )
+    np.testing.assert_allclose(RadialProfile("gauss", R, sigma=s).inverse_cdf(u), expected, rtol=1e-12, atol=1e-12)
     x = RadialProfile("linear", R).inverse_cdf(u) / R
     np.testing.assert_allclose(3 * x**2 - 2 * x**3, u, atol=1e-14)
 
@@ -95,9 +91,7 @@ def test_floor_is_a_mass_mixture() -> None:
     mixed = RadialProfile("gauss", R, sigma=3.0, floor=eta)
     uni = RadialProfile("uniform", R)
     r = np.linspace(0.0, R, 51)
-    np.testing.assert_allclose(
-        mixed.density(r), (1 - eta) * pure.density(r) + eta * uni.density(r), rtol=1e-14
-    )
+    np.testing.assert_allclose(mixed.density(r), (1 - eta) * pure.density(r) + eta * uni.density(r), rtol=1e-14)
     np.testing.assert_allclose(mixed.cdf(r), (1 - eta) * pure.cdf(r) + eta * uni.cdf(r), rtol=1e-14)
     # The floor populates the rim that the narrow Gaussian leaves almost empty.
     assert mixed.mass_between(0.8 * R, R) > 0.2 * eta

@@ -28,11 +28,7 @@ BOUNDS = (0.0, 40.0, 0.0, 40.0)
 
 def _scan(sensor, pos, heading, rng, radius, online, world, scene, *, cell=4.0, n_worlds=None, out=None):
     """Run the grid kernel with freshly built grids (agents and objects share one spec)."""
-    n_worlds = (
-        int(max(np.max(world, initial=0), np.max(scene.world, initial=0))) + 1
-        if n_worlds is None
-        else n_worlds
-    )
+    n_worlds = int(max(np.max(world, initial=0), np.max(scene.world, initial=0))) + 1 if n_worlds is None else n_worlds
     spec = GridSpec.for_bounds(BOUNDS, cell, n_worlds)
     ag = build_grid(spec, pos, world, online)
     og = build_object_grid(spec, scene.centre, scene.footprint_radius(), scene.world)
@@ -79,9 +75,7 @@ def _random_case(seed: int, n_slots: int = 160):
     # Positions reach 10 m past the map on every side (clamped into border cells) and slightly below ground.
     pos = np.column_stack([g.uniform(-10, 50, (n_slots, 2)), g.uniform(-0.5, 12.0, n_slots)])
     # Some headings are many turns away from [-pi, pi]; the scan must not care.
-    heading = g.uniform(-7.0, 7.0, n_slots) + 2e3 * np.pi * (g.random(n_slots) < 0.2) * g.integers(
-        -5, 6, n_slots
-    )
+    heading = g.uniform(-7.0, 7.0, n_slots) + 2e3 * np.pi * (g.random(n_slots) < 0.2) * g.integers(-5, 6, n_slots)
     rng = g.uniform(1.0, 15.0, n_slots)
     radius = g.uniform(0.1, 2.0, n_slots)
     online = g.random(n_slots) > 0.15
@@ -236,9 +230,7 @@ def test_agents_other_worlds_offline_and_self() -> None:
     assert not np.any(np.isin(got.hit_id[0], [1, 3]))
     assert (got.hit_kind[1, 8], got.hit_id[1, 8]) == (HIT_OBJECT, 0)  # world 1 sees its box
     assert np.all(got.hit_kind[1, got.hit_kind[1] != HIT_NONE] == HIT_OBJECT)  # but no world-0 agent
-    assert (
-        np.all(got.distance[3] == 1.0) and np.all(got.hit_kind[3] == HIT_NONE) and np.all(got.hit_id[3] == -1)
-    )
+    assert np.all(got.distance[3] == 1.0) and np.all(got.hit_kind[3] == HIT_NONE) and np.all(got.hit_id[3] == -1)
 
 
 def test_offline_slots_invisible_even_when_the_grid_holds_them() -> None:
@@ -248,9 +240,7 @@ def test_offline_slots_invisible_even_when_the_grid_holds_them() -> None:
     og = build_object_grid(spec, scene.centre, scene.footprint_radius(), scene.world)
     cfg = ProximityConfig(n_azimuth=16, elevations_deg=(-20.0, 0.0, 20.0))
     objects = (scene.kind, scene.centre, scene.half, scene.world)
-    got = ProximitySensor(cfg).scan(
-        pos, heading, rng, radius, online, world, every, *objects, og, scene.ground
-    )
+    got = ProximitySensor(cfg).scan(pos, heading, rng, radius, online, world, every, *objects, og, scene.ground)
     ref = _ref(cfg, pos, heading, rng, radius, online, world, scene)
     assert np.abs(got.distance - ref.distance).max() <= 1e-5
     np.testing.assert_array_equal(got.hit_kind, ref.hit_kind)
@@ -263,9 +253,7 @@ def test_nothing_in_range_and_inside_a_shape() -> None:
     scene.add("box", [[30.0, 30.0, 5.0]], [[2.0, 2.0, 2.0]])
     config = ProximityConfig(elevations_deg=(-30.0, 0.0))
     got = _check_both(config, _one([[5.0, 5.0, 8.0], [30.5, 29.0, 5.5]], rng=[3.0, 10.0]), scene)
-    assert (
-        np.all(got.distance[0] == 1.0) and np.all(got.hit_kind[0] == HIT_NONE) and np.all(got.hit_id[0] == -1)
-    )
+    assert np.all(got.distance[0] == 1.0) and np.all(got.hit_kind[0] == HIT_NONE) and np.all(got.hit_id[0] == -1)
     assert np.all(got.distance[1] == 0.0) and np.all(got.hit_kind[1] == HIT_OBJECT)  # origin inside the box
 
 
@@ -354,9 +342,7 @@ def test_scan_validation() -> None:
     args = _one([[1.0, 1.0, 1.0], [3.0, 3.0, 1.0]])
     with pytest.raises(ValueError, match="sensor_range"):
         _scan(sensor, *args[:2], np.array([1.0, 0.0]), *args[3:], scene)
-    offline_zero = _scan(
-        sensor, *args[:2], np.array([1.0, 0.0]), args[3], np.array([True, False]), args[5], scene
-    )
+    offline_zero = _scan(sensor, *args[:2], np.array([1.0, 0.0]), args[3], np.array([True, False]), args[5], scene)
     assert np.all(offline_zero.distance[1] == 1.0)  # an offline slot's range is never used
     with pytest.raises(ValueError, match="pos"):
         _scan(sensor, args[0][:, :2], *args[1:], scene)
@@ -368,9 +354,7 @@ def test_scan_validation() -> None:
     ag = build_grid(spec, args[0], np.array([0, 1]), args[4])
     og = build_object_grid(spec, scene.centre, scene.footprint_radius(), scene.world)
     with pytest.raises(ValueError, match="world ids"):  # a world the grids do not have
-        sensor.scan(
-            *args[:5], np.array([0, 2]), ag, scene.kind, scene.centre, scene.half, scene.world, og, True
-        )
+        sensor.scan(*args[:5], np.array([0, 2]), ag, scene.kind, scene.centre, scene.half, scene.world, og, True)
     with pytest.raises(ValueError, match="out"):
         _scan(sensor, *args, scene, out=ScanResult.empty(3, sensor.n_rays))
     bad = Scene()
@@ -427,7 +411,5 @@ def test_lidar_part_is_declared_and_written_the_same_two_ways(seed: int) -> None
     rows = np.array([4, 0, 6, 2], dtype=np.int64)
     out = np.full((rows.shape[0], 3 + 2 * k + 2), -7.0, dtype=np.float32)
     _rows_with_writer(scan.distance, scan.hit_kind, rows, out, 3)
-    np.testing.assert_array_equal(
-        out[:, 3 : 3 + 2 * k].view(np.uint32), want[rows].reshape(4, -1).view(np.uint32)
-    )
+    np.testing.assert_array_equal(out[:, 3 : 3 + 2 * k].view(np.uint32), want[rows].reshape(4, -1).view(np.uint32))
     assert (out[:, :3] == -7.0).all() and (out[:, 3 + 2 * k :] == -7.0).all()

@@ -107,9 +107,7 @@ def test_comm_traffic_tells_an_encoding_payload_from_a_constant(
         def act(obs: np.ndarray) -> np.ndarray:
             a = np.zeros((len(obs), comm + COMM_HEADER + d), dtype=np.float32)
             a[:, comm] = 0.9  # overlay
-            a[:, comm + COMM_HEADER : comm + COMM_HEADER + 2] = (
-                4.0 * obs[:, task + 1 : task + 3] if encode else 0.3
-            )
+            a[:, comm + COMM_HEADER : comm + COMM_HEADER + 2] = 4.0 * obs[:, task + 1 : task + 3] if encode else 0.3
             return a
 
         return act

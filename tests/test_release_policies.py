@@ -105,9 +105,7 @@ def _evaluate(env: Any) -> dict[str, float]:
     s = sensors(env)
     zs = env.scenario.zones
     profiles = [z.radial_profile() for z in zs.zones]
-    return evaluate_deployment(
-        s["land_xy"], s["zone"], zs.centres(), zs.radii(), profiles, env.scenario.config.wsn
-    )
+    return evaluate_deployment(s["land_xy"], s["zone"], zs.centres(), zs.radii(), profiles, env.scenario.config.wsn)
 
 
 def test_density_weighted_strategies_beat_uniform_on_the_default_zones() -> None:
@@ -127,9 +125,7 @@ def test_density_weighted_strategies_beat_uniform_on_the_default_zones() -> None
         assert scores[strategy][1] > scores["B0_uniform"][1], scores
 
 
-def _group_messages(
-    obs: dict[str, Any], map_size: tuple[float, float], payload: int
-) -> dict[str, np.ndarray]:
+def _group_messages(obs: dict[str, Any], map_size: tuple[float, float], payload: int) -> dict[str, np.ndarray]:
     rows = np.concatenate([o["inbox"] for o in obs.values()])
     rows = rows[(rows[:, 0] > 0.5) & (rows[:, 2] > 0.5)]
     return decode(rows[:, FEATURES_PER_MESSAGE : FEATURES_PER_MESSAGE + 6], map_size, payload)
@@ -157,9 +153,7 @@ def test_two_uavs_release_in_disjoint_wedges_and_talk() -> None:
         assert mine.sum() >= 8
         assert in_sector(s["target_xy"][mine] - centre, p.sector).all()  # targets: exactly in its wedge
         far = mine & (np.hypot(*(s["land_xy"] - centre).T) > 5.0)
-        assert (
-            in_sector(s["land_xy"][far] - centre, p.sector).mean() >= 0.9
-        )  # landings: up to the edge errors
+        assert in_sector(s["land_xy"][far] - centre, p.sector).mean() >= 0.9  # landings: up to the edge errors
     a, b = (in_sector(s["target_xy"] - centre, p.sector) for p in pieces)
     assert not np.any(a & b)  # the wedges are disjoint
 

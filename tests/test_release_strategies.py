@@ -113,9 +113,7 @@ def test_options_are_typed_frozen_fields_and_unknown_ones_are_refused() -> None:
         s.lloyd_iters = 6  # type: ignore[misc]
     with pytest.raises(ValueError, match=r"options for B0_uniform must be among .*'two_opt'.*\['n_rings'\]"):
         make_strategy("B0_uniform", n_rings=3)
-    assert B5Cvt.option_rule("lloyd_iters") == Bound(0) and B5Cvt.option_rule("fall_dt") == Bound(
-        0.0, lo_open=True
-    )
+    assert B5Cvt.option_rule("lloyd_iters") == Bound(0) and B5Cvt.option_rule("fall_dt") == Bound(0.0, lo_open=True)
     assert "grid" in B5Cvt.options() and "grid" not in strategy_class("B0_uniform").options()
 
 
@@ -189,9 +187,7 @@ def test_a_registered_strategy_is_planned_and_flown_by_name(centre_line: Any) ->
     with pytest.raises(ValueError, match="T1_centre_line option reach must be <= 1.0, got 2.0"):
         make_strategy(name, reach=2.0)
     profile = RadialProfile("gauss", 50.0, sigma=20.0)
-    plan = make_plan(
-        name, (100.0, 100.0), profile, 20, 20.0, 3.0, np.random.default_rng(0), options={"order": "in"}
-    )
+    plan = make_plan(name, (100.0, 100.0), profile, 20, 20.0, 3.0, np.random.default_rng(0), options={"order": "in"})
     assert plan.strategy == name and plan.mode == "waypoints" and plan.n_releases == 20
     assert plan.info == {"n": 20}
     env = agentsim_env.make("uav_release", **TINY)

@@ -127,11 +127,7 @@ def test_replay_frames_show_the_obstacles_and_goals_of_the_episode(tmp_path: Pat
         if not seen:  # the scene and the goals right after the reset
             sc = e.world.scene
             seen.append(
-                [
-                    (sc.centre[o, 0], sc.centre[o, 1])
-                    for o in np.flatnonzero(sc.world == 0)
-                    if sc.kind[o] == BOX
-                ]
+                [(sc.centre[o, 0], sc.centre[o, 1]) for o in np.flatnonzero(sc.world == 0) if sc.kind[o] == BOX]
             )
             seen.append([np.array(a) for a in e.scenario.markers(e.world, 0)])
 
@@ -142,14 +138,10 @@ def test_replay_frames_show_the_obstacles_and_goals_of_the_episode(tmp_path: Pat
     first = next(iter(replay_frames(path)))
     background = first[-1, -1]
     assert len(boxes) >= 3
-    drawn = [
-        not (first[int(cy), int(cx)] == background).all()
-        for cx, cy in (info.canvas.px(x, y) for x, y in boxes)
-    ]
+    drawn = [not (first[int(cy), int(cx)] == background).all() for cx, cy in (info.canvas.px(x, y) for x, y in boxes)]
     assert sum(drawn) >= len(boxes) - 1, f"{sum(drawn)} of {len(boxes)} obstacles drawn"
     hits = [
-        (first[int(cy), int(cx)] == c).all()
-        for (cx, cy), c in zip((info.canvas.px(x, y) for x, y in goals), goal_rgb)
+        (first[int(cy), int(cx)] == c).all() for (cx, cy), c in zip((info.canvas.px(x, y) for x, y in goals), goal_rgb)
     ]
     assert sum(hits) >= 2, f"{sum(hits)} of {len(goals)} goals drawn in their colour"
 
@@ -172,9 +164,7 @@ def test_replay_frames_colour_agents_by_group_beyond_a_dozen(tmp_path: Path) -> 
 
     path = tmp_path / "run.db"
     env = record(
-        agentsim_env.make(
-            "navigation", n_agents=16, n_groups=2, max_steps=2, map_size=400.0, obstacle_density=0.0
-        ),
+        agentsim_env.make("navigation", n_agents=16, n_groups=2, max_steps=2, map_size=400.0, obstacle_density=0.0),
         path,
     )
     run_episode(env, make_policy("navigation", env), 0)

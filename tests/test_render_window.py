@@ -79,9 +79,7 @@ def test_closed_window_raises_and_closes(event: str, monkeypatch: pytest.MonkeyP
     win.show(frame)
     pg.event.post(pg.event.Event(pg.KEYDOWN, key=pg.K_a))  # other keys do not close it
     win.show(frame)
-    posted = (
-        pg.event.Event(pg.KEYDOWN, key=pg.K_ESCAPE) if event == "Esc" else pg.event.Event(getattr(pg, event))
-    )
+    posted = pg.event.Event(pg.KEYDOWN, key=pg.K_ESCAPE) if event == "Esc" else pg.event.Event(getattr(pg, event))
     pg.event.post(posted)
     with pytest.raises(WindowClosed, match="closed"):
         win.show(frame)
@@ -163,9 +161,7 @@ def _run_row(db: Path) -> tuple[str, int, int]:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize(
-    ("sig", "code", "word"), [(signal.SIGTERM, 143, "SIGTERM"), (signal.SIGINT, 130, "Ctrl-C")]
-)
+@pytest.mark.parametrize(("sig", "code", "word"), [(signal.SIGTERM, 143, "SIGTERM"), (signal.SIGINT, 130, "Ctrl-C")])
 def test_signal_ends_live_run_cleanly(xdisplay: str, tmp_path: Path, sig: int, code: int, word: str) -> None:
     db = tmp_path / "run.db"
     proc = _start(
@@ -201,9 +197,7 @@ def test_signal_ends_live_run_cleanly(xdisplay: str, tmp_path: Path, sig: int, c
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize(
-    ("sig", "code", "word"), [(signal.SIGTERM, 143, "SIGTERM"), (signal.SIGINT, 130, "Ctrl-C")]
-)
+@pytest.mark.parametrize(("sig", "code", "word"), [(signal.SIGTERM, 143, "SIGTERM"), (signal.SIGINT, 130, "Ctrl-C")])
 def test_signal_ends_batch_run_cleanly(tmp_path: Path, sig: int, code: int, word: str) -> None:
     # without --render too: the run stops between steps (a Ctrl-C inside a kernel came out as a SystemError)
     db, out = tmp_path / "run.db", tmp_path / "out"

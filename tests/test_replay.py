@@ -65,15 +65,11 @@ def _png(path: Path) -> np.ndarray:
     return np.asarray(Image.open(path).convert("RGB"))
 
 
-def test_png_frames_one_per_recorded_step_with_agents_where_the_store_puts_them(
-    store: Path, tmp_path: Path
-) -> None:
+def test_png_frames_one_per_recorded_step_with_agents_where_the_store_puts_them(store: Path, tmp_path: Path) -> None:
     info = replay_info(store, episode=1)
     assert info.run == 1 and info.scenario == "navigation" and info.n_agents == N
     con = sqlite3.connect(store)
-    (n_steps,) = con.execute(
-        "SELECT count(DISTINCT step) FROM steps WHERE run = 1 AND episode = 1"
-    ).fetchone()
+    (n_steps,) = con.execute("SELECT count(DISTINCT step) FROM steps WHERE run = 1 AND episode = 1").fetchone()
     con.close()
     assert n_steps == STEPS + 1 == len(info.steps)  # step 0 after the reset, then every step
     paths = write_replay(store, tmp_path / "frames", episode=1)
@@ -212,9 +208,7 @@ def _one_error_line(capsys: pytest.CaptureFixture[str]) -> str:
 
 def test_cli_replay(store: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "c.gif"
-    assert (
-        main(["replay", str(store), "--episode", "1", "--every", "10", "--fps", "5", "--out", str(out)]) == 0
-    )
+    assert main(["replay", str(store), "--episode", "1", "--every", "10", "--fps", "5", "--out", str(out)]) == 0
     assert f"written: {out}" in capsys.readouterr().out
     with Image.open(out) as im:
         assert im.n_frames == 4

@@ -55,9 +55,7 @@ STACK_MODULES = ("ray", "torchrl", "tensordict", "benchmarl", "tyro", "skrl", "a
 
 
 @pytest.mark.parametrize("module", sorted(ADAPTERS))
-def test_adapter_without_its_stack_raises_the_install_hint(
-    module: str, monkeypatch: pytest.MonkeyPatch
-) -> None:
+def test_adapter_without_its_stack_raises_the_install_hint(module: str, monkeypatch: pytest.MonkeyPatch) -> None:
     blocked, extra = ADAPTERS[module]
     for name in blocked:  # None in sys.modules makes `import name` raise ImportError
         monkeypatch.setitem(sys.modules, name, None)

@@ -313,9 +313,7 @@ def test_a_recorded_env_rolls_out_through_its_step(tmp_path: Path) -> None:
         assert steps.nunique() == want.steps + 1  # every step written, the reset's included
 
 
-@pytest.mark.parametrize(
-    "env_keys", [{"obs_format": "flat", "action_format": "flat"}, {"ended_agents": "stay"}]
-)
+@pytest.mark.parametrize("env_keys", [{"obs_format": "flat", "action_format": "flat"}, {"ended_agents": "stay"}])
 def test_rollout_is_the_same_in_every_env_format(env_keys: dict[str, Any]) -> None:
     config = WORLDS["navigation"]
     want = agentsim_env.make("navigation", **config).rollout("go_to_goal", 10_000, seed=6)

@@ -57,10 +57,5 @@ def test_a_trained_model_without_set_has_no_hash(model_dir: Path, tmp_path: Path
     with_set = _pngs(out)
     assert len(with_set) == 1 and with_set[0].startswith("navigation_mymodel_seed0_"), with_set
     out = tmp_path / "b"
-    assert (
-        main(
-            ["run", "navigation", "--policy", str(model_dir), "--episodes", "1", "--quiet", "--out", str(out)]
-        )
-        == 0
-    )
+    assert main(["run", "navigation", "--policy", str(model_dir), "--episodes", "1", "--quiet", "--out", str(out)]) == 0
     assert _pngs(out) == ["navigation_mymodel_seed0.png"]

@@ -72,9 +72,7 @@ def test_group_sums_do_not_depend_on_the_split_or_the_order(seed: int, n_parts: 
         "n_groups": g,
         "energy": np.abs(task),
     }
-    np.testing.assert_array_equal(
-        compose_rewards(cfg, task, **kw), compose_rewards(cfg, task, totals=totals, **kw)
-    )
+    np.testing.assert_array_equal(compose_rewards(cfg, task, **kw), compose_rewards(cfg, task, totals=totals, **kw))
 
 
 def test_the_group_mean_is_the_fixed_point_mean() -> None:
@@ -85,9 +83,7 @@ def test_the_group_mean_is_the_fixed_point_mean() -> None:
     assert mean[0] == mean[1] == mean[2] and abs(mean[0] - 1e-5 / 3) <= 2**-32
     assert mean[3] == mean[4] == 1.625
     small = np.array([0.1, 0.2, 0.3])
-    got = group_mean(
-        small, np.zeros(3, dtype=np.int64), np.zeros(3, dtype=np.int64), np.ones(3, dtype=bool), 1
-    )
+    got = group_mean(small, np.zeros(3, dtype=np.int64), np.zeros(3, dtype=np.int64), np.ones(3, dtype=bool), 1)
     assert abs(got[0] - 0.2) <= 2**-32
 
 
@@ -102,11 +98,7 @@ def test_a_task_value_out_of_the_fixed_point_range_is_summed_as_a_float(big: flo
     assert group_means(out)[0] == (3.0 + big) / 3.0
     # a slot outside the mask does not enter the sums
     out = task_partials(task, zeros, zeros, np.array([1, 0, 1], bool), 1, 1)
-    assert (
-        out["task_count"].tolist() == [2]
-        and out["task_hi"].tolist() == [3]
-        and out["task_big"].tolist() == [0]
-    )
+    assert out["task_count"].tolist() == [2] and out["task_hi"].tolist() == [3] and out["task_big"].tolist() == [0]
 
 
 def test_non_finite_task_values_give_the_float_mean() -> None:
@@ -138,9 +130,7 @@ def _actions(scenario: Any, world: Any, rng: np.random.Generator) -> dict[str, n
     return {k: rng.uniform(-1, 1, (n, p.size)) for k, p in scenario.act_parts().items()}
 
 
-def _score_split(
-    scenario: Any, world: Any, parts: dict, acting: np.ndarray, labels: np.ndarray
-) -> StepResult:
+def _score_split(scenario: Any, world: Any, parts: dict, acting: np.ndarray, labels: np.ndarray) -> StepResult:
     """Stage 1 to 8 as ``run_step`` runs them, then stage 9 from the parts' partial sums."""
     scenario.apply_actions(world, parts, acting)
     if "comm" in parts:
@@ -162,9 +152,7 @@ def test_any_split_of_the_slots_scores_like_the_whole(name: str, seed: int, n_pa
     sb, wb = _world(name, seed)
     rng = np.random.default_rng(seed)
     labels = rng.integers(0, n_parts, wa.state.n_slots)
-    if (
-        name == "navigation"
-    ):  # a few agents in groups past n_groups (assign_group allows ids up to n_agents - 1)
+    if name == "navigation":  # a few agents in groups past n_groups (assign_group allows ids up to n_agents - 1)
         some = rng.choice(wa.state.n_slots, 3, replace=False)
         wa.state.group[some] = wb.state.group[some] = rng.integers(-1, wa.n_agents, 3)
     if name == "relay":  # end every non-scout of group 0 but one now and then, so scouts end too

@@ -104,9 +104,7 @@ def test_world_of_a_batch_equals_a_single_env(name: str, cfg: dict[str, Any], po
                 assert got == info[a], f"{where}: infos of {a} (reset {bool(out.reset_worlds[w])})"
             if out.reset_worlds[w]:
                 for a in live:
-                    np.testing.assert_array_equal(
-                        out.final_obs[w, agents.index(a)], obs_s[w][a], err_msg=where
-                    )
+                    np.testing.assert_array_equal(out.final_obs[w, agents.index(a)], obs_s[w][a], err_msg=where)
                 assert not single.agents
                 obs_s[w], _ = single.reset()  # the next episode of the same seed
                 episodes[w] += 1

@@ -84,9 +84,7 @@ def _world(key: str, seed: int = 4) -> tuple[Any, Any]:
 def _run(scenario: Any, world: Any, rng: np.random.Generator, steps: int, comm: bool = True) -> list[Any]:
     out = []
     for _ in range(steps):
-        parts = {
-            k: rng.uniform(-1, 1, (world.state.n_slots, p.size)) for k, p in scenario.act_parts().items()
-        }
+        parts = {k: rng.uniform(-1, 1, (world.state.n_slots, p.size)) for k, p in scenario.act_parts().items()}
         if not comm and "comm" in parts:
             parts["comm"][:, 0] = -1.0  # the "no message" channel
         res, _ = run_step(scenario, world, parts, world.state.online.copy())

@@ -94,14 +94,10 @@ def test_a_later_export_removes_what_a_killed_one_left(store: Path, tmp_path: Pa
     other = out / ".notes.tmp-1"  # not an export's file: kept
     other.write_text("mine")
     assert main(["export", str(store), "--out", str(out)]) == 0
-    assert sorted(p.name for p in out.iterdir()) == sorted(
-        [alive.name, other.name, *(f"{t}.csv" for t in TABLES)]
-    )
+    assert sorted(p.name for p in out.iterdir()) == sorted([alive.name, other.name, *(f"{t}.csv" for t in TABLES)])
 
 
-def test_an_interrupted_export_writes_no_table(
-    store: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
+def test_an_interrupted_export_writes_no_table(store: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """KeyboardInterrupt (Ctrl-C) while a table is written: no file of this export stays, old ones are kept."""
     from agentsim_env.recorder import read
 

@@ -73,9 +73,7 @@ def read_only_folder(tmp_path: Path) -> Iterator[tuple[Path, list[str]]]:
     if os.geteuid() == 0:
         prefix = _mount_read_only()
         if prefix is None:
-            pytest.skip(
-                "root writes a 0555 folder anyway, and unshare -m (for a read-only mount) is not available"
-            )
+            pytest.skip("root writes a 0555 folder anyway, and unshare -m (for a read-only mount) is not available")
         yield folder, [*prefix, str(folder)]
         return
     yield folder, []
@@ -143,9 +141,7 @@ def test_a_write_ahead_log_without_its_index_is_refused_on_read_only_media(
     assert not (out / "export").exists() or not any((out / "export").iterdir())
 
 
-def test_reading_a_writable_store_leaves_only_the_store_and_recovers_dead_runs(
-    store: Path, tmp_path: Path
-) -> None:
+def test_reading_a_writable_store_leaves_only_the_store_and_recovers_dead_runs(store: Path, tmp_path: Path) -> None:
     """Beside a store it may write, a reader leaves no ``-wal`` / ``-shm`` behind (a ``mode=ro`` connection
     would), and marks a run left ``running`` by a process that no longer exists ``incomplete``, as a writer does."""
     from agentsim_env.recorder.read import open_store

@@ -76,9 +76,7 @@ def test_every_observed_inbox_row_has_its_stored_message(tmp_path: Path) -> None
         i = agents.index(agent)
         stored = Counter((k, c) for e, s, r, k, c in rows if e == episode and s <= step and r == i)
         missing = inbox - stored
-        assert not missing, (
-            f"episode {episode}, step {step}, {agent}: inbox rows without a stored row {missing}"
-        )
+        assert not missing, f"episode {episode}, step {step}, {agent}: inbox rows without a stored row {missing}"
         for kind, _ in inbox.elements():
             checked[kind] += 1
     assert checked[ENV] > 0 and checked[OVERLAY] + checked[1] + checked[2] > 0, checked
@@ -92,9 +90,7 @@ def test_a_batched_world_stores_the_events_of_its_single_env(tmp_path: Path) -> 
 
     w, seeds = 1, [21, 7, 1234]
     batch = record(BatchedEnv("navigation", len(seeds), **CRASH_CONFIG), tmp_path / "batch.db")
-    single = record(
-        agentsim_env.make("navigation", action_format="flat", **CRASH_CONFIG), tmp_path / "one.db"
-    )
+    single = record(agentsim_env.make("navigation", action_format="flat", **CRASH_CONFIG), tmp_path / "one.db")
     batch.reset(seed=seeds)
     single.reset(seed=seeds[w])
     rng = np.random.default_rng(5)

@@ -161,9 +161,7 @@ def test_round_trip_every_scenario(name: str, tmp_path: Path) -> None:
         numeric = {i: v for i, v in want[k]["info"].items() if isinstance(v, (int, float, np.number))}
         assert set(numeric) <= set(names), f"{name} {k}: info keys {sorted(numeric)} not all columns {names}"
         for i, v in numeric.items():
-            assert got[k][f"info_{i}"] == pytest.approx(float(v), rel=1e-12, abs=1e-12), (
-                f"{name} {k} info {i}"
-            )
+            assert got[k][f"info_{i}"] == pytest.approx(float(v), rel=1e-12, abs=1e-12), f"{name} {k} info {i}"
     # agent 0's flat observation, at every step it was returned
     obs0 = observations.xs(0, level="agent")["obs"]
     want_obs = {t: w["obs"] for (t, i), w in want.items() if i == 0 and w["obs"] is not None}
@@ -203,15 +201,9 @@ def test_batched_round_trip_across_automatic_resets(tmp_path: Path) -> None:
         steps = store.steps()
         episodes = store.episodes()
         run = store.runs().loc[1]
-    assert (
-        run["n_worlds"] == 3
-        and run["n_agents"] == 2
-        and run["episodes"] == len(episodes) == episode.sum() + 3
-    )
+    assert run["n_worlds"] == 3 and run["n_agents"] == 2 and run["episodes"] == len(episodes) == episode.sum() + 3
     for w in range(3):  # episode numbers increase per world, each starting at step 0
-        assert list(episodes.xs(w, level="world").index.get_level_values("episode")) == list(
-            range(episode[w] + 1)
-        )
+        assert list(episodes.xs(w, level="world").index.get_level_values("episode")) == list(range(episode[w] + 1))
     assert steps.index.is_unique and len(steps) == len(expected)
     for (w, ep, s, i), (pos, flags) in expected.items():
         row = steps.loc[(1, ep, s, w, i)]
@@ -225,9 +217,7 @@ def test_batched_round_trip_across_automatic_resets(tmp_path: Path) -> None:
     # every finished episode ends with every agent terminated or truncated
     last = steps.groupby(level=("episode", "world", "agent")).tail(1)
     finished = [k for k in last.index if k[1] < episode[k[3]]]
-    assert finished and all(
-        bool(last.loc[k, "terminated"]) or bool(last.loc[k, "truncated"]) for k in finished
-    )
+    assert finished and all(bool(last.loc[k, "terminated"]) or bool(last.loc[k, "truncated"]) for k in finished)
 
 
 # ------------------------------------------------------------------------------------------ the API

@@ -60,26 +60,19 @@ def test_cli_run_records_every_episode_in_one_run(tmp_path: Path, capsys: pytest
     con = connect(db)
     try:
         runs = con.execute("SELECT run, scenario, status, n_agents, label FROM runs").fetchall()
-        label = (
-            "agentsim run navigation --policy go_to_goal --seed 5 --episodes 3 --set n_agents=3 max_steps=15"
-        )
+        label = "agentsim run navigation --policy go_to_goal --seed 5 --episodes 3 --set n_agents=3 max_steps=15"
         assert runs == [(1, "navigation", "complete", 3, label), (2, "navigation", "complete", 3, label)]
         assert con.execute("SELECT episode, seed FROM episodes WHERE run = 1").fetchall() == [
             (0, "5"),
             (1, "6"),
             (2, "7"),
         ]
-        assert (
-            con.execute("SELECT MAX(step) FROM steps WHERE run = 1 GROUP BY episode").fetchall()
-            == [(15,)] * 3
-        )
+        assert con.execute("SELECT MAX(step) FROM steps WHERE run = 1 GROUP BY episode").fetchall() == [(15,)] * 3
     finally:
         con.close()
 
 
-def test_cli_evaluate_writes_the_csvs_from_the_store(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
-) -> None:
+def test_cli_evaluate_writes_the_csvs_from_the_store(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """With --record every mission is a run of the store, and sensors.csv / runs.csv read back from it are the
     files written without it, byte for byte."""
     from agentsim_env.cli import main
@@ -155,9 +148,7 @@ def test_a_recording_that_fails_mid_mission_fails_the_run(tmp_path: Path) -> Non
     (src,) = resolve_zones(["tiny"])
     with (
         pytest.warns(RuntimeWarning, match="database or disk is full"),
-        pytest.raises(
-            ValueError, match=rf"{db}: recording the mission zones=tiny strategy=B2_rings seed=0 failed"
-        ),
+        pytest.raises(ValueError, match=rf"{db}: recording the mission zones=tiny strategy=B2_rings seed=0 failed"),
     ):
         run_one(src, "B2_rings", 0, TINY_OVERRIDES, record_env=record_env)
     con = connect(db)

@@ -233,9 +233,7 @@ def test_processes_record_to_one_file_at_once(tmp_path: Path) -> None:
     for p, (_out, err) in zip(procs, outs):
         assert p.returncode == 0, err
         assert "RuntimeWarning" not in err, err  # no writer detached
-    done = {
-        json.loads(out.splitlines()[-1])["label"]: json.loads(out.splitlines()[-1])["run"] for out, _ in outs
-    }
+    done = {json.loads(out.splitlines()[-1])["label"]: json.loads(out.splitlines()[-1])["run"] for out, _ in outs}
     assert sorted(done) == [f"writer{i}" for i in range(writers)] and sorted(done.values()) == [1, 2, 3]
     con = connect(db)
     try:
@@ -246,9 +244,7 @@ def test_processes_record_to_one_file_at_once(tmp_path: Path) -> None:
         for run, label, *_ in runs:
             assert done[label] == run
             _steps_complete(con, run, steps, episodes)
-            assert con.execute("SELECT COUNT(*) FROM episodes WHERE run = ?", (run,)).fetchone() == (
-                episodes,
-            )
+            assert con.execute("SELECT COUNT(*) FROM episodes WHERE run = ?", (run,)).fetchone() == (episodes,)
     finally:
         con.close()
 

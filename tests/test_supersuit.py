@@ -147,6 +147,4 @@ def test_example_runs(tmp_path: Path) -> None:
     assert res.returncode == 0, res.stderr[-3000:]
     assert (tmp_path / "run" / "model.zip").is_file()
     lines = [line for line in res.stdout.splitlines() if line.startswith("|")]
-    assert (
-        lines[0].startswith("| seed | mean return") and len(lines) == 2 + 2 + 1
-    )  # header, rule, 2 rows, mean
+    assert lines[0].startswith("| seed | mean return") and len(lines) == 2 + 2 + 1  # header, rule, 2 rows, mean

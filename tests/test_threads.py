@@ -197,9 +197,7 @@ def test_overlay_hops_and_inbox_pushes_do_not_depend_on_the_thread_count(seed: i
     online = rng.random(s) < 0.9
     world = np.zeros(s, dtype=np.int64)
     grid = build_grid(GridSpec.for_bounds((0, 30, 0, 30), 5.0, 1), pos, world, online)
-    starts = [
-        (rng.choice(np.flatnonzero(online), rng.integers(1, 30)), rng.integers(1, 5, 30)) for _ in range(6)
-    ]
+    starts = [(rng.choice(np.flatnonzero(online), rng.integers(1, 30)), rng.integers(1, 5, 30)) for _ in range(6)]
 
     def run(threads: int) -> list[np.ndarray]:
         ov = Overlay(s, d, 7.0)

@@ -38,10 +38,7 @@ def model_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def test_default_is_the_scenarios_default_baseline() -> None:
-    pick = {
-        b: baselines_of(load_config("navigation", {"eval": {"baselines": b}}))
-        for b in ("none", "default", "all")
-    }
+    pick = {b: baselines_of(load_config("navigation", {"eval": {"baselines": b}})) for b in ("none", "default", "all")}
     assert pick == {"none": [], "default": ["go_to_goal"], "all": ["go_to_goal", "random"]}
 
 
@@ -67,9 +64,7 @@ def test_eval_baselines_flag_and_the_cost_line(
     with open(model_dir / "eval.csv", encoding="utf-8") as f:
         assert [r["policy"] for r in csv.DictReader(f)] == policies
     n = len(policies) - 1
-    head = (
-        f"evaluating the model and {n} baseline{'' if n == 1 else 's'} (--eval-baselines {profile}) x 2 seeds"
-    )
+    head = f"evaluating the model and {n} baseline{'' if n == 1 else 's'} (--eval-baselines {profile}) x 2 seeds"
     assert head + f" = {2 * len(policies)} episodes" in out, out
     assert re.search(r"~\d+(\.\d)? s in all at the first episode's pace", out), out
     assert re.search(rf"evaluation: {2 * len(policies)} episodes in \d+\.\d s", out), out

@@ -107,9 +107,7 @@ def test_resume_skips_a_truncated_checkpoint_and_says_so(run: Path, capsys: pyte
     assert PPO.load(run / "checkpoints" / "step_1024.zip").num_timesteps == 1024  # written again, whole
 
 
-def test_folders_and_temp_files_named_like_checkpoints_are_ignored(
-    run: Path, capsys: pytest.CaptureFixture
-) -> None:
+def test_folders_and_temp_files_named_like_checkpoints_are_ignored(run: Path, capsys: pytest.CaptureFixture) -> None:
     from agentsim_env.train.runner import latest_checkpoint, train
 
     ckpts = run / "checkpoints"
@@ -151,14 +149,10 @@ def test_a_curve_row_cut_short_by_a_kill_is_dropped(run: Path) -> None:
 
     curve = run / "curve.csv"
     data = curve.read_bytes()
-    curve.write_bytes(
-        data[: data.rindex(b"\n", 0, len(data) - 1) + 1] + b"1024,1"
-    )  # the last row's append, killed
+    curve.write_bytes(data[: data.rindex(b"\n", 0, len(data) - 1) + 1] + b"1024,1")  # the last row's append, killed
     res = train(_cfg().replace(timesteps=1536), run, resume=True)
     assert [r["timesteps"] for r in res.curve] == [256, 512, 768, 1280, 1536]
-    assert curve.read_bytes().startswith(
-        data[: data.rindex(b"\n", 0, len(data) - 1) + 1]
-    )  # kept rows as written
+    assert curve.read_bytes().startswith(data[: data.rindex(b"\n", 0, len(data) - 1) + 1])  # kept rows as written
 
 
 # ------------------------------------------------------------------------------------ failure changes nothing
@@ -205,9 +199,7 @@ def _crash_mid_write(target: Any) -> None:
     raise OSError(28, "No space left on device")
 
 
-def test_a_failed_checkpoint_write_leaves_no_checkpoint(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
+def test_a_failed_checkpoint_write_leaves_no_checkpoint(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     from stable_baselines3.common.base_class import BaseAlgorithm
 
     from agentsim_env.train.runner import train

@@ -129,9 +129,7 @@ def test_runner_writes_the_run_folder_and_reproduces(tmp_path: Path) -> None:
     for name in ("model.zip", "config.json", "config.yaml", "curve.csv", "checkpoints/step_1024.zip"):
         assert (tmp_path / "a" / name).exists(), name
     meta = json.loads((tmp_path / "a" / "config.json").read_text())
-    assert (
-        meta["scenario"] == "navigation" and meta["timesteps_done"] == 2048 and meta["train"] == cfg.to_dict()
-    )
+    assert meta["scenario"] == "navigation" and meta["timesteps_done"] == 2048 and meta["train"] == cfg.to_dict()
     assert len(a.curve) == 2048 // (64 * 2 * 4) and a.curve[-1]["timesteps"] == 2048
     b = train(cfg, None)
     assert all(np.array_equal(x, y) for x, y in zip(_params(a.model), _params(b.model)))
@@ -202,9 +200,7 @@ def test_learned_policy_errors(model_dir: Path, tmp_path: Path) -> None:
         load_policy(tmp_path / "x.zip", agentsim_env.make("navigation"))
 
 
-def test_agentsim_run_takes_a_trained_model(
-    model_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture
-) -> None:
+def test_agentsim_run_takes_a_trained_model(model_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     from agentsim_env.cli import main
 
     rc = main(
@@ -280,10 +276,7 @@ def test_agentsim_train_end_to_end(tmp_path: Path, capsys: pytest.CaptureFixture
     assert "| go_to_goal | baseline | 1 |" in capsys.readouterr().out
     assert main(["train", "navigation", "--set", "ppo.gamma=2", "--out", str(tmp_path / "x")]) == 2
     assert "ppo.gamma" in capsys.readouterr().err and not (tmp_path / "x").exists()
-    assert (
-        main(["train", "navigation", "--record", str(tmp_path / "no" / "db"), "--out", str(tmp_path / "y")])
-        == 2
-    )
+    assert main(["train", "navigation", "--record", str(tmp_path / "no" / "db"), "--out", str(tmp_path / "y")]) == 2
     assert not (tmp_path / "y").exists()
 
 
@@ -296,9 +289,7 @@ sys.argv = ["train", "navigation", "--timesteps", "256", "--worlds", "1", "--out
             "--set", "ppo.n_steps=64", "ppo.batch_size=64"]
 runpy.run_module("agentsim_env.train", run_name="__main__", alter_sys=True)
 """
-    res = subprocess.run(
-        [sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True, timeout=300
-    )
+    res = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True, timeout=300)
     assert res.returncode == 0, res.stderr
     assert "navigation: 100%" in res.stderr and "256/256" in res.stderr and "return" in res.stderr, res.stderr
     assert (tmp_path / "run" / "model.zip").is_file() and (tmp_path / "run" / "curve.png").is_file()

@@ -25,9 +25,7 @@ def test_old_path_warns_and_reexports_the_same_objects(old: str) -> None:
     with pytest.warns(DeprecationWarning) as caught:
         shim = importlib.import_module(old)
     messages = [str(w.message) for w in caught if issubclass(w.category, DeprecationWarning)]
-    assert any(m.startswith(f"{old} is deprecated: import {DEPRECATED[old]} instead") for m in messages), (
-        messages
-    )
+    assert any(m.startswith(f"{old} is deprecated: import {DEPRECATED[old]} instead") for m in messages), messages
     names = _public(new)
     assert names, f"{DEPRECATED[old]} has no public names"
     for name in names:
@@ -36,9 +34,7 @@ def test_old_path_warns_and_reexports_the_same_objects(old: str) -> None:
 
 def test_the_new_paths_do_not_warn() -> None:
     # in a fresh interpreter: re-importing the new modules here would make second copies of their classes
-    code = "import importlib\n" + "".join(
-        f"importlib.import_module({n!r})\n" for n in sorted(set(DEPRECATED.values()))
-    )
+    code = "import importlib\n" + "".join(f"importlib.import_module({n!r})\n" for n in sorted(set(DEPRECATED.values())))
     res = subprocess.run(
         [sys.executable, "-W", "error::DeprecationWarning", "-c", code],
         capture_output=True,

@@ -52,9 +52,7 @@ def test_derived_constants_match_the_table() -> None:
     assert p.v0 == pytest.approx(4.03, abs=0.005)
 
 
-@pytest.mark.parametrize(
-    ("speed", "watts"), [(0.0, 168.5), (5.0, 143.6), (10.2, 126.0), (15.0, 138.5), (18.3, 161.6)]
-)
+@pytest.mark.parametrize(("speed", "watts"), [(0.0, 168.5), (5.0, 143.6), (10.2, 126.0), (15.0, 138.5), (18.3, 161.6)])
 def test_power_table(speed: float, watts: float) -> None:
     assert float(power(np.array([speed]))[0]) == pytest.approx(watts, rel=0.005)
 
@@ -213,9 +211,7 @@ BAD_ZONES = [
 ]
 
 
-@pytest.mark.parametrize(
-    ("content", "label", "field"), BAD_ZONES, ids=[f"bad{i}" for i in range(len(BAD_ZONES))]
-)
+@pytest.mark.parametrize(("content", "label", "field"), BAD_ZONES, ids=[f"bad{i}" for i in range(len(BAD_ZONES))])
 def test_bad_zone_file_names_zone_and_field(tmp_path: Path, content: dict, label: str, field: str) -> None:
     path = tmp_path / "zones.json"
     path.write_text(json.dumps(content))
@@ -285,9 +281,7 @@ def test_round_trip(tmp_path: Path) -> None:
 
 
 def test_defaults_and_radial_profile() -> None:
-    zs = zones_from_dict(
-        {"map_size": [200, 200], "zones": [{"centre": [100, 100], "radius": 40, "n_sensors": 5}]}
-    )
+    zs = zones_from_dict({"map_size": [200, 200], "zones": [{"centre": [100, 100], "radius": 40, "n_sensors": 5}]})
     z = zs.zones[0]
     assert (z.profile, z.alpha, z.sigma, z.floor, z.weight, z.altitude, z.name) == (
         "gauss",

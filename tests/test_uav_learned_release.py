@@ -27,10 +27,7 @@ def _fly(env, trigger, motion: float = 0.0, seed: int = 3, max_steps: int = 5000
     for _ in range(max_steps):
         if not env.agents:
             break
-        acts = {
-            a: {"motion": np.full(3, motion), "release": np.array([trigger(obs[a]), 0.0, 0.0])}
-            for a in env.agents
-        }
+        acts = {a: {"motion": np.full(3, motion), "release": np.array([trigger(obs[a]), 0.0, 0.0])} for a in env.agents}
         obs, rew, *_ = env.step(acts)
         log.append((env.world.state.pos[: env.scenario.n_agents].copy(), dict(rew), env.world.task.wp.copy()))
     return log
@@ -102,9 +99,7 @@ def test_release_goes_to_the_predicted_landing_point() -> None:
 def test_shaped_return_is_coverage_minus_a_constant() -> None:
     """Only coverage weighted: the episode's return is w_coverage x coverage - cost x payload (any policy)."""
     zero = {k: 0.0 for k in ("w_fidelity", "w_energy", "w_miss", "w_out", "w_lcc", "w_lifetime")}
-    env = agentsim_env.make(
-        "uav_release", **{**PILOT, "payload": 20}, **zero, w_coverage=100.0, release_cost=1.0
-    )
+    env = agentsim_env.make("uav_release", **{**PILOT, "payload": 20}, **zero, w_coverage=100.0, release_cost=1.0)
     cfg, n = env.scenario.config, env.scenario.zones.n_sensors
     for rule in (lambda o: 1.0 if o["autopilot"][0] > 0.0 else -1.0, lambda o: -1.0):
         log = _fly(env, rule)

@@ -142,10 +142,7 @@ def test_export_has_one_frame_per_chosen_step_and_shows_the_agents_moving(tmp_pa
     )
     expected = len(replay_info(db).frame_steps(10))
     out = tmp_path / "videos" / "nav.mp4"
-    assert (
-        main(["view", "--replay", str(db), "--out", str(out), "--every", "10", "--size", "320", "--fps", "5"])
-        == 0
-    )
+    assert main(["view", "--replay", str(db), "--out", str(out), "--every", "10", "--size", "320", "--fps", "5"]) == 0
     assert sorted(p.name for p in out.parent.iterdir()) == ["nav.mp4"]  # the temporary file was renamed
     reader = iio.get_reader(out)
     try:

@@ -238,9 +238,7 @@ def test_after_warmup_no_shipped_command_compiles_a_kernel(tmp_path: Path) -> No
     )
     assert ray.returncode == 0, ray.stderr[-3000:]
     after = _cache_index(tmp_path / "numba-cache")
-    assert after == before, (
-        f"compiled by the Ray shards: {sorted(k for k in after if after[k] != before.get(k))}"
-    )
+    assert after == before, f"compiled by the Ray shards: {sorted(k for k in after if after[k] != before.get(k))}"
 
 
 def _cache_index(cache: Path) -> dict[str, bytes]:

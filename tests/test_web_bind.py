@@ -42,15 +42,11 @@ def test_agentsim_view_listens_on_loopback_only(monkeypatch: pytest.MonkeyPatch)
         return real(*args, **kw)
 
     monkeypatch.setattr(rollout, "run_episode", first_episode)
-    assert (
-        main(["view", "navigation", "--set", "n_agents=3", "--steps", "2", "--speed", "0", "--no-wait"]) == 0
-    )
+    assert main(["view", "navigation", "--set", "n_agents=3", "--steps", "2", "--speed", "0", "--no-wait"]) == 0
     _assert_loopback(seen[0], "agentsim view")
 
 
-def test_agentsim_view_replay_listens_on_loopback_only(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
+def test_agentsim_view_replay_listens_on_loopback_only(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     import agentsim_env.cli_view as cli_view
 
     db = tmp_path / "r.db"

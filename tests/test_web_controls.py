@@ -164,12 +164,8 @@ def test_replay_playback_survives_any_speed_and_wakes_for_a_new_one(recorded: Pa
 
 
 @pytest.mark.parametrize("speed", ["0.01", "1e-300", "20000", "nan"])
-def test_view_refuses_a_speed_outside_the_range_in_one_line(
-    speed: str, capsys: pytest.CaptureFixture[str]
-) -> None:
+def test_view_refuses_a_speed_outside_the_range_in_one_line(speed: str, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["view", "navigation", "--set", "n_agents=2", "--steps", "1", "--speed", speed]) == 2
     err = capsys.readouterr().err
-    assert err.startswith("agentsim: error: --speed must be 0") and f"{MIN_SPEED:g}..{MAX_SPEED:g}" in err, (
-        err
-    )
+    assert err.startswith("agentsim: error: --speed must be 0") and f"{MIN_SPEED:g}..{MAX_SPEED:g}" in err, err
     assert err.count("\n") == 1

@@ -97,9 +97,7 @@ def test_preview_of_the_defaults() -> None:
         b8 = np.array(pz["b8"])
         np.testing.assert_allclose(b8, prof.low_discrepancy(z.n_sensors) + z.centre, atol=1e-3)
         b1 = np.array(pz["b1"])
-        np.testing.assert_allclose(
-            b1, prof.sample(z.n_sensors, np.random.default_rng(0)) + z.centre, atol=1e-3
-        )
+        np.testing.assert_allclose(b1, prof.sample(z.n_sensors, np.random.default_rng(0)) + z.centre, atol=1e-3)
         assert np.all(np.hypot(*(b1 - z.centre).T) <= z.radius + 1e-3)
     assert preview(d) == reply  # stable: the same zones give the same picture
 
@@ -191,9 +189,7 @@ def test_bad_files_give_the_validators_message(d: dict[str, Any]) -> None:
         ({"zones": {}, "path": "/etc/passwd"}, "cannot choose the file"),
     ],
 )
-def test_malformed_messages_are_client_errors(
-    tmp_path: Path, cmd: str, msg: dict[str, Any], words: str
-) -> None:
+def test_malformed_messages_are_client_errors(tmp_path: Path, cmd: str, msg: dict[str, Any], words: str) -> None:
     handlers = designer_handlers(tmp_path / "z.json")
     with pytest.raises(ClientError) as info:
         handlers[cmd]({"cmd": cmd, **msg})
@@ -359,9 +355,7 @@ def test_page_draws_edits_and_saves_two_zones(tmp_path: Path) -> None:
             assert [(z.name, z.n_sensors) for z in zs.zones] == [("alpha", 80), ("beta", 35)]
             tol = 1.0 / px + 0.1  # a pixel's worth of metres, and the page's 0.1 m rounding
             for z, (cx, cy, r) in zip(zs.zones, [(150, 200, 80), (420, 150, 60)], strict=True):
-                assert (
-                    abs(z.centre[0] - cx) <= tol and abs(z.centre[1] - cy) <= tol and abs(z.radius - r) <= tol
-                )
+                assert abs(z.centre[0] - cx) <= tol and abs(z.centre[1] - cy) <= tol and abs(z.radius - r) <= tol
             assert zs.zones[1].profile == "power" and zs.zones[1].alpha == 1.2 and zs.zones[1].weight == 2.0
             assert zs.zones[0].profile == "gauss" and zs.zones[0].floor == 0.0 and zs.zones[0].weight == 1.0
             assert zs.map_size == (600.0, 400.0) and zs.base == (20.0, 20.0)

@@ -66,9 +66,7 @@ def test_a_slow_preview_holds_up_neither_other_pages_nor_its_own_newest_request(
     async def pages() -> None:
         async with connect(url, max_size=None) as a, connect(url, max_size=None) as b:
             assert json.loads(await a.recv())["type"] == json.loads(await b.recv())["type"] == "zones.hello"
-            for i, n in enumerate(
-                (10, 11, 12, 13, 14), 1
-            ):  # the first is held; the others arrive while it runs
+            for i, n in enumerate((10, 11, 12, 13, 14), 1):  # the first is held; the others arrive while it runs
                 await a.send(json.dumps({"cmd": "zones.preview", "zones": one_zone(n), "id": i}))
             await asyncio.sleep(0.2)
             t0 = time.monotonic()
@@ -92,9 +90,7 @@ def test_a_slow_preview_holds_up_neither_other_pages_nor_its_own_newest_request(
     assert computed == [10, 14] and all(p["ok"] for p in previews)
 
 
-def test_previews_of_one_page_do_not_wait_for_another_pages(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
+def test_previews_of_one_page_do_not_wait_for_another_pages(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     release = threading.Event()
     real = designer.preview
 
@@ -121,9 +117,7 @@ def test_previews_of_one_page_do_not_wait_for_another_pages(
             await asyncio.sleep(0.1)
             await b.send(json.dumps({"cmd": "zones.preview", "zones": one_zone(7)}))
             got.append(json.loads(await asyncio.wait_for(b.recv(), 3.0)))
-            await b.send(
-                json.dumps({"cmd": "zones.preview", "zones": {"version": 1}})
-            )  # invalid: the message
+            await b.send(json.dumps({"cmd": "zones.preview", "zones": {"version": 1}}))  # invalid: the message
             got.append(json.loads(await asyncio.wait_for(b.recv(), 3.0)))
             release.set()
 

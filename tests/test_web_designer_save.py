@@ -31,9 +31,7 @@ OLD = '{"map_size": [100, 100], "zones": [{"centre": [50, 50], "radius": 10, "n_
 
 def save(path: Path) -> dict[str, Any]:
     """The Save handler's reply for ``ZONES`` written to ``path``."""
-    reply = designer_handlers(path)["zones.save"](
-        {"cmd": "zones.save", "zones": json.loads(json.dumps(ZONES))}
-    )
+    reply = designer_handlers(path)["zones.save"]({"cmd": "zones.save", "zones": json.loads(json.dumps(ZONES))})
     assert reply is not None
     return reply
 
@@ -205,6 +203,4 @@ def test_a_file_whose_owner_a_replacement_cannot_keep_is_refused(shared_folder: 
     assert only(shared_folder) == ["zones.json"]
     os.chown(path, NOBODY, NOBODY)  # nobody's own file: saved, still nobody's and 0666
     assert _save_as_nobody(path).startswith("saved ")
-    assert (
-        os.stat(path).st_uid == NOBODY and mode(path) == 0o666 and load_zones(path) == zones_from_dict(ZONES)
-    )
+    assert os.stat(path).st_uid == NOBODY and mode(path) == 0o666 and load_zones(path) == zones_from_dict(ZONES)

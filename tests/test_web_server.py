@@ -164,9 +164,7 @@ def test_every_log_line_reaches_the_page_once_in_order() -> None:
         while srv.n_pages == 0:
             time.sleep(0.01)
         for k in range(300):
-            srv.publish_log(
-                [{"step": k, "kind": "message", "text": f"line {k}.{j}", "slots": []} for j in range(3)]
-            )
+            srv.publish_log([{"step": k, "kind": "message", "text": f"line {k}.{j}", "slots": []} for j in range(3)])
         t.join()
     finally:
         srv.stop()
@@ -320,18 +318,14 @@ def test_replay_serves_the_recorded_positions(tmp_path: Any) -> None:
     assert unpack_frame(stepped[-1])[0]["step"] == 6
     assert unpack_frame(played[-1])[0]["step"] > 6
     scene = next(t for t in texts if t["type"] == "scene")
-    assert (
-        scene["mode"] == "replay" and scene["replay"]["first_step"] == 0 and len(scene["objects"]["kind"]) > 0
-    )
+    assert scene["mode"] == "replay" and scene["replay"]["first_step"] == 0 and len(scene["objects"]["kind"]) > 0
     errors = [t["message"] for t in texts if t["type"] == "error"]
     assert len(errors) == 1 and "seek: 'step' must be an integer in 0.." in errors[0]
     header, arrays = unpack_frame(frames[-1])
     assert header["step"] == 5
     steps = open_store(db).table("steps")
     rows = steps[(steps.step == 5)].sort_values("agent")
-    np.testing.assert_allclose(
-        arrays["pos"][rows.agent.to_numpy()], rows[["x", "y", "z"]].to_numpy(), atol=1e-4
-    )
+    np.testing.assert_allclose(arrays["pos"][rows.agent.to_numpy()], rows[["x", "y", "z"]].to_numpy(), atol=1e-4)
     # the rebuilt static scene is the recorded episode's (same seed)
     env = agentsim_env.make("navigation", n_agents=3)
     env.reset(seed=0)
@@ -367,9 +361,7 @@ def test_zones_check_lists_the_zones(capsys: Any) -> None:
 
 
 def test_view_runs_a_few_steps_and_stops(capsys: Any) -> None:
-    assert (
-        main(["view", "navigation", "--set", "n_agents=3", "--steps", "15", "--speed", "0", "--no-wait"]) == 0
-    )
+    assert main(["view", "navigation", "--set", "n_agents=3", "--steps", "15", "--speed", "0", "--no-wait"]) == 0
     assert "http://127.0.0.1:" in capsys.readouterr().err
 
 

@@ -83,9 +83,7 @@ def _deaf_page(port: int) -> socket.socket:
     return s
 
 
-def test_a_page_that_never_reads_holds_one_send_and_is_dropped(
-    srv: WebServer, monkeypatch: pytest.MonkeyPatch
-) -> None:
+def test_a_page_that_never_reads_holds_one_send_and_is_dropped(srv: WebServer, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(server, "SEND_TIMEOUT_S", 1.0)
     deaf = _deaf_page(srv.port)
     try:
@@ -109,9 +107,7 @@ def test_a_page_that_never_reads_holds_one_send_and_is_dropped(
                 buffered.append(conn.transport.get_write_buffer_size())
         assert i > 50 and tasks, i
         assert max(tasks) <= base + 2, tasks  # nothing piles up per broadcast
-        assert max(buffered) < 1_000_000, (
-            buffered
-        )  # at most one message waits beyond the socket's own buffers
+        assert max(buffered) < 1_000_000, buffered  # at most one message waits beyond the socket's own buffers
         assert srv.n_pages == 0, "a page that stayed unwritable was not dropped"
         assert time.monotonic() - t0 < 5
     finally:
@@ -181,9 +177,7 @@ def quiet_terminal(caplog: pytest.LogCaptureFixture, capfd: pytest.CaptureFixtur
 
 
 @pytest.mark.parametrize("method", ["POST", "PUT", "DELETE", "OPTIONS", "PATCH", "TRACE", "CONNECT", "BREW"])
-def test_methods_other_than_get_and_head_are_refused(
-    srv: WebServer, method: str, quiet_terminal: None
-) -> None:
+def test_methods_other_than_get_and_head_are_refused(srv: WebServer, method: str, quiet_terminal: None) -> None:
     for path in ("/", "/static/viewer.js", "/ws", "/nope"):
         r = _exchange(srv.port, f"{method} {path} HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n".encode())
         assert _status(r) == 405, (method, path, r[:120])

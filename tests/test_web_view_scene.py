@@ -59,9 +59,7 @@ def test_uav_release_scene_marks_its_zones_with_density_profiles() -> None:
 
 def test_frames_asks_the_scenario_and_never_checks_its_type() -> None:
     tree = ast.parse(inspect.getsource(frames))
-    calls = [
-        n for n in ast.walk(tree) if isinstance(n, ast.Call) and getattr(n.func, "id", "") == "isinstance"
-    ]
+    calls = [n for n in ast.walk(tree) if isinstance(n, ast.Call) and getattr(n.func, "id", "") == "isinstance"]
     imports = [n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)]
     assert not calls, "frames.py checks types"
     assert not any("scenarios" in (m or "") for m in imports), imports
@@ -117,9 +115,7 @@ def test_overlay_hop_summaries_are_their_own_log_kind_hidden_by_default() -> Non
         obs, *_ = env.step(pol.act({a: obs[a] for a in env.agents}))
         lines += log_lines(env.world, env.scenario, env.world.last_events, 0, 0)
     overlay = [ln for ln in lines if ln["text"].startswith("OVERLAY:")]
-    assert overlay and {ln["kind"] for ln in overlay} == {
-        "overlay"
-    }  # one summary a step, not a plain message
+    assert overlay and {ln["kind"] for ln in overlay} == {"overlay"}  # one summary a step, not a plain message
     assert "overlay" in frames.LOG_HIDDEN
 
 

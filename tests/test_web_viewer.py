@@ -75,8 +75,7 @@ def test_page_draws_agents_and_obstacles_where_they_are_with_no_console_errors()
             st, sc = env.world.state, env.world.scene
             agents = [_project(page, st.pos[i]) for i in range(6)]
             objects = [
-                _project(page, np.r_[sc.centre[o, :2], sc.centre[o, 2] + sc.half[o, 2]])
-                for o in range(sc.n_objects)
+                _project(page, np.r_[sc.centre[o, :2], sc.centre[o, 2] + sc.half[o, 2]]) for o in range(sc.n_objects)
             ]
             # the empty scene: the same map, no objects, the agents moved far off the map
             env.world.scene = Scene()
@@ -113,9 +112,7 @@ def test_log_stream_shows_the_collision_and_its_pause_holds_lines_while_steps_go
             st.pos[1] = st.pos[0] + np.array([0.1, 0.0, 0.0])  # agents 0 and 1 overlap: a collision this step
             _, _, term, _, infos = env.step({a: acts[a] for a in env.agents})
             assert env.world.last_events.collisions.agent.size > 0  # the env reported it
-            page.wait_for_function(
-                "window.agentsim.logLines().some(l => l.includes('collided'))", timeout=15000
-            )
+            page.wait_for_function("window.agentsim.logLines().some(l => l.includes('collided'))", timeout=15000)
             line = next(ln for ln in page.evaluate("window.agentsim.logLines()") if "collided" in ln)
             assert "agent_0" in line and "agent_1" in line
             page.click("#log-pause")
@@ -128,16 +125,12 @@ def test_log_stream_shows_the_collision_and_its_pause_holds_lines_while_steps_go
                 for _ in range(5):
                     env.step({a: acts[a] for a in env.agents})
             page.wait_for_function(
-                "window.agentsim.episode > 0 && window.agentsim.lastStep >= 1 && "
-                "window.agentsim.framesDrawn > 2",
+                "window.agentsim.episode > 0 && window.agentsim.lastStep >= 1 && window.agentsim.framesDrawn > 2",
                 timeout=15000,
             )
             time.sleep(0.5)
             assert page.evaluate("window.agentsim.logLines().length") == held  # paused: no new lines
-            assert (
-                page.evaluate("window.agentsim.episode") == 4
-                or page.evaluate("window.agentsim.lastStep") != step0
-            )
+            assert page.evaluate("window.agentsim.episode") == 4 or page.evaluate("window.agentsim.lastStep") != step0
             page.click("#log-pause")  # resume: the held lines appear
             page.wait_for_function(f"window.agentsim.logLines().length > {held}", timeout=10000)
             assert not errors, errors
@@ -200,9 +193,7 @@ def test_replay_shows_the_recorded_positions_at_the_chosen_step(tmp_path: Path) 
                 _wait_step(page, k)
                 shots[k] = _image(page)
             assert not errors, errors
-            pos = {
-                k: steps[steps.step == k].sort_values("agent")[["x", "y", "z"]].to_numpy() for k in (0, 30)
-            }
+            pos = {k: steps[steps.step == k].sort_values("agent")[["x", "y", "z"]].to_numpy() for k in (0, 30)}
             px = {k: [_project(page, p) for p in pos[k]] for k in (0, 30)}
     finally:
         viewer.close()

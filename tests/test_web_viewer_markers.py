@@ -77,9 +77,7 @@ def test_default_navigation_view_draws_readable_agents_and_the_goals_where_the_e
     got = sorted((m["slot"], m["x"], m["y"]) for m in drawn if m["kind"] == "goal")
     assert [g[0] for g in got] == list(range(n))
     assert np.allclose([g[1:] for g in got], goals, atol=1.0)
-    assert all(_changed(full, empty, xy, 2) >= 4 for xy in goals), (
-        "a goal is not drawn at its projected position"
-    )
+    assert all(_changed(full, empty, xy, 2) >= 4 for xy in goals), "a goal is not drawn at its projected position"
     for word in ("arrived", "collided", "offline", "goal"):
         assert word in legend, legend
 
@@ -100,8 +98,7 @@ def test_follow_keeps_the_selected_agent_centred_and_the_view_options_work() -> 
             )
             box = page.eval_on_selector(
                 "#canvas",
-                "c => { const r = c.getBoundingClientRect(); "
-                "return [r.left + r.width / 2, r.top + r.height / 2]; }",
+                "c => { const r = c.getBoundingClientRect(); return [r.left + r.width / 2, r.top + r.height / 2]; }",
             )
             far = np.hypot(*np.subtract(_project(page, st.pos[2]), box))
             page.evaluate("window.agentsim.send({cmd: 'select', slot: 2})")

@@ -188,9 +188,7 @@ def test_a_frame_that_is_not_a_post_closes_the_connection(two: Loop) -> None:
         assert _closed_unanswered(s)
 
 
-def test_too_many_peers_waiting_to_authenticate_are_closed_at_once(
-    two: Loop, monkeypatch: pytest.MonkeyPatch
-) -> None:
+def test_too_many_peers_waiting_to_authenticate_are_closed_at_once(two: Loop, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(wire, "MAX_PENDING_AUTH", 2)
     idle = [socket.create_connection(("127.0.0.1", two.port)) for _ in range(2)]
     try:

@@ -58,9 +58,7 @@ def test_collisions_match_brute_force(seed: int, n: int, n_worlds: int) -> None:
     spec = GridSpec.for_bounds((0, 30, 0, 30), 3.0, n_worlds)
     grid = build_grid(spec, pos, world, online)
     og = build_object_grid(spec, scene.centre, scene.footprint_radius(), scene.world)
-    ev = find_collisions(
-        pos, radius, online, world, grid, scene.kind, scene.centre, scene.half, scene.world, og
-    )
+    ev = find_collisions(pos, radius, online, world, grid, scene.kind, scene.centre, scene.half, scene.world, og)
     got = set(zip(ev.agent.tolist(), ev.other_agent.tolist(), ev.obj.tolist()))
     assert got == _collide_brute(pos, radius, online, world, scene)
     assert len(got) == len(ev)  # no duplicate rows

@@ -62,9 +62,7 @@ def assert_same_values(wrapper: Any, env: Any, names: set[str]) -> None:
 def test_the_parallel_base_forwards_every_public_name_of_the_env() -> None:
     env = agentsim_env.make("navigation", **CONFIG)
     missing = public_names(env) - forwarded_by(ParallelEnvWrapper) - set(PARALLEL_EXCLUDED)
-    assert not missing, (
-        f"ParallelEnvWrapper does not forward {sorted(missing)}: add them (or exclude, commented)"
-    )
+    assert not missing, f"ParallelEnvWrapper does not forward {sorted(missing)}: add them (or exclude, commented)"
     wrapper = ParallelEnvWrapper(env)
     wrapper.reset(seed=0)
     assert_same_values(wrapper, env, public_names(env) - set(PARALLEL_EXCLUDED))
@@ -74,9 +72,7 @@ def test_the_parallel_base_forwards_every_public_name_of_the_env() -> None:
 def test_the_batched_base_forwards_every_public_name_of_the_env() -> None:
     env = BatchedEnv("navigation", 2, **CONFIG)
     missing = public_names(env) - forwarded_by(BatchedEnvWrapper) - set(BATCHED_EXCLUDED)
-    assert not missing, (
-        f"BatchedEnvWrapper does not forward {sorted(missing)}: add them (or exclude, commented)"
-    )
+    assert not missing, f"BatchedEnvWrapper does not forward {sorted(missing)}: add them (or exclude, commented)"
     wrapper = BatchedEnvWrapper(env)
     wrapper.reset(seed=0)
     wrapper.step(np.zeros((2, 3, env.act_dim)))

@@ -285,9 +285,7 @@ def test_weighted_coverage_matches_importance_sampling() -> None:
         per_zone.append(got.per_zone[k])
     assert got.overall == pytest.approx(np.mean(per_zone))
     # With a uniform profile the weighting is flat: weighted coverage equals area coverage.
-    assert got.per_zone[1] == pytest.approx(
-        area_coverage(pts, (centres, radii), 7.0, 0.25).per_zone[1], abs=1e-9
-    )
+    assert got.per_zone[1] == pytest.approx(area_coverage(pts, (centres, radii), 7.0, 0.25).per_zone[1], abs=1e-9)
 
 
 def test_zone_grid_counts_overlap_once() -> None:

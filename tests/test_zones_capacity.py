@@ -46,9 +46,7 @@ def test_check_reports_the_default_fleet(capsys: pytest.CaptureFixture[str]) -> 
     assert "default fleet: 4 UAVs x 40 sensors = 160; the zones need 150: carried (10 spare)" in out
 
 
-def test_check_refuses_zones_the_default_fleet_cannot_carry(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
-) -> None:
+def test_check_refuses_zones_the_default_fleet_cannot_carry(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     path = big_zones(tmp_path)
     assert main(["zones", "check", str(path)]) == 2
     cap = capsys.readouterr()

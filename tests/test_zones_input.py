@@ -57,10 +57,7 @@ def test_check_text_accepts_ordinary_text(good: str) -> None:
 def test_check_text_newlines_only_where_allowed() -> None:
     with pytest.raises(ValueError, match="U\\+000A"):
         validation.check_text("label", "two\nlines")
-    assert (
-        validation.check_text("label", "two\nlines\tand a tab", allow_newlines=True)
-        == "two\nlines\tand a tab"
-    )
+    assert validation.check_text("label", "two\nlines\tand a tab", allow_newlines=True) == "two\nlines\tand a tab"
     with pytest.raises(ValueError, match="U\\+001B"):
         validation.check_text("label", "two\n\x1b[2J", allow_newlines=True)
     with pytest.raises(ValueError, match="label must be a string"):
@@ -85,9 +82,7 @@ def test_the_description_takes_newlines_but_no_escapes() -> None:
         zones_from_dict({**zone_file(), "description": ["a", "list"]})
 
 
-def test_zones_check_refuses_a_bad_name_in_one_ascii_line(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
-) -> None:
+def test_zones_check_refuses_a_bad_name_in_one_ascii_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     path = tmp_path / "z.json"
     # json.dumps writes the NUL, ESC, override and lone surrogate as \u escapes: a file that really holds them
     path.write_text(json.dumps(zone_file(name="a\x00\x1b[2J\u202e\ud800")), encoding="utf-8")
@@ -95,9 +90,7 @@ def test_zones_check_refuses_a_bad_name_in_one_ascii_line(
     captured = capsys.readouterr()
     assert captured.out == ""
     (line,) = captured.err.splitlines()
-    assert (
-        line.startswith(f"agentsim: error: {path}: zones[0]") and "field 'name'" in line and "U+0000" in line
-    )
+    assert line.startswith(f"agentsim: error: {path}: zones[0]") and "field 'name'" in line and "U+0000" in line
     line.encode("ascii")
 
 
@@ -177,9 +170,7 @@ def _store_naming(zones: Path, tmp_path: Path) -> Path:
     env.close()
     con = sqlite3.connect(path)
     with con:
-        con.execute(
-            "UPDATE runs SET scenario = 'uav_release', config = ?", (json.dumps({"zones": str(zones)}),)
-        )
+        con.execute("UPDATE runs SET scenario = 'uav_release', config = ?", (json.dumps({"zones": str(zones)}),))
     con.close()
     return path
 
@@ -228,9 +219,7 @@ def test_a_fifo_is_refused_without_waiting(reader: str, fifo: Path, tmp_path: Pa
     assert not thread.is_alive(), f"{reader} waits on a FIFO"
     (result,) = outcome
     if reader in ("load_zones", "make", "designer load"):
-        assert (
-            isinstance(result, ValueError) and "not a regular file" in str(result) and "FIFO" in str(result)
-        )
+        assert isinstance(result, ValueError) and "not a regular file" in str(result) and "FIFO" in str(result)
     elif reader == "designer hello":
         assert result[0]["source"] == "default" and "not a regular file" in result[1]["message"]
     elif reader == "zones check":

@@ -12,9 +12,7 @@ from websockets.asyncio.client import connect
 from agentsim_env.render.web.frames import unpack_frame
 
 
-def talk(
-    url: str, send: list[Any], seconds: float = 1.0, ack_delay: float = 0.0
-) -> tuple[list[dict], list[bytes]]:
+def talk(url: str, send: list[Any], seconds: float = 1.0, ack_delay: float = 0.0) -> tuple[list[dict], list[bytes]]:
     """Connect to the page's socket, send ``send`` (objects as JSON, strings and bytes as they are), collect for
     ``seconds``; each frame is acknowledged ``ack_delay`` seconds after it arrived (a slow page)."""
     texts: list[dict] = []

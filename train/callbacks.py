@@ -28,9 +28,7 @@ CURVE_FIELDS = ("timesteps", "episodes", "mean_return", "mean_length", "wall_s",
 def read_curve(path: str | Path) -> list[dict[str, float]]:
     """Rows of a ``curve.csv`` (numbers as floats; ``mean_return`` is NaN before the first finished episode)."""
     with open(path, newline="", encoding="utf-8") as f:
-        return [
-            {k: float(v) if v != "" else float("nan") for k, v in row.items()} for row in csv.DictReader(f)
-        ]
+        return [{k: float(v) if v != "" else float("nan") for k, v in row.items()} for row in csv.DictReader(f)]
 
 
 class TrainMonitor(BaseCallback):

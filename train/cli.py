@@ -201,9 +201,7 @@ def _train_and_report(args: argparse.Namespace, cfg: Any, out: Path) -> int:
             eval_rows=rows,
             title=f"{cfg.scenario}: PPO, {cfg.worlds} worlds, seed {cfg.seed}",
         )
-        print(
-            f"learning curve: {png} (CSV: {out / 'curve.csv'}; TensorBoard: tensorboard --logdir {out / 'tb'})"
-        )
+        print(f"learning curve: {png} (CSV: {out / 'curve.csv'}; TensorBoard: tensorboard --logdir {out / 'tb'})")
     if args.record:
         print(f"evaluation episodes recorded to {args.record}")
     return 0

@@ -112,9 +112,7 @@ def record_comm_traffic(policy: Any, scenario_config: Mapping[str, Any], seeds: 
     assert shape is not None  # a flat Box
     motion = int(shape[0]) - cfg.comms.action_dim
     index = {a: i for i, a in enumerate(env.possible_agents)}
-    cols: dict[str, list[Any]] = {
-        k: [] for k in ("step", "episode", "scout", "channel", "sent", "payload", "target")
-    }
+    cols: dict[str, list[Any]] = {k: [] for k in ("step", "episode", "scout", "channel", "sent", "payload", "target")}
     for e, seed in enumerate(seeds):
         obs, _ = env.reset(seed=int(seed))
         t = 0
@@ -131,9 +129,7 @@ def record_comm_traffic(policy: Any, scenario_config: Mapping[str, Any], seeds: 
             cols["step"].append(np.full(len(names), t))
             cols["episode"].append(np.full(len(names), e))
             cols["scout"].append(scout)
-            cols["channel"].append(
-                np.minimum(((comm[:, 0] + 1.0) * (N_CHANNELS / 2.0)).astype(int), N_CHANNELS - 1)
-            )
+            cols["channel"].append(np.minimum(((comm[:, 0] + 1.0) * (N_CHANNELS / 2.0)).astype(int), N_CHANNELS - 1))
             cols["sent"].append(world.comms.sent[slots].copy())
             cols["payload"].append(comm[:, COMM_HEADER:])
             cols["target"].append(target)
@@ -212,9 +208,7 @@ def plot_comm_traffic(
     pay, tgt = tr.payload[m], tr.target[m]
     if len(pay) > 2:
         for q in range(pay.shape[1]):
-            c = [
-                abs(np.corrcoef(pay[:, q], tgt[:, j])[0, 1]) if pay[:, q].std() > 0 else 0.0 for j in range(2)
-            ]
+            c = [abs(np.corrcoef(pay[:, q], tgt[:, j])[0, 1]) if pay[:, q].std() > 0 else 0.0 for j in range(2)]
             j = int(np.nanargmax(c))
             ax.scatter(
                 tgt[:, j],

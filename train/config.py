@@ -89,9 +89,7 @@ class PPOConfig:
     vf_coef: Annotated[Real, Field(ge=0.0, le=100.0)] = 0.5
     max_grad_norm: Annotated[Real, Field(gt=0.0, le=1e6)] = 0.5
     target_kl: Annotated[Real, Field(gt=0.0, le=10.0)] | None = None
-    net_arch: Annotated[
-        tuple[Annotated[Int, Field(ge=1, le=4096)], ...], Field(min_length=1, max_length=8)
-    ] = (
+    net_arch: Annotated[tuple[Annotated[Int, Field(ge=1, le=4096)], ...], Field(min_length=1, max_length=8)] = (
         64,
         64,
     )
@@ -209,23 +207,15 @@ def _build(cls: type, data: Any, where: str) -> Any:
 def _check_keys(cls: type, data: Any, where: str) -> None:
     """Raise on a non-mapping or an unknown key of ``cls`` or of one of its sections given as a mapping."""
     if not isinstance(data, dict):
-        raise ValueError(
-            f"{where.rstrip('.') or 'the config'} must be a mapping of keys, got {type(data).__name__}"
-        )
+        raise ValueError(f"{where.rstrip('.') or 'the config'} must be a mapping of keys, got {type(data).__name__}")
     allowed = [f.name for f in dataclasses.fields(cls)]
     unknown = sorted(set(data) - set(allowed), key=repr)  # YAML keys may mix types (1 and "a")
     if unknown:
-        first = (
-            unknown[0]
-            if isinstance(unknown[0], str) and len(unknown[0]) <= 60
-            else short_repr(unknown[0], 60)
-        )
+        first = unknown[0] if isinstance(unknown[0], str) and len(unknown[0]) <= 60 else short_repr(unknown[0], 60)
         raise ValueError(f"unknown key {where}{first}; allowed: {allowed}")
     for key, value in data.items():
         if key in ("env", "baseline_env") and not isinstance(value, dict):
-            raise ValueError(
-                f"{where}{key} must be a mapping of scenario config keys, got {type(value).__name__}"
-            )
+            raise ValueError(f"{where}{key} must be a mapping of scenario config keys, got {type(value).__name__}")
         section = getattr(cls, "nested", {}).get(key)
         if section is not None and isinstance(value, dict):
             _check_keys(section, value, f"{where}{key}.")
@@ -286,9 +276,7 @@ def load_config(
         if loaded is None:
             loaded = {}
         if not isinstance(loaded, dict):
-            raise ValueError(
-                f"config file {str(path)!r} must hold a mapping of keys, got {type(loaded).__name__}"
-            )
+            raise ValueError(f"config file {str(path)!r} must hold a mapping of keys, got {type(loaded).__name__}")
         data = loaded
     if scenario is not None:
         if data.get("scenario", scenario) != scenario:

@@ -171,9 +171,7 @@ def evaluate_policies(
             if record is not None:
                 from agentsim_env.recorder import record as record_env
 
-                env = record_env(
-                    env, record, label=f"agentsim train evaluation: {label} seeds {seeds[0]}-{seeds[-1]}"
-                )
+                env = record_env(env, record, label=f"agentsim train evaluation: {label} seeds {seeds[0]}-{seeds[-1]}")
             if kind == "baseline":
                 policy = make_policy(cfg.scenario, env, what)
             elif isinstance(what, (str, Path)):

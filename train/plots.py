@@ -59,9 +59,7 @@ def plot_learning_curve(
     ax.set_ylabel("mean episode return per agent")
     if pts and curve:
         last = curve[-1]
-        budget = (
-            f"{int(last['timesteps']):,} agent-steps, {last['wall_s']:.0f} s wall, {last['cpu_s']:.0f} s CPU"
-        )
+        budget = f"{int(last['timesteps']):,} agent-steps, {last['wall_s']:.0f} s wall, {last['cpu_s']:.0f} s CPU"
         title = f"{title}\n{budget}" if title else budget
     if title:
         ax.set_title(title, fontsize=10)

@@ -209,8 +209,7 @@ def _curve_upto(out: Path, timesteps: int) -> tuple[bytes | None, dict[str, floa
             step = int(row.split(",", 1)[0])
         except ValueError:
             raise ValueError(
-                f"--resume: {str(path)!r} line {line} is not a curve row ({row.strip()[:60]!r}); "
-                "nothing was changed"
+                f"--resume: {str(path)!r} line {line} is not a curve row ({row.strip()[:60]!r}); nothing was changed"
             ) from None
         if step <= timesteps:
             kept.append(row)
@@ -245,9 +244,7 @@ def _resume(cfg: TrainConfig, path: Path, vec: Any) -> tuple[Resumed, bytes | No
 
     _check_same_config(cfg, path)
     tensorboard = _tensorboard_dir(path)
-    resumed = find_resumable(
-        path, lambda p: load_model(p, env=vec, device="cpu", tensorboard_log=tensorboard)
-    )
+    resumed = find_resumable(path, lambda p: load_model(p, env=vec, device="cpu", tensorboard_log=tensorboard))
     curve, curve_clocks = _curve_upto(path, int(resumed.model.num_timesteps))
     return resumed, curve, resumed.clocks or curve_clocks
 
@@ -350,9 +347,7 @@ def _train(
     t0 = time.perf_counter()
     try:
         if left > 0:
-            model.learn(
-                total_timesteps=left, callback=monitor, reset_num_timesteps=not resume, tb_log_name="ppo"
-            )
+            model.learn(total_timesteps=left, callback=monitor, reset_num_timesteps=not resume, tb_log_name="ppo")
     except BaseException:
         if recorded is not None:
             recorded.recorder.finish("incomplete")

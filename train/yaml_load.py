@@ -99,9 +99,7 @@ def load_yaml_text(text: str, name: str) -> Any:
         YAMLConfigError: Naming the file, the line and the bound or the YAML error, on one line.
     """
     if len(text) > MAX_CONFIG_BYTES:
-        raise YAMLConfigError(
-            f"{name}: {len(text):,} characters; a YAML config is at most {MAX_CONFIG_BYTES:,}"
-        )
+        raise YAMLConfigError(f"{name}: {len(text):,} characters; a YAML config is at most {MAX_CONFIG_BYTES:,}")
     loader = _BoundedLoader(text, name)
     try:
         return loader.get_single_data()

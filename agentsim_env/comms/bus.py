@@ -136,8 +136,8 @@ class MessageBus:
     """
 
     __slots__ = tuple(
-        "n_worlds n_agents payload_dim channel inbox keys starts group _keyed _world_of _queue _next_id _bw_used _bw_step "
-        "_seq _sent_log _drop_log _ans_slot _ans_step _pushes".split()
+        "n_worlds n_agents payload_dim channel inbox keys starts group _keyed _world_of _queue _next_id _bw_used "
+        "_bw_step _seq _sent_log _drop_log _ans_slot _ans_step _pushes".split()
     )
 
     def __init__(
@@ -206,9 +206,7 @@ class MessageBus:
         """Use ``group`` (``(S,)`` ints, read by reference) to validate GROUP targets in ``send``."""
         g = np.asarray(group)
         if g.shape != (self.n_slots,) or not np.issubdtype(g.dtype, np.integer):
-            raise ValueError(
-                f"group must be an integer array of shape ({self.n_slots},), got {g.dtype} {g.shape}"
-            )
+            raise ValueError(f"group must be an integer array of shape ({self.n_slots},), got {g.dtype} {g.shape}")
         self.group = g
 
     def reset(self, rng: np.random.Generator | Sequence[np.random.Generator] | None) -> None:
@@ -251,9 +249,7 @@ class MessageBus:
         """
         a = np.asarray(starts)
         if a.shape != (self.n_worlds,) or not np.issubdtype(a.dtype, np.integer):
-            raise ValueError(
-                f"starts must be an integer array of shape ({self.n_worlds},), got {a.dtype} {a.shape}"
-            )
+            raise ValueError(f"starts must be an integer array of shape ({self.n_worlds},), got {a.dtype} {a.shape}")
         self.starts[:] = a
 
     def reset_world(self, world: int, rng: np.random.Generator) -> None:
@@ -467,9 +463,7 @@ class MessageBus:
         b = self._queue.pop_due(int(step))
         if b is None:
             return DueRows.empty(self.payload_dim)
-        return DueRows(
-            b["msg"], b["kind"], b["sender"], b["target"], b["world"], b["created"], b["seq"], b["payload"]
-        )
+        return DueRows(b["msg"], b["kind"], b["sender"], b["target"], b["world"], b["created"], b["seq"], b["payload"])
 
     def deliver_rows(
         self,
@@ -509,9 +503,7 @@ class MessageBus:
         pos, online, group = world_arrays(self.n_slots, pos, online, group)
         own, known = bool_mask(mine, "mine", self.n_slots), bool_mask(seen, "seen", self.n_slots)
         n0 = len(self._pushes)
-        delivered = self._deliver_rows(
-            rows, step, pos, online, group, own, _ALL_SEEN if known is None else known
-        )
+        delivered = self._deliver_rows(rows, step, pos, online, group, own, _ALL_SEEN if known is None else known)
         if push:
             new, self._pushes = self._pushes[n0:], self._pushes[:n0]
             self.inbox.push_batches(new)
@@ -613,9 +605,7 @@ class MessageBus:
         seq = self._seq.slots(hb, step)
         kind = np.full(n_hb, HEARTBEAT, dtype=np.int8)
         self._sent_log.append(
-            MessageLog(
-                ids, kind, hb, minus, minus.copy(), created, created.copy(), np.zeros(n_hb, dtype=np.int8)
-            )
+            MessageLog(ids, kind, hb, minus, minus.copy(), created, created.copy(), np.zeros(n_hb, dtype=np.int8))
         )
         self._queue.append(
             np.zeros((n_hb, self.payload_dim), dtype=np.float32),

@@ -63,8 +63,7 @@ def validate_send(
     if cross.any():
         i = int(np.flatnonzero(cross)[0])
         raise ValueError(
-            f"target receiver slot {tgt[i]} (world {tgt[i] // n}) is not in the world {wld[i]} "
-            f"of sender agent {snd[i]}"
+            f"target receiver slot {tgt[i]} (world {tgt[i] // n}) is not in the world {wld[i]} of sender agent {snd[i]}"
         )
     return np.where(~to_ctrl & ~agent, tgt // n, wld)
 
@@ -95,8 +94,7 @@ def world_arrays(
     online, group = np.ascontiguousarray(online, dtype=bool), np.asarray(group)
     if pos.shape != (s_n, 3) or online.shape != (s_n,) or group.shape != (s_n,):
         raise ValueError(
-            f"pos must be ({s_n}, 3), online and group ({s_n},); got {pos.shape}, "
-            f"{online.shape}, {group.shape}"
+            f"pos must be ({s_n}, 3), online and group ({s_n},); got {pos.shape}, {online.shape}, {group.shape}"
         )
     return pos, online, group
 

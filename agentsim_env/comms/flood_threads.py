@@ -75,9 +75,7 @@ def hop_cost(cur_f, cur_n, start, end, hops, limit):  # type: ignore[no-untyped-
     return out
 
 
-def flood_ranges(
-    cur_f: np.ndarray, threads: RowThreads, cost: np.ndarray | None = None
-) -> list[tuple[int, int]]:
+def flood_ranges(cur_f: np.ndarray, threads: RowThreads, cost: np.ndarray | None = None) -> list[tuple[int, int]]:
     """The frontier entries ``[0, n)`` cut into the pool's row ranges, each boundary moved to a flood's start.
 
     With ``cost`` (``hop_cost``'s cumulative cost per entry) the ranges hold equal shares of it instead of equal
@@ -188,9 +186,7 @@ def spread_threads(
     nd, npool = int(out_base[-1]), int(pool_base[-1])
     # the active floods without a frontier entry keep their readers behind every range's (range 0's pool is the
     # one returned; the later ranges' lists are placed below, at offsets keep_rest does not touch)
-    new_pool, npool = keep_rest(
-        active, seen, rd_start, rd_len, pool, _room(scratch[0][5], npool, int(pools[0])), npool
-    )
+    new_pool, npool = keep_rest(active, seen, rd_start, rd_len, pool, _room(scratch[0][5], npool, int(pools[0])), npool)
     scratch[0][5] = new_pool
     r, f = np.empty(nd, dtype=np.int64), np.empty(nd, dtype=np.int64)
     h = np.empty(nd, dtype=scratch[0][4].dtype)

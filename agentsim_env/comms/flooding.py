@@ -72,9 +72,7 @@ def keep_rest(active, seen, rd_start, rd_len, pool, new_pool, npool):  # type: i
 
 
 @nb.njit(cache=True)
-def _hop(
-    start, end, indices, src, q_lo, q_hi, f, h, stamp, token, out_r, out_f, out_h, nd, pool, npool, keep
-):  # type: ignore[no-untyped-def]  # noqa: E501
+def _hop(start, end, indices, src, q_lo, q_hi, f, h, stamp, token, out_r, out_f, out_h, nd, pool, npool, keep):  # type: ignore[no-untyped-def]  # noqa: E501
     # One hop of flood f from the frontier slots src[q_lo:q_hi]. Branch free: every neighbour is written at the
     # end of the output and kept only if it had not read the flood (about 4 in 5 have at hop 2, so a branch
     # would mispredict often). Its own function, so the buffers are not rebound inside the loop.

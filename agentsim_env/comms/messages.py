@@ -481,9 +481,7 @@ class Inbox:
         if k == 0:
             return
         if r.min() < 0 or r.max() >= self.n_slots:
-            raise ValueError(
-                f"receiver must be slots in [0, {self.n_slots}), got min {r.min()} max {r.max()}"
-            )
+            raise ValueError(f"receiver must be slots in [0, {self.n_slots}), got min {r.min()} max {r.max()}")
         kd = np.broadcast_to(np.asarray(kind), (k,)).astype(np.int8)
         if kd.min() < 1 or kd.max() > N_KINDS:
             raise ValueError(f"kind must be in 1..{N_KINDS} ({', '.join(KIND_NAMES.values())})")
@@ -564,9 +562,7 @@ class Inbox:
         if s.size:
             self.dropped += np.bincount(s, minlength=self.n_slots)
 
-    def observe(
-        self, pos: np.ndarray, step: int, out: np.ndarray | None = None, clip: float = np.inf
-    ) -> np.ndarray:
+    def observe(self, pos: np.ndarray, step: int, out: np.ndarray | None = None, clip: float = np.inf) -> np.ndarray:
         """Feature tensor of every inbox (layout in the module docstring).
 
         Args:
@@ -582,9 +578,7 @@ class Inbox:
         if out is None:
             out = np.empty(shape, dtype=np.float32)
         elif out.shape != shape or out.dtype != np.float32 or not out.flags.c_contiguous:
-            raise ValueError(
-                f"out must be a C-contiguous float32 array of shape {shape}, got {out.dtype} {out.shape}"
-            )
+            raise ValueError(f"out must be a C-contiguous float32 array of shape {shape}, got {out.dtype} {out.shape}")
         self.observe_flat(pos, step, out.reshape(self.n_slots, -1), 0, clip)
         return out
 
@@ -600,13 +594,9 @@ class Inbox:
             or out.strides[1] != 4
             or not out.flags.writeable
         ):
-            raise ValueError(
-                f"out must be a writable float32 array (S={self.n_slots}, width) with unit column stride"
-            )
+            raise ValueError(f"out must be a writable float32 array (S={self.n_slots}, width) with unit column stride")
         if not 0 <= col <= out.shape[1] - self.size * self.n_features:
-            raise ValueError(
-                f"col must leave {self.size * self.n_features} columns, got {col} of {out.shape[1]}"
-            )
+            raise ValueError(f"col must leave {self.size * self.n_features} columns, got {col} of {out.shape[1]}")
         p = np.asarray(pos, dtype=np.float64)
         if p.shape != (self.n_slots, 3):
             raise ValueError(f"pos must have shape ({self.n_slots}, 3), got {p.shape}")

@@ -1,7 +1,8 @@
 """Peer-to-peer overlay network: range-limited multi-hop flooding (no bus).
 
 A *flood* is one overlay message: its origin slot, a hop limit, the step it was created, a payload of ``D``
-floats and the set of slots that already read it (a list per flood; see ``comms.flooding``). As in AgentSimJS, an agent that receives a message checks whether its id is in the list of
+floats and the set of slots that already read it (a list per flood; see ``comms.flooding``). As in AgentSimJS, an agent
+that receives a message checks whether its id is in the list of
 readers: if not, it adds itself, keeps the message and re-sends it to the agents in range; if it is, the copy
 is discarded (counted as a duplicate).
 
@@ -150,9 +151,7 @@ class Deliveries:
         """Take what is still to be looked up out of the flood table, which is about to change: the rows
         themselves for a few deliveries, else a copy of the table."""
         t = self._table
-        if t is None or (
-            self._origin is not None and self._created is not None and self._payload is not None
-        ):
+        if t is None or (self._origin is not None and self._created is not None and self._payload is not None):
             return
         if 2 * len(self) < t[0].shape[0]:
             self.origin, self.created, self.payload  # noqa: B018  (looked up now)
@@ -489,9 +488,7 @@ class Overlay:
         k = origin.shape[0]
         if k == 0:
             return np.empty(0, dtype=np.int64)
-        for d in list(
-            self._unread
-        ):  # the table's rows are about to change: deliveries still alive keep theirs
+        for d in list(self._unread):  # the table's rows are about to change: deliveries still alive keep theirs
             d.keep_rows()
         self._unread.clear()
         if self._n_free < k:

@@ -323,9 +323,7 @@ class RangeGraph:
         """The pairs given to the latest ``set_pairs`` (empty after ``set_grid``)."""
         return self._pairs
 
-    def set_pairs(
-        self, pairs: tuple[np.ndarray, ...], pos: np.ndarray, online: np.ndarray, world: np.ndarray
-    ) -> None:
+    def set_pairs(self, pairs: tuple[np.ndarray, ...], pos: np.ndarray, online: np.ndarray, world: np.ndarray) -> None:
         """Use the pairs ``(i, j, d)`` of ``neighbor_pairs(..., max_dist)``; links and nearest follow lazily."""
         empty = np.zeros(0, dtype=np.int64)
         self._grid = None

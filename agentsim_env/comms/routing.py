@@ -8,7 +8,8 @@ the channel filters and the event columns, each a linear pass (numba).
 - ``expand``: one pair per unicast; one pair per online member of the target group for a GROUP message,
   the sender excluded; in the given message order (the inbox order), then slot order.
 - ``filter_pairs``: the drop reason of each pair (offline receiver, range from the sender's current position
-  (a sender the caller has not seen is out of range), loss from pre-drawn uniforms), the drop counters, and the delivered / dropped event columns (fresh arrays).
+  (a sender the caller has not seen is out of range), loss from pre-drawn uniforms), the drop counters, and the
+  delivered / dropped event columns (fresh arrays).
 """
 
 from __future__ import annotations

@@ -66,9 +66,7 @@ class Sequencer:
         sequence_kernel(snd, step, self.used, self.stamp, seq)
         return seq
 
-    def number(
-        self, kind: np.ndarray, snd: np.ndarray, tgt: np.ndarray, wld: np.ndarray, step: int
-    ) -> np.ndarray:
+    def number(self, kind: np.ndarray, snd: np.ndarray, tgt: np.ndarray, wld: np.ndarray, step: int) -> np.ndarray:
         """Number messages created at ``step`` (rows in creation order), advancing the counters.
 
         Args:

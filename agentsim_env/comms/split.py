@@ -47,9 +47,7 @@ def route(rows: DueRows, owner: np.ndarray, n_parts: int | None = None) -> dict[
         raise ValueError(f"owner must be a 1-D integer array (a part per slot), got {own.dtype} {own.shape}")
     k = int(own.max(initial=-1)) + 1 if n_parts is None else int(n_parts)
     if k < 0 or (own.size and (own.min() < -1 or own.max() >= max(k, 1))):
-        raise ValueError(
-            f"owner must hold parts in [-1, {k}) and n_parts must be >= 0, got n_parts={n_parts}"
-        )
+        raise ValueError(f"owner must hold parts in [-1, {k}) and n_parts must be >= 0, got n_parts={n_parts}")
     grp = rows.kind == GROUP
     # the slot whose owner decides: the receiver, or the sender of an answer to the controller
     slot = np.where(grp, 0, np.where(rows.target >= 0, rows.target, rows.sender))

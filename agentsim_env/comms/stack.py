@@ -482,9 +482,7 @@ class CommsStack:
         if k:
             # sender, created step and payload read from the flood table by flood id where the overlay has one
             snd, cre, pay, rows, by_rows = ov.push_columns()
-            pushes.append(
-                (ov.receiver, np.broadcast_to(_OVERLAY_KIND, (k,)), snd, ov.hops, cre, pay, rows, by_rows)
-            )
+            pushes.append((ov.receiver, np.broadcast_to(_OVERLAY_KIND, (k,)), snd, ov.hops, cre, pay, rows, by_rows))
         self.bus.inbox.push_batches(pushes)  # bus deliveries, then the overlay's: one pass over the inboxes
         self.events = CommsEvents(bus_ev, ov, self.sent.copy(), self.bus.take_answers())
         return self.events

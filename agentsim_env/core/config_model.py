@@ -410,9 +410,7 @@ def config_error(exc: pydantic.ValidationError, cls: type, label: str = "") -> V
         keys = sorted({str(e["loc"][-1]) for e in errors if tuple(e["loc"][:-1]) == loc[:-1]})
         names = sorted(_field_names(owner)) if owner is not None else []
         where = ".".join(p for p in (label, parent) if p) or "config"
-        return ValueError(
-            f"unknown {where} key(s) {keys} for {getattr(owner, '__name__', '?')}; allowed keys: {names}"
-        )
+        return ValueError(f"unknown {where} key(s) {keys} for {getattr(owner, '__name__', '?')}; allowed keys: {names}")
     path, annotation, _ = _walk(cls, loc)
     if chosen["type"] == "pair_order":
         path += "[1]"

@@ -90,9 +90,7 @@ def _unique_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for key, value in pairs:
         if key in out:
-            raise ValueError(
-                f"duplicate key {short_repr(key, 60)} in a JSON object; each field may be given only once"
-            )
+            raise ValueError(f"duplicate key {short_repr(key, 60)} in a JSON object; each field may be given only once")
         out[key] = value
     return out
 

@@ -172,9 +172,7 @@ class EpisodeSeeds:
             self._root = seed
             return
         if seed is not None and not is_int(seed):
-            raise ValueError(
-                f"seed must be None or an integer >= 0, got {type(seed).__name__} {short_repr(seed)}"
-            )
+            raise ValueError(f"seed must be None or an integer >= 0, got {type(seed).__name__} {short_repr(seed)}")
         if seed is not None and seed < 0:
             raise ValueError(f"seed must be None or an integer >= 0, got {seed}")
         self._root = np.random.SeedSequence(None if seed is None else int(seed))

@@ -175,8 +175,7 @@ class Registry:
         """
         if name not in self._registered:
             raise ValueError(
-                f"{self.kind} {name!r} was not registered with register(); registered: "
-                f"{sorted(self._registered)}"
+                f"{self.kind} {name!r} was not registered with register(); registered: {sorted(self._registered)}"
             )
         del self._registered[name]
         self._loaded.pop(name, None)
@@ -312,9 +311,7 @@ SCENARIOS = Registry(
 )
 """Scenarios by name (``agentsim_env.scenarios.registry`` builds them)."""
 
-POLICIES = Registry(
-    "policy", "agentsim_env.policies", None, _is_policy_class, "a policy class (for_env, reset, act)"
-)
+POLICIES = Registry("policy", "agentsim_env.policies", None, _is_policy_class, "a policy class (for_env, reset, act)")
 """Policies added to the scripted baselines (``agentsim_env.policies.registry`` lists the built-in ones); each
 serves the scenarios given to :func:`register_policy`, else those of its class attribute ``scenarios``."""
 

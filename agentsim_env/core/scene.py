@@ -196,11 +196,7 @@ class Scene:
                 cx, cr = np.concatenate(acc_xy), np.concatenate(acc_r)
                 if cx.shape[0] and np.any(np.hypot(*(cx - xy[i]).T) < cr + fr[i] + clearance):
                     continue
-                if (
-                    pts is not None
-                    and pts.shape[0]
-                    and np.any(np.hypot(*(pts - xy[i]).T) < fr[i] + keep_clear_radius)
-                ):
+                if pts is not None and pts.shape[0] and np.any(np.hypot(*(pts - xy[i]).T) < fr[i] + keep_clear_radius):
                     continue
                 acc_xy.append(xy[i : i + 1])
                 acc_r.append(fr[i : i + 1])

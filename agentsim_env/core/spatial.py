@@ -135,9 +135,7 @@ def build_grid(spec: GridSpec, pos: np.ndarray, world: np.ndarray, active: np.nd
         The grid; items are slot indices in ascending order within each cell.
     """
     if world.shape[0] and (int(world.min()) < 0 or int(world.max()) >= spec.n_worlds):
-        raise ValueError(
-            f"world ids must be in [0, {spec.n_worlds}), got {int(world.min())}..{int(world.max())}"
-        )
+        raise ValueError(f"world ids must be in [0, {spec.n_worlds}), got {int(world.min())}..{int(world.max())}")
     cs, items = _build(
         np.ascontiguousarray(pos),
         world,
@@ -176,9 +174,7 @@ def _build_objects(cx, cy, rad, world, ox, oy, cell, nx, ny, n_cells):  # type: 
     return counts, items
 
 
-def build_object_grid(
-    spec: GridSpec, centre: np.ndarray, footprint_radius: np.ndarray, world: np.ndarray
-) -> Grid:
+def build_object_grid(spec: GridSpec, centre: np.ndarray, footprint_radius: np.ndarray, world: np.ndarray) -> Grid:
     """Register every object in all cells its footprint's bounding square touches.
 
     Args:

@@ -103,7 +103,7 @@ class AgentState:
     def configure(
         self, *, radius: float, sensor_range: float, max_speed: float, max_accel: float, n_groups: int = 1
     ) -> None:
-        """Give every slot the same body, sensor and limits, and deal agent ``i`` of each world to group ``i % n_groups``."""
+        """Give every slot the same body, sensor and limits; agent ``i`` of each world joins group ``i % n_groups``."""
         self.radius[:] = radius
         self.sensor_range[:] = sensor_range
         self.max_speed[:] = max_speed

@@ -38,9 +38,7 @@ def build_config(cls: type[T], values: Mapping[str, Any], label: str = "config")
     names = [f.name for f in dataclasses.fields(cls)]  # type: ignore[arg-type]
     unknown = sorted(set(values) - set(names))
     if unknown:
-        raise ValueError(
-            f"unknown {label} key(s) {unknown} for {cls.__name__}; allowed keys: {sorted(names)}"
-        )
+        raise ValueError(f"unknown {label} key(s) {unknown} for {cls.__name__}; allowed keys: {sorted(names)}")
     try:
         return cls(**values)
     except TypeError as exc:  # e.g. a value of the wrong type reaching a comparison
@@ -90,9 +88,7 @@ def is_int(value: Any) -> bool:
 
 def is_real(value: Any) -> bool:
     """Whether ``value`` is a real number (Python or numpy int or float, never a bool or complex)."""
-    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(
-        value, (bool, np.bool_)
-    )
+    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_))
 
 
 def check_int(name: str, value: Any, lo: int | None = None, hi: int | None = None) -> None:
@@ -110,11 +106,7 @@ def check_float(
 ) -> None:
     """Raise unless ``value`` is a finite real within the bounds (``lo_open`` makes ``lo`` exclusive)."""
     # an integer past the float range (400 digits in a config file) is no finite number: math.isfinite overflows
-    if (
-        not is_real(value)
-        or (is_int(value) and abs(int(value)) > sys.float_info.max)
-        or not math.isfinite(value)
-    ):
+    if not is_real(value) or (is_int(value) and abs(int(value)) > sys.float_info.max) or not math.isfinite(value):
         raise ValueError(f"{name} must be a finite number, got {short_repr(value)}")
     if lo is not None and (value <= lo if lo_open else value < lo):
         raise ValueError(f"{name} must be {'>' if lo_open else '>='} {lo}, got {value}")

@@ -58,9 +58,7 @@ class LocalShards:
         self.n_shards = int(n_shards)
         self.exchange = LocalExchange(bridge, self.n_shards)
         self._factory = factory
-        self.shards: dict[int, Shard | None] = {
-            k: factory(k, self.exchange.swap) for k in range(self.n_shards)
-        }
+        self.shards: dict[int, Shard | None] = {k: factory(k, self.exchange.swap) for k in range(self.n_shards)}
         self.address = "local"
 
     def call(
@@ -146,9 +144,7 @@ class LocalShards:
         self.shards = dict.fromkeys(self.shards)
 
 
-def _wait_all(
-    threads: dict[int, threading.Thread], timeout_s: float, waiting: Callable[[], set[int]]
-) -> list[int]:
+def _wait_all(threads: dict[int, threading.Thread], timeout_s: float, waiting: Callable[[], set[int]]) -> list[int]:
     """Wait until every thread ended or the deadline passed; the late shards (those not waiting at the exchange).
 
     A shard waiting at the exchange when the deadline passes waits for a late one: it is not late itself.

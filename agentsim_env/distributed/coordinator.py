@@ -183,9 +183,7 @@ class Coordinator:
             exc_info=failure.error,
         )
 
-    def _call(
-        self, method: str, calls: dict[int, tuple[Any, ...]], on_reply: Any = None
-    ) -> dict[int, Packed]:
+    def _call(self, method: str, calls: dict[int, tuple[Any, ...]], on_reply: Any = None) -> dict[int, Packed]:
         # ``on_reply(k, reply)``: called with each shard's reply as it comes in (the Ray backend), while the
         # others still run
         calls = {k: a for k, a in calls.items() if self.shards[k].alive}
@@ -244,9 +242,7 @@ class Coordinator:
         assert out is not None
         out[r["slots"]] = r["obs"] if "obs" in r else self.backend.obs_rows(k, int(r["obs_n"]))
 
-    def _take(
-        self, replies: dict[int, Packed], obs: bool, taken: set[int] | frozenset[int] = frozenset()
-    ) -> None:
+    def _take(self, replies: dict[int, Packed], obs: bool, taken: set[int] | frozenset[int] = frozenset()) -> None:
         # ``taken``: shards whose observation rows were scattered as their reply came in
         st = self.world.state
         for k, r in replies.items():
@@ -280,9 +276,7 @@ class Coordinator:
         s = world.state.n_slots
         self.obs = np.zeros((s, _obs_dim(sc)), np.float32)
         if gather:  # shards beside the driver take their actions and send their rows through shared memory
-            self.backend.share_rows(
-                s, _obs_dim(sc), tuple((k, p.size, "<f8") for k, p in sc.act_parts().items())
-            )
+            self.backend.share_rows(s, _obs_dim(sc), tuple((k, p.size, "<f8") for k, p in sc.act_parts().items()))
         replies = self._call(
             "reset",
             {
@@ -466,9 +460,7 @@ class Coordinator:
                 if key not in info:
                     info[key] = np.zeros(s, dtype=v.dtype)
                 info[key][sl] = v
-            tr.replies += nbytes(r) + 4 * int(r.get("obs_n", 0)) * _obs_dim(
-                self.scenario
-            )  # shared rows: float32
+            tr.replies += nbytes(r) + 4 * int(r.get("obs_n", 0)) * _obs_dim(self.scenario)  # shared rows: float32
         for key in keys:
             info.setdefault(key, np.zeros(s))
         self._take(replies, obs=True, taken=taken)

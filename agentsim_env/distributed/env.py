@@ -153,9 +153,7 @@ class DistributedParallelEnv(AgentSimParallelEnv):
         np.copyto(out, obs)
         return out
 
-    def send_message(
-        self, sender: str, payload: Any, *, to: str | None = None, group: int | None = None
-    ) -> bool:
+    def send_message(self, sender: str, payload: Any, *, to: str | None = None, group: int | None = None) -> bool:
         """``AgentSimParallelEnv.send_message``: checked here, sent on the sender's shard (its bus, its bandwidth)."""
         with self._guard.hold("send_message"):
             s, target, to_group, pay = self._message(sender, payload, to, group)
@@ -167,9 +165,7 @@ class DistributedParallelEnv(AgentSimParallelEnv):
         slot = self._index[agent]
         self.coordinator.call_owner(slot, "assign_group", slot, int(group))
 
-    def rollout(
-        self, policy: Any, steps: int, seed: int | None = None, *, on_step: Any = None
-    ) -> RolloutResult:
+    def rollout(self, policy: Any, steps: int, seed: int | None = None, *, on_step: Any = None) -> RolloutResult:
         """``AgentSimParallelEnv.rollout`` with the policy inside the shards (observations stay there).
 
         Each shard builds the policy (a baseline name or a trained model folder; a policy object is sent as it
@@ -182,9 +178,7 @@ class DistributedParallelEnv(AgentSimParallelEnv):
         if self.world.hooks or self.render_mode or self._stay:
             return super().rollout(policy, steps, seed, on_step=on_step)
         steps, pseed = check_steps(steps), check_seed(seed)
-        if isinstance(
-            policy, (str, os.PathLike)
-        ):  # a bad name is one error here, not a failure in every shard
+        if isinstance(policy, (str, os.PathLike)):  # a bad name is one error here, not a failure in every shard
             build_policy(self.scenario.name, _config_fields(self.scenario), policy)
         if seed is not None:
             self._seeds.reset(seed)
@@ -192,9 +186,7 @@ class DistributedParallelEnv(AgentSimParallelEnv):
         try:
             t0 = time.perf_counter()
             watch = None
-            if (
-                on_step is not None
-            ):  # the observer reads the masks, infos and env.world's positions of each step
+            if on_step is not None:  # the observer reads the masks, infos and env.world's positions of each step
 
                 def watch(taken: int, acted: Any, live: Any, info: Any) -> bool:
                     if acted is None:  # right after the reset
@@ -253,9 +245,7 @@ class DistributedBatchedEnv(BatchedEnv):
         check_options(shards, backend, ray_address, timeout_s)
         check_shardable(make_scenario(name, **config), shards)
         super().__init__(name, 1, check_finite=check_finite, **config)
-        self.coordinator = build_coordinator(
-            self.scenario, self.world, shards, backend, ray_address, timeout_s
-        )
+        self.coordinator = build_coordinator(self.scenario, self.world, shards, backend, ray_address, timeout_s)
 
     @property
     def shards(self) -> list[ShardInfo]:

@@ -101,8 +101,7 @@ class LocalExchange:
             if not self._cond.wait_for(lambda: key in self._b.results, timeout=self.wait_s):
                 self._b.waiting.discard(k)
                 raise TimeoutError(
-                    f"exchange {key[1]!r} of step {key[0]}: the other shards did not post within "
-                    f"{self.wait_s:g} s"
+                    f"exchange {key[1]!r} of step {key[0]}: the other shards did not post within {self.wait_s:g} s"
                 )
             return self._b.take(key, k)
 
@@ -183,8 +182,7 @@ class ExchangeActor:
             except asyncio.TimeoutError:
                 self._b.waiting.discard(k)
                 raise TimeoutError(
-                    f"exchange {key[1]!r} of step {key[0]}: the other shards did not post within "
-                    f"{self.wait_s:g} s"
+                    f"exchange {key[1]!r} of step {key[0]}: the other shards did not post within {self.wait_s:g} s"
                 ) from None
         return self._b.take(key, k)
 

@@ -150,9 +150,7 @@ def hop_kernel(
         token = next_token(stamp, token)
         tok = np.int32(token)
         p0 = npool
-        npool = _copy_readers(
-            f, rd_start, rd_len, pool, add_start, add_len, add_v, own, new_pool, npool, stamp, tok
-        )
+        npool = _copy_readers(f, rd_start, rd_len, pool, add_start, add_len, add_v, own, new_pool, npool, stamp, tok)
         # every frontier entry of a flood holds the same hop count (they all read it at the same hop)
         h = np.int32(e_hops[a] + 1)
         row_h[f] = h

@@ -90,9 +90,7 @@ class FloodEntries:
     def empty(cls, payload_dim: int) -> FloodEntries:
         """No entries, with payload width ``payload_dim``."""
         i32 = np.zeros(0, dtype=np.int32)
-        return cls(
-            _e(), _e(), _e(), _e(), i32, i32.copy(), i32.copy(), np.zeros((0, payload_dim), np.float32)
-        )
+        return cls(_e(), _e(), _e(), _e(), i32, i32.copy(), i32.copy(), np.zeros((0, payload_dim), np.float32))
 
     @classmethod
     def concat(cls, parts: Sequence[FloodEntries], payload_dim: int) -> FloodEntries:
@@ -179,11 +177,7 @@ class PartHopStats:
 
 
 def _n_keys(keys: Sequence[np.ndarray]) -> int:
-    k = (
-        np.concatenate([np.asarray(x, dtype=np.int64).reshape(-1, 3) for x in keys])
-        if keys
-        else _e().reshape(0, 3)
-    )
+    k = np.concatenate([np.asarray(x, dtype=np.int64).reshape(-1, 3) for x in keys]) if keys else _e().reshape(0, 3)
     return int(np.unique(k, axis=0).shape[0]) if k.shape[0] else 0
 
 
@@ -473,9 +467,7 @@ class PartFloods:
         n = self._c.shape[0]
         e_row = np.concatenate([self._fr_row, g_rows])
         e_slot = np.concatenate([self._fr_slot, g.slot[gk].astype(np.int64)])
-        e_own = np.concatenate(
-            [np.ones(self._fr_row.shape[0], dtype=bool), np.zeros(g_rows.shape[0], dtype=bool)]
-        )
+        e_own = np.concatenate([np.ones(self._fr_row.shape[0], dtype=bool), np.zeros(g_rows.shape[0], dtype=bool)])
         e_hops = np.concatenate([self._hops[self._fr_row], g.hops[gk].astype(np.int32)])
         rank = np.empty(n, dtype=np.int64)
         rank[np.lexsort((self._q, self._o, self._c))] = np.arange(n)
@@ -517,9 +509,7 @@ class PartFloods:
         self._pool_buf, self._pool, self._rd_start, self._rd_len = spare, spare[:npool], rd_start, rd_len
         self._add_row, self._add_slot = _e(), _e()
         out_f, out_h = out_f[:nd], out_h[:nd]
-        out = FloodDeliveries(
-            out_v[:nd].copy(), out_h.copy(), out_f.copy(), (self._o, self._c, self._pay, self._q)
-        )
+        out = FloodDeliveries(out_v[:nd].copy(), out_h.copy(), out_f.copy(), (self._o, self._c, self._pay, self._q))
         out_v = out.receiver
         done = row_h >= 0
         self._end[done] = self._clock + self._limit[done] - row_h[done]

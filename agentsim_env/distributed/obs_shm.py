@@ -82,9 +82,7 @@ class ObsSegment:
 
     def __init__(self, n_shards: int, n_slots: int, obs_dim: int) -> None:
         self.n_shards, self.n_slots, self.obs_dim = int(n_shards), int(n_slots), int(obs_dim)
-        self._shm: SharedMemory | None = _create(
-            "obs", self.n_shards * _region_bytes(self.n_slots, self.obs_dim)
-        )
+        self._shm: SharedMemory | None = _create("obs", self.n_shards * _region_bytes(self.n_slots, self.obs_dim))
         self.name = self._shm.name.lstrip("/")
 
     def rows(self, k: int, n: int) -> np.ndarray:
@@ -92,9 +90,7 @@ class ObsSegment:
         if self._shm is None:
             raise RuntimeError("the observation segment is closed")
         if not (0 <= k < self.n_shards and 0 <= n <= self.n_slots):
-            raise ValueError(
-                f"shard must be in [0, {self.n_shards}) and rows in [0, {self.n_slots}], got {k}, {n}"
-            )
+            raise ValueError(f"shard must be in [0, {self.n_shards}) and rows in [0, {self.n_slots}], got {k}, {n}")
         at = k * _region_bytes(self.n_slots, self.obs_dim)
         return np.ndarray((n, self.obs_dim), dtype=np.float32, buffer=self._shm.buf, offset=at)
 
@@ -138,9 +134,7 @@ class ObsWriter:
 def _action_bytes(n_slots: int, layout: tuple[tuple[str, int, str], ...]) -> list[int]:
     # byte offsets within a region: the slots (int64), then each part's rows, each block 64-byte aligned
     offsets, at = [], 0
-    for nbytes in [int(n_slots) * 8] + [
-        int(n_slots) * size * np.dtype(dt).itemsize for _, size, dt in layout
-    ]:
+    for nbytes in [int(n_slots) * 8] + [int(n_slots) * size * np.dtype(dt).itemsize for _, size, dt in layout]:
         offsets.append(at)
         at += -(-nbytes // 64) * 64
     offsets.append(at)
@@ -184,9 +178,7 @@ class ActionSegment:
 
     def __init__(self, n_shards: int, n_slots: int, layout: tuple[tuple[str, int, str], ...]) -> None:
         self.n_shards, self.n_slots, self.layout = int(n_shards), int(n_slots), tuple(layout)
-        self._shm: SharedMemory | None = _create(
-            "act", self.n_shards * _action_bytes(self.n_slots, self.layout)[-1]
-        )
+        self._shm: SharedMemory | None = _create("act", self.n_shards * _action_bytes(self.n_slots, self.layout)[-1])
         self.name = self._shm.name.lstrip("/")
         self._regions = _ActionRegions(self._shm.buf, self.n_slots, self.layout)
 

@@ -484,9 +484,7 @@ class RayShards:
                 got = out[refs[ref]] = self._answer(ref, refs[ref])
                 if on_reply is not None and not isinstance(got, Failure):
                     on_reply(refs[ref], got)
-        if (
-            pending
-        ):  # late: the ones not waiting at the exchange are killed and dropped; the others then finish
+        if pending:  # late: the ones not waiting at the exchange are killed and dropped; the others then finish
             waiting = ray.get(self.exchange.waiting.remote())
             late = [ref for ref in pending if refs[ref] not in waiting] or pending
             for ref in late:
@@ -512,9 +510,7 @@ class RayShards:
             self.kill(k)
             return raised(e.cause if isinstance(e.cause, BaseException) else e)
 
-    def call_rest(
-        self, pending: list[Any], refs: dict[Any, int], timeout_s: float
-    ) -> dict[int, Packed | Failure]:
+    def call_rest(self, pending: list[Any], refs: dict[Any, int], timeout_s: float) -> dict[int, Packed | Failure]:
         """The answers of the calls that waited at the exchange for a late shard (one more deadline)."""
         ray, out = self._ray, {}
         done, late = ray.wait(pending, num_returns=len(pending), timeout=timeout_s)

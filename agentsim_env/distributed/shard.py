@@ -254,9 +254,7 @@ class Shard:
         seen = self.own | self.ghost
         rounds = [bus.deliver_rows(mine, step, pos, online, group, mine=self.held, seen=seen, push=False)]
         while len(again := bus.take_due(step)):
-            rounds.append(
-                bus.deliver_rows(again, step, pos, online, group, mine=self.held, seen=seen, push=False)
-            )
+            rounds.append(bus.deliver_rows(again, step, pos, online, group, mine=self.held, seen=seen, push=False))
         if len(rounds) == 1:
             return rounds[0]
         return DeliveryEvents(
@@ -447,9 +445,7 @@ class Shard:
         res, terminated = self.run(slots, full, control)
         world = self.world
         done = np.flatnonzero(self.acting)
-        out = self._rows_out(
-            done, res, terminated, bool(control.get("obs", True)), bool(control.get("kinematics"))
-        )
+        out = self._rows_out(done, res, terminated, bool(control.get("obs", True)), bool(control.get("kinematics")))
         col = world.last_events.collisions
         out["col.agent"], out["col.other"], out["col.obj"] = col.agent, col.other_agent, col.obj
         comms = world.comms

@@ -97,6 +97,4 @@ class ShardOverlay:
         self._totals = self._totals + self._last
         # origin, created and payload looked up in the part's flood table when read (it replaces its columns
         # instead of writing them, so these rows stay as they are)
-        return Deliveries.by_flood(
-            d.receiver, np.full(len(d), -1, dtype=np.int64), d.hops, d.table[:3], d.rows
-        )
+        return Deliveries.by_flood(d.receiver, np.full(len(d), -1, dtype=np.int64), d.hops, d.table[:3], d.rows)

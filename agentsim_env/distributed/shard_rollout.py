@@ -65,10 +65,7 @@ class ShardRollout:
         """The observation parts of ``slots`` in the layout's shapes and float32 (the values the flat rows hold),
         not flattened: the policy gets parts."""
         got = self.worker.scenario.observation_rows(self.worker.world, slots)
-        return {
-            k: got[k].astype(np.float32, copy=False).reshape(slots.size, *shape)
-            for k, _, shape in self.layout
-        }
+        return {k: got[k].astype(np.float32, copy=False).reshape(slots.size, *shape) for k, _, shape in self.layout}
 
     def act(self, control: Packed) -> Packed:
         """One step: the policy's actions for the own live agents, the step, the sums; counts back."""
@@ -128,9 +125,7 @@ class ShardRollout:
         }
         out["sums"] = {k: v[slots] for k, v in self.sums.items()}
         out["own"] = np.flatnonzero(w.own)
-        out["obs"] = self.worker.flat_layout(
-            self.parts, self.slots.size
-        )  # of ``live``: step() can go on from here
+        out["obs"] = self.worker.flat_layout(self.parts, self.slots.size)  # of ``live``: step() can go on from here
         for key in ("live", "returns", "ended_here", *(f"sum.{k}" for k in self.info_keys)):
             w.carry.pop(key, None)
         return out

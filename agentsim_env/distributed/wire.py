@@ -186,9 +186,7 @@ class WireServer:
         max_frame_bytes: The bound of one frame.
     """
 
-    def __init__(
-        self, swap: Swap, token: bytes, n_shards: int, max_frame_bytes: int = MAX_FRAME_BYTES
-    ) -> None:
+    def __init__(self, swap: Swap, token: bytes, n_shards: int, max_frame_bytes: int = MAX_FRAME_BYTES) -> None:
         if len(token) != TOKEN_BYTES:
             raise ValueError(f"token must be {TOKEN_BYTES} bytes, got {len(token)}")
         self._swap, self._token, self.n_shards = swap, bytes(token), int(n_shards)

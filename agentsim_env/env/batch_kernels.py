@@ -101,9 +101,7 @@ def _scatter_kernel(a, idx, lo, hi, out):  # type: ignore[no-untyped-def]
     return True
 
 
-def scatter_part(
-    values: np.ndarray, idx: np.ndarray, n_slots: int, low: float, high: float
-) -> np.ndarray | None:
+def scatter_part(values: np.ndarray, idx: np.ndarray, n_slots: int, low: float, high: float) -> np.ndarray | None:
     """Rows ``values`` put at slots ``idx`` of a zeroed ``(n_slots, size)`` float64 array, clipped to [low, high].
 
     Args:

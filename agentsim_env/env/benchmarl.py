@@ -59,14 +59,10 @@ class AgentSimTaskClass(TaskClass):
             cfg.pop(key, None)
         self._max_steps = make_scenario(scenario, **cfg).max_steps  # also checks the config, naming bad keys
 
-    def get_env_fun(
-        self, num_envs: int, continuous_actions: bool, seed: int | None, device: Any
-    ) -> Callable[[], Any]:
+    def get_env_fun(self, num_envs: int, continuous_actions: bool, seed: int | None, device: Any) -> Callable[[], Any]:
         """A function building one TorchRL environment (BenchMARL makes ``num_envs`` copies itself)."""
         if not continuous_actions:
-            raise ValueError(
-                "agentsim scenarios have continuous actions only: pick an algorithm that supports them"
-            )
+            raise ValueError("agentsim scenarios have continuous actions only: pick an algorithm that supports them")
         cfg = copy.deepcopy(self.config)
         scenario = cfg.pop("scenario")
         return lambda: torchrl_env(scenario, seed=seed, device=device, return_state=True, **cfg)

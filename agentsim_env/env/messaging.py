@@ -35,9 +35,7 @@ class MessageCalls:
             raise ValueError(f"{what}: agent {agent!r} is offline")
         return slot
 
-    def send_message(
-        self, sender: str, payload: Any, *, to: str | None = None, group: int | None = None
-    ) -> bool:
+    def send_message(self, sender: str, payload: Any, *, to: str | None = None, group: int | None = None) -> bool:
         """Send a bus message from code (besides the ``comm`` action): to one agent or to a group.
 
         Args:

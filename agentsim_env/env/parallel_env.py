@@ -145,9 +145,7 @@ class AgentSimParallelEnv(MessageCalls, ParallelEnv):
         obs_space = observation_space_for(obs_parts, obs_format)
         self._obs_keys = tuple(obs_parts)
         self._obs_cols = [(sl, obs_parts[k].shape) for k, sl in flat_layout(obs_parts).items()]
-        self._obs_out = Recycled(
-            (self.world.state.n_slots, sum(p.size for p in obs_parts.values())), np.float32
-        )
+        self._obs_out = Recycled((self.world.state.n_slots, sum(p.size for p in obs_parts.values())), np.float32)
         self._act_parts = scenario.act_parts()  # fixed per config; read on every step
         act_space = action_space_for(self._act_parts, action_format)
         # public, as PettingZoo's ParallelEnv declares them (skrl reads them); observation_space(a) is a lookup here
@@ -180,8 +178,7 @@ class AgentSimParallelEnv(MessageCalls, ParallelEnv):
     def _check_known(self, agent: str) -> str:
         if agent not in self._index:
             raise ValueError(
-                f"unknown agent id {agent!r}; agents are {self.possible_agents[0]!r}..."
-                f"{self.possible_agents[-1]!r}"
+                f"unknown agent id {agent!r}; agents are {self.possible_agents[0]!r}...{self.possible_agents[-1]!r}"
             )
         return agent
 
@@ -277,11 +274,7 @@ class AgentSimParallelEnv(MessageCalls, ParallelEnv):
             terms = dict(zip(live, rows(terminated, idx))) if ended_t else self._all_false.copy()
             truncs = dict(zip(live, rows(truncated, idx))) if ended_u else self._all_false.copy()
             keys = tuple(res.info)
-            infos = (
-                per_agent(live, keys, [rows(res.info[k], idx) for k in keys])
-                if keys
-                else {a: {} for a in live}
-            )
+            infos = per_agent(live, keys, [rows(res.info[k], idx) for k in keys]) if keys else {a: {} for a in live}
         if ended_t or ended_u:
             keep = ~(terminated | truncated)[self._live_idx]
             self._set_agents([a for a, k in zip(live, keep.tolist()) if k], self._live_idx[keep])
@@ -382,9 +375,7 @@ class AgentSimParallelEnv(MessageCalls, ParallelEnv):
         except (ValueError, TypeError, KeyError, RuntimeError):
             for a in live:  # slow path: find the culprit and raise naming it
                 split_action(actions[a], parts, self.action_format, a)
-            raise ValueError(
-                "actions could not be stacked; check that every action has the same layout"
-            ) from None
+            raise ValueError("actions could not be stacked; check that every action has the same layout") from None
         return out
 
     def _reset_infos(self) -> dict[str, dict[str, Any]]:
@@ -493,9 +484,7 @@ def to_aec(env: AgentSimParallelEnv, *, raw: bool = False) -> Any:
 ENV_KEYS = ("render_mode", "obs_format", "action_format", "check_finite", "num_threads", "ended_agents")
 
 
-def build_parallel_env(
-    name: str, defaults: dict[str, Any] | None = None, **config: Any
-) -> AgentSimParallelEnv:
+def build_parallel_env(name: str, defaults: dict[str, Any] | None = None, **config: Any) -> AgentSimParallelEnv:
     """The ParallelEnv of scenario ``name`` (what ``agentsim_env.make`` returns; the adapters build through it).
 
     Args:

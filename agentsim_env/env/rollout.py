@@ -176,9 +176,7 @@ class DictRows:
         start = 0
         for name, p in self.parts.items():
             if names and not isinstance(acts[names[0]], Mapping):  # flat actions: the parts in layout order
-                rows = [
-                    np.asarray(acts[a], dtype=np.float32).reshape(-1)[start : start + p.size] for a in names
-                ]
+                rows = [np.asarray(acts[a], dtype=np.float32).reshape(-1)[start : start + p.size] for a in names]
             else:
                 rows = [np.asarray(acts[a][name], dtype=np.float32) for a in names]
             start += p.size
@@ -336,9 +334,7 @@ def _array_loop(
     return _result(env, taken, returns, events, sums, agent_steps, t0)
 
 
-def scatter_part_checked(
-    name: str, acts: Mapping[str, Any], part: Any, live: np.ndarray, n_slots: int
-) -> np.ndarray:
+def scatter_part_checked(name: str, acts: Mapping[str, Any], part: Any, live: np.ndarray, n_slots: int) -> np.ndarray:
     """One action part of the live rows over every slot, clipped to its bounds (``step``'s rule)."""
     if name not in acts:
         raise ValueError(f"the policy returned no action part {name!r} (parts: {sorted(acts)})")
@@ -377,16 +373,12 @@ def _dict_loop(
         live = list(inner._live)
         slots = np.array([index[a] for a in live], dtype=np.int64)
         parts = {
-            k: np.stack(
-                [np.asarray(obs[a][k] if isinstance(obs[a], dict) else _part(inner, obs[a], k)) for a in live]
-            )
+            k: np.stack([np.asarray(obs[a][k] if isinstance(obs[a], dict) else _part(inner, obs[a], k)) for a in live])
             for k in keys
         }
         acts = policy.act_rows(parts, slots, taken)
         act_keys = list(inner._act_parts)
-        actions: dict[str, Any] = {
-            a: {k: np.asarray(acts[k][i]) for k in act_keys} for i, a in enumerate(live)
-        }
+        actions: dict[str, Any] = {a: {k: np.asarray(acts[k][i]) for k in act_keys} for i, a in enumerate(live)}
         if env.action_format == "flat":
             actions = {a: np.concatenate([v[k].reshape(-1) for k in act_keys]) for a, v in actions.items()}
         obs, rew, _, _, infos = env.step(actions)
@@ -398,9 +390,7 @@ def _dict_loop(
             events[k] += v
         for a, info in infos.items():
             for k, v in info.items():
-                if isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(
-                    v, (bool, np.bool_)
-                ):
+                if isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, (bool, np.bool_)):
                     if k not in acc:
                         acc[k] = np.zeros(len(env.possible_agents), dtype=np.float64)
                     acc[k][index[a]] += float(v)

@@ -48,9 +48,7 @@ class AgentSimVecEnv(VecEnv):
         self.batch = batch if batch is not None else BatchedEnv(name, n_worlds, **config)
         b = self.batch
         n_worlds = b.n_worlds
-        obs_parts = (
-            b.scenario.obs_parts()
-        )  # through the public API: a wrapped batched env has no private parts
+        obs_parts = b.scenario.obs_parts()  # through the public API: a wrapped batched env has no private parts
         lows = np.concatenate([np.full(p.size, p.low) for p in obs_parts.values()]).astype(np.float32)
         highs = np.concatenate([np.full(p.size, p.high) for p in obs_parts.values()]).astype(np.float32)
         obs_space = spaces.Box(lows, highs, dtype=np.float32)

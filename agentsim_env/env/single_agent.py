@@ -74,13 +74,9 @@ class SingleAgentEnv(gymnasium.Env):
         agents = self.par_env.possible_agents
         self.agent = agents[0] if agent is None else agent
         if self.agent not in agents:
-            raise ValueError(
-                f"agent: unknown agent id {self.agent!r}; agents are {agents[0]!r}...{agents[-1]!r}"
-            )
+            raise ValueError(f"agent: unknown agent id {self.agent!r}; agents are {agents[0]!r}...{agents[-1]!r}")
         if others is not None and not callable(others):
-            raise ValueError(
-                f"others must be a callable (observations -> actions), got {type(others).__name__}"
-            )
+            raise ValueError(f"others must be a callable (observations -> actions), got {type(others).__name__}")
         self.others = others
         self.render_mode = render_mode
         self.metadata = dict(self.par_env.metadata)

@@ -18,9 +18,7 @@ FORMATS = ("dict", "flat")
 def observation_space_for(parts: dict[str, Part], fmt: str) -> spaces.Space:
     """A Dict of float32 Boxes (one per part) or one flat Box (parts concatenated in order)."""
     if fmt == "dict":
-        return spaces.Dict(
-            {k: spaces.Box(p.low, p.high, shape=p.shape, dtype=np.float32) for k, p in parts.items()}
-        )
+        return spaces.Dict({k: spaces.Box(p.low, p.high, shape=p.shape, dtype=np.float32) for k, p in parts.items()})
     low = np.concatenate([np.full(p.size, p.low, dtype=np.float32) for p in parts.values()])
     high = np.concatenate([np.full(p.size, p.high, dtype=np.float32) for p in parts.values()])
     return spaces.Box(low, high, dtype=np.float32)
@@ -51,9 +49,7 @@ def split_action(action: Any, parts: dict[str, Part], fmt: str, agent: str) -> d
     """
     if fmt == "dict":
         if not isinstance(action, dict):
-            raise ValueError(
-                f"action of {agent!r} must be a dict with keys {list(parts)}, got {type(action).__name__}"
-            )
+            raise ValueError(f"action of {agent!r} must be a dict with keys {list(parts)}, got {type(action).__name__}")
         unknown = set(action) - set(parts)
         missing = set(parts) - set(action)
         if unknown or missing:

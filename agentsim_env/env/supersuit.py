@@ -86,10 +86,7 @@ class SeededSB3VecEnv(SB3VecEnvWrapper):
     def get_attr(self, attr_name: str, indices: Any = None) -> list[Any]:
         """An attribute of the ParallelEnv copy behind each entry (``ConcatVecEnv`` has no ``get_attr``)."""
         copies = self.venv.vec_envs
-        return [
-            getattr(copies[i // self._per_copy].par_env.unwrapped, attr_name)
-            for i in self._get_indices(indices)
-        ]
+        return [getattr(copies[i // self._per_copy].par_env.unwrapped, attr_name) for i in self._get_indices(indices)]
 
     def reset(self, seed: int | None = None, options: dict[str, Any] | None = None) -> np.ndarray:
         """Reset every copy: with ``seed``, else with the stored seed (used once), else continuing each copy."""

@@ -174,8 +174,7 @@ class BatchedEnv:
             seeds = list(seed)
             if len(seeds) != b or not all(is_int(s) for s in seeds):
                 raise ValueError(
-                    f"seed must be None, an int or a sequence of {b} ints (one per world), "
-                    f"got {short_repr(seed)}"
+                    f"seed must be None, an int or a sequence of {b} ints (one per world), got {short_repr(seed)}"
                 )
         for w, s in enumerate(seeds):
             try:
@@ -215,13 +214,9 @@ class BatchedEnv:
         except (TypeError, ValueError, RuntimeError) as exc:
             raise ValueError(f"actions must be an array of real numbers ({ACTION_RULE}): {exc}") from None
         if a.dtype.kind not in REAL_KINDS:
-            raise ValueError(
-                f"actions must be real numbers (ints or floats), got dtype {a.dtype} ({ACTION_RULE})"
-            )
+            raise ValueError(f"actions must be real numbers (ints or floats), got dtype {a.dtype} ({ACTION_RULE})")
         if a.shape != (self.n_worlds, self.n_agents, self.act_dim):
-            raise ValueError(
-                f"actions must have shape {(self.n_worlds, self.n_agents, self.act_dim)}, got {a.shape}"
-            )
+            raise ValueError(f"actions must have shape {(self.n_worlds, self.n_agents, self.act_dim)}, got {a.shape}")
         acting = self.alive.reshape(-1).copy()
         a, bad = prepare_actions(a.reshape(-1, self.act_dim), acting)
         if bad >= 0:
@@ -230,9 +225,7 @@ class BatchedEnv:
         parts = {k: a[:, sl] for k, sl in self._act_layout.items()}
         res, term = self._step_core(parts, acting)
         self.steps += 1
-        obs = self._flat_obs(
-            acting, int(self.steps.max()) if self.check_finite else 0, res, self._obs_out.get()
-        )
+        obs = self._flat_obs(acting, int(self.steps.max()) if self.check_finite else 0, res, self._obs_out.get())
         term = np.asarray(term, dtype=bool)
         trunc, done_worlds, n_done = finish_step(
             term, acting, self.steps >= self.scenario.max_steps, self.alive, obs.reshape(-1, self.obs_dim)

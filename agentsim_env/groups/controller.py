@@ -14,7 +14,8 @@ Heartbeat protocol (all traffic crosses the bus, so latency and loss apply both 
   answers automatically; the answer reaches the controller another ``latency`` steps later unless lost.
 - ``tick`` first reads the answers handed to it (those that arrived since the previous tick) into
   ``last_answer`` (the step each answer arrived), then reports every monitored slot with
-  ``step - last_answer > timeout``, offline ones included (an offline slot never answers). A slot is reported once (``timed_out`` remembers it); the world
+  ``step - last_answer > timeout``, offline ones included (an offline slot never answers). A slot is reported once
+  (``timed_out`` remembers it); the world
   marks it offline.
 
 With the pipeline order of DESIGN section 4 (``tick`` before ``deliver`` in a step) and a loss-free channel,
@@ -267,9 +268,7 @@ class GroupController:
         if not ev:
             e = np.empty(0, dtype=np.int64)
             return GroupEvents(e, e.copy(), np.empty(0, dtype=np.int32), np.empty(0, dtype=np.int32))
-        return GroupEvents(
-            *(np.concatenate([getattr(x, f) for x in ev]) for f in ("step", "slot", "old", "new"))
-        )
+        return GroupEvents(*(np.concatenate([getattr(x, f) for x in ev]) for f in ("step", "slot", "old", "new")))
 
     def members(self, world: int, group: int) -> np.ndarray:
         """Slots of ``world`` in ``group`` (online or not), ascending int64."""

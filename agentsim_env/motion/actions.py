@@ -190,9 +190,7 @@ def _velocity_kernel(kind, params, t, n_waypoints, wp_index, loop, done, acting,
         done[s] = False
 
 
-def decode_velocity_unchecked(
-    ms: MotionState, acting: np.ndarray, actions: np.ndarray, max_speed: np.ndarray
-) -> None:
+def decode_velocity_unchecked(ms: MotionState, acting: np.ndarray, actions: np.ndarray, max_speed: np.ndarray) -> None:
     """Hot-path twin of :func:`decode_velocity` over every slot at once (one kernel, no validation).
 
     Gives exactly the targets :func:`decode_velocity` gives; the caller guarantees the input (the env has

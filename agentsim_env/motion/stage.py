@@ -38,9 +38,7 @@ class MotionStage:
 
     name = "motion"
 
-    def __init__(
-        self, n_worlds: int, n_agents: int, max_waypoints: int = 16, keep_start: bool = False
-    ) -> None:
+    def __init__(self, n_worlds: int, n_agents: int, max_waypoints: int = 16, keep_start: bool = False) -> None:
         self.n_agents = int(n_agents)
         self.state = MotionState.create(int(n_worlds) * self.n_agents, max_waypoints)
         self.keep_start = keep_start

@@ -86,9 +86,7 @@ def _as_n3(a: ArrayLike, name: str) -> NDArray[np.float64]:
     return arr
 
 
-def vacuum_landing(
-    p0: ArrayLike, v0: ArrayLike, g: float = 9.81
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+def vacuum_landing(p0: ArrayLike, v0: ArrayLike, g: float = 9.81) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Closed-form landing of a drag-free projectile released above flat ground at ``z = 0``.
 
     Args:

@@ -139,13 +139,9 @@ def fall_substeps(
             mx, my, gx, gy = mean_xy[i, 0], mean_xy[i, 1], gust_xy[i, 0], gust_xy[i, 1]
             a1x, a1y, a1z = _acc(z, vx, vy, vz, mx, my, gx, gy, k, g, code, z0, z_ref, log_ref)
             v2x, v2y, v2z = vx + 0.5 * h * a1x, vy + 0.5 * h * a1y, vz + 0.5 * h * a1z
-            a2x, a2y, a2z = _acc(
-                z + 0.5 * h * vz, v2x, v2y, v2z, mx, my, gx, gy, k, g, code, z0, z_ref, log_ref
-            )
+            a2x, a2y, a2z = _acc(z + 0.5 * h * vz, v2x, v2y, v2z, mx, my, gx, gy, k, g, code, z0, z_ref, log_ref)
             v3x, v3y, v3z = vx + 0.5 * h * a2x, vy + 0.5 * h * a2y, vz + 0.5 * h * a2z
-            a3x, a3y, a3z = _acc(
-                z + 0.5 * h * v2z, v3x, v3y, v3z, mx, my, gx, gy, k, g, code, z0, z_ref, log_ref
-            )
+            a3x, a3y, a3z = _acc(z + 0.5 * h * v2z, v3x, v3y, v3z, mx, my, gx, gy, k, g, code, z0, z_ref, log_ref)
             v4x, v4y, v4z = vx + h * a3x, vy + h * a3y, vz + h * a3z
             a4x, a4y, a4z = _acc(z + h * v3z, v4x, v4y, v4z, mx, my, gx, gy, k, g, code, z0, z_ref, log_ref)
             c = h / 6.0

@@ -275,9 +275,7 @@ class PayloadSet:
                 if np.any(old):
                     gusts[old] = wind.advance_gusts(gusts[old], dt, rng, None if w_of is None else w_of[old])
                 if np.any(fresh):
-                    gusts[fresh] = wind.init_gusts(
-                        int(fresh.sum()), rng, None if w_of is None else w_of[fresh]
-                    )
+                    gusts[fresh] = wind.init_gusts(int(fresh.sum()), rng, None if w_of is None else w_of[fresh])
                 a["gust"][act] = gusts
         landed = np.zeros(n, dtype=np.bool_)
         xy = np.empty((n, 2))
@@ -338,9 +336,7 @@ class PayloadSet:
                 mask &= self._a[name][: self._count] == value
         return np.flatnonzero(mask)
 
-    def landed_xy(
-        self, world: int | None = None, zone: int | None = None, owner: int | None = None
-    ) -> np.ndarray:
+    def landed_xy(self, world: int | None = None, zone: int | None = None, owner: int | None = None) -> np.ndarray:
         """Landing points ``(m, 2)`` of the landed objects, in id order, optionally filtered.
 
         Args:
@@ -353,9 +349,7 @@ class PayloadSet:
         """
         return self._a["land_xy"][self._select(self._a["landed"], world, zone, owner)]
 
-    def landed_ids(
-        self, world: int | None = None, zone: int | None = None, owner: int | None = None
-    ) -> np.ndarray:
+    def landed_ids(self, world: int | None = None, zone: int | None = None, owner: int | None = None) -> np.ndarray:
         """Ids of the landed objects (same order and filters as ``landed_xy``)."""
         return self._a["id"][self._select(self._a["landed"], world, zone, owner)]
 

@@ -45,9 +45,7 @@ class PayloadStage:
 
     name = "payloads"
 
-    def __init__(
-        self, params: FallParams, scatter: ScatterConfig, wind: WindConfig | None, n_worlds: int
-    ) -> None:
+    def __init__(self, params: FallParams, scatter: ScatterConfig, wind: WindConfig | None, n_worlds: int) -> None:
         self.objects = PayloadSet(params, scatter)
         self.wind = WindModel(wind, None, n_worlds) if wind is not None else None
         self.n_worlds = int(n_worlds)

@@ -18,9 +18,7 @@ from ..core.scene import CYLINDER, SPHERE
 # Row copies between the caller's arrays and the batch layout (x, y, vx, vy per body). One pass per side: numpy
 # needs three masked copies, and the (S, 2) strided ones are slow (about 10 us for 1,000 rows).
 @njit(cache=True)
-def _pack(
-    pos: np.ndarray, vel: np.ndarray, online: np.ndarray, x_offset: np.ndarray, body: np.ndarray
-) -> None:
+def _pack(pos: np.ndarray, vel: np.ndarray, online: np.ndarray, x_offset: np.ndarray, body: np.ndarray) -> None:
     for i in range(online.shape[0]):
         if online[i]:  # offline rows keep their parking spot (and may hold NaN in pos)
             body[i, 0] = pos[i, 0] + x_offset[i]

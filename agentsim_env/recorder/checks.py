@@ -9,7 +9,8 @@ validated by the scenario's own config classes (:func:`stored_config`).
 
 Read-only stores: a file this process may not write, or one in a folder it may not write, is opened with SQLite's
 ``mode=ro``; when that cannot open it because the folder cannot be written (SQLite needs to create ``NAME-shm``
-next to a WAL store: read-only media), it is opened ``immutable=1``, which reads the main file alone. A store whose write-ahead log ``NAME-wal`` holds committed rows but has no
+next to a WAL store: read-only media), it is opened ``immutable=1``, which reads the main file alone. A store whose
+write-ahead log ``NAME-wal`` holds committed rows but has no
 ``NAME-shm`` cannot be read that way (the rows in the log would be missed): it is refused, saying so.
 """
 
@@ -136,11 +137,7 @@ def _check_version(con: sqlite3.Connection, p: Path) -> None:
             f"{p}: not an agentsim store (an SQLite file with other tables: {', '.join(other[:5])}); "
             "record to a new file"
         )
-    row = (
-        con.execute("SELECT value FROM meta WHERE key = 'schema_version'").fetchone()
-        if "meta" in tables
-        else None
-    )
+    row = con.execute("SELECT value FROM meta WHERE key = 'schema_version'").fetchone() if "meta" in tables else None
     if row is None or row[0] != str(SCHEMA_VERSION):
         found = "none" if row is None else row[0]
         raise StoreError(
@@ -164,12 +161,8 @@ def expected_columns() -> dict[str, dict[str, str]]:
     con = sqlite3.connect(":memory:")
     try:
         con.executescript(_DDL)
-        names = [
-            r[0] for r in con.execute("SELECT name FROM sqlite_master WHERE type = 'table' ORDER BY rowid")
-        ]
-        return {
-            t: {r[1]: str(r[2]).upper() for r in con.execute(f"PRAGMA table_info({_q(t)})")} for t in names
-        }
+        names = [r[0] for r in con.execute("SELECT name FROM sqlite_master WHERE type = 'table' ORDER BY rowid")]
+        return {t: {r[1]: str(r[2]).upper() for r in con.execute(f"PRAGMA table_info({_q(t)})")} for t in names}
     finally:
         con.close()
 
@@ -197,9 +190,7 @@ def check_schema(con: sqlite3.Connection, path: str | os.PathLike[str]) -> None:
                 )
         for col in have:
             if table == "steps" and col.startswith("info_") and have[col] != "REAL":
-                raise StoreError(
-                    f"{path}: column steps.{col} is declared {have[col]}, but info columns are REAL"
-                )
+                raise StoreError(f"{path}: column steps.{col} is declared {have[col]}, but info columns are REAL")
 
 
 # ------------------------------------------------------------------------------------------------ values
@@ -263,8 +254,7 @@ def check_values(
     bads = [f"({rule[0].format(c=_q(c))})" for c, rule in checks.items()]
     try:
         row = con.execute(
-            f"SELECT rowid, {', '.join(bads)} FROM {_q(table)} WHERE ({where}) AND "
-            f"({' OR '.join(bads)}) LIMIT 1",
+            f"SELECT rowid, {', '.join(bads)} FROM {_q(table)} WHERE ({where}) AND ({' OR '.join(bads)}) LIMIT 1",
             list(params),
         ).fetchone()
         if row is None:
@@ -274,8 +264,7 @@ def check_values(
     except sqlite3.DatabaseError as exc:  # a damaged page, not a damaged value
         raise StoreError(f"{path}: cannot read table {table}: {exc}") from None
     raise StoreError(
-        f"{path}: {table}.{col} holds {value} in {place}, but it must be {checks[col][1]}: "
-        "the store is damaged"
+        f"{path}: {table}.{col} holds {value} in {place}, but it must be {checks[col][1]}: the store is damaged"
     )
 
 
@@ -335,9 +324,7 @@ def _known(cls: type, values: Mapping[str, Any]) -> dict[str, Any]:
     return out
 
 
-def stored_config(
-    path: str | os.PathLike[str], run: int, scenario: str, text: Any
-) -> tuple[dict[str, Any], Any]:
+def stored_config(path: str | os.PathLike[str], run: int, scenario: str, text: Any) -> tuple[dict[str, Any], Any]:
     """The run's config (``runs.config``) validated by the scenario's config class.
 
     Keys this version of the scenario does not declare are left out (a store written by another version); a

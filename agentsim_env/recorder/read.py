@@ -13,7 +13,8 @@ by the methods that return DataFrames, so ``export`` to CSV, :meth:`Store.run_ro
 Every frame has one row per table row. The typed methods set the key columns as a (sorted) index and convert
 columns by their declared SQL type: ``INTEGER`` -> nullable ``Int64``, ``REAL`` -> ``float64``, ``TEXT`` ->
 strings (pandas' default string type, missing values NA); the 0/1 flags ``online``, ``terminated`` and
-``truncated`` -> nullable ``boolean`` (NA in the step-0 rows, which follow a reset and carry no reward). :meth:`Store.table` returns a table as stored
+``truncated`` -> nullable ``boolean`` (NA in the step-0 rows, which follow a reset and carry no reward).
+:meth:`Store.table` returns a table as stored
 (ordered by rowid, default index, pandas' own type inference), which is what :func:`export` writes.
 The schema and example SQL queries are in ``docs/store.md``.
 """
@@ -147,9 +148,7 @@ def _check_tables(tables: Iterable[str] | None) -> list[str]:
     chosen = list(dict.fromkeys(tables))
     bad = [t for t in chosen if t not in TABLES]
     if bad or not chosen:
-        raise ValueError(
-            f"tables must be among {', '.join(TABLES)}; got {', '.join(map(repr, bad)) or 'none'}"
-        )
+        raise ValueError(f"tables must be among {', '.join(TABLES)}; got {', '.join(map(repr, bad)) or 'none'}")
     return chosen
 
 
@@ -256,9 +255,7 @@ class Store:
         frame = pd.DataFrame.from_records(self.run_rows(), columns=list(types))
         return _typed(frame, types).set_index("run")
 
-    def episodes(
-        self, run: IdFilter = None, episode: IdFilter = None, world: IdFilter = None
-    ) -> pd.DataFrame:
+    def episodes(self, run: IdFilter = None, episode: IdFilter = None, world: IdFilter = None) -> pd.DataFrame:
         """One row per (run, world, episode): its ``seed`` (text) and ``first_step``."""
         return self._frame("episodes", run, episode, world)
 
@@ -270,23 +267,19 @@ class Store:
         """
         return self._frame("steps", run, episode, world)
 
-    def messages(
-        self, run: IdFilter = None, episode: IdFilter = None, world: IdFilter = None
-    ) -> pd.DataFrame:
+    def messages(self, run: IdFilter = None, episode: IdFilter = None, world: IdFilter = None) -> pd.DataFrame:
         """Bus events (``sent`` / ``delivered`` / ``dropped`` with ``reason``) and ``overlay`` deliveries."""
         return self._frame("messages", run, episode, world)
 
     def events(self, run: IdFilter = None, episode: IdFilter = None, world: IdFilter = None) -> pd.DataFrame:
-        """``collision``, ``offline``, ``shard_offline`` (distributed runs), ``group``, ``release`` and ``landing`` events."""
+        """``collision``, ``offline``, ``shard_offline`` (sharded), ``group``, ``release``, ``landing`` events."""
         return self._frame("events", run, episode, world)
 
     def sensors(self, run: IdFilter = None, episode: IdFilter = None, world: IdFilter = None) -> pd.DataFrame:
         """One row per released sensor: UAV, zone, release and landing coordinates (m), steps and times (s)."""
         return self._frame("sensors", run, episode, world)
 
-    def observations(
-        self, run: IdFilter = None, episode: IdFilter = None, world: IdFilter = None
-    ) -> pd.DataFrame:
+    def observations(self, run: IdFilter = None, episode: IdFilter = None, world: IdFilter = None) -> pd.DataFrame:
         """Recorded flat observations; ``obs`` holds one float64 NumPy array per row."""
         import numpy as np
 
@@ -317,9 +310,7 @@ class Store:
         chosen = _check_tables(tables)
         pa = _pyarrow() if fmt == "parquet" else None
         out = Path(out_dir)
-        snapshot = (
-            not self.con.in_transaction
-        )  # one read transaction: the tables agree while a writer goes on
+        snapshot = not self.con.in_transaction  # one read transaction: the tables agree while a writer goes on
         if snapshot:
             self.con.execute("BEGIN")
         temps: dict[Path, Path] = {}

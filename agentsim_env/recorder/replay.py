@@ -106,9 +106,7 @@ def _step_rows(con: sqlite3.Connection, info: ReplayInfo) -> Iterator[tuple[int,
 
 
 # --------------------------------------------------------------------------------------------- drawing
-def _discs(
-    img: np.ndarray, cx: np.ndarray, cy: np.ndarray, r: float, colors: np.ndarray, hole: float = 0.0
-) -> None:
+def _discs(img: np.ndarray, cx: np.ndarray, cy: np.ndarray, r: float, colors: np.ndarray, hole: float = 0.0) -> None:
     """Filled discs (or rings, inner radius ``hole``) of radius ``r`` pixels; ``colors`` ``(k, 3)`` or ``(3,)``."""
     h, w, _ = img.shape
     colors = np.broadcast_to(colors, (len(cx), 3))
@@ -196,17 +194,14 @@ def _draw_scene(img: np.ndarray, scene: StaticScene, cv: Canvas) -> None:
         mx, my = cv.px(np.asarray(mxy)[:, 0], np.asarray(mxy)[:, 1])
         floor = min_marker_px(cv.size)
         for m in range(len(mx)):
-            _discs(
-                img, mx[m : m + 1], my[m : m + 1], max(float(rad[m]) * s, floor), np.asarray(rgb[m], np.uint8)
-            )
+            _discs(img, mx[m : m + 1], my[m : m + 1], max(float(rad[m]) * s, floor), np.asarray(rgb[m], np.uint8))
 
 
 def _first_groups(con: sqlite3.Connection, info: ReplayInfo) -> np.ndarray:
     """Each agent's group at its first recorded step (-1 when not recorded)."""
     groups = np.full(info.n_agents, -1, dtype=np.int64)
     rows = con.execute(
-        "SELECT agent, grp FROM steps WHERE run = ? AND episode = ? AND world = ? AND step = ? "
-        "AND grp IS NOT NULL",
+        "SELECT agent, grp FROM steps WHERE run = ? AND episode = ? AND world = ? AND step = ? AND grp IS NOT NULL",
         (info.run, info.episode, info.world, info.steps[0]),
     ).fetchall()
     for a, g in rows:
@@ -288,18 +283,14 @@ class _Replay:
         _discs(img, self.xy[live, 0], self.xy[live, 1], r, _RIM)
         _discs(img, self.xy[live, 0], self.xy[live, 1], r - max(1.0, r / 6), self.colors[live])
         hx, hy = np.cos(self.heading[live]), np.sin(self.heading[live])
-        _discs(
-            img, self.xy[live, 0] + hx * r * 0.7, self.xy[live, 1] - hy * r * 0.7, max(r / 3, 1.0), _HEADING
-        )
+        _discs(img, self.xy[live, 0] + hx * r * 0.7, self.xy[live, 1] - hy * r * 0.7, max(r / 3, 1.0), _HEADING)
         recent = (self.col_step <= step) & (self.col_step > step - COLLISION_HOLD)
         hit = np.unique(self.col_agent[recent])
         hit = hit[hit < len(self.xy)]
         _discs(img, self.xy[hit, 0], self.xy[hit, 1], r + 3.0, _COLLISION, hole=r + 1.5)
         i = self.info
         n_col = int((self.col_step <= step).sum())
-        text = (
-            f"run {i.run}  {i.scenario}  episode {i.episode}  world {i.world}  step {step}/{self.last_step}"
-        )
+        text = f"run {i.run}  {i.scenario}  episode {i.episode}  world {i.world}  step {step}/{self.last_step}"
         if off.any():
             text += f"  offline {int(off.sum())}"
         if n_col:

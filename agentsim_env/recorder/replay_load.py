@@ -137,9 +137,7 @@ def _scenario_bounds(name: str, config: dict[str, Any]) -> tuple[float, float, f
     except ImportError:  # pragma: no cover
         return None
     attempts = [config] + [
-        {k: v for k, v in config.items() if k != drop}
-        for drop, sub in config.items()
-        if isinstance(sub, dict)
+        {k: v for k, v in config.items() if k != drop} for drop, sub in config.items() if isinstance(sub, dict)
     ]
     for cfg in attempts:
         try:  # build() checks the memory the world needs before allocating it
@@ -225,9 +223,7 @@ def replay_info(
             run = runs[-1]
         elif _check_int("run", run, 0) not in runs:
             raise ValueError(f"{path}: no run {run}; runs in the store: {_ranges(runs)}")
-        check_values(
-            con, path, "runs", "run = ?", (run,), {**RUN_RULES, "n_agents": integer_within(1, MAX_AGENTS)}
-        )
+        check_values(con, path, "runs", "run = ?", (run,), {**RUN_RULES, "n_agents": integer_within(1, MAX_AGENTS)})
         name, config_text, n_worlds, n_agents = con.execute(
             "SELECT scenario, config, n_worlds, n_agents FROM runs WHERE run = ?", (run,)
         ).fetchone()
@@ -235,15 +231,10 @@ def replay_info(
             worlds = "0" if n_worlds == 1 else f"0-{n_worlds - 1}"
             raise ValueError(f"{path}: run {run} has no world {world}; its worlds: {worlds}")
         check_values(con, path, "episodes", "run = ? AND world = ?", (run, world))
-        episodes = [
-            e
-            for (e,) in con.execute("SELECT episode FROM episodes WHERE run = ? AND world = ?", (run, world))
-        ]
+        episodes = [e for (e,) in con.execute("SELECT episode FROM episodes WHERE run = ? AND world = ?", (run, world))]
         if episode not in episodes:
             have = _ranges(episodes) if episodes else "none"
-            raise ValueError(
-                f"{path}: run {run} world {world} has no episode {episode}; recorded episodes: {have}"
-            )
+            raise ValueError(f"{path}: run {run} world {world} has no episode {episode}; recorded episodes: {have}")
         key, where = (run, episode, world), "run = ? AND episode = ? AND world = ?"
         position = number_within(POSITION_LIMIT)
         check_values(
@@ -270,9 +261,7 @@ def replay_info(
             key,
             {c: position for c in ("release_x", "release_y", "release_z", "land_x", "land_y")},
         )
-        steps = tuple(
-            s for (s,) in con.execute(f"SELECT DISTINCT step FROM steps WHERE {where} ORDER BY step", key)
-        )
+        steps = tuple(s for (s,) in con.execute(f"SELECT DISTINCT step FROM steps WHERE {where} ORDER BY step", key))
         if not steps:
             raise ValueError(f"{path}: run {run} world {world} episode {episode} has no recorded steps")
         (rows,) = con.execute(f"SELECT count(*) FROM steps WHERE {where}", key).fetchone()

@@ -52,8 +52,7 @@ def recorded_seeds(info: ReplayInfo) -> tuple[int, list[tuple[int, int]]]:
     try:
         (n_worlds,) = con.execute("SELECT n_worlds FROM runs WHERE run = ?", (info.run,)).fetchone()
         rows = con.execute(
-            "SELECT episode, seed FROM episodes WHERE run = ? AND world = ? AND episode <= ? "
-            "ORDER BY episode",
+            "SELECT episode, seed FROM episodes WHERE run = ? AND world = ? AND episode <= ? ORDER BY episode",
             (info.run, info.world, info.episode),
         ).fetchall()
     finally:

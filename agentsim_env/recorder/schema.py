@@ -111,9 +111,7 @@ def _wal(con: sqlite3.Connection, timeout: float) -> None:
         time.sleep(0.005)
 
 
-def connect(
-    path: str | os.PathLike[str], *, create: bool = True, timeout: float = 30.0
-) -> sqlite3.Connection:
+def connect(path: str | os.PathLike[str], *, create: bool = True, timeout: float = 30.0) -> sqlite3.Connection:
     """Open (and with ``create``, initialise) a store; check its schema version; recover dead runs.
 
     The connection uses WAL journaling and ``synchronous=NORMAL``: a crash loses at most the transaction in

@@ -135,18 +135,14 @@ class ReplayData:
                         [b],
                     )
                 if len(m) > MAX_MESSAGE_LINES:
-                    self._add(
-                        s, "message", f"... and {len(m) - MAX_MESSAGE_LINES} more deliveries this step", []
-                    )
+                    self._add(s, "message", f"... and {len(m) - MAX_MESSAGE_LINES} more deliveries this step", [])
             for s, ev, a, b, obj, old, new in con.execute(
                 "SELECT step, event, agent, other_agent, object, old, new FROM events WHERE run = ? AND "
                 "episode = ? AND world = ? ORDER BY step",
                 key,
             ):
                 if ev in ("collision", "offline") and a is not None and 0 <= a < n and s in index:
-                    why[a] = (
-                        (index[s], COLLIDED if ev == "collision" else OFFLINE) if why[a][0] < 0 else why[a]
-                    )
+                    why[a] = (index[s], COLLIDED if ev == "collision" else OFFLINE) if why[a][0] < 0 else why[a]
                 if ev == "collision":
                     other = f"agent {self._name(b)}" if b is not None and b >= 0 else f"object #{obj}"
                     self._add(s, "collision", f"{self._name(a)} collided with {other}", [a])
@@ -399,9 +395,7 @@ class ReplayViewer:
         self.index = i
         self.seq += 1
         arrays = self.data.arrays(i)
-        self.server.publish_frame(
-            self.seq, pack_frame(self.seq, int(self.data.steps[i]), self.info.episode, arrays)
-        )
+        self.server.publish_frame(self.seq, pack_frame(self.seq, int(self.data.steps[i]), self.info.episode, arrays))
         self.server.publish_log(self.data.log[i])
         self.server.broadcast(self._status())
 

@@ -70,9 +70,7 @@ _PAGE_CSS = """
 #export-label { position: fixed; left: 8px; top: 6px; z-index: 5; padding: 2px 6px; border-radius: 3px;
   font: 13px/1.3 system-ui, sans-serif; color: #222; background: rgba(255, 255, 255, .8); pointer-events: none; }
 """
-_ADD_LABEL = (
-    "() => { const d = document.createElement('div'); d.id = 'export-label'; document.body.append(d); }"
-)
+_ADD_LABEL = "() => { const d = document.createElement('div'); d.id = 'export-label'; document.body.append(d); }"
 _SEEK = (
     "([step, text]) => { document.getElementById('export-label').textContent = text; "
     "window.agentsim.send({cmd: 'seek', step: step}); }"
@@ -109,16 +107,13 @@ def check_export(out: str | os.PathLike[str], fps: float | None, size: int, ever
     if fmt is None:
         suffix = Path(out).suffix or "no suffix"
         raise ValueError(
-            f"--out {str(out)!r}: the 3D view is exported as {', '.join('.' + f for f in VIDEO_FORMATS)}"
-            f" (got {suffix})"
+            f"--out {str(out)!r}: the 3D view is exported as {', '.join('.' + f for f in VIDEO_FORMATS)} (got {suffix})"
         )
     if fps is not None and (isinstance(fps, bool) or not isinstance(fps, (int, float)) or not fps > 0):
         raise ValueError(f"--fps must be > 0, got {fps!r}")
     lo, hi = SIZE_RANGE
     if isinstance(size, bool) or not isinstance(size, (int, np.integer)) or not lo <= size <= hi:
-        raise ValueError(
-            f"--size must be an integer in {lo}..{hi} (the video's width in pixels), got {size!r}"
-        )
+        raise ValueError(f"--size must be an integer in {lo}..{hi} (the video's width in pixels), got {size!r}")
     _check_int("--every", every, 1)
     return fmt
 
@@ -141,9 +136,7 @@ def _launch(pw: Any) -> Any:
     """Headless Chromium: the system's, else one Playwright installed itself; a ValueError when there is none."""
     path = find_chromium()
     if path and not (os.path.isfile(path) and os.access(path, os.X_OK)):
-        raise ValueError(
-            f"AGENTSIM_CHROMIUM={path!r} is not an executable file; {CHROMIUM_HINT.split(': ', 1)[1]}"
-        )
+        raise ValueError(f"AGENTSIM_CHROMIUM={path!r} is not an executable file; {CHROMIUM_HINT.split(': ', 1)[1]}")
     try:
         return pw.chromium.launch(executable_path=path, headless=True, args=CHROMIUM_FLAGS)
     except Exception as exc:  # noqa: BLE001 - Playwright's Error: no browser, or one that does not start
@@ -290,6 +283,4 @@ def _wait(page: Any, sync_api: Any, expression: str, arg: Any, what: str, errors
         page.wait_for_function(expression, arg=arg, timeout=FRAME_TIMEOUT_S * 1000)
     except sync_api.TimeoutError:
         seen = f"; page errors: {' | '.join(errors[:3])}" if errors else ""
-        raise ValueError(
-            f"the viewer page did not draw: waited {FRAME_TIMEOUT_S:g} s for {what}{seen}"
-        ) from None
+        raise ValueError(f"the viewer page did not draw: waited {FRAME_TIMEOUT_S:g} s for {what}{seen}") from None

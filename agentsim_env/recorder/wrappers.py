@@ -147,7 +147,8 @@ def record(
 
     Args:
         target: An ``AgentSimParallelEnv`` or a wrapper of one (returns a recording ParallelEnv), a
-            ``BatchedEnv`` or a wrapper of one (returns a recording batched env) or a ``World`` (returns the ``Recorder``; its hook records every step of
+            ``BatchedEnv`` or a wrapper of one (returns a recording batched env) or a ``World`` (returns the
+            ``Recorder``; its hook records every step of
             every world as episode 0 onwards, ``recorder.reset(worlds)`` marks new episodes).
         path: The store file (created with its tables when missing; its folder must exist).
         commit_every: Steps per transaction (1: every step is durable once ``step`` returns).
@@ -172,7 +173,8 @@ def record(
         return rec
     rec.finish("incomplete")
     raise TypeError(
-        f"record() takes an AgentSimParallelEnv, a BatchedEnv (or a wrapper of either) or a World, got {type(target).__name__}"
+        "record() takes an AgentSimParallelEnv, a BatchedEnv (or a wrapper of either) or a World, got "
+        f"{type(target).__name__}"
     )
 
 

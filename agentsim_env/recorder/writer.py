@@ -51,9 +51,7 @@ def _insert(con: sqlite3.Connection, head: str, ncols: int, rows: Iterable[tuple
     _insert_flat(con, head, ncols, list(chain.from_iterable(rows)))
 
 
-def _insert_flat(
-    con: sqlite3.Connection, head: str, ncols: int, flat: list[Any], const: Sequence[Any] = ()
-) -> None:
+def _insert_flat(con: sqlite3.Connection, head: str, ncols: int, flat: list[Any], const: Sequence[Any] = ()) -> None:
     """Insert the rows of ``flat`` (row after row, ``ncols`` values each) with multi-row ``INSERT``s, in order.
 
     One statement per up to ``_CHUNK_ROWS`` rows costs about 2/3 of ``executemany`` (one statement run per row)
@@ -231,9 +229,7 @@ class Recorder:
 
     def _con(self) -> sqlite3.Connection:
         if self.con is None:
-            raise StoreError(
-                f"{self.path}: the recorder is closed" + (f" ({self.error})" if self.error else "")
-            )
+            raise StoreError(f"{self.path}: the recorder is closed" + (f" ({self.error})" if self.error else ""))
         return self.con
 
     def _detach(self) -> None:
@@ -288,10 +284,7 @@ class Recorder:
             con = self._con()
             con.executemany(
                 "INSERT INTO episodes VALUES (?, ?, ?, ?, 0)",
-                [
-                    (self.run, int(w), int(self._episode[w]), None if s is None else str(s))
-                    for w, s in zip(ws, seeds)
-                ],
+                [(self.run, int(w), int(self._episode[w]), None if s is None else str(s)) for w, s in zip(ws, seeds)],
             )
             slots = (ws[:, None] * self._n + np.arange(self._n)).ravel()
             self._write_states(con, slots, np.zeros(slots.size, dtype=np.int64), None)
@@ -382,19 +375,13 @@ class Recorder:
             a[:, 12] = ~term & (step >= self._max_steps) if self._max_steps is not None else 0.0
             for j, key in enumerate(keys):
                 a[:, 13 + j] = np.asarray(sc.info[key])[slots] if key in sc.info else np.nan
-        cols = (
-            "run, episode, step, world, agent, x, y, z, vx, vy, vz, heading, online, grp, reward, terminated"
-        )
+        cols = "run, episode, step, world, agent, x, y, z, vx, vy, vz, heading, online, grp, reward, terminated"
         head = f"INSERT INTO steps ({cols}, truncated{''.join(', info_' + k for k in keys)}) "
         ep = self._episode[w]
         if world.n_worlds == 1:  # one world: run, episode, step and world are the same in every row
-            _insert_flat(
-                con, head, 13 + len(keys), a.ravel().tolist(), (self.run, int(ep[0]), int(step[0]), 0)
-            )
+            _insert_flat(con, head, 13 + len(keys), a.ravel().tolist(), (self.run, int(ep[0]), int(step[0]), 0))
         else:
-            lead = np.column_stack(
-                [np.full(slots.size, self.run if self.run is not None else 0), ep, step, w]
-            )
+            lead = np.column_stack([np.full(slots.size, self.run if self.run is not None else 0), ep, step, w])
             _insert_flat(con, head, 17 + len(keys), np.hstack([lead, a]).ravel().tolist())
 
     def _where(self, slot: np.ndarray) -> tuple[list[int], list[int]]:

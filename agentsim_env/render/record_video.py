@@ -80,14 +80,10 @@ class RecordVideo(ParallelEnvWrapper):
         try:
             folder.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
-            raise ValueError(
-                f"video_folder {str(folder)!r} cannot be created: {exc.strerror or exc}"
-            ) from None
+            raise ValueError(f"video_folder {str(folder)!r} cannot be created: {exc.strerror or exc}") from None
         super().__init__(env)
         self.video_folder = folder
-        self.episode_trigger = (
-            episode_trigger if episode_trigger is not None else (lambda k: k % every_n == 0)
-        )
+        self.episode_trigger = episode_trigger if episode_trigger is not None else (lambda k: k % every_n == 0)
         self.name_prefix = name_prefix
         self.fps = float(fps)
         self.fmt = fmt
@@ -136,9 +132,7 @@ class RecordVideo(ParallelEnvWrapper):
         assert self._writer is not None
         frame = self.env.render()
         if frame is None:
-            raise ValueError(
-                "RecordVideo: env.render() returned None; build the env with render_mode='rgb_array'"
-            )
+            raise ValueError("RecordVideo: env.render() returned None; build the env with render_mode='rgb_array'")
         self._writer.append(frame)
 
     def _finish(self) -> None:

@@ -25,9 +25,7 @@ _SHADOW = np.array([175, 175, 175], dtype=np.uint8)
 _CROSS = np.array([40, 40, 40], dtype=np.uint8)
 
 
-def _mask(
-    img: np.ndarray, cx: float, cy: float, r: float
-) -> tuple[tuple[slice, slice], np.ndarray, np.ndarray]:
+def _mask(img: np.ndarray, cx: float, cy: float, r: float) -> tuple[tuple[slice, slice], np.ndarray, np.ndarray]:
     """The window around ``(cx, cy)`` of reach ``r`` and its pixel-centre offsets ``(dx, dy)`` from it."""
     h, w, _ = img.shape
     x0, x1 = max(int(cx - r), 0), min(int(cx + r) + 1, w)
@@ -46,9 +44,7 @@ def _disc(img: np.ndarray, cx: float, cy: float, r: float, color: np.ndarray) ->
 _CHUNK = 8192  # discs stamped per numpy pass (bounds the index arrays to a few tens of MB)
 
 
-def _stamp(
-    img: np.ndarray, cx: np.ndarray, cy: np.ndarray, r: float, colors: np.ndarray, cross: bool = False
-) -> None:
+def _stamp(img: np.ndarray, cx: np.ndarray, cy: np.ndarray, r: float, colors: np.ndarray, cross: bool = False) -> None:
     """Discs of radius ``r`` pixels (or their diagonals, ``cross``) at ``(cx, cy)``, ``colors`` ``(k, 3)``.
 
     Every disc is stamped from one pixel mask (its centre snapped to the pixel it falls in), all of them in a few
@@ -136,9 +132,7 @@ def render_topdown(world: World, w: int = 0, markers: Markers | None = None, siz
     off = ~np.asarray(st.online[slots], dtype=bool)
     on = ~off
     _stamp_sized(img, cx[off], cy[off], r[off] * 0.8, faded[off])
-    _stamp_sized(
-        img, cx[off], cy[off], r[off] * 0.8, np.broadcast_to(_CROSS, (int(off.sum()), 3)), cross=True
-    )
+    _stamp_sized(img, cx[off], cy[off], r[off] * 0.8, np.broadcast_to(_CROSS, (int(off.sum()), 3)), cross=True)
     a = np.clip((st.pos[slots, 2] - zmin) / max(zmax - zmin, 1e-9), 0.0, 1.0)
     shadow = on & (a * r >= 1.0)
     _stamp_sized(

@@ -228,28 +228,16 @@ def plot_trajectories(traj: Trajectories, path: str | os.PathLike[str], title: s
         m = len(mxy)
         keep = np.unique(np.linspace(0, m - 1, min(m, MAX_PATHS)).astype(np.int64))
         crowd_m = min(1.0, 200.0 / keep.size)
-        floor = (
-            0.006 * max(w, h) * max(crowd_m**0.5, 0.2)
-        )  # a goal of a metre still shows on a map of kilometres
-        discs = [
-            Circle((float(mxy[i, 0]), float(mxy[i, 1])), max(float(rad[i]), floor)) for i in keep.tolist()
-        ]
+        floor = 0.006 * max(w, h) * max(crowd_m**0.5, 0.2)  # a goal of a metre still shows on a map of kilometres
+        discs = [Circle((float(mxy[i, 0]), float(mxy[i, 1])), max(float(rad[i]), floor)) for i in keep.tolist()]
         ax.add_collection(
-            PatchCollection(
-                discs, facecolors=np.asarray(rgb, dtype=float)[keep] / 255.0, edgecolors="none", alpha=0.6
-            )
+            PatchCollection(discs, facecolors=np.asarray(rgb, dtype=float)[keep] / 255.0, edgecolors="none", alpha=0.6)
         )
-        label = "scenario markers (goals, zones, sensors)" + (
-            f", {keep.size:,} of {m:,}" if keep.size < m else ""
-        )
-        handles.append(
-            Patch(facecolor=tuple(np.asarray(rgb[0], dtype=float) / 255.0), alpha=0.6, label=label)
-        )
+        label = "scenario markers (goals, zones, sensors)" + (f", {keep.size:,} of {m:,}" if keep.size < m else "")
+        handles.append(Patch(facecolor=tuple(np.asarray(rgb[0], dtype=float) / 255.0), alpha=0.6, label=label))
     counts = dict.fromkeys(OUTCOMES, 0)
     n = len(traj.outcome)
-    shown = (
-        np.unique(np.linspace(0, n - 1, min(n, MAX_PATHS)).astype(np.int64)) if n else np.zeros(0, np.int64)
-    )
+    shown = np.unique(np.linspace(0, n - 1, min(n, MAX_PATHS)).astype(np.int64)) if n else np.zeros(0, np.int64)
     outcome = np.asarray(traj.outcome, dtype=object)
     for name, k in zip(*np.unique(outcome, return_counts=True)):
         counts[str(name)] = int(k)
@@ -259,9 +247,7 @@ def plot_trajectories(traj: Trajectories, path: str | os.PathLike[str], title: s
     if shown.size:
         paths = [traj.xy[: traj.last[i] + 1, i] for i in shown.tolist()]
         ax.add_collection(
-            LineCollection(
-                paths, colors=colours[shown], linewidths=max(0.4, 1.4 * crowd**0.5), alpha=0.9, zorder=3
-            )
+            LineCollection(paths, colors=colours[shown], linewidths=max(0.4, 1.4 * crowd**0.5), alpha=0.9, zorder=3)
         )
         first = np.array([p[0] for p in paths])
         ax.scatter(
@@ -339,9 +325,7 @@ def plot_trajectories(traj: Trajectories, path: str | os.PathLike[str], title: s
                 )
             )
     if shown.size < n:
-        handles.append(
-            Patch(facecolor="none", edgecolor="none", label=f"paths of {shown.size:,} of {n:,} agents")
-        )
+        handles.append(Patch(facecolor="none", edgecolor="none", label=f"paths of {shown.size:,} of {n:,} agents"))
     pad = 0.03 * max(w, h)
     ax.set_xlim(xmin - pad, xmax + pad)
     ax.set_ylim(ymin - pad, ymax + pad)

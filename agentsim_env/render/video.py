@@ -90,9 +90,7 @@ def _as_rgb(frame: Any) -> np.ndarray:
     """``frame`` as a contiguous ``(H, W, 3)`` uint8 array (checked)."""
     a = np.asarray(frame)
     if a.ndim != 3 or a.shape[2] not in (3, 4) or a.dtype != np.uint8:
-        raise ValueError(
-            f"a video frame must be an (H, W, 3) uint8 array, got shape {a.shape} dtype {a.dtype}"
-        )
+        raise ValueError(f"a video frame must be an (H, W, 3) uint8 array, got shape {a.shape} dtype {a.dtype}")
     return np.ascontiguousarray(a[..., :3])
 
 
@@ -133,9 +131,7 @@ class VideoWriter:
         if self._shape is None:
             self._shape = a.shape
         elif a.shape != self._shape:
-            raise ValueError(
-                f"every video frame must have the first one's shape {self._shape}, got {a.shape}"
-            )
+            raise ValueError(f"every video frame must have the first one's shape {self._shape}, got {a.shape}")
         if self.fmt == "gif":
             self._gif.append(self._palette(a))
         else:
@@ -160,9 +156,7 @@ class VideoWriter:
             return a
         from PIL import Image
 
-        return Image.fromarray(a).quantize(
-            colors=256, method=Image.Quantize.MEDIANCUT, dither=Image.Dither.NONE
-        )
+        return Image.fromarray(a).quantize(colors=256, method=Image.Quantize.MEDIANCUT, dither=Image.Dither.NONE)
 
     def close(self) -> Path | None:
         """Finish the file; returns its path (None when no frame was given)."""

@@ -107,9 +107,7 @@ class Window:
             self._clock = pg.time.Clock()
         # read the events (not just pump them): the close button only arrives as an event
         for event in pg.event.get():
-            if event.type in (pg.QUIT, pg.WINDOWCLOSE) or (
-                event.type == pg.KEYDOWN and event.key == pg.K_ESCAPE
-            ):
+            if event.type in (pg.QUIT, pg.WINDOWCLOSE) or (event.type == pg.KEYDOWN and event.key == pg.K_ESCAPE):
                 self.close()
                 raise WindowClosed(f"the {self.title!r} window was closed")
         surf = pg.surfarray.make_surface(np.ascontiguousarray(frame.swapaxes(0, 1)))

@@ -166,7 +166,8 @@ class Scenario(ABC, Generic[ConfigT]):
 
         A process holding part of a world's slots (a shard) computes these over its own slots; adding them up
         over every part (:func:`combine_partials`) gives the totals :meth:`score` takes. Each value is an integer
-        array (``task_big``, the values past the fixed point's range, is float64) indexed ``group * B + world`` (``rewards.group_keys``), of shape ``(B * n_groups,)`` unless a slot
+        array (``task_big``, the values past the fixed point's range, is float64) indexed ``group * B + world``
+        (``rewards.group_keys``), of shape ``(B * n_groups,)`` unless a slot
         of the part has a higher group id (then longer; the combine zero-pads), so the totals do not depend on
         how the slots were split. Default: ``{}`` (no group terms).
 
@@ -313,8 +314,7 @@ class Scenario(ABC, Generic[ConfigT]):
                 declared = _declared_part(world, k)
                 if declared is not None and declared.shape != shape:
                     raise ValueError(
-                        f"{self.name}: observation part {k!r} has shape {shape}, its sensor declares "
-                        f"{declared.shape}"
+                        f"{self.name}: observation part {k!r} has shape {shape}, its sensor declares {declared.shape}"
                     )
                 lo, hi = self._bounds(world, k)
                 parts[k] = Part(shape, lo, hi)
@@ -363,9 +363,7 @@ class Scenario(ABC, Generic[ConfigT]):
             if s.obs_part is not None:
                 out[s.name] = s.observe(world.readings[s.name])
         if world.comms is not None:
-            out["inbox"], out["comms"] = world.comms.observe(
-                world.state.pos, max(world.tick - 1, 0), INBOX_CLIP
-            )
+            out["inbox"], out["comms"] = world.comms.observe(world.state.pos, max(world.tick - 1, 0), INBOX_CLIP)
         return out
 
     def observe_rows(self, world: World, slots: np.ndarray) -> dict[str, np.ndarray]:

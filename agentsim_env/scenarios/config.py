@@ -87,9 +87,7 @@ class SensingConfig:
 
     def __post_init__(self) -> None:
         if not 1 <= len(self.elevations_deg) <= MAX_RINGS:
-            raise FieldError(
-                "elevations_deg", f"must hold 1..{MAX_RINGS} elevations, got {self.elevations_deg!r}"
-            )
+            raise FieldError("elevations_deg", f"must hold 1..{MAX_RINGS} elevations, got {self.elevations_deg!r}")
 
 
 @config()

@@ -221,9 +221,7 @@ class NavigationConfig(ScenarioConfig):
                 f"obstacle_density x map side^2 gives {n_obs:,.0f} obstacles per world, over the "
                 f"limit of {MAX_OBSTACLES:,}; lower obstacle_density or map_size"
             )
-        problem = placement_problem(
-            self.n_agents, (2.0, side - 2.0, 2.0, side - 2.0), 4.0 * self.body.radius + 2.0
-        )
+        problem = placement_problem(self.n_agents, (2.0, side - 2.0, 2.0, side - 2.0), 4.0 * self.body.radius + 2.0)
         if problem:
             raise ValueError(
                 f"n_agents: {problem} (4 x body.radius + 2 apart, on a map of side {side:g} m); "
@@ -485,10 +483,7 @@ class NavigationScenario(Scenario[NavigationConfig]):
     def flat_observation(self, world: World, out: np.ndarray | None = None) -> np.ndarray:
         """The flat layout written straight into ``out`` or a fresh array: the three parts by the observation
         kernel, then the inbox and counters (with comms), when no sensor adds a part."""
-        if (
-            any(s.obs_part is not None for s in world.sensors)
-            or type(self).observation is not Scenario.observation
-        ):
+        if any(s.obs_part is not None for s in world.sensors) or type(self).observation is not Scenario.observation:
             return super().flat_observation(world, out)
         lead = self._obs.shape[1]
         if out is None:

@@ -14,9 +14,7 @@ def _cells(n: int, w: float, h: float, min_sep: float) -> tuple[float, int, int]
     """Cell side and counts of the jittered grid for ``n`` points in a ``w x h`` area (deterministic)."""
     if w <= 0 or h <= 0:
         return max(min_sep, 1.0), 0, 0
-    cell = max(
-        float(np.sqrt(w * h / (1.3 * max(n, 1)))), min_sep
-    )  # ~30 % spare cells: the choice stays random
+    cell = max(float(np.sqrt(w * h / (1.3 * max(n, 1)))), min_sep)  # ~30 % spare cells: the choice stays random
     nx, ny = int(w // cell), int(h // cell)
     while nx * ny < 1.3 * n and cell * 0.95 >= min_sep:  # integer rounding lost cells: shrink them
         cell *= 0.95
@@ -34,9 +32,7 @@ def placement_problem(n: int, bounds: tuple[float, float, float, float], min_sep
     _, nx, ny = _cells(n, w, h, min_sep)
     if nx * ny >= n:
         return ""
-    return (
-        f"cannot place {n} points at least {min_sep:g} m apart in a {max(w, 0):.0f} x {max(h, 0):.0f} m area"
-    )
+    return f"cannot place {n} points at least {min_sep:g} m apart in a {max(w, 0):.0f} x {max(h, 0):.0f} m area"
 
 
 def jittered_points(

@@ -136,9 +136,7 @@ class RelayScenario(Scenario[RelayConfig]):
         st.heading[sl] = rng.uniform(-np.pi, np.pi, n)
         st.online[sl] = True
         st.energy[sl] = 0.0
-        scout_slot = np.arange(g_n) + g_n * rng.integers(
-            0, int(c.group_size or 1), g_n
-        )  # slot i is in group i % G
+        scout_slot = np.arange(g_n) + g_n * rng.integers(0, int(c.group_size or 1), g_n)  # slot i is in group i % G
         ang = rng.uniform(-np.pi, np.pi, g_n)
         r = rng.uniform(c.target_offset[0], c.target_offset[1], g_n)
         tgt = st.pos[sl][scout_slot, :2] + r[:, None] * np.column_stack([np.cos(ang), np.sin(ang)])
@@ -188,9 +186,7 @@ class RelayScenario(Scenario[RelayConfig]):
         out = {"pending": np.bincount(self._key(world)[pending], minlength=size).astype(np.int64)}
         if c.reward.group_share:
             out.update(
-                task_partials(
-                    task, st.group, st.world_id, acting & mine, c.n_groups, world.n_worlds, world.threads
-                )
+                task_partials(task, st.group, st.world_id, acting & mine, c.n_groups, world.n_worlds, world.threads)
             )
         return out
 
@@ -279,9 +275,7 @@ class RelayScenario(Scenario[RelayConfig]):
         """Targets as discs, one colour per group."""
         sl = slice(w * self.n_agents, (w + 1) * self.n_agents)
         g = np.arange(self.n_groups)
-        rgb = np.column_stack([40 + 70 * (g % 3), 170 - 50 * (g % 2), 60 + 60 * ((g + 1) % 3)]).astype(
-            np.uint8
-        )
+        rgb = np.column_stack([40 + 70 * (g % 3), 170 - 50 * (g % 2), 60 + 60 * ((g + 1) % 3)]).astype(np.uint8)
         return (
             world.task.target[sl][: self.n_groups].copy(),
             rgb,

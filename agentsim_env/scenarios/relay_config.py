@@ -87,9 +87,7 @@ class RelayConfig(ScenarioConfig):
         else:
             in_range("n_agents", self.n_agents, 2 * self.n_groups, 256 * self.n_groups)
             if self.n_agents % self.n_groups:
-                raise ValueError(
-                    f"n_agents ({self.n_agents}) must be a multiple of n_groups ({self.n_groups})"
-                )
+                raise ValueError(f"n_agents ({self.n_agents}) must be a multiple of n_groups ({self.n_groups})")
             size = self.n_agents // self.n_groups
             if self.group_size is not None and self.group_size != size:
                 raise ValueError(
@@ -98,9 +96,7 @@ class RelayConfig(ScenarioConfig):
                 )
             object.__setattr__(self, "group_size", size)
         if self.comms is None:
-            raise FieldError(
-                "comms", "must be a CommsConfig or a dict of its fields (relay needs comms), got None"
-            )
+            raise FieldError("comms", "must be a CommsConfig or a dict of its fields (relay needs comms), got None")
         in_range("corridor_width", self.corridor_width, 2.0 * self.lateral_spread + 4.0)
         in_range("gap[0]", self.gap[0], 2.0 * self.body.radius + 0.5)  # neighbours start clear of each other
         limit = 2e4 if self.physics == "pymunk" else 1e5

@@ -224,9 +224,7 @@ def group_means(totals: dict[str, np.ndarray]) -> np.ndarray:
 
     A group with a NaN member, or with both infinities, has mean NaN; one with one kind of infinity has it.
     """
-    total = (
-        totals["task_hi"].astype(np.float64) + totals["task_lo"].astype(np.float64) * 2.0**-FIXED_POINT_BITS
-    )
+    total = totals["task_hi"].astype(np.float64) + totals["task_lo"].astype(np.float64) * 2.0**-FIXED_POINT_BITS
     if "task_big" in totals:
         total = total + totals["task_big"]
     mean = total / np.maximum(totals["task_count"], 1).astype(np.float64)
@@ -237,9 +235,7 @@ def group_means(totals: dict[str, np.ndarray]) -> np.ndarray:
     return mean
 
 
-def group_mean(
-    values: np.ndarray, group: np.ndarray, world: np.ndarray, mask: np.ndarray, n_groups: int
-) -> np.ndarray:
+def group_mean(values: np.ndarray, group: np.ndarray, world: np.ndarray, mask: np.ndarray, n_groups: int) -> np.ndarray:
     """Mean of ``values`` over the masked members of each (world, group), broadcast back to every slot.
 
     Slots with group -1 (no group) get their own value. The sums are the fixed-point ones of
@@ -357,7 +353,5 @@ def compose_rewards(
         use,
     )
     out = np.empty(task.shape[0])
-    (threads or _ONE_THREAD).run(
-        lambda lo, hi, _: _compose_kernel(lo, hi, *args, out), task.shape[0], light_min_rows()
-    )
+    (threads or _ONE_THREAD).run(lambda lo, hi, _: _compose_kernel(lo, hi, *args, out), task.shape[0], light_min_rows())
     return out

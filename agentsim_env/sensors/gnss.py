@@ -101,9 +101,7 @@ class GnssSensor:
         worlds = np.arange(len(self._keys)) if ctx.fresh is None else np.asarray(ctx.fresh, dtype=np.int64)
         missing = worlds[~self._keyed[worlds]]
         if missing.size:
-            raise ValueError(
-                f"gnss: world {int(missing[0])} has no noise key yet: reset it (reset_world) first"
-            )
+            raise ValueError(f"gnss: world {int(missing[0])} has no noise key yet: reset it (reset_world) first")
         rows = (worlds[:, None] * n + np.arange(n)).ravel()
         live = rows[st.online[rows]]
         w_of, agent = np.divmod(live, n)

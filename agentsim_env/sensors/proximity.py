@@ -65,9 +65,7 @@ class ProximityConfig:
     """
 
     n_azimuth: Annotated[Int, Field(ge=1, le=4096)] = 32
-    elevations_deg: Annotated[tuple[Annotated[Real, Field(ge=-90.0, le=90.0)], ...], Field(min_length=1)] = (
-        0.0,
-    )
+    elevations_deg: Annotated[tuple[Annotated[Real, Field(ge=-90.0, le=90.0)], ...], Field(min_length=1)] = (0.0,)
     detect_agents: Flag = True
     detect_objects: Flag = True
     detect_ground: Flag = True
@@ -510,9 +508,7 @@ class ProximitySensor:
         threads = self.threads
         parts = 1 if threads.num_threads == 1 else len(threads.ranges(s))
         if len(self._stamps) < parts or self._stamps[0].shape[0] < kind.shape[0]:
-            self._stamps = [
-                np.empty(kind.shape[0], dtype=np.int64) for _ in range(max(parts, len(self._stamps)))
-            ]
+            self._stamps = [np.empty(kind.shape[0], dtype=np.int64) for _ in range(max(parts, len(self._stamps)))]
         agent_args = _grid_args(agent_grid if use_agents else None, lo, hi, "agent_grid")
         if use_objects:
             lo, hi = olo, ohi

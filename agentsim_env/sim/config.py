@@ -53,6 +53,4 @@ class WorldConfig:
         # pymunk steps every world in one space, world w shifted by w * 1e5 m along x, and the world calls its
         # step without per-step input checks: keep the map well inside the +-5e4 m each world may use
         if self.physics == "pymunk" and max(abs(self.bounds[0]), abs(self.bounds[1])) >= 2.5e4:
-            raise FieldError(
-                "bounds", f"x must lie within +-25000 m with physics='pymunk', got {self.bounds}"
-            )
+            raise FieldError("bounds", f"x must lie within +-25000 m with physics='pymunk', got {self.bounds}")

@@ -102,9 +102,7 @@ def _walk(path: str, obj: Any, n_slots: int, depth: int, seen: set[int], out: di
         return  # a root is walked whatever its module (a scenario's SlotState may live outside the package)
     skip = _per_world_fields(obj)
     for name, value in _attributes(obj):
-        if name not in skip and (
-            isinstance(value, np.ndarray) or type(value).__module__.startswith("agentsim_env.")
-        ):
+        if name not in skip and (isinstance(value, np.ndarray) or type(value).__module__.startswith("agentsim_env.")):
             _walk(f"{path}.{name}", value, n_slots, depth + 1, seen, out)
 
 

@@ -207,9 +207,7 @@ class World:
         if sc.n_objects == 0:
             return None
         if self._object_grid is None or self._object_grid_version != sc.version:
-            self._object_grid = build_object_grid(
-                self.object_grid_spec, sc.centre, sc.footprint_radius(), sc.world
-            )
+            self._object_grid = build_object_grid(self.object_grid_spec, sc.centre, sc.footprint_radius(), sc.world)
             self._object_grid_version = sc.version
         return self._object_grid
 
@@ -323,9 +321,7 @@ class World:
             self.regrid(ctx)
         comm_events = self.run_comms(ctx)  # 7
         readings = self.run_sensors(ctx)  # 8
-        return self.end_step(
-            StepEvents(events, went, timed_out, comm_events, group_events, landed, readings), hooks
-        )
+        return self.end_step(StepEvents(events, went, timed_out, comm_events, group_events, landed, readings), hooks)
 
     def run_motion(self, ctx: StepContext) -> tuple[CollisionEvents | None, PayloadEvents | None]:
         """Stages 2-4: motion, physics (its contacts are returned), the map clip, payloads (their landings)."""

@@ -170,9 +170,7 @@ class ClaimMap:
     def __init__(self, tracker: DeploymentTracker, n_worlds: int) -> None:
         self.tracker = tracker
         self.claimed = np.zeros((n_worlds, tracker.phi.size), dtype=bool)
-        self.predicted: dict[
-            int, tuple[int, float]
-        ] = {}  # payload id -> (world, predicted gain), while it falls
+        self.predicted: dict[int, tuple[int, float]] = {}  # payload id -> (world, predicted gain), while it falls
         pts = tracker.grid.points
         # largest gain a single sensor can have: a whole disc at the most important place
         sums = [
@@ -190,11 +188,7 @@ class ClaimMap:
         """``(row, lattice index)`` pairs within ``r_s`` of each point."""
         hits = self.tracker.grid.tree.query_ball_point(xy, self.tracker.r_s)
         sizes = np.fromiter((len(h) for h in hits), dtype=np.int64, count=len(hits))
-        idx = (
-            np.concatenate([np.asarray(h, dtype=np.int64) for h in hits])
-            if sizes.sum()
-            else np.zeros(0, np.int64)
-        )
+        idx = np.concatenate([np.asarray(h, dtype=np.int64) for h in hits]) if sizes.sum() else np.zeros(0, np.int64)
         return np.repeat(np.arange(len(hits)), sizes), idx
 
     def gain(self, world: np.ndarray, xy: np.ndarray) -> np.ndarray:

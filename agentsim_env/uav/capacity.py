@@ -70,10 +70,7 @@ def capacity_text(cap: dict[str, Any], fleet: str = "fleet") -> str:
         fleet: How the fleet is named at the start of the line.
     """
     n, p = cap["n_uavs"], cap["payload"]
-    head = (
-        f"{fleet}: {n} UAV{'' if n == 1 else 's'} x {p} sensors = {cap['capacity']}; "
-        f"the zones need {cap['needed']}"
-    )
+    head = f"{fleet}: {n} UAV{'' if n == 1 else 's'} x {p} sensors = {cap['capacity']}; the zones need {cap['needed']}"
     if cap["carried"]:
         return f"{head}: carried ({cap['spare']} spare)"
     fixes = [
@@ -82,6 +79,4 @@ def capacity_text(cap: dict[str, Any], fleet: str = "fleet") -> str:
         if cap[k + "_needed"] <= top
     ]
     advice = f" ({' or '.join(fixes)})" if fixes else ""
-    return (
-        f"{head}: cannot carry {-cap['spare']} of them; raise n_uavs or payload{advice}, or lower n_sensors"
-    )
+    return f"{head}: cannot carry {-cap['spare']} of them; raise n_uavs or payload{advice}, or lower n_sensors"

@@ -44,9 +44,7 @@ def _fill_evaluate(p: argparse.ArgumentParser) -> None:
     """The epilog listing the release strategies (filled when help is shown: it imports the registry)."""
     from agentsim_env.uav.evaluation.runner import TELEPORT, available_strategies
 
-    listed = textwrap.fill(
-        ", ".join(available_strategies()), 100, initial_indent="  ", subsequent_indent="  "
-    )
+    listed = textwrap.fill(", ".join(available_strategies()), 100, initial_indent="  ", subsequent_indent="  ")
     p.epilog = (
         f"release strategies (--strategies):\n{listed}\n  (the {TELEPORT} reference, placed without flying, is "
         f"always added;\n  the flown {TELEPORT} strategy is labelled {TELEPORT}_flown)\n\n" + (p.epilog or "")
@@ -264,9 +262,7 @@ def add_commands(sub: Any, set_help: str) -> None:
         metavar="SEED",
         help="a count N >= 1 (seeds 0..N-1) or a list: 0,4,9 or 0 4 9 (one seed: 7,)",
     )
-    e.add_argument(
-        "--set", nargs="*", metavar="KEY=VALUE", help="uav_release " + set_help + "; for every run"
-    )
+    e.add_argument("--set", nargs="*", metavar="KEY=VALUE", help="uav_release " + set_help + "; for every run")
     e.add_argument("--out", default="outputs/evaluation", help="output folder")
     e.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     e.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -288,9 +284,7 @@ def add_commands(sub: Any, set_help: str) -> None:
     )
     zsub = z.add_subparsers(dest="zones_command", required=True, metavar="ACTION")
     d = zsub.add_parser("design", help="the hot-zone designer page (saves only to FILE)")
-    d.add_argument(
-        "file", nargs="?", default=None, metavar="FILE", help="zone file to edit (created on Save)"
-    )
+    d.add_argument("file", nargs="?", default=None, metavar="FILE", help="zone file to edit (created on Save)")
     network_options(d)
     d.set_defaults(func=cmd_zones_design)
     c = zsub.add_parser("check", help="validate a zone file, list its zones and check the fleet carries them")

@@ -25,8 +25,7 @@ from agentsim_env.uav.wsn.evaluate import WsnConfig
 from agentsim_env.uav.zones import ZoneSet, load_zones, validate_against_payload, zones_from_dict
 
 ZONES_ACCEPTED = (
-    "a zones JSON path (str or Path), a dict in the zones format (docs/zones.md), a ZoneSet, "
-    "'tiny', 'default' or None"
+    "a zones JSON path (str or Path), a dict in the zones format (docs/zones.md), a ZoneSet, 'tiny', 'default' or None"
 )
 """What the ``zones`` field accepts (named in its errors)."""
 
@@ -48,7 +47,8 @@ class UavReleaseConfig(ScenarioConfig):
     Autopilot mode (``autopilot=True``, see ``uav_autopilot`` and the scenario docstring): the scenario flies a
     sweep at ``autopilot_speed`` m/s (0.5..``body.max_speed``) and ``autopilot_altitude`` m (inside
     ``body.altitude``) over lanes ``autopilot_lane`` m apart (1..1e4); ``release_cost`` (0..100, in units of the mean
-    weighted coverage per required sensor, ``1 / zones.n_sensors``) is the shaping baseline of a release. These fields do nothing when ``autopilot`` is off.
+    weighted coverage per required sensor, ``1 / zones.n_sensors``) is the shaping baseline of a release. These fields
+    do nothing when ``autopilot`` is off.
     """
 
     nested: ClassVar[dict[str, type]] = {
@@ -59,9 +59,7 @@ class UavReleaseConfig(ScenarioConfig):
     }
     aliases: ClassVar[dict[str, str]] = {"n_uavs": "n_agents"}
 
-    zones: Any = (
-        None  # a zones JSON path, a dict in that format, a ZoneSet, "tiny", or None / "default" (shipped)
-    )
+    zones: Any = None  # a zones JSON path, a dict in that format, a ZoneSet, "tiny", or None / "default" (shipped)
     n_agents: Annotated[Int, Field(ge=1, le=1024)] = 4
     payload: Annotated[Int, Field(ge=1, le=100_000)] = 40
     # the physical fields' ranges: outside them the physics and rewards overflow
@@ -82,9 +80,7 @@ class UavReleaseConfig(ScenarioConfig):
     wind: WindConfig = field(default_factory=lambda: WindConfig(mean_speed=2.0))
     scatter: ScatterConfig = field(default_factory=lambda: ScatterConfig(1.0, 0.05, 0.5))
     wsn: WsnConfig = field(default_factory=WsnConfig)
-    reward: RewardConfig = field(
-        default_factory=lambda: RewardConfig(collision_penalty=20.0, message_cost=0.001)
-    )
+    reward: RewardConfig = field(default_factory=lambda: RewardConfig(collision_penalty=20.0, message_cost=0.001))
     comms: CommsConfig | None = field(
         default_factory=lambda: CommsConfig(payload_dim=6, inbox_size=8, overlay_range=150.0)
     )
@@ -114,9 +110,7 @@ class UavReleaseConfig(ScenarioConfig):
         zs = self.zone_set()
         object.__setattr__(self, "zones", zs)
         if self.physics == "pymunk" and max(zs.map_size) > 2e4:
-            raise ValueError(
-                f"zones: map_size {list(zs.map_size)} is over 20000 m, the limit with physics='pymunk'"
-            )
+            raise ValueError(f"zones: map_size {list(zs.map_size)} is over 20000 m, the limit with physics='pymunk'")
         validate_against_payload(zs, self.n_agents, self.payload)
 
     @property

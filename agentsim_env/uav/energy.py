@@ -208,9 +208,7 @@ def power(
     return out
 
 
-def energy_step(
-    vel: ArrayLike, mass: ArrayLike, dt: float, params: RotorParams = DEFAULT_ROTOR
-) -> NDArray[np.float64]:
+def energy_step(vel: ArrayLike, mass: ArrayLike, dt: float, params: RotorParams = DEFAULT_ROTOR) -> NDArray[np.float64]:
     """Energy spent by each UAV over one step of constant velocity (J).
 
     The horizontal speed ``hypot(vx, vy)`` sets the forward-flight power and ``vz`` the climb term.

@@ -1,9 +1,11 @@
 """uav_release: UAVs release wireless sensors over circular hot zones, denser toward each zone's centre.
 
-K = ``n_agents`` UAVs (``uav_0`` ...; ``n_uavs`` is an alias key) take off from the base with ``payload`` sensors each and a battery (rotary-wing power
+K = ``n_agents`` UAVs (``uav_0`` ...; ``n_uavs`` is an alias key) take off from the base with ``payload`` sensors each
+and a battery (rotary-wing power
 model, the mass falling as sensors leave). A released sensor falls with quadratic drag and wind (log-law
 mean per episode plus gusts) and lands with scatter (GNSS, timing jitter, bounce). Zones come from a zone
-designer JSON file (``docs/zones.md``). The episode ends when the zones' sensors have all landed (or nothing is left on board
+designer JSON file (``docs/zones.md``). The episode ends when the zones' sensors have all landed (or nothing is left on
+board
 and nothing is falling, or at ``max_steps``);
 a collision or an empty battery ends a UAV.
 
@@ -20,7 +22,8 @@ Observation (Dict; flat Box = parts in this order):
 | autopilot | (4,)       | autopilot mode only: predicted coverage gain of releasing now x N / 4 (N = the zones' sensors), route progress, whether the predicted landing point is in a zone (1 / -1), payload left / payload - (1 - progress); all x 2 - 1 but the last, clipped to [-1, 1] |
 
 Action (Dict; flat Box = parts in this order), values in [-1, 1]:
-- ``motion``: (3,) velocity / max_speed (``action_mode="velocity"``) or (8,) primitive (``agentsim_env.motion.actions``).
+- ``motion``: (3,) velocity / max_speed (``action_mode="velocity"``) or (8,) primitive
+(``agentsim_env.motion.actions``).
 - ``release``: (3,) trigger (> 0 releases one sensor this step, from the UAV's position and velocity), and the
   intended landing point's offset from the UAV (dx, dy) x ``target_scale`` m (used for the miss distance and
   recorded as the sensor's target; the zone containing it is the sensor's zone).
@@ -143,14 +146,10 @@ class UavReleaseScenario(Scenario[UavReleaseConfig]):
             grid_cell=max(c.sensing.range / 2, 5.0),
         )
         payloads = PayloadStage(self.fall, c.scatter, c.wind, n_worlds)
-        world = World(
-            wc, n_worlds, c.n_agents, sensors=[ProximitySensor(self.lidar)], comms=c.comms, payloads=payloads
-        )
+        world = World(wc, n_worlds, c.n_agents, sensors=[ProximitySensor(self.lidar)], comms=c.comms, payloads=payloads)
         st = world.state
         # one group: the whole fleet
-        st.configure(
-            radius=b.radius, sensor_range=c.sensing.range, max_speed=b.max_speed, max_accel=b.max_accel
-        )
+        st.configure(radius=b.radius, sensor_range=c.sensing.range, max_speed=b.max_speed, max_accel=b.max_accel)
         world.task = UavSlots.allocate(st.n_slots, n_worlds)
         world.task.tracker = DeploymentTracker(self.zones, n_worlds, c.wsn.r_s)
         if self.pilot is not None:

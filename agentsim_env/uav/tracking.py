@@ -41,9 +41,7 @@ class DeploymentTracker:
             # read a quarter cell out, so phi stays finite
             r = np.maximum(np.linalg.norm(pts[inside] - centres[k], axis=1), 0.25 * resolution)
             d = z.weight * prof.density(r)
-            if (
-                inside.size and not d.sum() > 0
-            ):  # a profile narrower than the lattice: its mass on the nearest point
+            if inside.size and not d.sum() > 0:  # a profile narrower than the lattice: its mass on the nearest point
                 d[np.argmin(r)] = z.weight / (resolution * resolution)
             phi[inside] += d
         self.phi = phi / phi.sum()

@@ -33,7 +33,8 @@ name         string   null     label used in messages, logs and plots
 
 A file is a regular file (not a device or FIFO) of at most 16 MiB of UTF-8 JSON, with no key given twice in
 one object and at most ``MAX_JSON_DEPTH`` levels of nesting. Text (``name``, ``description``) must be printable:
-control characters, bidirectional overrides and unpaired surrogates are refused. Unknown fields, missing required fields, wrong types (a boolean is not a number; an integer is accepted for
+control characters, bidirectional overrides and unpaired surrogates are refused. Unknown fields, missing required
+fields, wrong types (a boolean is not a number; an integer is accepted for
 a number) and out-of-range values raise ``ValueError`` naming the zone (``zones[i]`` and its name) and the
 field.
 Overlapping zones are allowed (see ``overlaps``); the payload check is separate (``validate_against_payload``)
@@ -298,9 +299,7 @@ def _check_keys(label: str, d: dict[str, Any], allowed: tuple[str, ...], require
         if key not in allowed:
             close = difflib.get_close_matches(str(key), allowed, n=1)
             hint = f" (did you mean {close[0]!r}?)" if close else ""
-            raise ValueError(
-                f"{label}: unknown field {short_repr(key, 60)}{hint}; allowed fields: {list(allowed)}"
-            )
+            raise ValueError(f"{label}: unknown field {short_repr(key, 60)}{hint}; allowed fields: {list(allowed)}")
 
 
 def zones_from_dict(d: dict[str, Any]) -> ZoneSet:
@@ -320,8 +319,7 @@ def zones_from_dict(d: dict[str, Any]) -> ZoneSet:
         raise ValueError(f"the zone file must hold a JSON object, got {type(d).__name__}")
     if json_depth(d, MAX_JSON_DEPTH) > MAX_JSON_DEPTH:
         raise ValueError(
-            f"the zone file is nested more than {MAX_JSON_DEPTH} levels deep; at most "
-            f"{MAX_JSON_DEPTH} are allowed"
+            f"the zone file is nested more than {MAX_JSON_DEPTH} levels deep; at most {MAX_JSON_DEPTH} are allowed"
         )
     _check_keys("zone file", d, _TOP_FIELDS, ("map_size", "zones"))
     if "description" in d:  # not kept, but checked like every other text of the file

@@ -100,9 +100,7 @@ class ParallelEnvWrapper(ParallelEnv):
         return self.env.state()
 
     # ------------------------------------------------------------------ calls beside step
-    def send_message(
-        self, sender: str, payload: Any, *, to: str | None = None, group: int | None = None
-    ) -> bool:
+    def send_message(self, sender: str, payload: Any, *, to: str | None = None, group: int | None = None) -> bool:
         """Send a bus message from code, to one agent or a group (``AgentSimParallelEnv.send_message``)."""
         return bool(self.env.send_message(sender, payload, to=to, group=group))
 

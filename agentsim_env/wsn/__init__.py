@@ -10,8 +10,7 @@ import warnings
 from agentsim_env.uav.wsn import *  # noqa: F403
 
 warnings.warn(
-    "agentsim_env.wsn is deprecated: import agentsim_env.uav.wsn instead "
-    "(this path is removed in the next release)",
+    "agentsim_env.wsn is deprecated: import agentsim_env.uav.wsn instead (this path is removed in the next release)",
     DeprecationWarning,
     stacklevel=2,
 )

@@ -122,9 +122,7 @@ class B3Spiral(ReleaseStrategy):
     """B3: Archimedean spiral whose pitch equals the local spacing ``c / sqrt(rho)``, ``N`` releases."""
 
     name: ClassVar[str] = "B3_spiral"
-    description: ClassVar[str] = (
-        "Archimedean spiral with variable pitch Delta(r) = s(r) = c / sqrt(rho(r)), N releases"
-    )
+    description: ClassVar[str] = "Archimedean spiral with variable pitch Delta(r) = s(r) = c / sqrt(rho(r)), N releases"
     release_speed: ClassVar[float] = 5.0
 
     def pattern(self, ctx: PlanContext) -> Pattern:
@@ -146,9 +144,7 @@ class B4Boustrophedon(ReleaseStrategy):
     """
 
     name: ClassVar[str] = "B4_boustrophedon"
-    description: ClassVar[str] = (
-        "lawnmower lanes over the box, release each time accumulated rho*Delta*ds gains 1"
-    )
+    description: ClassVar[str] = "lawnmower lanes over the box, release each time accumulated rho*Delta*ds gains 1"
     release_speed: ClassVar[float] = 5.0
     bounds: ClassVar = {"lane_spacing": Bound(0.0, lo_open=True)}
 
@@ -266,9 +262,7 @@ class B8Teleport(ReleaseStrategy):
     """
 
     name: ClassVar[str] = "B8_teleport"
-    description: ClassVar[str] = (
-        "teleport placement of the B1-LD (or B5) points: no flight, zero landing error"
-    )
+    description: ClassVar[str] = "teleport placement of the B1-LD (or B5) points: no flight, zero landing error"
     release_speed: ClassVar[float] = 0.0
     plan_mode: ClassVar[str] = "teleport"
     bounds: ClassVar = {"base": Choice(tuple(_B8_BASES)), "lloyd_iters": Bound(0), "grid": Bound(1)}
@@ -280,9 +274,7 @@ class B8Teleport(ReleaseStrategy):
     def pattern(self, ctx: PlanContext) -> Pattern:
         """The base layout's points in the wedge (no tour: they are placed, not flown)."""
         base = _B8_BASES[self.base]
-        own = set(base.options()) - set(
-            ReleaseStrategy.options()
-        )  # the layout's own options: lloyd_iters, grid
+        own = set(base.options()) - set(ReleaseStrategy.options())  # the layout's own options: lloyd_iters, grid
         shared = {k: getattr(self, k) for k in own if k in self.options()}
         pts = base(**shared).layout(ctx)
         return Pattern(pts[in_sector(pts, ctx.sector)])

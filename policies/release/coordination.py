@@ -171,9 +171,7 @@ def encode(
         ``(PAYLOAD_DIM,)`` float32.
     """
     if kind not in MSG_NAMES:
-        raise ValueError(
-            f"kind must be one of {sorted(MSG_NAMES)} ({', '.join(MSG_NAMES.values())}), got {kind!r}"
-        )
+        raise ValueError(f"kind must be one of {sorted(MSG_NAMES)} ({', '.join(MSG_NAMES.values())}), got {kind!r}")
     for name, v in (("uav", uav), ("zone", zone), ("piece", piece)):
         if not 0 <= v < INDEX_SCALE:
             raise ValueError(f"{name} must be in [0, {INDEX_SCALE:g}) to be encoded exactly, got {v!r}")

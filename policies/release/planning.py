@@ -242,9 +242,7 @@ def sector_quota(n: int, sector: tuple[float, float] | None) -> int:
     return int(math.floor(n * f1 + 0.5) - math.floor(n * f0 + 0.5))
 
 
-def split_sectors(
-    n_uavs: int, capacities: ArrayLike | None = None, theta0: float = 0.0
-) -> list[tuple[float, float]]:
+def split_sectors(n_uavs: int, capacities: ArrayLike | None = None, theta0: float = 0.0) -> list[tuple[float, float]]:
     """Contiguous wedges covering the circle, angle proportional to each UAV's capacity (domain 5.3).
 
     Args:

@@ -157,9 +157,7 @@ class ReleasePolicy:
         for name, v, strict in checks:
             if not (math.isfinite(v) and (v > 0 if strict else v >= 0)):
                 raise ValueError(f"{name} must be a finite number {'>' if strict else '>='} 0, got {v!r}")
-        if release_speed is not None and not (
-            math.isfinite(release_speed) and 0 <= release_speed <= c.body.max_speed
-        ):
+        if release_speed is not None and not (math.isfinite(release_speed) and 0 <= release_speed <= c.body.max_speed):
             raise ValueError(
                 f"release_speed must be None or in [0, max_speed = {c.body.max_speed}], got {release_speed!r}"
             )
@@ -221,22 +219,14 @@ class ReleasePolicy:
         self._tab_of = inv.reshape(n, k)
         pieces = split_work(zs, n, c.payload)
         self._queue: list[deque] = [deque() for _ in range(n)]
-        self.book, self._tasks, extra = plan_mission(
-            pieces, start, c.payload, self._piece_tasks, self._target_tasks
-        )
+        self.book, self._tasks, extra = plan_mission(pieces, start, c.payload, self._piece_tasks, self._target_tasks)
         if self.coordinate:
             for pc in pieces:  # claim every piece (at its first target), then the overflow targets taken
                 first = next(
-                    (
-                        t[2]
-                        for t in self._tasks[pc.uav]
-                        if t[0] != WAYPOINT and self.book.piece[t[1]] == pc.pid
-                    ),
+                    (t[2] for t in self._tasks[pc.uav] if t[0] != WAYPOINT and self.book.piece[t[1]] == pc.pid),
                     start[pc.uav],
                 )
-                self._queue[pc.uav].append(
-                    encode(MSG_CLAIM, pc.uav, first, self._map, zone=pc.zone, piece=pc.pid)
-                )
+                self._queue[pc.uav].append(encode(MSG_CLAIM, pc.uav, first, self._map, zone=pc.zone, piece=pc.pid))
             for j, tids in enumerate(extra):
                 self._claim(j, tids)
         self._views = [MissionView(j, self.book, n, c.payload) for j in range(n)]
@@ -271,9 +261,7 @@ class ReleasePolicy:
 
     def _target_tasks(self, j: int, tids: np.ndarray, start: np.ndarray, book: TargetBook) -> list[tuple]:
         def throw(k: int, head: float) -> np.ndarray:
-            return self._throw(
-                np.array([self._tab_of[j, k]]), np.array([self.release_speed]), np.array([head])
-            )[0]
+            return self._throw(np.array([self._tab_of[j, k]]), np.array([self.release_speed]), np.array([head]))[0]
 
         return target_tasks(tids, start, book, self.hover, throw)
 
@@ -332,9 +320,7 @@ class ReleasePolicy:
         slots = np.array([self._index[a] for a in names])
         s = np.stack([observations[a]["self"] for a in names]).astype(np.float64)
         (w, h), (lo, hi) = self.env.scenario.zones.map_size, c.body.altitude
-        pos = np.column_stack(
-            [(s[:, 0] + 1) / 2 * w, (s[:, 1] + 1) / 2 * h, lo + (s[:, 2] + 1) / 2 * (hi - lo)]
-        )
+        pos = np.column_stack([(s[:, 0] + 1) / 2 * w, (s[:, 1] + 1) / 2 * h, lo + (s[:, 2] + 1) / 2 * (hi - lo)])
         vel = s[:, 3:6] * c.body.max_speed
         if not self._planned:
             self._plan(slots, pos)

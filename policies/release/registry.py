@@ -66,8 +66,7 @@ def strategy_class(name: str) -> type[ReleaseStrategy]:
     cls = STRATEGIES.get(name)
     if not _concrete(cls):
         raise ValueError(
-            f"strategy {name!r} ({STRATEGIES.origin(name)}) must be a concrete ReleaseStrategy subclass, "
-            f"got {cls!r}"
+            f"strategy {name!r} ({STRATEGIES.origin(name)}) must be a concrete ReleaseStrategy subclass, got {cls!r}"
         )
     if cls.name != name:
         raise ValueError(
@@ -79,11 +78,7 @@ def strategy_class(name: str) -> type[ReleaseStrategy]:
 
 def _concrete(cls: Any) -> bool:
     """Whether ``cls`` is a ``ReleaseStrategy`` subclass with no abstract method left."""
-    return (
-        isinstance(cls, type)
-        and issubclass(cls, ReleaseStrategy)
-        and not getattr(cls, "__abstractmethods__", ())
-    )
+    return isinstance(cls, type) and issubclass(cls, ReleaseStrategy) and not getattr(cls, "__abstractmethods__", ())
 
 
 def make_strategy(name: str, **options: Any) -> ReleaseStrategy:

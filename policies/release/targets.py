@@ -179,9 +179,7 @@ def _ring_layout(profile: RadialProfile, n: int, n_rings: int | None, radii: str
     return at[1::2], counts
 
 
-def ring_points(
-    profile: RadialProfile, n: int, n_rings: int | None, radii: str
-) -> tuple[NDArray, NDArray, NDArray]:
+def ring_points(profile: RadialProfile, n: int, n_rings: int | None, radii: str) -> tuple[NDArray, NDArray, NDArray]:
     """Concentric rings; returns offsets, ring index and angle of each point (ring by ring, CCW)."""
     if n_rings is not None and int(n_rings) < 1:
         raise ValueError(f"options['n_rings'] must be >= 1, got {n_rings!r}")

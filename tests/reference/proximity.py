@@ -47,9 +47,7 @@ def _ref_t(shape: int, p: np.ndarray, d: np.ndarray, h: np.ndarray) -> np.ndarra
         with np.errstate(divide="ignore", invalid="ignore"):
             inv = 1.0 / a
             lo = np.where(vert, np.where(c > 0, np.inf, -np.inf), np.where(disc < 0, np.inf, (-b - sq) * inv))
-            hi = np.where(
-                vert, np.where(c > 0, -np.inf, np.inf), np.where(disc < 0, -np.inf, (-b + sq) * inv)
-            )
+            hi = np.where(vert, np.where(c > 0, -np.inf, np.inf), np.where(disc < 0, -np.inf, (-b + sq) * inv))
     lo3, hi3 = _ref_slab(p[..., 2], d[..., 2], h[..., 2])
     lo, hi = np.maximum(lo, lo3), np.minimum(hi, hi3)
     return np.where((lo <= hi) & (hi >= 0.0), np.maximum(lo, 0.0), np.inf)
@@ -83,9 +81,7 @@ def scan_reference(
     Returns:
         A fresh :class:`ScanResult`.
     """
-    arrays, _ = _check_inputs(
-        pos, heading, sensor_range, radius, online, world, kind, centre, half, obj_world
-    )
+    arrays, _ = _check_inputs(pos, heading, sensor_range, radius, online, world, kind, centre, half, obj_world)
     pos, heading, srange, radius, online, world, kind, centre, half, obj_world = arrays
     dirs = config.ray_directions()
     res = ScanResult.empty(pos.shape[0], config.n_rays)

@@ -24,8 +24,7 @@ def network_options(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--host",
         default="127.0.0.1",
-        help="address to bind; anything but 127.0.0.1 is reachable "
-        "from other machines (a warning is printed)",
+        help="address to bind; anything but 127.0.0.1 is reachable from other machines (a warning is printed)",
     )
     p.add_argument("--port", type=int, default=0, help="port (0: a free one)")
     p.add_argument("--open", action="store_true", help="open the page in the default browser")

@@ -235,9 +235,7 @@ def _rays(world: World, slot: int) -> tuple[np.ndarray, np.ndarray] | None:
     st = world.state
     dirs = np.asarray(getattr(sensor, "directions"), dtype=np.float64)  # noqa: B009 - the proximity sensor's; body yaw frame
     c, s = np.cos(st.heading[slot]), np.sin(st.heading[slot])
-    world_dirs = np.column_stack(
-        [c * dirs[:, 0] - s * dirs[:, 1], s * dirs[:, 0] + c * dirs[:, 1], dirs[:, 2]]
-    )
+    world_dirs = np.column_stack([c * dirs[:, 0] - s * dirs[:, 1], s * dirs[:, 0] + c * dirs[:, 1], dirs[:, 2]])
     dist = np.asarray(scan.distance[slot], dtype=np.float64) * float(st.sensor_range[slot])
     ends = st.pos[slot][None, :] + world_dirs * dist[:, None]
     return ends.astype(np.float32), (np.asarray(scan.hit_kind[slot]) != 0).astype(np.uint8)

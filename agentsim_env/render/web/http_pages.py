@@ -42,9 +42,7 @@ def check_head(head: bytes, trailing: bool) -> tuple[int, str] | None:
     if len(parts) != 3:
         return None
     method = parts[0]
-    fields = [
-        (name.strip().lower(), value.strip()) for name, _, value in (ln.partition(b":") for ln in lines[1:])
-    ]
+    fields = [(name.strip().lower(), value.strip()) for name, _, value in (ln.partition(b":") for ln in lines[1:])]
     if method not in (b"GET", b"HEAD"):
         shown = method[:20].decode("ascii", "replace")
         return 405, f"method {shown!r} is not allowed: this server answers {ALLOWED_METHODS} only\n"
@@ -127,9 +125,7 @@ def answer(connection: Any, request: Any, *, files: dict[str, Path], page: str, 
         return response
     body = file.read_bytes()
     ctype = (
-        {".js": "text/javascript", ".mjs": "text/javascript", ".css": "text/css", ".html": "text/html"}.get(
-            file.suffix
-        )
+        {".js": "text/javascript", ".mjs": "text/javascript", ".css": "text/css", ".html": "text/html"}.get(file.suffix)
         or mimetypes.guess_type(file.name)[0]
         or "text/plain"
     )

@@ -1,12 +1,14 @@
 """The viewer's web server: the page, its static files and one WebSocket, on a background thread.
 
-With ``http_pages``, the only importer of ``websockets`` (the ``viewer`` extra). One asyncio loop on a daemon thread serves:
+With ``http_pages``, the only importer of ``websockets`` (the ``viewer`` extra). One asyncio loop on a daemon thread
+serves:
 
 * ``GET /``: the page the server was made for (``viewer.html``, or a page of another folder: the UAV zone
   designer's ``designer.html``);
 * ``GET /static/NAME`` and ``/static/vendor/NAME``: the files of the server's static folder (the package's own
   by default), looked up by exact name in a table built at start-up; any other path (``..``, encoded slashes,
-  absolute paths) is a 404, so nothing outside that folder can be read; other methods, request bodies and pipelined requests get one 4xx
+  absolute paths) is a 404, so nothing outside that folder can be read; other methods, request bodies and pipelined
+  requests get one 4xx
   (``http_pages``);
 * ``/ws``: a WebSocket per page. JSON texts from the page are commands, dispatched to handlers; the server sends
   JSON texts (scene, log, status, replies) and binary frames (the packed state, ``frames.pack_frame``).
@@ -101,13 +103,9 @@ class _Client:
     in_flight: int = 0
     sent_seq: int = -1
     log_pos: int = 0
-    outbox: deque[tuple[str | None, str]] = field(
-        default_factory=deque
-    )  # (broadcast type or None, JSON text)
+    outbox: deque[tuple[str | None, str]] = field(default_factory=deque)  # (broadcast type or None, JSON text)
     drained: asyncio.Event = field(default_factory=asyncio.Event)  # set while the outbox is empty
-    jobs: dict[str, dict[str, Any] | None] = field(
-        default_factory=dict
-    )  # Background command -> newest waiting
+    jobs: dict[str, dict[str, Any] | None] = field(default_factory=dict)  # Background command -> newest waiting
     gone: bool = False
 
 
@@ -350,9 +348,7 @@ class WebServer:
                 if client.gone:
                     break
                 self._receive(client, raw)
-                if (
-                    len(client.outbox) >= REPLY_BACKLOG
-                ):  # the page is not reading its replies: stop reading it
+                if len(client.outbox) >= REPLY_BACKLOG:  # the page is not reading its replies: stop reading it
                     await client.drained.wait()
         except Exception:  # a page that vanishes mid-message ends its session, nothing more
             pass
@@ -378,9 +374,7 @@ class WebServer:
             if reply is not None:
                 self._queue(client, reply)
             return
-        if (
-            cmd in client.jobs
-        ):  # one running for this page: this request waits, replacing any older waiting one
+        if cmd in client.jobs:  # one running for this page: this request waits, replacing any older waiting one
             client.jobs[cmd] = msg
             return
         client.jobs[cmd] = None

@@ -145,12 +145,8 @@ class Controls:
     def _select(self, msg: dict[str, Any]) -> dict[str, Any] | None:
         self._only(msg, ("slot",))
         slot = msg.get("slot")
-        if slot is not None and (
-            isinstance(slot, bool) or not isinstance(slot, int) or not 0 <= slot < self.n_agents
-        ):
-            raise ClientError(
-                f"select: 'slot' must be an agent index in 0..{self.n_agents - 1} or null, got {slot!r}"
-            )
+        if slot is not None and (isinstance(slot, bool) or not isinstance(slot, int) or not 0 <= slot < self.n_agents):
+            raise ClientError(f"select: 'slot' must be an agent index in 0..{self.n_agents - 1} or null, got {slot!r}")
         self.selected = slot
         return None
 
@@ -350,11 +346,7 @@ class WebViewer:
         The simulation has been idle for a while (no hook ran), so its state holds still while it is read.
         """
         held = self._held
-        if (
-            held is not None
-            and time.perf_counter() - self._last_hook > 2 * TICK_S
-            and self.server.ready_pages
-        ):
+        if held is not None and time.perf_counter() - self._last_hook > 2 * TICK_S and self.server.ready_pages:
             self._held = None
             self._send_frame(held)
 

@@ -168,9 +168,7 @@ def designer_handlers(path: Path | None) -> dict[str, Handler]:
         d = _check_message(msg, "zones.preview")["zones"]
         rid = msg.get("id")
         if "id" in msg and (isinstance(rid, bool) or not isinstance(rid, int)):
-            raise ClientError(
-                f"zones.preview: 'id' must be an integer (echoed in the reply), got {type(rid).__name__}"
-            )
+            raise ClientError(f"zones.preview: 'id' must be an integer (echoed in the reply), got {type(rid).__name__}")
         echo = {} if rid is None else {"id": rid}  # the page tells from it which request a reply answers
         try:
             zs = _validate(d)
@@ -183,8 +181,7 @@ def designer_handlers(path: Path | None) -> dict[str, Handler]:
         d = _check_message(msg, "zones.save")["zones"]
         if target is None:
             raise ClientError(
-                "started without a file: nothing is written; use Download, or start "
-                "`agentsim zones design FILE`"
+                "started without a file: nothing is written; use Download, or start `agentsim zones design FILE`"
             )
         try:
             zs = _validate(d)
@@ -201,9 +198,7 @@ def designer_handlers(path: Path | None) -> dict[str, Handler]:
         """Re-read ``path`` and return its zones."""
         _check_message(msg, "zones.load")
         if target is None:
-            raise ClientError(
-                "started without a file: there is nothing to load; start `agentsim zones design FILE`"
-            )
+            raise ClientError("started without a file: there is nothing to load; start `agentsim zones design FILE`")
         if not target.exists():
             raise ClientError(f"{target} does not exist yet: Save creates it")
         try:
@@ -276,9 +271,7 @@ def _wait_forever() -> None:
     threading.Event().wait()
 
 
-def run_designer(
-    path: str | None, host: str = "127.0.0.1", port: int = 0, open_browser: bool = False
-) -> None:
+def run_designer(path: str | None, host: str = "127.0.0.1", port: int = 0, open_browser: bool = False) -> None:
     """Serve the designer until Ctrl-C.
 
     Args:

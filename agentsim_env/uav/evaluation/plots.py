@@ -149,9 +149,7 @@ def plot_landing_maps(
         land = land[np.isfinite(land).all(axis=1)]
         ax.scatter(land[:, 0], land[:, 1], s=9, color=_DOT, edgecolors="white", linewidths=0.3, zorder=3)
         score = None if scores is None else scores.get(name)
-        sub = f"{len(land)} landed" + (
-            f", score {score:.3f}" if score is not None and math.isfinite(score) else ""
-        )
+        sub = f"{len(land)} landed" + (f", score {score:.3f}" if score is not None and math.isfinite(score) else "")
         ax.set_title(f"{name}\n{sub}", fontsize=10)
         ax.set_xlim(0, w)
         ax.set_ylim(0, h)
@@ -264,14 +262,10 @@ def write_plots(grid: Any, out_dir: str | os.PathLike[str]) -> list[Path]:
     paths = []
     for src in grid.sources:
         sensors = [s for run in grid.runs if run.zones == src.label and run.seed == seed for s in run.sensors]
-        scores = {
-            r["strategy"]: composite_score(r) for r in rows if r["zones"] == src.label and r["seed"] == seed
-        }
+        scores = {r["strategy"]: composite_score(r) for r in rows if r["zones"] == src.label and r["seed"] == seed}
         title = f"Landed sensors, zone file '{src.label}', seed {seed}"
         png = out / f"landing_{src.label}_seed{seed}.png"
         paths.append(plot_landing_maps(sensors, src.zones, order, png, title, scores))
         mine = [r for r in rows if r["zones"] == src.label]
-        paths.append(
-            plot_metric_bars(mine, out / f"metrics_{src.label}.png", f"Key metrics, zone file '{src.label}'")
-        )
+        paths.append(plot_metric_bars(mine, out / f"metrics_{src.label}.png", f"Key metrics, zone file '{src.label}'"))
     return paths

@@ -8,7 +8,8 @@ failed or interrupted evaluation leaves no partial file that looks complete (fil
 the same folder are left as they were; ``summary.md`` lists the files of its own evaluation).
 
 When the missions were recorded (``agentsim evaluate --record run.db``), ``write_outputs(..., store=con)`` reads
-the flown missions' sensor rows back from the store's open connection (``store_rows``): ``sensors`` joined with ``runs`` gives
+the flown missions' sensor rows back from the store's open connection (``store_rows``): ``sensors`` joined with ``runs``
+gives
 every released sensor with its UAV, zone, release point and time and landing point and time. The store does
 not record a sensor's release velocity or target point, so ``vx_rel, vy_rel, x_target, y_target`` are joined
 in from the evaluation by sensor id. The store holds no table for the evaluation's metrics either: the

@@ -176,9 +176,7 @@ def resolve_zones(specs: Sequence[str | Path]) -> list[ZoneSource]:
         path = _NAMED_ZONES[name]() if name in _NAMED_ZONES else Path(name)
         label = name if name in _NAMED_ZONES else path.stem
         if not path.is_file():
-            raise ValueError(
-                f"zones file {name!r} not found; use 'default', 'tiny' or the path of a JSON zone file"
-            )
+            raise ValueError(f"zones file {name!r} not found; use 'default', 'tiny' or the path of a JSON zone file")
         try:
             zones = load_zones(path)
         except (OSError, UnicodeDecodeError) as exc:
@@ -288,9 +286,7 @@ def _wsn_config(config: Any, zones: ZoneSet) -> WsnConfig:
     return wsn if wsn.zone_weights is not None else replace(wsn, zone_weights=tuple(zones.weights().tolist()))
 
 
-def _evaluate(
-    zones: ZoneSet, wsn: WsnConfig, land: np.ndarray, zone_of: np.ndarray, targets: np.ndarray
-) -> dict:
+def _evaluate(zones: ZoneSet, wsn: WsnConfig, land: np.ndarray, zone_of: np.ndarray, targets: np.ndarray) -> dict:
     profiles = [z.radial_profile() for z in zones.zones]
     return evaluate_deployment(land, zone_of, zones.centres(), zones.radii(), profiles, wsn, targets)
 
@@ -469,17 +465,13 @@ def run_grid(
             ref = refs[src.label]
             for s in seed_list:  # the reference has no randomness: one evaluation, reported per seed
                 runs.append(
-                    RunResult(
-                        src.label, TELEPORT, s, dict(ref.metrics), [{**r, "seed": s} for r in ref.sensors]
-                    )
+                    RunResult(src.label, TELEPORT, s, dict(ref.metrics), [{**r, "seed": s} for r in ref.sensors])
                 )
             for name, lab in zip(names, labels, strict=True):
                 for seed in seed_list:
                     if bar is not None:
                         bar.set_postfix_str(f"{src.label} {lab} seed {seed}")
-                    runs.append(
-                        run_one(src, name, seed, overrides, ref.metrics, record_env=record_env, label=lab)
-                    )
+                    runs.append(run_one(src, name, seed, overrides, ref.metrics, record_env=record_env, label=lab))
                     if bar is not None:
                         bar.update(1)
     finally:

@@ -160,9 +160,7 @@ def rank_strategies(rows: Sequence[Mapping[str, Any]], zones: str | None = None)
     for name, rs in groups.items():
         m, s = mean_std([_row_score(r) for r in rs])
         out.append(StrategySummary(name, tuple(rs), m, s))
-    return sorted(
-        out, key=lambda x: (-(x.score_mean if math.isfinite(x.score_mean) else -math.inf), x.strategy)
-    )
+    return sorted(out, key=lambda x: (-(x.score_mean if math.isfinite(x.score_mean) else -math.inf), x.strategy))
 
 
 def run_rows(runs: Iterable[Any]) -> list[dict[str, Any]]:

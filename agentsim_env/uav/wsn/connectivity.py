@@ -148,9 +148,7 @@ def connectivity(
     n, m = p.shape[0], s.shape[0]
     if n == 0:
         empty = np.zeros(0)
-        return ConnectivityResult(
-            0, math.nan, math.nan, math.nan, math.nan, math.nan, empty.astype(np.int64), empty
-        )
+        return ConnectivityResult(0, math.nan, math.nan, math.nan, math.nan, math.nan, empty.astype(np.int64), empty)
     pairs = unit_disk_edges(p, r)[0] if edges is None else edges[0]
     adj = _adjacency(n, pairs)
     n_comp, labels = csgraph.connected_components(adj, directed=False)

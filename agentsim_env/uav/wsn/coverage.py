@@ -159,9 +159,7 @@ def _cached_grid(centres_key: bytes, radii_key: bytes, h: float) -> ZoneGrid:
     hi = np.ceil((c + r[:, None]) / h).astype(np.int64)
     total = int(np.prod(hi - lo, axis=1).sum())
     if total > _MAX_GRID_POINTS:
-        raise ValueError(
-            f"resolution {h} gives about {total} lattice points (max {_MAX_GRID_POINTS}); raise it"
-        )
+        raise ValueError(f"resolution {h} gives about {total} lattice points (max {_MAX_GRID_POINTS}); raise it")
     chunks = []
     for k in range(c.shape[0]):  # K zones, each vectorised over its bounding box
         xs = (np.arange(lo[k, 0], hi[k, 0]) + 0.5) * h
@@ -187,9 +185,7 @@ def _in_disc(points: NDArray[np.float64], centre: NDArray[np.float64], radius: f
     return d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] <= radius * radius
 
 
-def cover_pairs(
-    grid: ZoneGrid, sensors: ArrayLike, r_s: float
-) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+def cover_pairs(grid: ZoneGrid, sensors: ArrayLike, r_s: float) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
     """All (lattice point, sensor) pairs with ``||q - p|| <= r_s``.
 
     Args:
@@ -355,9 +351,7 @@ def weighted_from_covered(
         if total > 0.0:
             per_zone[k] = float(phi[covered[idx]].sum() / total)
     ok = np.isfinite(per_zone)
-    overall = (
-        float(np.sum(w[ok] * per_zone[ok]) / w[ok].sum()) if np.any(ok) and w[ok].sum() > 0 else math.nan
-    )
+    overall = float(np.sum(w[ok] * per_zone[ok]) / w[ok].sum()) if np.any(ok) and w[ok].sum() > 0 else math.nan
     return CoverageResult(overall, per_zone)
 
 

@@ -99,9 +99,7 @@ class WsnConfig:
         """The sink: ``"centroid"`` or positions."""
         if isinstance(self.sink, str):
             if self.sink != "centroid":
-                raise FieldError(
-                    "sink", f"must be 'centroid', (x, y) or a tuple of (x, y), got {self.sink!r}"
-                )
+                raise FieldError("sink", f"must be 'centroid', (x, y) or a tuple of (x, y), got {self.sink!r}")
         else:
             sink_positions(self.sink, np.zeros((1, 2)))  # raises on a malformed position
 
@@ -177,9 +175,7 @@ def evaluate_deployment(
     edges = unit_disk_edges(land, config.r_c)
     conn = connectivity(land, config.r_c, sinks, config.fiedler_max_n, edges)
     life = simulate_lifetime(land, sinks, config.r_c, config.radio, edges=edges)
-    cov_life = coverage_lifetime(
-        grid, land, config.r_s, life.death_round, config.coverage_lifetime_threshold, pairs
-    )
+    cov_life = coverage_lifetime(grid, land, config.r_s, life.death_round, config.coverage_lifetime_threshold, pairs)
     fid = fidelity_per_zone(land, zone, c, r, profiles, targets_xy, config.knn_k)
 
     reach = np.isfinite(conn.hops)

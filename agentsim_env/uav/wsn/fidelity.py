@@ -75,11 +75,7 @@ def assign_zones(
     p = check_points(points, "land_xy")
     c, r = check_discs(centres, radii)
     n, n_zones = p.shape[0], c.shape[0]
-    zone = (
-        np.full(n, -1, dtype=np.int64)
-        if zone_of is None
-        else np.asarray(zone_of).astype(np.int64).reshape(-1)
-    )
+    zone = np.full(n, -1, dtype=np.int64) if zone_of is None else np.asarray(zone_of).astype(np.int64).reshape(-1)
     if zone.shape != (n,):
         raise ValueError(f"zone_of must have shape (n,) = ({n},), got {zone.shape}")
     if zone.size and (zone.min() < -1 or zone.max() >= n_zones):
@@ -150,9 +146,7 @@ def density_ratio(r: NDArray[np.float64], radius: float) -> float:
         The ratio; ``inf`` when the outer ring is empty but the core is not, NaN when both are empty.
     """
     inner = np.count_nonzero(r < radius / 3.0) / (math.pi * (radius / 3.0) ** 2)
-    outer = np.count_nonzero((r > 2.0 * radius / 3.0) & (r < radius)) / (
-        math.pi * radius**2 * (1.0 - 4.0 / 9.0)
-    )
+    outer = np.count_nonzero((r > 2.0 * radius / 3.0) & (r < radius)) / (math.pi * radius**2 * (1.0 - 4.0 / 9.0))
     if outer == 0.0:
         return math.inf if inner > 0.0 else math.nan
     return float(inner / outer)
@@ -314,7 +308,5 @@ def fidelity_per_zone(
         warnings.simplefilter("ignore", RuntimeWarning)
         for k in range(c.shape[0]):  # K zones, each vectorised over its sensors
             sel = z == k
-            out.append(
-                zone_fidelity(p[sel], c[k], r[k], profiles[k], None if tgt is None else tgt[sel], knn_k)
-            )
+            out.append(zone_fidelity(p[sel], c[k], r[k], profiles[k], None if tgt is None else tgt[sel], knn_k))
     return out

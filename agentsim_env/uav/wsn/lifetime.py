@@ -85,9 +85,7 @@ def _graph(
     r_c: float,
     radio: RadioParams,
     edges: tuple[NDArray[np.int64], NDArray[np.float64]] | None,
-) -> tuple[
-    NDArray[np.int64], NDArray[np.int64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]
-]:
+) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """CSR adjacency over sensors ``0..n-1`` and sinks ``n..n+m-1`` with per-entry energies.
 
     Returns ``(indptr, nbr, txe, wt_in, wt_out)``: for the entry of row ``u`` pointing at ``x``, ``txe`` is
@@ -332,9 +330,7 @@ def simulate_lifetime(
     p, s, energy = _inputs(sensors, sinks, r_c, e0, radio)
     indptr, nbr, txe, wt_in, wt_out = _graph(p, s, float(r_c), radio, edges)
     erx = float(rx_energy(radio.packet_bits, radio))
-    death, cause, fnd_static, n_events, n_reroutes = _simulate(
-        indptr, nbr, txe, wt_in, wt_out, p.shape[0], erx, energy
-    )
+    death, cause, fnd_static, n_events, n_reroutes = _simulate(indptr, nbr, txe, wt_in, wt_out, p.shape[0], erx, energy)
     return _summary(death, cause, fnd_static, int(n_events), int(n_reroutes))
 
 
