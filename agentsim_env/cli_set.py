@@ -240,7 +240,7 @@ def _convert(cls: type, name: str, text: str, key: str) -> Any:
 
 def _is_type_error(kind: str) -> bool:
     """Whether a pydantic error kind says the value is not of the declared type."""
-    return kind.endswith(("_type", "_parsing")) or kind in _TYPE_ERRORS
+    return kind.endswith(("_type", "_parsing", "_parsing_size")) or kind in _TYPE_ERRORS
 
 
 def _aliases(cls: type, top: bool) -> dict[str, str]:

@@ -263,8 +263,9 @@ def test_agentsim_train_config_errors_are_one_line(
         ("obstacle_size=" + "[" * 5000 + "]" * 5000, "obstacle_size: JSON nested deeper than 32 levels"),
         ("obstacle_size=[[[1]]]", "expected a list of 2 numbers"),
         ("goal_radius=" + "x" * 100_000, "expected a finite number"),
+        ("n_agents=" + "9" * 5000, "expected an integer, got '999"),
     ],
-    ids=["duplicate", "deep-subconfig", "deep-tuple", "shallow-tuple", "long-text"],
+    ids=["duplicate", "deep-subconfig", "deep-tuple", "shallow-tuple", "long-text", "long-integer"],
 )
 def test_set_json_is_bounded(capsys: pytest.CaptureFixture[str], pair: str, needle: str) -> None:
     assert main(["run", "navigation", "--episodes", "1", "--set", pair]) == 2
