@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 import agentsim_env
 from agentsim_env.comms.flood_threads import flood_ranges
 from agentsim_env.comms.inbox import Inbox
+from agentsim_env.comms.inbox_kernels import SAME_ROWS
 from agentsim_env.comms.overlay import Overlay
 from agentsim_env.comms.rangegraph import RangeGraph
 from agentsim_env.core import threads as threads_mod
@@ -305,3 +306,62 @@ def test_cli_run_with_threads_prints_what_one_thread_prints(capsys: pytest.Captu
         # every line but the timing rows (steps per second differ from run to run)
         outs.append([x for x in capsys.readouterr().out.splitlines() if "steps/s" not in x])
     assert outs[0] == outs[1] and any("mean return" in x for x in outs[0])
+
+
+def _inbox_state(inbox: Inbox) -> list[np.ndarray]:
+    return [inbox.valid, inbox.kind, inbox.sender, inbox.hops, inbox.created, inbox.payload, inbox.received]
+
+
+@given(seed=st.integers(0, 10_000), k=st.integers(2, 7), steps=st.integers(1, 4))
+@settings(max_examples=40, deadline=None)
+def test_inbox_pushes_do_not_depend_on_the_thread_count(seed: int, k: int, steps: int) -> None:
+    # Two or three batches a step in every form the producers hand (a table of flood rows with per-row sender and
+    # created step, one kind or hop count for all as a stride-0 broadcast, int16/int32/int64 hops beyond the int16
+    # range, receivers < 0 skipped); with 4 or more ranges every range counts its own receivers (the scan path).
+    rng = np.random.default_rng(seed)
+    s, m, d = 37, 3, 2
+    one, many = Inbox(s, m, d), Inbox(s, m, d)
+    many.threads = RowThreads(k)
+    for step in range(steps):
+        batches = []
+        for form in range(int(rng.integers(1, 4))):
+            n = int(rng.integers(0, 90))
+            recv = rng.integers(-3, s, n)
+            hops: np.ndarray = rng.integers(-5, 70_000, n)
+            if form == 0:  # the bus: one hop count for all, as a broadcast
+                hops = np.broadcast_to(np.zeros(1, np.int16), (n,))
+            elif form == 1:
+                hops = hops.astype(np.int32)
+            if form == 2:  # the overlay: sender and created read from a table by row, one kind for all
+                table = int(rng.integers(1, 6))
+                batches.append(
+                    (
+                        recv,
+                        np.broadcast_to(np.int8(5), (n,)),
+                        rng.integers(0, s, table),
+                        hops,
+                        rng.integers(0, 9, table),
+                        rng.random((table, d), dtype=np.float32),
+                        rng.integers(0, table, n),
+                        True,
+                    )
+                )
+            else:
+                batches.append(
+                    (
+                        recv,
+                        rng.integers(1, 5, n).astype(np.int8),
+                        rng.integers(-1, s, n),
+                        hops,
+                        np.full(n, step),
+                        rng.random((n, d), dtype=np.float32),
+                        SAME_ROWS,
+                    )
+                )
+        one.push_batches(batches)
+        with pytest.MonkeyPatch.context() as mp:
+            mp.setattr(threads_mod, "MIN_ROWS", 4)
+            many.push_batches(batches)
+        for i, (a, b) in enumerate(zip(_inbox_state(one), _inbox_state(many))):
+            np.testing.assert_array_equal(a, b, err_msg=f"{k} threads, step {step}: inbox array {i} differs")
+    assert one.hops.max() <= np.iinfo(np.int16).max and one.hops.min() >= 0

@@ -15,13 +15,16 @@ import numpy as np
 from agentsim_env.comms.messages import FEATURES_PER_MESSAGE
 
 SAME_ROWS = np.zeros(0, dtype=np.int64)  # push_rows: message j takes payload row j
-#: The push kernel's one signature: receiver, kind, sender, hops, created, payload, rows of each batch.
-BATCH_DTYPES = (np.int64, np.int8, np.int64, np.int64, np.int64, np.float32, np.int64)
+#: The push kernel's one signature: receiver, kind, sender, hops, created, payload, rows of each batch. ``kind``
+#: and ``hops`` may hold one value for every message (a length-1 array: a batch of one kind or hop count).
+BATCH_DTYPES = (np.int64, np.int8, np.int64, np.int32, np.int64, np.float32, np.int64)
+HOPS_MAX = 32767  # hops are kept in int16 inbox rows
+_ONE_VALUE = (1, 3)  # kind, hops
 EMPTY_BATCH = (
     SAME_ROWS,
     np.zeros(0, dtype=np.int8),
     SAME_ROWS,
-    SAME_ROWS,
+    np.zeros(0, dtype=np.int32),
     SAME_ROWS,
     np.zeros((0, 0), dtype=np.float32),
     SAME_ROWS,
@@ -35,11 +38,16 @@ def kernel_batch(batch: tuple[Any, ...]) -> tuple[Any, ...]:
     numba compiles a kernel once per signature, and a signature tells C-contiguous from strided arrays (a
     stride-0 broadcast of one kind or hop count is strided with two messages or more, contiguous with one) and
     writable from read-only ones (Ray hands shards read-only arrays). Producers hand all of these; one form
-    keeps the kernel at one compiled version, whatever a step delivers. The arrays are a step's messages, so
-    the copies this may take are small; arrays already in form pass through untouched.
+    keeps the kernel at one compiled version, whatever a step delivers. A stride-0 broadcast of ``kind`` or
+    ``hops`` becomes its one value (no copy of a million equal entries); hops of another integer type are
+    clipped to ``[0, HOPS_MAX]`` before they are narrowed. Arrays already in form pass through untouched.
     """
     out: list[np.ndarray | bool] = []
-    for a, dtype in zip(batch[:7], BATCH_DTYPES):
+    for j, (a, dtype) in enumerate(zip(batch[:7], BATCH_DTYPES)):
+        if j in _ONE_VALUE and a.ndim == 1 and a.shape[0] > 1 and a.strides[0] == 0:
+            a = a[:1]
+        if j == 3 and a.dtype != dtype:
+            a = np.clip(a, 0, HOPS_MAX).astype(dtype)
         if a.dtype != dtype or not a.flags.c_contiguous or not a.flags.writeable:
             a = np.array(a, dtype=dtype, order="C")  # a fresh array: contiguous and writable
         out.append(a)
@@ -61,6 +69,28 @@ def push_count(newest, taken, ra, rb):  # type: ignore[no-untyped-def]
         if t < m:
             newest[s, t] = g
         taken[s] = t + 1
+
+
+@nb.njit(cache=True, nogil=True)
+def push_count_range(newest, taken, ra, rb, lo, hi):  # type: ignore[no-untyped-def]
+    # ``push_count`` for the receivers in [lo, hi) only: every range reads all receivers (a sequential read) and
+    # writes its own rows, so ranges run on threads at once; the same walk keeps each receiver's order.
+    m = newest.shape[1]
+    na = ra.shape[0]
+    for g in range(rb.shape[0] - 1, -1, -1):
+        s = rb[g]
+        if s >= lo and s < hi:
+            t = taken[s]
+            if t < m:
+                newest[s, t] = g + na
+            taken[s] = t + 1
+    for g in range(na - 1, -1, -1):
+        s = ra[g]
+        if s >= lo and s < hi:
+            t = taken[s]
+            if t < m:
+                newest[s, t] = g
+            taken[s] = t + 1
 
 
 @nb.njit(cache=True, nogil=True)
@@ -124,16 +154,16 @@ def push_kernel(
             if g < na:
                 row = g if qa.shape[0] == 0 else qa[g]
                 at = row if ta else g
-                kind[s, i], sender[s, i], created[s, i] = ka[g], sa[at], ca[at]
-                hops[s, i] = min(max(ha[g], 0), 32767)
+                kind[s, i], sender[s, i], created[s, i] = ka[min(g, ka.shape[0] - 1)], sa[at], ca[at]
+                hops[s, i] = min(max(ha[min(g, ha.shape[0] - 1)], 0), 32767)
                 for x in range(d):
                     payload[s, i, x] = pa[row, x]
             else:
                 g -= na
                 row = g if qb.shape[0] == 0 else qb[g]
                 at = row if tb else g
-                kind[s, i], sender[s, i], created[s, i] = kb[g], sb[at], cb[at]
-                hops[s, i] = min(max(hb[g], 0), 32767)
+                kind[s, i], sender[s, i], created[s, i] = kb[min(g, kb.shape[0] - 1)], sb[at], cb[at]
+                hops[s, i] = min(max(hb[min(g, hb.shape[0] - 1)], 0), 32767)
                 for x in range(d):
                     payload[s, i, x] = pb[row, x]
 
