@@ -120,6 +120,7 @@ def _result() -> BenchResult:
     result.baselines["navigation"] = [
         {"policy": "go_to_goal", "episodes": 2, "mean_return": 38.0, "std_return": 1.0, "success": 1.0},
         {"policy": "random", "episodes": 2, "mean_return": -0.5, "std_return": 0.2, "success": 0.0},
+        {"policy": "ghost", "episodes": 0, "status": "failed: boom"},  # a baseline that could not be played
     ]
     return result
 
@@ -128,10 +129,11 @@ def test_summary_table_has_one_row_per_algorithm_and_baseline_and_keeps_rows_tha
     text = summary_markdown(_result(), "agentsim benchmark-rl --quick", quick=True)
     assert "quick profile" in text and "`agentsim benchmark-rl --quick`" in text
     rows = [line for line in text.splitlines() if line.startswith("| navigation")]
-    assert len(rows) == 4
+    assert len(rows) == 5
     assert rows[0].startswith("| navigation | ppo | 2 | 1,000 | 2.000 ± 1.000 | 0.500 ± 0.000 | 2.000 ± 0.000 | ok |")
     assert rows[1] == f"| navigation | mappo | 1 | 1,000 | - | - | - | {MISSING_BENCHMARL} |"
     assert rows[2] == "| navigation | baseline `go_to_goal` | - | - | 38.000 ± 1.000 | 1.000 | - | scripted |"
+    assert rows[4] == "| navigation | baseline `ghost` | - | - | - | - | - | failed: boom |"
 
 
 def test_write_all_writes_every_file_and_leaves_no_temporary(tmp_path: Path) -> None:

@@ -319,6 +319,25 @@ def _run_benchmarl(
         ]
 
 
+def _baselines(scenario: str, cfg: TrainConfig) -> list[dict[str, Any]]:
+    """Every scripted baseline of ``scenario`` on the evaluation seeds, one at a time: one that cannot be built
+    or played (a plugin's, half installed) keeps a row with its error instead of stopping the benchmark."""
+    from agentsim_env.train.evaluate import baselines_of, evaluate_policies
+
+    rows = []
+    for name in baselines_of(cfg):
+        try:
+            (row,) = evaluate_policies(cfg.replace(eval={"baselines": name}), None)
+        except (ValueError, ImportError) as exc:
+            print(f"benchmark-rl: baseline {name!r} of {scenario!r} failed: {exc}", file=sys.stderr)
+            rows.append({"policy": name, "episodes": 0, "status": f"failed: {exc}"})
+            continue
+        rows.append({**row, "status": "scripted", "success": _success(scenario, cfg, row)})
+    for row in rows:
+        row["success_metric"] = SUCCESS_METRIC.get(scenario, "")
+    return rows
+
+
 def run_benchmark(opts: BenchOptions) -> BenchResult:
     """Run the benchmark ``opts`` selects and write its files into ``opts.out``.
 
@@ -331,7 +350,6 @@ def run_benchmark(opts: BenchOptions) -> BenchResult:
     import torch
     from tqdm.auto import tqdm
 
-    from agentsim_env.train.evaluate import evaluate_policies
     from agentsim_env.train.learnbench_report import write_all
 
     torch.set_num_threads(1)
@@ -343,10 +361,7 @@ def run_benchmark(opts: BenchOptions) -> BenchResult:
     benchmarl_plan = []
     try:
         for scenario, cfg in configs.items():
-            result.baselines[scenario] = [
-                {**r, "success": _success(scenario, cfg, r), "success_metric": SUCCESS_METRIC.get(scenario, "")}
-                for r in evaluate_policies(cfg, None)
-            ]
+            result.baselines[scenario] = _baselines(scenario, cfg)
             for algorithm in algorithms:
                 for seed in range(seeds):
                     if algorithm in BENCHMARL_ALGORITHMS:

@@ -56,7 +56,16 @@ RUN_FIELDS = (
 #: Columns of ``curves.csv``.
 CURVE_FIELDS = ("scenario", "algorithm", "seed", "agent_steps", "mean_return")
 #: Columns of ``baselines.csv``.
-BASELINE_FIELDS = ("scenario", "policy", "episodes", "mean_return", "std_return", "success_metric", "success")
+BASELINE_FIELDS = (
+    "scenario",
+    "policy",
+    "status",
+    "episodes",
+    "mean_return",
+    "std_return",
+    "success_metric",
+    "success",
+)
 
 
 def write_text_atomic(path: Path, text: str) -> Path:
@@ -142,9 +151,10 @@ def summary_markdown(
             )
         for b in result.baselines.get(scenario, []):
             metric = metric or str(b.get("success_metric", ""))
+            ret = "-" if "mean_return" not in b else f"{float(b['mean_return']):.3f} ± {float(b['std_return']):.3f}"
             lines.append(
-                f"| {scenario} | baseline `{b['policy']}` | - | - | {float(b['mean_return']):.3f} ± "
-                f"{float(b['std_return']):.3f} | {_cell(b.get('success', ''))} | - | scripted |"
+                f"| {scenario} | baseline `{b['policy']}` | - | - | {ret} | {_cell(b.get('success', ''))} | - | "
+                f"{b.get('status', 'scripted')} |"
             )
     lines.append("")
     return "\n".join(lines)
@@ -202,7 +212,7 @@ def plot_scenario(
         ax.plot(x, mean, color=colour, lw=1.8, marker="o" if len(x) == 1 else None, label=f"{algo} ({seeds} seeds)")
         ax.fill_between(x, lo, hi, color=colour, alpha=0.2)
     styles = ["--", ":", "-."]
-    for j, b in enumerate(baselines):
+    for j, b in enumerate(b for b in baselines if "mean_return" in b):
         ax.axhline(
             float(b["mean_return"]),
             color="0.35",
@@ -229,9 +239,10 @@ def write_all(result: BenchResult, opts: BenchOptions, configs: Mapping[str, Tra
         {
             "scenario": s,
             "policy": b["policy"],
+            "status": b.get("status", "scripted"),
             "episodes": b["episodes"],
-            "mean_return": b["mean_return"],
-            "std_return": b["std_return"],
+            "mean_return": b.get("mean_return", ""),
+            "std_return": b.get("std_return", ""),
             "success_metric": b.get("success_metric", ""),
             "success": b.get("success", ""),
         }
