@@ -71,7 +71,7 @@ QUICK: dict[str, dict[str, Any]] = {
     "navigation": {"env": {"n_agents": 2, "max_steps": 50}},
     "relay": {"env": {"n_groups": 1, "group_size": 2, "max_steps": 50}},
     "rendezvous": {"env": {"n_agents": 2, "max_steps": 50}},
-    "uav_release": {"env": {"max_steps": 400}},
+    "uav_release": {"env": {"max_steps": 300}, "worlds": 1},  # an episode ends within the budget,
 }
 QUICK_BUDGET = 2000
 QUICK_EVAL_SEEDS = 2
@@ -146,8 +146,8 @@ def bench_config(scenario: str, opts: BenchOptions) -> TrainConfig:
     """The training config of ``scenario``'s runs: its bench YAML with ``opts``' overrides (seed 0)."""
     overrides: dict[str, Any] = {"checkpoint_every": 0}
     if opts.quick:
-        overrides.update(QUICK[scenario])
         overrides.update(timesteps=QUICK_BUDGET, worlds=4, ppo={"n_steps": 64, "batch_size": 128, "n_epochs": 2})
+        overrides.update(QUICK[scenario])
         overrides["eval"] = {"seeds": QUICK_EVAL_SEEDS}
     if opts.budget is not None:
         overrides["timesteps"] = int(opts.budget)
@@ -247,6 +247,7 @@ def _benchmarl_jobs(
                 "seed": seed,
                 "frames": max(1, cfg.timesteps // n_agents),  # a frame moves every agent of one env
                 "frames_per_batch": max(1, min(6000, cfg.timesteps // n_agents // 4)),
+                "envs": min(4, cfg.worlds),  # BenchMARL's serial env copies
                 "env": cfg.env,
                 "eval_seeds": cfg.eval.seed_list(),
                 "hidden": list(cfg.ppo.net_arch),
