@@ -16,13 +16,13 @@ from agentsim_env.train.learnbench import (
     MISSING_BENCHMARL,
     SUCCESS_METRIC,
     BenchOptions,
-    BenchResult,
     _run_benchmarl,
     bench_config,
     bench_scenarios,
 )
 from agentsim_env.train.learnbench_report import (
     RUN_FIELDS,
+    BenchResult,
     csv_text,
     mean_std,
     summary_markdown,
@@ -137,8 +137,9 @@ def test_summary_table_has_one_row_per_algorithm_and_baseline_and_keeps_rows_tha
 
 
 def test_write_all_writes_every_file_and_leaves_no_temporary(tmp_path: Path) -> None:
-    opts = BenchOptions(scenarios=("navigation",), out=tmp_path / "out", quick=True, command="cmd")
-    paths = write_all(_result(), opts, {"navigation": bench_config("navigation", opts)})
+    opts = BenchOptions(scenarios=("navigation",), quick=True)
+    configs = {"navigation": bench_config("navigation", opts)}
+    paths = write_all(_result(), tmp_path / "out", configs, quick=True, command="cmd")
     names = sorted(p.name for p in paths)
     assert names == ["baselines.csv", "curves.csv", "navigation.png", "runs.csv", "summary.md"]
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == names

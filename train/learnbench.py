@@ -27,13 +27,14 @@ import subprocess
 import sys
 import tempfile
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from agentsim_env.train.config import CONFIG_DIR, TrainConfig, load_config
+from agentsim_env.train.learnbench_report import BenchResult, write_all
 
 __all__ = [
     "ALGORITHMS",
@@ -154,21 +155,6 @@ def bench_config(scenario: str, opts: BenchOptions) -> TrainConfig:
     if opts.eval_seeds is not None:
         overrides["eval"] = {**overrides.get("eval", {}), "seeds": int(opts.eval_seeds)}
     return load_config(BENCH_DIR / f"{scenario}.yaml", overrides)
-
-
-@dataclass
-class BenchResult:
-    """Everything one benchmark produced.
-
-    Attributes:
-        runs: One row per scenario x algorithm x seed (see ``learnbench_report.RUN_FIELDS``).
-        curves: Learning-curve points: scenario, algorithm, seed, agent_steps, mean_return.
-        baselines: Per scenario, the baselines' evaluation rows (``evaluate_policies``).
-    """
-
-    runs: list[dict[str, Any]] = field(default_factory=list)
-    curves: list[dict[str, Any]] = field(default_factory=list)
-    baselines: dict[str, list[dict[str, Any]]] = field(default_factory=dict)
 
 
 def _success(scenario: str, cfg: TrainConfig, row: dict[str, Any]) -> float:
@@ -351,8 +337,6 @@ def run_benchmark(opts: BenchOptions) -> BenchResult:
     import torch
     from tqdm.auto import tqdm
 
-    from agentsim_env.train.learnbench_report import write_all
-
     torch.set_num_threads(1)
     scenarios, algorithms, seeds = opts.selected_scenarios(), opts.selected_algorithms(), opts.n_seeds()
     configs = {s: bench_config(s, opts) for s in scenarios}
@@ -378,5 +362,5 @@ def run_benchmark(opts: BenchOptions) -> BenchResult:
         bar.close()
     order = {(s, a): i for i, (s, a) in enumerate((s, a) for s in scenarios for a in algorithms)}
     result.runs.sort(key=lambda r: (order[(r["scenario"], r["algorithm"])], r["seed"]))
-    write_all(result, opts, configs)
+    write_all(result, opts.out, configs, quick=opts.quick, command=opts.command)
     return result

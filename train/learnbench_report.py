@@ -14,6 +14,7 @@ import csv
 import io
 import math
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -23,10 +24,11 @@ from agentsim_env.train.checkpoints import write_atomic
 
 if TYPE_CHECKING:
     from agentsim_env.train.config import TrainConfig
-    from agentsim_env.train.learnbench import BenchOptions, BenchResult
 
 __all__ = [
+    "BASELINE_FIELDS",
     "CURVE_FIELDS",
+    "BenchResult",
     "RUN_FIELDS",
     "csv_text",
     "mean_std",
@@ -66,6 +68,21 @@ BASELINE_FIELDS = (
     "success_metric",
     "success",
 )
+
+
+@dataclass
+class BenchResult:
+    """Everything one benchmark produced.
+
+    Attributes:
+        runs: One row per scenario x algorithm x seed (see ``RUN_FIELDS``).
+        curves: Learning-curve points: scenario, algorithm, seed, agent_steps, mean_return.
+        baselines: Per scenario, the baselines' evaluation rows (``evaluate_policies``).
+    """
+
+    runs: list[dict[str, Any]] = field(default_factory=list)
+    curves: list[dict[str, Any]] = field(default_factory=list)
+    baselines: dict[str, list[dict[str, Any]]] = field(default_factory=dict)
 
 
 def write_text_atomic(path: Path, text: str) -> Path:
@@ -215,7 +232,7 @@ def plot_scenario(
     for j, b in enumerate(b for b in baselines if "mean_return" in b):
         ax.axhline(
             float(b["mean_return"]),
-            color="0.35",
+            color=plt.cm.Dark2(j % 8),
             ls=styles[j % 3],
             lw=1.0,
             label=f"{b['policy']} (scripted): {float(b['mean_return']):.2f}",
@@ -231,9 +248,27 @@ def plot_scenario(
     return path
 
 
-def write_all(result: BenchResult, opts: BenchOptions, configs: Mapping[str, TrainConfig]) -> list[Path]:
-    """Write every file of ``result`` into ``opts.out``; returns their paths."""
-    out = Path(opts.out)
+def write_all(
+    result: BenchResult,
+    out: Path,
+    configs: Mapping[str, TrainConfig],
+    *,
+    quick: bool = False,
+    command: str = "",
+) -> list[Path]:
+    """Write every file of ``result`` into ``out``.
+
+    Args:
+        result: The benchmark's rows, curves and baselines.
+        out: The output folder (created).
+        configs: Each scenario's training config (budget and evaluation seeds for the plot titles).
+        quick: Label the table and plots as the quick profile.
+        command: The command line shown in ``summary.md``.
+
+    Returns:
+        The paths written.
+    """
+    out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     baseline_rows = [
         {
@@ -255,9 +290,9 @@ def write_all(result: BenchResult, opts: BenchOptions, configs: Mapping[str, Tra
         write_text_atomic(out / "baselines.csv", csv_text(baseline_rows, BASELINE_FIELDS)),
     ]
     for scenario, cfg in configs.items():
-        label = " (quick profile: not a result)" if opts.quick else ""
+        label = " (quick profile: not a result)" if quick else ""
         title = f"{scenario}{label}: {cfg.timesteps:,} agent-steps per run, evaluation on {cfg.eval.seeds} seeds"
         paths.append(plot_scenario(scenario, result.curves, result.baselines.get(scenario, []), out / f"{scenario}.png",
                                    title=title))  # fmt: skip
-    paths.append(write_text_atomic(out / "summary.md", summary_markdown(result, opts.command, quick=opts.quick)))
+    paths.append(write_text_atomic(out / "summary.md", summary_markdown(result, command, quick=quick)))
     return paths
