@@ -26,6 +26,7 @@ from typing import TYPE_CHECKING, Any
 
 from agentsim_env import env  # the env package, callable: env(name, **config) is the AEC env
 from agentsim_env._compile_notice import install as _install_compile_notice
+from agentsim_env._moved import install as _install_moved_paths
 from agentsim_env._numba_cache import ensure_numba_cache as _ensure_numba_cache
 from agentsim_env.core.plugins import register_policy, register_scenario, register_strategy
 
@@ -37,6 +38,7 @@ if TYPE_CHECKING:
 
 _ensure_numba_cache()  # before any kernel module: numba picks a function's cache directory when decorating it
 _install_compile_notice()  # one stderr line when a kernel compiles instead of loading from the cache
+_install_moved_paths()  # the UAV modules' old paths (agentsim_env._moved): their new modules, with a warning
 
 __version__ = "0.1.0"
 

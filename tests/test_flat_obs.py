@@ -94,7 +94,7 @@ def test_a_scenario_that_adds_parts_in_observation_keeps_them_in_its_flat_rows()
     ],
 )
 def test_inbox_flat_write_refuses_bad_outputs_by_name(make_out: Any, col: int, match: str) -> None:
-    from agentsim_env.comms.messages import Inbox
+    from agentsim_env.comms.inbox import Inbox
 
     inbox = Inbox(6, 1, 4)
     with pytest.raises(ValueError, match=match):

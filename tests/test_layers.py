@@ -6,12 +6,15 @@ from __future__ import annotations
 import ast
 from pathlib import Path
 
+from agentsim_env._moved import MOVED
+
 ROOT = Path(__file__).resolve().parents[1]
 # package -> layer; a package may import its own modules and packages of lower layers only. A top-level module
 # (cli_run.py, ...) is a package of its own here.
 LAYERS: dict[str, int] = {
     # 0: nothing of ours
     "_numba_cache": 0,  # where numba caches the package's kernels
+    "_moved": 0,  # the import hook of the UAV modules' old paths; imports nothing of the package
     "_compile_notice": 0,  # the one-line notice when a kernel compiles; numba and the standard library only
     "core": 0,
     "outdirs": 0,  # output folders checked before work (cli, uav's evaluate, the store's export)
@@ -45,36 +48,10 @@ LAYERS: dict[str, int] = {
     "cli_run": 11,  # the run subcommand of cli; over policies, render, the recorder, distributed and cli_live
     "cli": 12,  # the command line: over everything (train's subcommand, uav's by name: SUBCOMMAND_PROVIDERS)
 }
-# the old paths of modules that moved into uav: shims that warn and re-export (old module -> new module); each
-# may import only its counterpart, and nothing of ours imports them
-DEPRECATED: dict[str, str] = {
-    **{
-        f"agentsim_env.scenarios.{old}": f"agentsim_env.uav.{new}"
-        for old, new in [
-            ("uav_release", "scenario"),
-            ("uav_config", "config"),
-            ("uav_zones", "zones"),
-            ("uav_energy", "energy"),
-            ("uav_autopilot", "autopilot"),
-            ("uav_tracking", "tracking"),
-            ("uav_outcome", "outcome"),
-            ("uav_capacity", "capacity"),
-            ("landed_grid", "landed_grid"),
-        ]
-    },
-    "agentsim_env.wsn": "agentsim_env.uav.wsn",
-    **{
-        f"agentsim_env.wsn.{m}": f"agentsim_env.uav.wsn.{m}"
-        for m in ("connectivity", "coverage", "evaluate", "fidelity", "lifetime", "profiles", "radio")
-    },
-    "agentsim_env.evaluation": "agentsim_env.uav.evaluation",
-    **{
-        f"agentsim_env.evaluation.{m}": f"agentsim_env.uav.evaluation.{m}"
-        for m in ("mission", "plots", "report", "runner", "scoring", "strategies")
-    },
-    "agentsim_env.render.web.designer": "agentsim_env.uav.designer",
-}
-# the only modules outside uav that import it (besides the shims): the release strategies
+# the old paths of modules that moved into uav (old module -> new module): no file stands there; the package's
+# import hook (agentsim_env._moved) resolves each to its new module with a DeprecationWarning
+DEPRECATED: dict[str, str] = MOVED
+# the only modules outside uav that import it: the release strategies
 UAV_IMPORTERS = "agentsim_env.policies.release"
 # folders installed under the package's name (pyproject's package-dir)
 MAPPED = {"policies": ROOT / "policies", "train": ROOT / "train"}
@@ -135,15 +112,13 @@ def graph() -> dict[str, set[str]]:
 
 
 def test_every_package_has_a_layer() -> None:
-    missing = sorted({package_of(m) for m in modules() if m not in DEPRECATED} - set(LAYERS))
+    missing = sorted({package_of(m) for m in modules()} - set(LAYERS))
     assert not missing, f"packages without a layer in this test: {missing}"
 
 
 def test_each_package_imports_only_lower_layers() -> None:
     bad = []
     for mod, targets in graph().items():
-        if mod in DEPRECATED:
-            continue  # test_deprecated_shims_import_only_their_counterpart
         src = package_of(mod)
         for t in targets:
             dst = package_of(t)
@@ -156,19 +131,13 @@ def test_layers_are_whole_numbers() -> None:
     assert all(type(v) is int and v >= 0 for v in LAYERS.values()), LAYERS
 
 
-def test_deprecated_shims_import_only_their_counterpart() -> None:
+def test_old_paths_have_no_file_and_nothing_imports_them() -> None:
     g = graph()
-    assert set(DEPRECATED) <= set(g), f"shims missing: {sorted(set(DEPRECATED) - set(g))}"
-    bad = []
-    for old, new in DEPRECATED.items():
-        # the counterpart, its parent packages, and (for a shim package) its own shim submodules
-        allowed = {new, *(new.rsplit(".", k)[0] for k in range(1, new.count(".")))}
-        extra = {t for t in g[old] if t not in allowed and not t.startswith(old + ".")}
-        bad += [f"{old} -> {t}" for t in sorted(extra)]
-        if new not in g[old]:
-            bad.append(f"{old} does not import {new}")
-    importers = sorted(m for m, ts in g.items() if m not in DEPRECATED and set(ts) & set(DEPRECATED))
-    assert not bad, "shims importing more than their counterpart:\n" + "\n".join(bad)
+    standing = sorted(set(DEPRECATED) & set(g))
+    assert not standing, f"a file stands at an old path (the import hook serves it): {standing}"
+    gone = sorted(set(DEPRECATED.values()) - set(g))
+    assert not gone, f"old paths pointing at no module: {gone}"
+    importers = sorted(f"{m} -> {t}" for m, path in modules().items() for t in imports(path, m) if t in DEPRECATED)
     assert not importers, f"modules importing a deprecated path: {importers}"
 
 
@@ -179,7 +148,6 @@ def test_only_the_release_strategies_import_uav() -> None:
         for t in ts
         if package_of(t) == "uav"
         and package_of(m) != "uav"
-        and m not in DEPRECATED
         and not (m == UAV_IMPORTERS or m.startswith(UAV_IMPORTERS + "."))
     )
     assert not outside, "generic code importing the UAV case study:\n" + "\n".join(outside)
@@ -214,3 +182,22 @@ def test_the_checker_sees_violations(tmp_path: Path) -> None:
     f.write_text("def f():\n    from agentsim_env.env.vector import BatchedEnv\nfrom ..sim import world\n")
     found = imports(f, "agentsim_env.core.mod")
     assert "agentsim_env.env.vector" in found and "agentsim_env.sim" in found
+
+
+def test_no_cycles_between_packages() -> None:
+    edges: dict[str, set[str]] = {}
+    for mod, targets in graph().items():
+        for t in targets:
+            if package_of(t) != package_of(mod):
+                edges.setdefault(package_of(mod), set()).add(package_of(t))
+    done: set[str] = set()
+
+    def walk(pkg: str, path: list[str]) -> None:
+        assert pkg not in path, "packages importing each other round: " + " -> ".join([*path, pkg])
+        if pkg not in done:
+            for nxt in sorted(edges.get(pkg, ())):
+                walk(nxt, [*path, pkg])
+            done.add(pkg)
+
+    for pkg in sorted(edges):
+        walk(pkg, [])

@@ -300,3 +300,20 @@ def test_importing_the_package_loads_no_scenario_env_or_simulator() -> None:
     assert "agentsim_env.core.plugins" in modules
     assert not [m for m in modules if m.startswith(heavy)], modules
     assert world == "True"
+
+
+def test_training_evaluation_compares_against_plugin_policies_too() -> None:
+    pytest.importorskip("yaml")
+    from agentsim_env.policies.navigation import GoToGoalPolicy
+    from agentsim_env.train.config import load_config
+    from agentsim_env.train.evaluate import baselines_of
+
+    agentsim_env.register_policy("go_again", GoToGoalPolicy, scenario="navigation")
+    assert baselines_of(load_config("navigation", {"eval": {"baselines": "all"}})) == [
+        "go_to_goal",
+        "random",
+        "go_again",
+    ]
+    assert baselines_of(load_config("navigation", {"eval": {"baselines": "go_again"}})) == ["go_again"]
+    with pytest.raises(ValueError, match=r"or from \['go_to_goal', 'random', 'go_again'\]"):
+        baselines_of(load_config("navigation", {"eval": {"baselines": "nope"}}))

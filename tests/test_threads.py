@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 
 import agentsim_env
 from agentsim_env.comms.flood_threads import flood_ranges
-from agentsim_env.comms.messages import Inbox
+from agentsim_env.comms.inbox import Inbox
 from agentsim_env.comms.overlay import Overlay
 from agentsim_env.comms.rangegraph import RangeGraph
 from agentsim_env.core import threads as threads_mod

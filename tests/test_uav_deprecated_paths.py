@@ -24,6 +24,7 @@ def test_old_path_warns_and_reexports_the_same_objects(old: str) -> None:
     sys.modules.pop(old, None)  # a fresh import, so that it warns again
     with pytest.warns(DeprecationWarning) as caught:
         shim = importlib.import_module(old)
+    assert shim is new, f"{old} is not the module {DEPRECATED[old]} itself"
     messages = [str(w.message) for w in caught if issubclass(w.category, DeprecationWarning)]
     assert any(m.startswith(f"{old} is deprecated: import {DEPRECATED[old]} instead") for m in messages), messages
     names = _public(new)

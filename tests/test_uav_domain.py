@@ -238,6 +238,14 @@ def test_profile_error_lists_the_allowed_kinds() -> None:
 def test_unknown_field_suggests_spelling() -> None:
     with pytest.raises(ValueError, match=r"did you mean 'centre'"):
         zones_from_dict(_bad(0, center=[1, 2]))
+    misspelt = _bad(0, center=[150, 280])
+    del misspelt["zones"][0]["centre"]  # the required field only under its misspelling: named as such, not missing
+    with pytest.raises(ValueError, match=r"unknown field 'center' \(did you mean 'centre'\?\)"):
+        zones_from_dict(misspelt)
+    missing = _bad(0)
+    del missing["zones"][0]["centre"]
+    with pytest.raises(ValueError, match=r"missing required field\(s\) \['centre'\]"):
+        zones_from_dict(missing)
 
 
 @pytest.mark.parametrize(

@@ -247,11 +247,12 @@ def _cache_index(cache: Path) -> dict[str, bytes]:
 
 
 # ------------------------------------------------------------------------------------------------ fast
-def test_the_inbox_push_kernel_has_one_signature_whatever_producers_hand_it() -> None:
+def test_the_inboxpush_kernel_has_one_signature_whatever_producers_hand_it() -> None:
     # strided broadcasts (several messages of one kind or hop count), their one-message cuts (contiguous),
     # read-only arrays (as Ray hands shards) and other integer dtypes all reach the kernel in one form: a run
     # can never compile a version the warm-up did not
-    from agentsim_env.comms.messages import Inbox, _push_kernel
+    from agentsim_env.comms.inbox import Inbox
+    from agentsim_env.comms.inbox_kernels import push_kernel
 
     inbox = Inbox(4, 2, 2)
     ids = np.arange(3, dtype=np.int64)
@@ -290,7 +291,7 @@ def test_the_inbox_push_kernel_has_one_signature_whatever_producers_hand_it() ->
         for b in forms:
             inbox.push_batches([a, b])
         inbox.push_batches([a])
-    assert len(_push_kernel.signatures) == 1, _push_kernel.signatures
+    assert len(push_kernel.signatures) == 1, push_kernel.signatures
     assert inbox.received.tolist() == [
         21,
         14,

@@ -26,10 +26,10 @@ __all__ = ["baselines_of", "evaluate_policies", "format_table", "write_table"]
 
 def baselines_of(cfg: TrainConfig) -> list[str]:
     """The scripted baselines ``cfg.eval.baselines`` selects (``all``, ``default``: the scenario's default
-    baseline, ``none`` or a comma list)."""
-    from agentsim_env.policies.registry import BASELINES
+    baseline, ``none`` or a comma list); a scenario's plug-in policies (``register_policy``, entry points) count."""
+    from agentsim_env.policies.registry import scenario_policies
 
-    known = list(BASELINES.get(cfg.scenario, {}))
+    known = scenario_policies(cfg.scenario)
     sel = cfg.eval.baselines.strip()
     if sel == "all":
         return known

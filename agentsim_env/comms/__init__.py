@@ -3,6 +3,7 @@ flooding lives in ``comms.overlay`` and the split of a bus over parts in ``comms
 not re-exported here)."""
 
 from agentsim_env.comms.bus import BUS_KINDS, ChannelConfig, DeliveryEvents, DueRows, MessageBus, MessageLog
+from agentsim_env.comms.inbox import Inbox
 from agentsim_env.comms.messages import (
     AGENT,
     DROP_BANDWIDTH,
@@ -20,7 +21,6 @@ from agentsim_env.comms.messages import (
     OVERLAY,
     REASON_NAMES,
     REASON_NONE,
-    Inbox,
     env_collision_payload,
 )
 

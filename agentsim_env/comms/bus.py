@@ -3,7 +3,7 @@
 ``send`` validates a batch of messages, enforces the per-sender bandwidth of the step and queues the rest
 with ``due = step + latency``; ``deliver(step, ...)`` takes everything due, expands GROUP messages to the
 group's online members, filters (offline receiver, range, loss) and pushes the survivors into the
-:class:`~agentsim_env.comms.messages.Inbox`. Every step's traffic comes back as arrays (``DeliveryEvents``).
+:class:`~agentsim_env.comms.inbox.Inbox`. Every step's traffic comes back as arrays (``DeliveryEvents``).
 
 Rules (one line each, the tests check them):
 
@@ -70,6 +70,7 @@ from pydantic import Field
 from agentsim_env.comms.bus_kernels import bandwidth_kernel, keyed_draws
 from agentsim_env.comms.checks import bool_mask, int_vector, validate_send, world_arrays
 from agentsim_env.comms.events import DeliveryEvents, DueRows, MessageLog, _Queue
+from agentsim_env.comms.inbox import Inbox
 from agentsim_env.comms.messages import (
     AGENT,
     DROP_BANDWIDTH,
@@ -77,7 +78,6 @@ from agentsim_env.comms.messages import (
     GROUP,
     HEARTBEAT,
     KIND_NAMES,
-    Inbox,
 )
 from agentsim_env.comms.routing import expand, filter_pairs, group_members
 from agentsim_env.comms.sequence import Sequencer, inbox_order

@@ -112,8 +112,8 @@ def printable(value: str, *, allow_newlines: bool = False) -> str:
         ``value`` unchanged.
 
     Raises:
-        pydantic_core.PydanticCustomError: ``printable_text``, naming the first refused character (as
-            ``U+XXXX``) and its position; the message never contains the character itself.
+        pydantic_core.PydanticCustomError: ``printable_text``, naming the first refused character (its code
+            point, e.g. ``U+202E``) and its position; the message never contains the character itself.
     """
     bad = (BAD_TEXT_OR_NEWLINE if allow_newlines else BAD_TEXT).search(value)
     if bad is not None:

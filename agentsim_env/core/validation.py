@@ -60,8 +60,8 @@ def check_text(name: str, value: Any, *, allow_newlines: bool = False) -> str:
         ``value`` unchanged.
 
     Raises:
-        ValueError: Naming the field, the first refused character (as ``U+XXXX``) and its position; the
-            message never contains the character itself.
+        ValueError: Naming the field, the first refused character (its code point, e.g. ``U+202E``) and its
+            position; the message never contains the character itself.
     """
     if not isinstance(value, str):
         raise ValueError(f"{name} must be a string, got {short_repr(value)}")

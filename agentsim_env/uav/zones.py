@@ -291,15 +291,16 @@ def _check_inside(label: str, z: Zone, width: float, height: float) -> None:
 
 
 def _check_keys(label: str, d: dict[str, Any], allowed: tuple[str, ...], required: tuple[str, ...]) -> None:
-    """Raise on missing or unknown keys, suggesting the closest allowed spelling."""
-    missing = [k for k in required if k not in d]
-    if missing:
-        raise ValueError(f"{label}: missing required field(s) {missing}; required: {list(required)}")
+    """Raise on unknown or missing keys, suggesting the closest allowed spelling (a misspelt required field,
+    such as ``center``, is named as unknown with its correct spelling rather than reported missing)."""
     for key in d:
         if key not in allowed:
             close = difflib.get_close_matches(str(key), allowed, n=1)
             hint = f" (did you mean {close[0]!r}?)" if close else ""
             raise ValueError(f"{label}: unknown field {short_repr(key, 60)}{hint}; allowed fields: {list(allowed)}")
+    missing = [k for k in required if k not in d]
+    if missing:
+        raise ValueError(f"{label}: missing required field(s) {missing}; required: {list(required)}")
 
 
 def zones_from_dict(d: dict[str, Any]) -> ZoneSet:
