@@ -16,6 +16,7 @@ from agentsim_env.train.learnbench import (
     MISSING_BENCHMARL,
     SUCCESS_METRIC,
     BenchOptions,
+    _baselines,
     _run_benchmarl,
     bench_config,
     bench_scenarios,
@@ -78,6 +79,21 @@ def test_command_line_refuses_a_bad_option_with_one_line(tmp_path: Path) -> None
     assert proc.returncode == 2
     assert "error: seeds must be an integer >= 1, got 0" in proc.stderr
     assert not (tmp_path / "runs.csv").exists()
+
+
+def test_a_plugin_policy_that_does_not_load_leaves_rows_not_a_stopped_benchmark() -> None:
+    from agentsim_env.core.plugins import POLICIES, register_policy
+
+    cfg = bench_config("navigation", BenchOptions(quick=True))
+    register_policy("lb_broken", "no_such_module_lb:Policy")  # no scenario given: it is read from the class
+    try:
+        rows = _baselines("navigation", cfg)
+    finally:
+        POLICIES.unregister("lb_broken")
+    assert rows[0]["policy"] == "plug-in policies" and "no_such_module_lb" in rows[0]["status"]
+    assert [r["policy"] for r in rows[1:]] == ["go_to_goal", "random"]
+    assert all(r["status"].startswith(("failed: ", "scripted")) for r in rows)
+    assert {r["success_metric"] for r in rows} == {SUCCESS_METRIC["navigation"]}
 
 
 def test_missing_benchmarl_environment_gives_rows_without_numbers(tmp_path: Path) -> None:

@@ -308,11 +308,23 @@ def _run_benchmarl(
 
 def _baselines(scenario: str, cfg: TrainConfig) -> list[dict[str, Any]]:
     """Every scripted baseline of ``scenario`` on the evaluation seeds, one at a time: one that cannot be built
-    or played (a plugin's, half installed) keeps a row with its error instead of stopping the benchmark."""
+    or played (a plugin's, half installed) keeps a row with its error instead of stopping the benchmark. When the
+    plug-in policies cannot even be listed (one does not load, so the scenarios it serves are unknown), a row
+    says so and each built-in baseline is still tried, with a row of its own (``make_policy`` lists the plug-ins
+    too, so they may fail the same way)."""
+    from agentsim_env.policies.registry import BASELINES
     from agentsim_env.train.evaluate import baselines_of, evaluate_policies
 
-    rows = []
-    for name in baselines_of(cfg):
+    rows: list[dict[str, Any]] = []
+    try:
+        names = baselines_of(cfg)
+    except ValueError as exc:
+        if cfg.eval.baselines.strip() != "all":
+            raise
+        print(f"benchmark-rl: the plug-in policies of {scenario!r} could not be listed: {exc}", file=sys.stderr)
+        rows.append({"policy": "plug-in policies", "episodes": 0, "status": f"failed: {exc}"})
+        names = list(BASELINES.get(scenario, {}))
+    for name in names:
         try:
             (row,) = evaluate_policies(cfg.replace(eval={"baselines": name}), None)
         except (ValueError, ImportError) as exc:
