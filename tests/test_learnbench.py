@@ -118,7 +118,7 @@ def test_mean_std_skips_empty_and_non_finite_cells() -> None:
 
 
 def _row(algorithm: str, seed: int, ret: object, status: str = "ok") -> dict[str, object]:
-    row = {k: "" for k in RUN_FIELDS}
+    row: dict[str, object] = {k: "" for k in RUN_FIELDS}
     row.update(scenario="navigation", algorithm=algorithm, seed=seed, status=status, budget_agent_steps=1000)
     row.update(eval_return=ret, success=0.5 if ret != "" else "", success_metric="arrived_per_agent")
     row.update(cpu_s=2.0 if ret != "" else "")
