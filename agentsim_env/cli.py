@@ -9,6 +9,8 @@ Subcommands:
                ``make install`` runs it
     view       the 3D web viewer: a live run with a policy, or a replay from the store (``cli_view``)
     train, replay, export, runs   (``agentsim_env.train.cli``, ``cli_replay``, ``cli_store``)
+    benchmark-rl  the learning benchmark: scenarios x algorithms x seeds beside the baselines
+               (``agentsim_env.train.learnbench_cli``)
     evaluate   batch evaluation of the UAV sensor-release strategies (zone files x strategies x seeds):
                sensors.csv, runs.csv, summary.md (ranking) and PNG plots (``agentsim_env.uav.cli``)
     zones      the hot-zone designer page, and a zone-file check (``agentsim_env.uav.cli``)
@@ -251,6 +253,9 @@ def build_parser() -> argparse.ArgumentParser:
     from agentsim_env.train.cli import add_train_command
 
     add_train_command(sub)
+    from agentsim_env.train.learnbench_cli import add_benchmark_rl_command
+
+    add_benchmark_rl_command(sub)
     from agentsim_env.cli_replay import add_replay_command
 
     add_replay_command(sub)

@@ -45,6 +45,7 @@ class Rendezvous(Scenario[RendezvousConfig]):
         RendezvousConfig,
         ({"n_agents": 4}, {"n_agents": 3, "max_steps": 50}),
     )
+    event_keys = ("met",)  # what an evaluation counts per agent: 1 for each agent of a world that met
 
     def make_world(self, n_worlds: int) -> World:
         c = self.config
