@@ -32,7 +32,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Annotated, Protocol
 
-import numba as nb
 import numpy as np
 from pydantic import Field
 
@@ -59,90 +58,11 @@ from agentsim_env.comms.messages import (
 )
 from agentsim_env.comms.overlay import Deliveries, Overlay
 from agentsim_env.comms.rangegraph import RangeGraph
+from agentsim_env.comms.send_kernels import CHANNELS, COMM_HEADER, N_CHANNELS, comm_rows, decode  # noqa: F401  (the action layout, re-exported)
 from agentsim_env.core.config_model import FieldError, Flag, Int, config
 from agentsim_env.core.pipeline import StepContext
 from agentsim_env.core.spatial import Grid
 from agentsim_env.core.threads import RowThreads
-
-CHANNELS = ("none", "group", "nearest", "named", "overlay")
-N_CHANNELS = len(CHANNELS)
-COMM_HEADER = 3
-
-
-@nb.njit(cache=True, error_model="numpy")  # n_agents >= 1: no zero-division checks
-def _decode(comm, acting, n_agents, max_hops):  # type: ignore[no-untyped-def]
-    # The header columns of float64 actions, with the float64 operations of the numpy path in ``send_actions``
-    # (same order and rounding: the same bins, receivers and hop limits bit for bit).
-    s_n = comm.shape[0]
-    sel = np.zeros(s_n, dtype=np.int64)
-    named = np.empty(s_n, dtype=np.int64)
-    hops = np.empty(s_n, dtype=np.int64)
-    any_near = False
-    for s in range(s_n):
-        if acting[s]:
-            sel[s] = min(np.int64((comm[s, 0] + 1.0) * (N_CHANNELS / 2.0)), N_CHANNELS - 1)
-            any_near |= sel[s] == 2
-        named[s] = (s // n_agents) * n_agents + np.int64(np.rint((comm[s, 1] + 1.0) * 0.5 * (n_agents - 1)))
-        hops[s] = 1 + np.int64(np.rint((comm[s, 2] + 1.0) * 0.5 * (max_hops - 1)))
-    return sel, named, hops, any_near
-
-
-@nb.njit(cache=True)
-def _comm_rows(sel, group, near, named, hops, comm, n_agents, sent):  # type: ignore[no-untyped-def]
-    # All bus rows of a step's comm actions in one pass, in the order of three consecutive sends: GROUP rows,
-    # then "nearest" unicasts, then "named" unicasts (slot order within each), plus the overlay floods.
-    s_n = sel.shape[0]
-    d = comm.shape[1] - COMM_HEADER
-    n_g = n_n = n_m = n_o = 0
-    for s in range(s_n):
-        c = sel[s]
-        if c == 1 and group[s] >= 0:
-            n_g += 1
-        elif c == 2 and near[s] >= 0:
-            n_n += 1
-        elif c == 3 and named[s] != s:
-            n_m += 1
-        elif c == 4:
-            n_o += 1
-    k = n_g + n_n + n_m
-    kind = np.empty(k, dtype=np.int8)
-    snd = np.empty(k, dtype=np.int64)
-    tgt = np.empty(k, dtype=np.int64)
-    wld = np.empty(k, dtype=np.int64)
-    pay = np.empty((k, d), dtype=np.float32)
-    o_org = np.empty(n_o, dtype=np.int64)
-    o_hops = np.empty(n_o, dtype=np.int64)
-    o_pay = np.empty((n_o, d), dtype=np.float32)
-    nxt = np.array([0, n_g, n_g + n_n])  # next free row of each channel's block
-    o = 0
-    for s in range(s_n):
-        c = sel[s]
-        if c == 4:
-            o_org[o] = s
-            o_hops[o] = hops[s]
-            for q in range(d):
-                o_pay[o, q] = np.float32(comm[s, COMM_HEADER + q])
-            o += 1
-            sent[s] += 1
-            continue
-        if c == 1 and group[s] >= 0:
-            b, kd, t = 0, GROUP, group[s]
-        elif c == 2 and near[s] >= 0:
-            b, kd, t = 1, AGENT, near[s]
-        elif c == 3 and named[s] != s:
-            b, kd, t = 2, AGENT, named[s]
-        else:
-            continue
-        r = nxt[b]
-        nxt[b] += 1
-        kind[r] = kd
-        snd[r] = s
-        tgt[r] = t
-        wld[r] = s // n_agents
-        for q in range(d):
-            pay[r, q] = np.float32(comm[s, COMM_HEADER + q])
-        sent[s] += 1
-    return kind, snd, tgt, wld, pay, o_org, o_hops, o_pay
 
 
 @config("comms")
@@ -367,7 +287,8 @@ class CommsStack:
         np.copyto(self._received0, self.bus.inbox.received)
         np.copyto(self._dropped0, self.bus.inbox.dropped)
         if comm.dtype == np.float64:
-            sel, named, hops, any_near = _decode(np.ascontiguousarray(comm), acting, n, cfg.max_hops)
+            comm = np.ascontiguousarray(comm)
+            sel, named, hops, any_near = decode(comm, acting, n, cfg.max_hops, self.threads)
         else:  # the same arithmetic in numpy, in the comm array's own precision
             sel = np.minimum(((comm[:, 0] + 1.0) * (N_CHANNELS / 2.0)).astype(np.int64), N_CHANNELS - 1)
             sel[~acting] = 0
@@ -377,8 +298,8 @@ class CommsStack:
             any_near = bool((sel == 2).any())
         # nearest from the range graph of the positions the agents act on
         near = self.graph.nearest() if any_near else self._no_near
-        kind, snd, tgt, wld, pay, o_org, o_hops, o_pay = _comm_rows(
-            sel, group, near, named, hops, np.ascontiguousarray(comm), n, self.sent
+        kind, snd, tgt, wld, pay, o_org, o_hops, o_pay = comm_rows(
+            sel, group, near, named, hops, np.ascontiguousarray(comm), n, self.sent, self.threads
         )
         if snd.shape[0]:
             self.bus.enqueue(kind, snd, tgt, wld, pay, step)
