@@ -151,10 +151,9 @@ def _provider(spec: str) -> Callable[[Any, str], None]:
 # ------------------------------------------------------------------------------------------ commands
 def cmd_scenarios(args: argparse.Namespace) -> int:
     """Print the registered scenarios with the first line of their documentation."""
-    import agentsim_env
-    from agentsim_env.scenarios.registry import scenario_class
+    from agentsim_env.scenarios.registry import scenario_class, usable_scenarios
 
-    for name in agentsim_env.list_scenarios():
+    for name in usable_scenarios():  # a plug-in that does not load is left out (with a warning)
         mod = sys.modules[scenario_class(name).__module__]
         print(f"{name:14s} {(mod.__doc__ or '').strip().splitlines()[0]}")
     return 0

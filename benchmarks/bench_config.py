@@ -40,10 +40,10 @@ def mean_us(call: Callable[[], Any], rounds: int) -> float:
 def rows(rounds: int, make_rounds: int) -> list[list[str]]:
     """One table row per registered scenario."""
     import agentsim_env
-    from agentsim_env.scenarios.registry import list_scenarios, scenario_class
+    from agentsim_env.scenarios.registry import scenario_class, usable_scenarios
 
     out = []
-    for name in list_scenarios():
+    for name in usable_scenarios():
         cls = scenario_class(name).config_cls
         default = cls()
         times = [

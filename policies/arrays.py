@@ -24,7 +24,7 @@ from typing import Any
 
 from agentsim_env.env.rollout import ArrayPolicy, DictRows
 from agentsim_env.policies.learned import is_model_path, load_policy
-from agentsim_env.policies.registry import baseline_names, make_policy, policy_class
+from agentsim_env.policies.registry import baseline_names, check_plugin, make_policy, policy_class
 from agentsim_env.scenarios.registry import make_scenario
 
 
@@ -94,6 +94,7 @@ def build_policy(
         target = env if env is not None else PolicyEnv(scenario, config)
         return load_policy(name, target, deterministic=deterministic)
     if name not in names:
+        check_plugin(scenario, name)  # a plug-in that cannot be used: its own error
         raise ValueError(f"policy must be {_allowed(scenario)}; got {name!r}")
     if env is None:
         if not hasattr(policy_class(scenario, name), "act_rows"):

@@ -5,6 +5,10 @@ A scenario's policies are its built-in baselines (``BASELINES``, the default fir
 scenario=...)`` or by an installed plug-in's entry point in the group ``agentsim_env.policies``, whose class
 names its scenarios in a class attribute ``scenarios = ("my_scenario",)``), sorted by name. A policy is built
 with its class's ``for_env(env, **options)`` (the ``Policy`` protocol). ``docs/extending.md`` has an example.
+
+An installed plug-in policy (or release strategy) that cannot be used (it does not load, names no scenario, or
+repeats the name of a built-in baseline of a scenario it serves) is left out of every list with one
+``PluginLoadWarning``; asking for it by name raises its ``PluginLoadError``.
 """
 
 from __future__ import annotations
@@ -13,7 +17,7 @@ import importlib
 from collections.abc import Iterator, Mapping
 from typing import Any
 
-from agentsim_env.core.plugins import POLICIES, policy_scenarios
+from agentsim_env.core.plugins import POLICIES, STRATEGIES, policy_scenarios
 from agentsim_env.policies.base import Policy
 from agentsim_env.policies.release.registry import strategy_class, strategy_names
 
@@ -39,12 +43,13 @@ class ReleaseBaselines(Mapping[str, Entry]):
         return (self.POLICY, {"strategy": cls.name})
 
     def __iter__(self) -> Iterator[str]:
-        names = strategy_names()
+        usable = set(STRATEGIES.usable_names(strategy_class))  # a strategy plug-in that fails is left out
+        names = [n for n in strategy_names() if n in usable]
         head = [self.DEFAULT] if self.DEFAULT in names else []
         return iter(head + [n for n in names if n != self.DEFAULT])
 
     def __len__(self) -> int:
-        return len(strategy_names())
+        return sum(1 for _ in self)
 
 
 # scenario -> {policy name: "module:Class" or ("module:Class", kwargs for for_env)}; the first entry is the
@@ -66,14 +71,35 @@ BASELINES: dict[str, Mapping[str, Entry]] = {
 BASELINES["uav_release"] = ReleaseBaselines()
 
 
+def _check_plugin_policy(name: str) -> None:
+    """Refuse installed policy ``name`` when it names no scenario or repeats a built-in baseline of one it serves
+    (``POLICIES.usable_names`` then leaves it out, whatever scenario is listed)."""
+    for scenario in policy_scenarios(name):
+        if name in BASELINES.get(scenario, {}):
+            raise ValueError(f"it repeats the name of a built-in baseline of {scenario!r}")
+
+
+def _usable_policies() -> list[str]:
+    """The names of ``POLICIES`` less the installed plug-ins that cannot be used (each warned about once)."""
+    return POLICIES.usable_names(_check_plugin_policy)
+
+
+def check_plugin(scenario: str, name: str) -> None:
+    """Raise the ``PluginLoadError`` of ``name`` when it is an installed plug-in policy (or, for ``uav_release``,
+    release strategy) that cannot be used; else do nothing (callers then report an unknown name)."""
+    error = POLICIES.load_error(name) or (STRATEGIES.load_error(name) if scenario == "uav_release" else None)
+    if error is not None:
+        raise error from error.error
+
+
 def plugin_policies(scenario: str) -> list[str]:
     """The names of the policies of ``POLICIES`` (registered or installed) that serve ``scenario``, sorted.
 
     Raises:
-        ValueError: A plug-in policy that does not load, names no scenario, or repeats the name of a built-in
-            baseline of ``scenario``.
+        ValueError: A registered policy that does not load, names no scenario, or repeats the name of a built-in
+            baseline of ``scenario`` (an installed plug-in that does is left out, see the module docstring).
     """
-    names = [n for n in POLICIES.names() if scenario in policy_scenarios(n)]
+    names = [n for n in _usable_policies() if scenario in policy_scenarios(n)]
     for name in names:
         if name in BASELINES.get(scenario, {}):
             raise ValueError(
@@ -96,7 +122,7 @@ def baseline_names(scenario: str) -> list[str]:
     """
     names = scenario_policies(scenario)
     if not names:
-        known = sorted({*BASELINES, *(s for n in POLICIES.names() for s in policy_scenarios(n))})
+        known = sorted({*BASELINES, *(s for n in _usable_policies() for s in policy_scenarios(n))})
         raise ValueError(f"no scripted baselines for scenario {scenario!r}; known: {known}")
     return names
 
@@ -105,6 +131,7 @@ def policy_class(scenario: str, name: str) -> Any:
     """The class of policy ``name`` of ``scenario`` (a built-in baseline or a plug-in), imported.
 
     Raises:
+        PluginLoadError: ``name`` is an installed plug-in that cannot be used.
         ValueError: ``name`` is no policy of ``scenario`` (the message lists them).
     """
     builtin = BASELINES.get(scenario, {})
@@ -113,6 +140,7 @@ def policy_class(scenario: str, name: str) -> Any:
         module, cls = (entry if isinstance(entry, str) else entry[0]).split(":")
         return getattr(importlib.import_module(module), cls)
     if name not in plugin_policies(scenario):
+        check_plugin(scenario, name)
         raise ValueError(f"policy must be one of {baseline_names(scenario)} for {scenario!r}, got {name!r}")
     return POLICIES.get(name)
 
@@ -142,6 +170,7 @@ def make_policy(scenario: str, env: Any, name: str | None = None) -> Policy:
     names = baseline_names(scenario)
     name = name or names[0]
     if name not in names and name not in BASELINES.get(scenario, {}):  # the latter: a deprecated former name
+        check_plugin(scenario, name)
         raise ValueError(f"policy must be one of {names} for {scenario!r}, got {name!r}")
     entry = BASELINES.get(scenario, {}).get(name)
     kwargs = entry[1] if isinstance(entry, tuple) else {}
@@ -172,6 +201,7 @@ def resolve_policy(scenario: str, policy: str | None, config: dict[str, Any]) ->
             raise ValueError(f"--policy {name!r} was trained on {trained_on!r}, not {scenario!r}")
         return name, {**env_config, **config}
     if name not in names and name not in BASELINES.get(scenario, {}):  # the latter: a deprecated former name
+        check_plugin(scenario, name)
         raise ValueError(
             f"--policy must be one of {names} for {scenario!r} or a trained model "
             f"(a folder with model.zip, or a .zip), got {name!r}"

@@ -27,7 +27,7 @@ __all__ = ["baselines_of", "evaluate_policies", "format_table", "write_table"]
 def baselines_of(cfg: TrainConfig) -> list[str]:
     """The scripted baselines ``cfg.eval.baselines`` selects (``all``, ``default``: the scenario's default
     baseline, ``none`` or a comma list); a scenario's plug-in policies (``register_policy``, entry points) count."""
-    from agentsim_env.policies.registry import scenario_policies
+    from agentsim_env.policies.registry import check_plugin, scenario_policies
 
     known = scenario_policies(cfg.scenario)
     sel = cfg.eval.baselines.strip()
@@ -40,6 +40,7 @@ def baselines_of(cfg: TrainConfig) -> list[str]:
     names = [s.strip() for s in sel.split(",") if s.strip()]
     bad = [n for n in names if n not in known]
     if bad:
+        check_plugin(cfg.scenario, bad[0])  # a plug-in that cannot be used: its own error
         raise ValueError(
             f"eval.baselines: {bad[0]!r} is not a baseline of {cfg.scenario!r}; "
             f"choose 'all', 'default', 'none' or from {known}"

@@ -309,7 +309,8 @@ def _run_benchmarl(
 def _baselines(scenario: str, cfg: TrainConfig) -> list[dict[str, Any]]:
     """Every scripted baseline of ``scenario`` on the evaluation seeds, one at a time: one that cannot be built
     or played (a plugin's, half installed) keeps a row with its error instead of stopping the benchmark. When the
-    plug-in policies cannot even be listed (one does not load, so the scenarios it serves are unknown), a row
+    plug-in policies cannot even be listed (one registered from code does not load, so the scenarios it serves
+    are unknown; an installed one that does not load is left out by the registry with a warning), a row
     says so and each built-in baseline is still tried, with a row of its own (``make_policy`` lists the plug-ins
     too, so they may fail the same way)."""
     from agentsim_env.policies.registry import BASELINES

@@ -11,6 +11,11 @@ A :class:`Registry` maps a name to an object or to a ``"module:attribute"`` refe
 A name belongs to one entry: a registration may not take a built-in's or an earlier registration's name
 unless ``replace=True``; an entry point that repeats a taken name is skipped with a ``RuntimeWarning``.
 
+An installed plug-in that cannot be used (its module raises on import, the attribute is missing, the object is
+of the wrong kind, or a caller's check of it fails) harms only its own name: :meth:`Registry.get` raises a
+:class:`PluginLoadError` naming it, and the listings that load plug-ins (:meth:`Registry.usable_names`) leave
+it out with one :class:`PluginLoadWarning` per process. :meth:`Registry.names` loads nothing.
+
 The three registries: :data:`SCENARIOS` (group ``agentsim_env.scenarios``: ``Scenario`` subclasses),
 :data:`POLICIES` (group ``agentsim_env.policies``: policy classes with ``for_env``, ``reset`` and ``act``) and
 :data:`STRATEGIES` (group ``agentsim_env.strategies``: release strategy classes or factories).
@@ -31,6 +36,8 @@ __all__ = [
     "POLICIES",
     "SCENARIOS",
     "STRATEGIES",
+    "PluginLoadError",
+    "PluginLoadWarning",
     "Registry",
     "check_name",
     "load_ref",
@@ -42,6 +49,30 @@ __all__ = [
 
 _NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.\-]{0,63}")
 _DOTTED = re.compile(r"[A-Za-z_]\w*(\.[A-Za-z_]\w*)*")
+_WARNED: set[tuple[str, str, str]] = set()  # (group, name, reference) of the plug-ins warned about
+
+
+class PluginLoadWarning(UserWarning):
+    """An installed plug-in cannot be used and is left out of a listing (warned once per process per plug-in)."""
+
+
+class PluginLoadError(ValueError):
+    """An installed plug-in cannot be used: its entry point does not load, or the object it names is refused.
+
+    Args:
+        kind, name, ref, group, dist: What it is ("policy", ...), its entry point's name, ``"module:attribute"``
+            and group, and the distribution that provides it.
+        error: The original exception (raised ``from`` it).
+        loaded: Whether the object loaded (and a caller's check of it failed).
+    """
+
+    def __init__(self, kind: str, name: str, ref: str, group: str, dist: str, error: Exception, loaded: bool) -> None:
+        self.kind, self.name, self.ref, self.group, self.dist, self.error = kind, name, ref, group, dist, error
+        what = "loads but cannot be used" if loaded else "cannot be loaded"
+        super().__init__(
+            f"{kind} plug-in {name!r} = {ref!r} (entry-point group {group!r} of {dist}) {what}: "
+            f"{type(error).__name__}: {error}; reinstall or uninstall the package that provides it"
+        )
 
 
 def check_name(kind: str, name: Any) -> str:
@@ -140,8 +171,10 @@ class Registry:
             self._builtins[check_name(kind, name)] = self._checked_entry(name, entry)
         self._registered: dict[str, Any] = {}
         self._entry_points: dict[str, Any] | None = None  # name -> reference; read on first use
-        self._origin: dict[str, str] = {}  # entry-point name -> distribution, for messages
+        self._origin: dict[str, str] = {}  # entry-point name -> where it comes from, for messages
+        self._dist: dict[str, str] = {}  # entry-point name -> distribution, for messages
         self._loaded: dict[str, Any] = {}  # name -> object loaded from a reference
+        self._failed: dict[str, tuple[Exception, bool]] = {}  # entry-point name -> (its error, it loaded)
 
     # -------------------------------------------------------------------------------- registration
     def register(self, name: str, obj: Any, *, replace: bool = False) -> None:
@@ -221,6 +254,7 @@ class Registry:
                     continue
                 found[ep.name] = ep.value
                 self._origin[ep.name] = f"entry point {ep.value!r} of {dist}"
+                self._dist[ep.name] = dist
             self._entry_points = found
         return self._entry_points
 
@@ -230,11 +264,51 @@ class Registry:
         for name in self._entry_points or {}:
             self._loaded.pop(name, None)
         self._entry_points = None
-        self._origin = {}
+        self._origin, self._dist, self._failed = {}, {}, {}
 
     def names(self) -> list[str]:
-        """Every name: built-ins, registrations and entry points, sorted."""
+        """Every name: built-ins, registrations and entry points, sorted (nothing is loaded)."""
         return sorted({*self._builtins, *self._registered, *self._eps()})
+
+    def is_plugin(self, name: str) -> bool:
+        """Whether ``name`` is an installed entry point's (no registration or built-in of that name)."""
+        return name not in self._registered and name not in self._builtins and name in self._eps()
+
+    def load_error(self, name: str, validate: Callable[[str], object] | None = None) -> PluginLoadError | None:
+        """Why installed plug-in ``name`` cannot be used (kept: :meth:`get` raises it until :meth:`refresh`), or
+        None, also for a built-in, a registration or an unknown name (only plug-ins are loaded here).
+
+        Args:
+            name: The name.
+            validate: Called with ``name`` once the plug-in loads; an exception it raises makes the plug-in
+                unusable (a policy that names no scenario, a strategy class of another name, ...).
+        """
+        if not self.is_plugin(name):
+            return None
+        if name not in self._failed:
+            try:
+                self.get(name)
+                if validate is not None:
+                    validate(name)
+            except PluginLoadError:
+                pass  # get kept it
+            except Exception as exc:  # the plug-in's own code may raise anything
+                self._loaded.pop(name, None)
+                self._failed[name] = (exc, True)
+        return self._plugin_error(name) if name in self._failed else None
+
+    def usable_names(self, validate: Callable[[str], object] | None = None) -> list[str]:
+        """:meth:`names` less the installed plug-ins that cannot be used, each left out with one
+        :class:`PluginLoadWarning` per process (plug-ins are loaded here; see :meth:`load_error`)."""
+        names = []
+        for name in self.names():
+            error = self.load_error(name, validate)
+            if error is None:
+                names.append(name)
+            elif (key := (self.group, name, error.ref)) not in _WARNED:
+                _WARNED.add(key)
+                warnings.warn(f"{error}; it is left out of the {self.kind} names", PluginLoadWarning, stacklevel=3)
+        return names
 
     def builtin_names(self) -> list[str]:
         """The built-in names, sorted."""
@@ -261,15 +335,24 @@ class Registry:
     def _unknown(self, name: str) -> str:
         return f"unknown {self.kind} {name!r}; known: {self.names()}"
 
+    def _plugin_error(self, name: str) -> PluginLoadError:
+        """A new :class:`PluginLoadError` of entry point ``name`` (one of ``_failed``)."""
+        error, loaded = self._failed[name]
+        return PluginLoadError(self.kind, name, self._eps()[name], self.group, self._dist[name], error, loaded)
+
     def get(self, name: str) -> Any:
         """The object registered as ``name`` (a reference is imported and checked on first use, then kept).
 
         Raises:
-            ValueError: An unknown name (the message lists the known ones) or a reference that does not load
-                (it names the reference and what was expected).
+            PluginLoadError: ``name`` is an installed plug-in that cannot be used (its import raised, or
+                :meth:`load_error` refused it); raised from the original exception.
+            ValueError: An unknown name (the message lists the known ones) or a reference of a built-in or a
+                registration that does not load (it names the reference and what was expected).
         """
         if name in self._loaded:
             return self._loaded[name]
+        if name in self._failed and self.is_plugin(name):
+            raise self._plugin_error(name) from self._failed[name][0]
         for table in (self._registered, self._builtins, self._eps()):
             if name in table:
                 entry = table[name]
@@ -278,13 +361,20 @@ class Registry:
             raise ValueError(self._unknown(name))
         if not isinstance(entry, str):
             return entry
-        obj = load_ref(self.kind, entry, self.check, self.expected)
+        if table is self._entry_points:
+            try:
+                obj = load_ref(self.kind, entry, self.check, self.expected)
+            except Exception as exc:  # a plug-in's module may raise anything on import
+                self._failed[name] = (exc, False)
+                raise self._plugin_error(name) from exc
+        else:
+            obj = load_ref(self.kind, entry, self.check, self.expected)
         self._loaded[name] = obj
         return obj
 
     def items(self, names: Iterable[str] | None = None) -> list[tuple[str, Any]]:
-        """``(name, object)`` pairs of ``names`` (default: every name), loading references."""
-        return [(n, self.get(n)) for n in (self.names() if names is None else names)]
+        """``(name, object)`` pairs of ``names`` (default: :meth:`usable_names`), loading references."""
+        return [(n, self.get(n)) for n in (self.usable_names() if names is None else names)]
 
 
 def _is_scenario_class(obj: Any) -> bool:

@@ -28,7 +28,7 @@ from agentsim_env.env.parallel_env import ENV_KEYS, AgentSimParallelEnv
 from agentsim_env.env.rollout import RolloutResult, StepView, build_policy, check_seed, check_steps
 from agentsim_env.env.vector import BatchedEnv
 from agentsim_env.scenarios.base import Scenario
-from agentsim_env.scenarios.registry import list_scenarios, make_scenario, scenario_class
+from agentsim_env.scenarios.registry import make_scenario, scenario_class, usable_scenarios
 
 BACKENDS = ("ray", "local")
 DEFAULT_TIMEOUT_S = 5.0
@@ -43,7 +43,7 @@ def check_shardable(scenario: Scenario, shards: int) -> None:
     """
     c = scenario.config
     if not scenario.shardable:
-        ok = [n for n in list_scenarios() if scenario_class(n).shardable]
+        ok = [n for n in usable_scenarios() if scenario_class(n).shardable]
         raise ValueError(
             f"scenario {scenario.name!r} cannot run over shards (shards={shards}); the scenarios that "
             f"can are {ok}; use shards=None for one process"

@@ -27,7 +27,7 @@ import gymnasium
 import numpy as np
 
 from agentsim_env.env.parallel_env import AgentSimParallelEnv, available_render_modes
-from agentsim_env.scenarios.registry import list_scenarios, make_scenario, scenario_class
+from agentsim_env.scenarios.registry import make_scenario, scenario_class, usable_scenarios
 
 OthersPolicy = Callable[[dict[str, np.ndarray]], dict[str, Any]]
 """How the agents not controlled act: ``{agent id: flat observation} -> {agent id: flat action}``, called every
@@ -143,7 +143,7 @@ def register_gymnasium_envs() -> list[str]:
         The registered ids.
     """
     ids = []
-    for name in list_scenarios():
+    for name in usable_scenarios():  # a plug-in that does not load is left out
         env_id = f"agentsim/{name}-v{scenario_class(name).version}"
         if env_id not in gymnasium.registry:
             gymnasium.register(

@@ -3,7 +3,9 @@ over it.
 
 The built-in scenarios, those added with ``agentsim_env.register_scenario`` and those of installed plug-ins
 (entry points of the group ``agentsim_env.scenarios``) are listed alike; modules are imported on first use so
-``import agentsim_env`` stays cheap. ``docs/extending.md`` shows how to add one.
+``import agentsim_env`` stays cheap. ``docs/extending.md`` shows how to add one. An installed plug-in that
+cannot be loaded is still listed by ``list_scenarios`` (which loads nothing) but left out of
+``usable_scenarios``; building it raises its ``PluginLoadError``.
 """
 
 from __future__ import annotations
@@ -36,8 +38,17 @@ def register(name: str, module: str) -> None:
 
 
 def list_scenarios() -> list[str]:
-    """Names of every scenario (built-in, registered and installed plug-ins), sorted."""
+    """Names of every scenario (built-in, registered and installed plug-ins), sorted; nothing is imported."""
     return SCENARIOS.names()
+
+
+def usable_scenarios() -> list[str]:
+    """``list_scenarios()`` less the installed plug-ins that cannot be used (their module fails to import, or
+    ``scenario_class`` refuses the class), each left out with one ``PluginLoadWarning`` per process.
+
+    For the callers that go on to load every scenario; every plug-in scenario is imported here.
+    """
+    return SCENARIOS.usable_names(scenario_class)
 
 
 def scenario_class(name: str) -> type[Scenario]:
