@@ -11,9 +11,11 @@ builds that environment) with the repository on ``PYTHONPATH``::
 folder). Each finished run appends one JSON line to ``RESULTS.jsonl``: the learning curve (``[frames, mean episode
 return per agent]`` per collected batch in which an episode ended), the wall and CPU seconds of training, and the
 deterministic policy's mean return per agent over ``eval_seeds`` (each an episode of the TorchRL environment reset
-with that seed). A run that raises writes its error instead, and the next run goes on.
+with that seed) with each episode's metrics (``eval_metrics``: ``agentsim_env.wrappers.EpisodeMetrics``, whose
+success counters the TorchRL loop does not show). A run that raises writes its error instead, and the next run goes on.
 
-This file imports only ``agentsim_env.env`` (and BenchMARL / TorchRL), never the training package, so that it
+This file imports only ``agentsim_env.env`` and ``agentsim_env.wrappers`` (and BenchMARL / TorchRL), never the
+training package, so that it
 runs against the checkout on ``PYTHONPATH`` whatever the BenchMARL environment has installed.
 """
 
@@ -101,21 +103,24 @@ def _experiment(job: dict[str, Any], curve: list[list[float]]) -> Any:
     )
 
 
-def _evaluate(exp: Any, job: dict[str, Any]) -> list[float]:
-    """The deterministic policy's mean return per agent on each held-out seed."""
+def _evaluate(exp: Any, job: dict[str, Any]) -> tuple[list[float], list[dict[str, float]]]:
+    """The deterministic policy's mean return per agent on each held-out seed, and each episode's metrics
+    (``EpisodeMetrics.summary``: event counters per agent, final values, the scenario's outcome)."""
     import torch
     from torchrl.envs.utils import ExplorationType, set_exploration_type
 
     from agentsim_env.env.torchrl import torchrl_env
+    from agentsim_env.wrappers.metrics import EpisodeMetrics
 
-    returns = []
+    returns, metrics = [], []
     for seed in job["eval_seeds"]:
-        env = torchrl_env(job["scenario"], seed=int(seed), return_state=True, **job["env"])
+        env = torchrl_env(job["scenario"], seed=int(seed), return_state=True, wrap=EpisodeMetrics, **job["env"])
         with torch.no_grad(), set_exploration_type(ExplorationType.DETERMINISTIC):
             td = env.rollout(exp.max_steps, policy=exp.policy, break_when_any_done=True)
         returns.append(float(td.get(("next", "agents", "reward")).sum(dim=0).mean()))
+        metrics.append(env._env.summary())  # the EpisodeMetrics that TorchRL wraps
         env.close()
-    return returns
+    return returns, metrics
 
 
 def run_job(job: dict[str, Any]) -> dict[str, Any]:
@@ -128,7 +133,7 @@ def run_job(job: dict[str, Any]) -> dict[str, Any]:
     exp = _experiment(job, curve)
     exp.run()
     wall, cpu = time.perf_counter() - t0, time.process_time() - c0
-    returns = _evaluate(exp, job)
+    returns, metrics = _evaluate(exp, job)
     return {
         "id": job["id"],
         "frames_done": int(exp.total_frames),
@@ -136,6 +141,7 @@ def run_job(job: dict[str, Any]) -> dict[str, Any]:
         "cpu_s": cpu,
         "curve": curve,
         "eval_returns": returns,
+        "eval_metrics": metrics,
     }
 
 

@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from agentsim_env.train.config import TrainConfig
+from agentsim_env.wrappers.metrics import outcome
 
 __all__ = ["baselines_of", "evaluate_policies", "format_table", "write_table"]
 
@@ -46,15 +47,6 @@ def baselines_of(cfg: TrainConfig) -> list[str]:
             f"choose 'all', 'default', 'none' or from {known}"
         )
     return names
-
-
-def _episode_extras(env: Any) -> dict[str, float]:
-    """Scenario-specific outcome of the episode just played (relay: groups at their target)."""
-    sc = env.scenario
-    if hasattr(sc, "group_success"):
-        ok = np.asarray(sc.group_success(env.world, 0), dtype=bool)
-        return {"groups_reached": float(ok.mean()), "all_groups_reached": float(ok.all())}
-    return {}
 
 
 def _play(
@@ -89,7 +81,7 @@ def _play(
             first = None
         returns.append(float(np.mean(list(ep.returns.values()))))
         sums.append({k: v / n for k, v in ep.info_sums.items() if k in events})
-        extras.append({**last, **_episode_extras(env)})
+        extras.append({**last, **outcome(env)})
         if bar is not None:
             bar.update(1)
     row: dict[str, Any] = {

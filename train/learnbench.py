@@ -15,7 +15,8 @@ evaluation seeds; every scripted baseline of the scenario is played once per sce
 The BenchMARL algorithms run in a subprocess of ``benchmarl_python`` (``train/benchmarl_worker.py`` with the
 checkout on ``PYTHONPATH``); when that Python is missing their rows say so and carry no numbers. Their
 evaluation is the deterministic policy's mean return per agent on the same held-out seeds through the TorchRL
-env; the success metric is not measured for them. ``agentsim_env.train.learnbench_report`` writes the files.
+env, and its success metric from the same episodes' infos (``agentsim_env.wrappers.EpisodeMetrics``).
+``agentsim_env.train.learnbench_report`` writes the files.
 """
 
 from __future__ import annotations
@@ -291,6 +292,12 @@ def _run_benchmarl(
         row = _run_row(scenario, algorithm, seed, cfg)
         curve = [(int(f * n_agents), float(r)) for f, r in rec["curve"] if math.isfinite(r)]
         returns = np.asarray(rec["eval_returns"], dtype=float)
+        episodes = rec.get("eval_metrics") or []
+        metric = SUCCESS_METRIC.get(scenario, "")
+        if episodes:  # averaged as evaluate_policies does it: an episode whose counter never fired counts 0
+            seen = [e for e in episodes if metric in e]
+            mean = {metric: float(np.mean([e.get(metric, 0.0) for e in episodes]))} if seen else {}
+            row["success"] = _success(scenario, cfg, mean)
         row.update(
             agent_steps=int(rec["frames_done"]) * n_agents,
             wall_s=round(float(rec["wall_s"]), 3),

@@ -144,8 +144,8 @@ def summary_markdown(
         "main metric (navigation: arrivals per agent; rendezvous: agents that met, per agent; relay: share of "
         "groups at their target; "
         "uav_release: weighted coverage). BenchMARL rows: the return is measured through the TorchRL env on the "
-        "same seeds; their success metric is not measured (`-`). Baseline rows: scripted policies on the same "
-        "seeds (std over episodes). Rows that did not run say why.",
+        "same seeds, and the success metric from the same episodes' infos. Baseline rows: scripted policies on "
+        "the same seeds (std over episodes). Rows that did not run say why.",
         "",
         "| scenario | algorithm | seeds | budget (agent-steps) | eval return | success | CPU s / seed | status |",
         "|---|---|---|---|---|---|---|---|",

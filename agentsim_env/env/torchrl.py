@@ -11,6 +11,7 @@ the global ``"state"`` for centralised critics. Install with ``pip install "agen
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 from agentsim_env.env.parallel_env import AgentSimParallelEnv, build_parallel_env
@@ -46,6 +47,7 @@ def torchrl_env(
     seed: int | None = None,
     device: str = "cpu",
     return_state: bool = False,
+    wrap: Callable[[Any], Any] | None = None,
     **config: Any,
 ) -> PettingZooWrapper:
     """A scenario as a TorchRL environment: one group of all agents, masked, done when every agent is.
@@ -55,13 +57,16 @@ def torchrl_env(
         seed: Seed of the first reset (``None``: fresh entropy).
         device: Torch device of the tensors.
         return_state: Add the global state (``"state"``) for centralised critics.
+        wrap: Applied to the ParallelEnv before TorchRL wraps it, e.g. ``agentsim_env.wrappers.EpisodeMetrics``
+            (whose tally of the infos TorchRL does not pass on); it must return a PettingZoo ``ParallelEnv``.
         **config: ParallelEnv and scenario config keys (see :func:`parallel_env`).
 
     Returns:
         The ``PettingZooWrapper``; ``env.group_map == {"agents": [every agent id]}``.
     """
+    env = parallel_env(scenario, **config)
     return PettingZooWrapper(
-        env=parallel_env(scenario, **config),
+        env=env if wrap is None else wrap(env),
         group_map=MarlGroupMapType.ALL_IN_ONE_GROUP,
         use_mask=True,
         done_on_any=False,
