@@ -120,14 +120,15 @@ def _batched(name: str, config: dict[str, Any] | None = None, num_threads: int =
 
 
 def _threaded(name: str, config: dict[str, Any]) -> None:
-    """``_batched`` over 2 threads with ranges of a few slots, so the kernels that only big worlds split (the
-    range graph's and the overlay's joins, the delivery look-ups) compile here too."""
+    """``_batched`` over 4 threads with ranges of one slot or more, so the kernels that only big worlds split (the
+    range graph's and the overlay's joins, the delivery look-ups, the sends' rows, and from 4 ranges the inbox
+    push's and the grid's per-range passes) compile here too."""
     from agentsim_env.core import threads
 
     saved = threads.MIN_ROWS
-    threads.MIN_ROWS = 4
+    threads.MIN_ROWS = 1
     try:
-        _batched(name, config, num_threads=2)
+        _batched(name, config, num_threads=4)
     finally:
         threads.MIN_ROWS = saved
 

@@ -365,3 +365,64 @@ def test_inbox_pushes_do_not_depend_on_the_thread_count(seed: int, k: int, steps
         for i, (a, b) in enumerate(zip(_inbox_state(one), _inbox_state(many))):
             np.testing.assert_array_equal(a, b, err_msg=f"{k} threads, step {step}: inbox array {i} differs")
     assert one.hops.max() <= np.iinfo(np.int16).max and one.hops.min() >= 0
+
+
+@given(seed=st.integers(0, 10_000), k=st.integers(2, 9), n_worlds=st.integers(1, 3))
+@settings(max_examples=60, deadline=None)
+def test_the_grid_does_not_depend_on_the_thread_count(seed: int, k: int, n_worlds: int) -> None:
+    # Crowded and empty cells, slots off the map (clamped into the border cells), inactive slots, several worlds:
+    # each range of cells counts and places its own slots; starts and items equal the one-pass build's.
+    rng = np.random.default_rng(seed)
+    s = int(rng.integers(0, 400))
+    pos = np.column_stack([rng.uniform(-5, 25, (s, 2)), rng.uniform(0, 4, s)])
+    pos[: s // 4, :2] = np.round(pos[: s // 4, :2])  # many slots in one cell, on cell borders
+    world = rng.integers(0, n_worlds, s)
+    active = rng.random(s) < 0.8
+    spec = GridSpec.for_bounds((0, 20, 0, 20), float(rng.choice([1.0, 2.5, 7.0])), n_worlds)
+    one = build_grid(spec, pos, world, active)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(threads_mod, "MIN_ROWS", 4)
+        many = build_grid(spec, pos, world, active, RowThreads(k))
+    np.testing.assert_array_equal(one.cell_start, many.cell_start)
+    np.testing.assert_array_equal(one.items, many.items)
+
+
+@given(seed=st.integers(0, 10_000), k=st.integers(2, 6))
+@settings(max_examples=40, deadline=None)
+def test_bus_fan_out_and_filters_do_not_depend_on_the_thread_count(seed: int, k: int) -> None:
+    # A batch of unicasts, GROUP messages (members on and offline, the sender among them), heartbeat answers to the
+    # controller (receiver -1), with a range limit, senders the caller has not seen and loss: pairs, their order,
+    # delivered and dropped columns, tallies and drop counters equal the one-pass kernels'.
+    from agentsim_env.comms.messages import AGENT, GROUP, HEARTBEAT
+    from agentsim_env.comms.routing import expand, expand_on, filter_pairs, filter_pairs_on, group_members
+
+    rng = np.random.default_rng(seed)
+    s, q, n_g = 60, int(rng.integers(0, 70)), 4
+    online = rng.random(s) < 0.85
+    group = rng.integers(-1, n_g, s)
+    world_of = np.zeros(s, dtype=np.int64)
+    kind = rng.choice(np.array([AGENT, GROUP, HEARTBEAT], dtype=np.int8), q)
+    snd = rng.integers(-1, s, q)
+    tgt = np.where(kind == GROUP, rng.integers(0, n_g, q), rng.integers(-1, s, q))
+    kid, offsets, slots = group_members(online, group, world_of, 1, n_g, np.where(kind == GROUP, tgt, -1))
+    order = rng.permutation(q) if rng.random() < 0.5 else np.zeros(0, dtype=np.int64)
+    one = expand(kind, snd, tgt, kid, offsets, slots, order)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(threads_mod, "MIN_ROWS", 2)
+        many = expand_on(RowThreads(k), kind, snd, tgt, kid, offsets, slots, order)
+        for a, b in zip(one, many):
+            np.testing.assert_array_equal(a, b)
+        rep, recv = one
+        m = rep.shape[0]
+        msg, created = np.arange(q, dtype=np.int64) + 100, rng.integers(0, 9, q)
+        pos = rng.uniform(0, 30, (s, 3))
+        seen = rng.random(s) < 0.9 if rng.random() < 0.5 else np.zeros(0, dtype=bool)
+        u = rng.random(m) if m else np.zeros(0)
+        args = (rep, recv, msg, kind, snd, tgt, created, online, seen, pos, 15.0**2, u, 0.2)
+        d1, d2 = np.zeros(s, dtype=np.int64), np.zeros(s, dtype=np.int64)
+        ok1, dr1, hb1, an1 = filter_pairs(*args, d1)
+        ok2, dr2, hb2, an2 = filter_pairs_on(RowThreads(k), *args, d2)
+    for a, b in zip(ok1 + dr1, ok2 + dr2):
+        np.testing.assert_array_equal(a, b)
+    assert (hb1, an1) == (hb2, an2)
+    np.testing.assert_array_equal(d1, d2)

@@ -79,7 +79,7 @@ from agentsim_env.comms.messages import (
     HEARTBEAT,
     KIND_NAMES,
 )
-from agentsim_env.comms.routing import expand, filter_pairs, group_members
+from agentsim_env.comms.routing import expand_on, filter_pairs_on, group_members
 from agentsim_env.comms.sequence import Sequencer, inbox_order
 from agentsim_env.core.config_model import Int, Real, config
 
@@ -543,7 +543,8 @@ class MessageBus:
             kid, offsets, slots = group_members(
                 members, group, self._world_of, self.n_worlds, n_g, rows.world * n_g + tgt
             )
-        rep, recv = expand(kind, snd, tgt, kid, offsets, slots, order)
+        threads = self.inbox.threads
+        rep, recv = expand_on(threads, kind, snd, tgt, kid, offsets, slots, order)
         if mine is not None and rep.shape[0]:
             own = mine[np.where(recv >= 0, recv, snd[rep])]  # an answer belongs to the bus owning its sender
             if not own.all():
@@ -555,7 +556,8 @@ class MessageBus:
             when = rows.created - self.starts[rows.world]  # the step within the world's episode
             u = keyed_draws(rep, recv, self.keys, rows.world, self.n_agents, when, snd, rows.seq, kind)
         r_max = self.channel.max_range
-        ok, dr, n_hb, n_ans = filter_pairs(
+        ok, dr, n_hb, n_ans = filter_pairs_on(
+            threads,
             rep,
             recv,
             rows.msg,

@@ -19,13 +19,8 @@ from agentsim_env.comms.inbox_kernels import (
     push_kernel,
 )
 from agentsim_env.comms.messages import FEATURES_PER_MESSAGE, KIND_NAMES, N_KINDS
+from agentsim_env.core import threads as _threads
 from agentsim_env.core.threads import RowThreads
-
-SCAN_MIN_RANGES = 4
-"""Fewest row ranges at which a push counts each range's receivers on its own thread (``push_count_range``: every
-range reads all receivers) instead of one serial count before the parallel pass. With two ranges each would read
-everything to write half, and mispredict the range test half the time; with four or more the serial count was
-the push's largest part (a full-traffic step at 100,000 agents: 1.7 million messages)."""
 
 
 class Inbox:
@@ -196,7 +191,8 @@ class Inbox:
                 optionally with an eighth item ``True``: ``sender`` and ``created`` are then tables indexed by
                 ``rows`` like ``payload`` (message ``j`` has ``sender[rows[j]]``), not one value per message.
         """
-        scan = len(self.threads.ranges(self.n_slots)) >= SCAN_MIN_RANGES if self.threads.num_threads > 1 else False
+        n_ranges = len(self.threads.ranges(self.n_slots)) if self.threads.num_threads > 1 else 1
+        scan = n_ranges >= _threads.SCAN_MIN_RANGES  # each range counts its own receivers (core.threads)
         for k in range(0, len(batches), 2):  # pairs in turn: the same as one push of everything, in order
             a = kernel_batch(batches[k])
             b = kernel_batch(batches[k + 1]) if k + 1 < len(batches) else EMPTY_BATCH

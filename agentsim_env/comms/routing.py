@@ -18,6 +18,7 @@ import numba as nb
 import numpy as np
 
 from agentsim_env.comms.messages import DROP_LOSS, DROP_OFFLINE, DROP_RANGE, GROUP, HEARTBEAT, REASON_NONE
+from agentsim_env.core.threads import RowThreads, light_min_rows
 
 
 @nb.njit(cache=True)
@@ -70,25 +71,31 @@ def group_members(
     return np.where(found, at, -1), np.append(first, mk.size), ms[order]
 
 
-@nb.njit(cache=True)
-def expand(kind, snd, tgt, kid, offsets, slots, order):  # type: ignore[no-untyped-def]
-    """(message row, receiver) pairs of a batch: GROUP messages fan out to their members, sender excluded.
-
-    Messages are taken in ``order`` (row indices; empty = row order), members in slot order.
-    """
-    q = kind.shape[0]
-    total = 0
-    for k in range(q):
-        if kind[k] == GROUP:
-            if kid[k] >= 0:
-                for p in range(offsets[kid[k]], offsets[kid[k] + 1]):
-                    total += slots[p] != snd[k]
-        else:
-            total += 1
-    rep = np.empty(total, dtype=np.int64)
-    recv = np.empty(total, dtype=np.int64)
+@nb.njit(cache=True, nogil=True)
+def _pairs_of(k, kind, snd, kid, offsets, slots):  # type: ignore[no-untyped-def]
+    # How many pairs message k makes: one per member of its group but the sender, or one
+    if kind[k] != GROUP:
+        return 1
     n = 0
-    for i in range(q):
+    if kid[k] >= 0:
+        for p in range(offsets[kid[k]], offsets[kid[k] + 1]):
+            n += slots[p] != snd[k]
+    return n
+
+
+@nb.njit(cache=True, nogil=True)
+def expand_count(lo, hi, kind, snd, kid, offsets, slots, order):  # type: ignore[no-untyped-def]
+    """Pairs made by the messages at positions [lo, hi) of ``order`` (row order when it is empty)."""
+    total = 0
+    for i in range(lo, hi):
+        total += _pairs_of(order[i] if order.shape[0] else i, kind, snd, kid, offsets, slots)
+    return total
+
+
+@nb.njit(cache=True, nogil=True)
+def expand_fill(lo, hi, kind, snd, tgt, kid, offsets, slots, order, n, rep, recv):  # type: ignore[no-untyped-def]
+    """Write the pairs of the messages at positions [lo, hi) of ``order`` from pair ``n`` on."""
+    for i in range(lo, hi):
         k = order[i] if order.shape[0] else i
         if kind[k] == GROUP:
             if kid[k] >= 0:
@@ -101,7 +108,104 @@ def expand(kind, snd, tgt, kid, offsets, slots, order):  # type: ignore[no-untyp
             rep[n] = k
             recv[n] = tgt[k]
             n += 1
+
+
+@nb.njit(cache=True)
+def expand(kind, snd, tgt, kid, offsets, slots, order):  # type: ignore[no-untyped-def]
+    """(message row, receiver) pairs of a batch: GROUP messages fan out to their members, sender excluded.
+
+    Messages are taken in ``order`` (row indices; empty = row order), members in slot order.
+    """
+    q = kind.shape[0]
+    total = expand_count(0, q, kind, snd, kid, offsets, slots, order)
+    rep = np.empty(total, dtype=np.int64)
+    recv = np.empty(total, dtype=np.int64)
+    expand_fill(0, q, kind, snd, tgt, kid, offsets, slots, order, 0, rep, recv)
     return rep, recv
+
+
+@nb.njit(cache=True, nogil=True)
+def pair_reasons(lo, hi, rep, recv, snd, online, seen, pos, r_max2, u, loss, reason):  # type: ignore[no-untyped-def]
+    """The drop reason of pairs [lo, hi) into ``reason`` (``filter_pairs``' rules); returns how many pass."""
+    n_ok = 0
+    for p in range(lo, hi):
+        r = recv[p]
+        s = snd[rep[p]]
+        why = REASON_NONE
+        if r >= 0:
+            if not online[r]:
+                why = DROP_OFFLINE
+            elif r_max2 >= 0.0 and s >= 0 and seen.shape[0] > 0 and not seen[s]:
+                why = DROP_RANGE  # the caller does not know where the sender is: it is not in range
+            elif r_max2 >= 0.0 and s >= 0:
+                d0 = pos[s, 0] - pos[r, 0]
+                d1 = pos[s, 1] - pos[r, 1]
+                d2 = pos[s, 2] - pos[r, 2]
+                if (d0 * d0 + d2 * d2) + d1 * d1 > r_max2:  # numpy's einsum association, bit for bit
+                    why = DROP_RANGE
+        if why == REASON_NONE and loss > 0.0 and u[p] < loss:
+            why = DROP_LOSS
+        reason[p] = why
+        n_ok += why == REASON_NONE
+    return n_ok
+
+
+@nb.njit(cache=True, nogil=True)
+def pair_columns(lo, hi, rep, recv, reason, msg, kind, snd, tgt, created, a, b, ok, dr):  # type: ignore[no-untyped-def]
+    """The event columns of pairs [lo, hi): delivered ones into ``ok`` from row ``a``, dropped ones into ``dr``
+    from row ``b``; returns the delivered heartbeats to slots and answers to the controller."""
+    d_msg, d_kind, d_snd, d_tgt, d_rcv, d_cre, d_row = ok
+    x_msg, x_kind, x_snd, x_tgt, x_rcv, x_cre, x_why = dr
+    n_hb = 0
+    n_ans = 0
+    for p in range(lo, hi):
+        k = rep[p]
+        if reason[p] == REASON_NONE:
+            d_msg[a], d_kind[a], d_snd[a], d_tgt[a] = msg[k], kind[k], snd[k], tgt[k]
+            d_rcv[a], d_cre[a], d_row[a] = recv[p], created[k], k
+            if recv[p] < 0:
+                n_ans += 1
+            elif kind[k] == HEARTBEAT:
+                n_hb += 1
+            a += 1
+        else:
+            x_msg[b], x_kind[b], x_snd[b], x_tgt[b] = msg[k], kind[k], snd[k], tgt[k]
+            x_rcv[b], x_cre[b], x_why[b] = recv[p], created[k], reason[p]
+            b += 1
+    return n_hb, n_ans
+
+
+@nb.njit(cache=True)
+def pair_arrays(n_ok, n_dr):  # type: ignore[no-untyped-def]
+    """Fresh delivered and dropped event columns of ``n_ok`` and ``n_dr`` rows."""
+    ok = (
+        np.empty(n_ok, dtype=np.int64),
+        np.empty(n_ok, dtype=np.int8),
+        np.empty(n_ok, dtype=np.int64),
+        np.empty(n_ok, dtype=np.int64),
+        np.empty(n_ok, dtype=np.int64),
+        np.empty(n_ok, dtype=np.int64),
+        np.empty(n_ok, dtype=np.int64),
+    )
+    dr = (
+        np.empty(n_dr, dtype=np.int64),
+        np.empty(n_dr, dtype=np.int8),
+        np.empty(n_dr, dtype=np.int64),
+        np.empty(n_dr, dtype=np.int64),
+        np.empty(n_dr, dtype=np.int64),
+        np.empty(n_dr, dtype=np.int64),
+        np.empty(n_dr, dtype=np.int8),
+    )
+    return ok, dr
+
+
+@nb.njit(cache=True)
+def count_drops(x_rcv, x_snd, dropped):  # type: ignore[no-untyped-def]
+    """One drop for each dropped pair's receiver (its sender for an answer to the controller)."""
+    for j in range(x_rcv.shape[0]):
+        c = x_rcv[j] if x_rcv[j] >= 0 else x_snd[j]
+        if c >= 0:
+            dropped[c] += 1
 
 
 @nb.njit(cache=True)
@@ -120,68 +224,81 @@ def filter_pairs(rep, recv, msg, kind, snd, tgt, created, online, seen, pos, r_m
         delivered heartbeats to slots and of answers that reached the controller.
     """
     m = rep.shape[0]
-    reason = np.zeros(m, dtype=np.int8)
-    n_ok = 0
-    for p in range(m):
-        r = recv[p]
-        s = snd[rep[p]]
-        why = REASON_NONE
-        if r >= 0:
-            if not online[r]:
-                why = DROP_OFFLINE
-            elif r_max2 >= 0.0 and s >= 0 and seen.shape[0] > 0 and not seen[s]:
-                why = DROP_RANGE  # the caller does not know where the sender is: it is not in range
-            elif r_max2 >= 0.0 and s >= 0:
-                d0 = pos[s, 0] - pos[r, 0]
-                d1 = pos[s, 1] - pos[r, 1]
-                d2 = pos[s, 2] - pos[r, 2]
-                if (d0 * d0 + d2 * d2) + d1 * d1 > r_max2:  # numpy's einsum association, bit for bit
-                    why = DROP_RANGE
-        if why == REASON_NONE and loss > 0.0 and u[p] < loss:
-            why = DROP_LOSS
-        reason[p] = why
-        if why == REASON_NONE:
-            n_ok += 1
-        else:
-            c = r if r >= 0 else s
-            if c >= 0:
-                dropped[c] += 1
-    n_dr = m - n_ok
-    d_msg, d_kind = np.empty(n_ok, dtype=np.int64), np.empty(n_ok, dtype=np.int8)
-    d_snd, d_tgt = np.empty(n_ok, dtype=np.int64), np.empty(n_ok, dtype=np.int64)
-    d_rcv, d_cre, d_row = (
-        np.empty(n_ok, dtype=np.int64),
-        np.empty(n_ok, dtype=np.int64),
-        np.empty(n_ok, dtype=np.int64),
+    reason = np.empty(m, dtype=np.int8)
+    n_ok = pair_reasons(0, m, rep, recv, snd, online, seen, pos, r_max2, u, loss, reason)
+    ok, dr = pair_arrays(n_ok, m - n_ok)
+    n_hb, n_ans = pair_columns(0, m, rep, recv, reason, msg, kind, snd, tgt, created, 0, 0, ok, dr)
+    count_drops(dr[4], dr[2], dropped)
+    return ok, dr, n_hb, n_ans
+
+
+def _ranges(threads: RowThreads, n: int, min_rows: int | None) -> int:
+    """How many ranges ``threads.run`` cuts ``n`` rows into (1 with one thread)."""
+    return 1 if threads.num_threads == 1 else len(threads.ranges(n, min_rows))
+
+
+def expand_on(
+    threads: RowThreads,
+    kind: np.ndarray,
+    snd: np.ndarray,
+    tgt: np.ndarray,
+    kid: np.ndarray,
+    offsets: np.ndarray,
+    slots: np.ndarray,
+    order: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """``expand`` over ranges of messages on ``threads`` (a message fans out to ~10 pairs: ``MIN_ROWS`` messages a
+    range): each range counts its pairs, then writes them from its first row; the same pairs in the same order."""
+    q = kind.shape[0]
+    if _ranges(threads, q, None) == 1:
+        return expand(kind, snd, tgt, kid, offsets, slots, order)  # type: ignore[no-any-return]
+    counts = threads.run(lambda lo, hi, _: expand_count(lo, hi, kind, snd, kid, offsets, slots, order), q)
+    first = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    rep, recv = np.empty(int(first[-1]), dtype=np.int64), np.empty(int(first[-1]), dtype=np.int64)
+    threads.run(
+        lambda lo, hi, r: expand_fill(lo, hi, kind, snd, tgt, kid, offsets, slots, order, first[r], rep, recv), q
     )
-    x_msg, x_kind = np.empty(n_dr, dtype=np.int64), np.empty(n_dr, dtype=np.int8)
-    x_snd, x_tgt = np.empty(n_dr, dtype=np.int64), np.empty(n_dr, dtype=np.int64)
-    x_rcv, x_cre, x_why = (
-        np.empty(n_dr, dtype=np.int64),
-        np.empty(n_dr, dtype=np.int64),
-        np.empty(n_dr, dtype=np.int8),
+    return rep, recv
+
+
+def filter_pairs_on(
+    threads: RowThreads,
+    rep: np.ndarray,
+    recv: np.ndarray,
+    msg: np.ndarray,
+    kind: np.ndarray,
+    snd: np.ndarray,
+    tgt: np.ndarray,
+    created: np.ndarray,
+    online: np.ndarray,
+    seen: np.ndarray,
+    pos: np.ndarray,
+    r_max2: float,
+    u: np.ndarray,
+    loss: float,
+    dropped: np.ndarray,
+) -> tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...], int, int]:
+    """``filter_pairs`` over ranges of pairs on ``threads`` (a few nanoseconds a pair: ``light_min_rows`` pairs a
+    range): reasons and counts per range, then each range writes its delivered and dropped rows from its first
+    ones; the drop counters after. The same columns, counters and totals for any thread count."""
+    m = rep.shape[0]
+    light = light_min_rows()
+    if _ranges(threads, m, light) == 1:
+        return filter_pairs(rep, recv, msg, kind, snd, tgt, created, online, seen, pos, r_max2, u, loss, dropped)  # type: ignore[no-any-return]
+    reason = np.empty(m, dtype=np.int8)
+    n_ok = threads.run(
+        lambda lo, hi, _: pair_reasons(lo, hi, rep, recv, snd, online, seen, pos, r_max2, u, loss, reason), m, light
     )
-    a = 0
-    b = 0
-    n_hb = 0
-    n_ans = 0
-    for p in range(m):
-        k = rep[p]
-        if reason[p] == REASON_NONE:
-            d_msg[a], d_kind[a], d_snd[a], d_tgt[a] = msg[k], kind[k], snd[k], tgt[k]
-            d_rcv[a], d_cre[a], d_row[a] = recv[p], created[k], k
-            if recv[p] < 0:
-                n_ans += 1
-            elif kind[k] == HEARTBEAT:
-                n_hb += 1
-            a += 1
-        else:
-            x_msg[b], x_kind[b], x_snd[b], x_tgt[b] = msg[k], kind[k], snd[k], tgt[k]
-            x_rcv[b], x_cre[b], x_why[b] = recv[p], created[k], reason[p]
-            b += 1
-    return (
-        (d_msg, d_kind, d_snd, d_tgt, d_rcv, d_cre, d_row),
-        (x_msg, x_kind, x_snd, x_tgt, x_rcv, x_cre, x_why),
-        n_hb,
-        n_ans,
+    spans = threads.ranges(m, light)
+    ok_first = np.concatenate([[0], np.cumsum(n_ok)]).astype(np.int64)
+    dr_first = np.concatenate([[0], np.cumsum([hi - lo - k for (lo, hi), k in zip(spans, n_ok)])]).astype(np.int64)
+    ok, dr = pair_arrays(int(ok_first[-1]), int(dr_first[-1]))
+    tallies = threads.run(
+        lambda lo, hi, r: pair_columns(
+            lo, hi, rep, recv, reason, msg, kind, snd, tgt, created, ok_first[r], dr_first[r], ok, dr
+        ),
+        m,
+        light,
     )
+    count_drops(dr[4], dr[2], dropped)
+    return ok, dr, sum(t[0] for t in tallies), sum(t[1] for t in tallies)
