@@ -121,8 +121,8 @@ def _batched(name: str, config: dict[str, Any] | None = None, num_threads: int =
 
 def _threaded(name: str, config: dict[str, Any]) -> None:
     """``_batched`` over 4 threads with ranges of one slot or more, so the kernels that only big worlds split (the
-    range graph's and the overlay's joins, the delivery look-ups, the sends' rows, and from 4 ranges the inbox
-    push's and the grid's per-range passes) compile here too."""
+    range graph's and the overlay's joins, the delivery look-ups, the sends' rows, the bus's fan-out and filters,
+    and from 4 ranges the inbox push's per-range count) compile here too."""
     from agentsim_env.core import threads
 
     saved = threads.MIN_ROWS

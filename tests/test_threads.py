@@ -367,26 +367,6 @@ def test_inbox_pushes_do_not_depend_on_the_thread_count(seed: int, k: int, steps
     assert one.hops.max() <= np.iinfo(np.int16).max and one.hops.min() >= 0
 
 
-@given(seed=st.integers(0, 10_000), k=st.integers(2, 9), n_worlds=st.integers(1, 3))
-@settings(max_examples=60, deadline=None)
-def test_the_grid_does_not_depend_on_the_thread_count(seed: int, k: int, n_worlds: int) -> None:
-    # Crowded and empty cells, slots off the map (clamped into the border cells), inactive slots, several worlds:
-    # each range of cells counts and places its own slots; starts and items equal the one-pass build's.
-    rng = np.random.default_rng(seed)
-    s = int(rng.integers(0, 400))
-    pos = np.column_stack([rng.uniform(-5, 25, (s, 2)), rng.uniform(0, 4, s)])
-    pos[: s // 4, :2] = np.round(pos[: s // 4, :2])  # many slots in one cell, on cell borders
-    world = rng.integers(0, n_worlds, s)
-    active = rng.random(s) < 0.8
-    spec = GridSpec.for_bounds((0, 20, 0, 20), float(rng.choice([1.0, 2.5, 7.0])), n_worlds)
-    one = build_grid(spec, pos, world, active)
-    with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(threads_mod, "MIN_ROWS", 4)
-        many = build_grid(spec, pos, world, active, RowThreads(k))
-    np.testing.assert_array_equal(one.cell_start, many.cell_start)
-    np.testing.assert_array_equal(one.items, many.items)
-
-
 @given(seed=st.integers(0, 10_000), k=st.integers(2, 6))
 @settings(max_examples=40, deadline=None)
 def test_bus_fan_out_and_filters_do_not_depend_on_the_thread_count(seed: int, k: int) -> None:

@@ -17,9 +17,6 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
-from agentsim_env.core import threads as _threads
-from agentsim_env.core.threads import RowThreads
-
 # Kernels compile with error_model="numpy": every division in them is guarded or by a validated positive
 # value, and dropping the per-division zero check of the default model made the scan ~20 % faster.
 
@@ -125,9 +122,7 @@ def _build(pos, world, active, ox, oy, cell, nx, ny, n_cells):  # type: ignore[n
     return counts, items
 
 
-def build_grid(
-    spec: GridSpec, pos: np.ndarray, world: np.ndarray, active: np.ndarray, threads: RowThreads | None = None
-) -> Grid:
+def build_grid(spec: GridSpec, pos: np.ndarray, world: np.ndarray, active: np.ndarray) -> Grid:
     """Bin every active slot by world and horizontal cell.
 
     Args:
@@ -135,69 +130,24 @@ def build_grid(
         pos: Positions ``(S, 3)`` (or ``(S, 2)``).
         world: World id per slot ``(S,)``.
         active: Which slots to index ``(S,)``.
-        threads: Row threads (None, or fewer than ``core.threads.SCAN_MIN_RANGES`` ranges: one pass on the
-            calling thread). Otherwise the cells are keyed over slot ranges, then each range of cells counts and
-            places its own slots (every range reads every key): the same grid for any thread count.
 
     Returns:
         The grid; items are slot indices in ascending order within each cell.
     """
     if world.shape[0] and (int(world.min()) < 0 or int(world.max()) >= spec.n_worlds):
         raise ValueError(f"world ids must be in [0, {spec.n_worlds}), got {int(world.min())}..{int(world.max())}")
-    p = np.ascontiguousarray(pos)
-    geo = (spec.origin_x, spec.origin_y, spec.cell, spec.nx, spec.ny)
-    s = p.shape[0]
-    k = 1 if threads is None or threads.num_threads == 1 else len(threads.ranges(s))
-    if k < _threads.SCAN_MIN_RANGES:
-        cs, items = _build(p, world, active, *geo, spec.n_cells)
-        return Grid(spec, cs, items)
-    assert threads is not None
-    n_cells = spec.n_cells
-    key = np.empty(s, dtype=np.int64)
-    in_bucket = np.zeros((k, k), dtype=np.int64)  # [slot range, cell range]: keys of the one in the other
-    threads.run(lambda lo, hi, r: _keys(lo, hi, p, world, active, *geo, n_cells, k, key, in_bucket[r]), s)
-    first = np.concatenate([[0], np.cumsum(in_bucket.sum(axis=0))])  # each cell range's first item
-    counts = np.zeros(n_cells + 1, dtype=np.int64)
-    items = np.empty(int(first[-1]), dtype=np.int64)
-    counts[n_cells] = first[-1]
-    threads.run(lambda lo, hi, r: _place(key, n_cells, k, r, int(first[r]), counts, items), s)
-    return Grid(spec, counts, items)
-
-
-@nb.njit(cache=True, nogil=True, error_model="numpy")
-def _keys(lo, hi, pos, world, active, ox, oy, cell, nx, ny, n_cells, k, key, in_bucket):  # type: ignore[no-untyped-def]
-    # The cell key of slots [lo, hi) (-1: inactive), and how many of them fall in each of the k cell ranges.
-    for i in range(lo, hi):
-        if not active[i]:
-            key[i] = -1
-            continue
-        cx, cy = cell_of(pos[i, 0], pos[i, 1], ox, oy, cell, nx, ny)
-        c = (world[i] * nx + cx) * ny + cy
-        key[i] = c
-        in_bucket[c * k // n_cells] += 1
-
-
-@nb.njit(cache=True, nogil=True)
-def _place(key, n_cells, k, r, first, counts, items):  # type: ignore[no-untyped-def]
-    # ``_build``'s count, prefix sum and placing for the cells of range r only, [r n_cells / k, (r + 1) n_cells
-    # / k) (the cells whose key c has c k // n_cells == r), whose items start at ``first``: every range reads
-    # every key and writes its own cells' starts and items.
-    c0 = (r * n_cells + k - 1) // k
-    c1 = ((r + 1) * n_cells + k - 1) // k
-    s = key.shape[0]
-    for i in range(s):
-        c = key[i]
-        if c >= c0 and c < c1:
-            counts[c] += 1
-    total = first
-    for c in range(c0, c1):
-        total += counts[c]
-        counts[c] = total
-    for i in range(s - 1, -1, -1):
-        c = key[i]
-        if c >= c0 and c < c1:
-            counts[c] -= 1
-            items[counts[c]] = i
+    cs, items = _build(
+        np.ascontiguousarray(pos),
+        world,
+        active,
+        spec.origin_x,
+        spec.origin_y,
+        spec.cell,
+        spec.nx,
+        spec.ny,
+        spec.n_cells,
+    )
+    return Grid(spec, cs, items)
 
 
 @nb.njit(cache=True, error_model="numpy")

@@ -253,7 +253,7 @@ class World:
     def refresh(self, worlds: Sequence[int] | None = None) -> None:
         """Rebuild the grid, the comms range graph and the sensor readings after ``worlds`` were reset (None: all)."""
         st = self.state
-        self.agent_grid = build_grid(self.grid_spec, st.pos, st.world_id, st.online, self.threads)
+        self.agent_grid = build_grid(self.grid_spec, st.pos, st.world_id, st.online)
         if self.comms is not None:
             self.comms.update_graph(self.agent_grid, st.pos, st.online, st.world_id)
         if self.physics is not None:
@@ -292,7 +292,7 @@ class World:
     def regrid(self, ctx: StepContext) -> None:
         """Rebuild the step's agent grid over the online slots (into ``ctx.grid`` too)."""
         st = self.state
-        self.agent_grid = ctx.grid = build_grid(self.grid_spec, st.pos, st.world_id, st.online, self.threads)
+        self.agent_grid = ctx.grid = build_grid(self.grid_spec, st.pos, st.world_id, st.online)
 
     def step(self, *, hooks: bool = True) -> StepEvents:
         """Advance every world by one ``dt``: stages 2-8, then the step hooks (10).
