@@ -72,23 +72,17 @@ def group_members(
 
 
 @nb.njit(cache=True, nogil=True)
-def _pairs_of(k, kind, snd, kid, offsets, slots):  # type: ignore[no-untyped-def]
-    # How many pairs message k makes: one per member of its group but the sender, or one
-    if kind[k] != GROUP:
-        return 1
-    n = 0
-    if kid[k] >= 0:
-        for p in range(offsets[kid[k]], offsets[kid[k] + 1]):
-            n += slots[p] != snd[k]
-    return n
-
-
-@nb.njit(cache=True, nogil=True)
 def expand_count(lo, hi, kind, snd, kid, offsets, slots, order):  # type: ignore[no-untyped-def]
     """Pairs made by the messages at positions [lo, hi) of ``order`` (row order when it is empty)."""
+    # (written out: a per-message helper taking the arrays made this pass six times slower)
     total = 0
     for i in range(lo, hi):
-        total += _pairs_of(order[i] if order.shape[0] else i, kind, snd, kid, offsets, slots)
+        k = order[i] if order.shape[0] else i
+        if kind[k] != GROUP:
+            total += 1
+        elif kid[k] >= 0:
+            for p in range(offsets[kid[k]], offsets[kid[k] + 1]):
+                total += slots[p] != snd[k]
     return total
 
 
