@@ -165,6 +165,23 @@ def test_write_all_writes_every_file_and_leaves_no_temporary(tmp_path: Path) -> 
     assert (tmp_path / "out" / "navigation.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
+def test_baselines_of_another_mode_are_compared_by_success_not_drawn_on_the_return_axis(tmp_path: Path) -> None:
+    # uav_release's strategies play the default mode while the policy learns the autopilot mode: their returns are
+    # on another scale, so the plot keeps them off the curves and adds a panel of the success metric
+    import matplotlib.image as mpimg
+
+    from agentsim_env.train.learnbench_report import plot_scenario
+
+    r = _result()
+    one = plot_scenario("navigation", r.curves, r.baselines["navigation"], tmp_path / "one.png", runs=r.runs)
+    two = plot_scenario(
+        "navigation", r.curves, r.baselines["navigation"], tmp_path / "two.png", runs=r.runs, baselines_elsewhere=True
+    )
+    assert mpimg.imread(two).shape[1] > mpimg.imread(one).shape[1]  # the success panel beside the curves
+    configs = {"uav_release": bench_config("uav_release", BenchOptions(scenarios=("uav_release",)))}
+    assert configs["uav_release"].eval.baseline_env  # the shipped config plays the baselines in their own mode
+
+
 @pytest.mark.slow
 def test_quick_profile_writes_every_file_with_finite_numbers(tmp_path: Path) -> None:
     out = tmp_path / "bench"

@@ -196,16 +196,25 @@ def plot_scenario(
     path: Path,
     *,
     title: str = "",
+    runs: Sequence[Mapping[str, Any]] = (),
+    baselines_elsewhere: bool = False,
 ) -> Path:
     """Draw one scenario's learning curves (mean and min-max spread over seeds per algorithm) and each baseline's
     evaluation return as a horizontal line.
 
+    When the baselines play another env than the trained policies (``baselines_elsewhere``: the config's
+    ``eval.baseline_env``, e.g. ``uav_release``'s strategies fly the default mode while the policy learns the
+    autopilot mode), their returns are on another scale: they are left off the curves, and a second panel compares
+    the success metric instead (each algorithm's mean and spread over seeds from ``runs``, each baseline's value).
+
     Args:
         scenario: The scenario (the rows of ``curves`` for it are drawn).
         curves: Rows of ``curves.csv``.
-        baselines: The scenario's baseline rows (``policy``, ``mean_return``).
+        baselines: The scenario's baseline rows (``policy``, ``mean_return``, ``success``).
         path: PNG to write (atomically).
         title: Figure title (default: the scenario).
+        runs: Rows of ``runs.csv`` (for the success panel).
+        baselines_elsewhere: Whether the baselines played another env (see above).
 
     Returns:
         ``path``.
@@ -215,7 +224,11 @@ def plot_scenario(
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(8, 4.5), dpi=110)
+    if baselines_elsewhere:
+        fig, (ax, bx) = plt.subplots(1, 2, figsize=(11, 4.5), dpi=110, gridspec_kw={"width_ratios": [3, 2]})
+        _success_panel(bx, scenario, runs, baselines)
+    else:
+        fig, ax = plt.subplots(figsize=(8, 4.5), dpi=110)
     algos = list(dict.fromkeys(r["algorithm"] for r in curves if r["scenario"] == scenario))
     for i, algo in enumerate(algos):
         pts = [
@@ -229,7 +242,7 @@ def plot_scenario(
         ax.plot(x, mean, color=colour, lw=1.8, marker="o" if len(x) == 1 else None, label=f"{algo} ({seeds} seeds)")
         ax.fill_between(x, lo, hi, color=colour, alpha=0.2)
     styles = ["--", ":", "-."]
-    for j, b in enumerate(b for b in baselines if "mean_return" in b):
+    for j, b in enumerate(b for b in baselines if "mean_return" in b and not baselines_elsewhere):
         ax.axhline(
             float(b["mean_return"]),
             color=plt.cm.Dark2(j % 8),
@@ -241,11 +254,59 @@ def plot_scenario(
     ax.set_ylabel("mean episode return per agent")
     ax.set_title(title or scenario, fontsize=10)
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5))
+    if baselines_elsewhere:
+        ax.legend(fontsize=7, loc="lower right")
+    else:
+        ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5))
     fig.tight_layout()
     write_atomic(path, lambda tmp: fig.savefig(tmp, format="png"))
     plt.close(fig)
     return path
+
+
+def _number(v: Any) -> float:
+    """A CSV cell as a float (NaN when empty or not a number)."""
+    try:
+        return float(v)
+    except (TypeError, ValueError):
+        return math.nan
+
+
+def _success_panel(
+    ax: Any, scenario: str, runs: Sequence[Mapping[str, Any]], baselines: Sequence[Mapping[str, Any]]
+) -> None:
+    """Horizontal bars of the success metric: each algorithm (mean over seeds, min-max as an error bar), then each
+    baseline, highest first within each kind."""
+    labels, values, errs, colours = [], [], [], []
+    algos = list(dict.fromkeys(r["algorithm"] for r in runs if r["scenario"] == scenario))
+    for i, algo in enumerate(algos):
+        vals = [_number(r["success"]) for r in runs if r["scenario"] == scenario and r["algorithm"] == algo]
+        vals = [v for v in vals if math.isfinite(v)]
+        if vals:
+            m = sum(vals) / len(vals)
+            labels.append(f"{algo} ({len(vals)} seeds)")
+            values.append(m)
+            errs.append((m - min(vals), max(vals) - m))
+            colours.append(f"C{i}")
+    rows = sorted(((b["policy"], _number(b.get("success", ""))) for b in baselines), key=lambda t: -t[1])
+    for name, v in rows:  # a NaN sorts anywhere: it is skipped here
+        if math.isfinite(v):
+            labels.append(f"{name} (scripted)")
+            values.append(v)
+            errs.append((0.0, 0.0))
+            colours.append("0.6")
+    y = list(range(len(labels)))[::-1]
+    n_alg = sum(1 for c in colours if c != "0.6")
+    spread = list(zip(*errs[:n_alg])) if n_alg else None
+    ax.barh(y[:n_alg], values[:n_alg], color=colours[:n_alg], xerr=spread, capsize=2)
+    ax.barh(y[n_alg:], values[n_alg:], color="0.6")
+    ax.set_yticks(y, labels, fontsize=7)
+    metric = next((r.get("success_metric", "") for r in runs if r["scenario"] == scenario), "") or next(
+        (b.get("success_metric", "") for b in baselines), ""
+    )
+    ax.set_xlabel(metric or "success")
+    ax.set_title("success (the baselines play their own mode)", fontsize=9)
+    ax.grid(alpha=0.3, axis="x")
 
 
 def write_all(
@@ -293,6 +354,7 @@ def write_all(
         label = " (quick profile: not a result)" if quick else ""
         title = f"{scenario}{label}: {cfg.timesteps:,} agent-steps per run, evaluation on {cfg.eval.seeds} seeds"
         paths.append(plot_scenario(scenario, result.curves, result.baselines.get(scenario, []), out / f"{scenario}.png",
-                                   title=title))  # fmt: skip
+                                   title=title, runs=result.runs,
+                                   baselines_elsewhere=bool(cfg.eval.baseline_env)))  # fmt: skip
     paths.append(write_text_atomic(out / "summary.md", summary_markdown(result, command, quick=quick)))
     return paths
