@@ -28,7 +28,7 @@ examples:
   agentsim train uav_release --timesteps 20000 --eval-baselines default   # evaluate beside B5_cvt only
   agentsim train relay --config relay_nocomm --set seed=1 ppo.learning_rate=0.0001
   agentsim train relay --config relay_curriculum --out outputs/train/relay_cur   # stage by stage (curriculum:)
-  agentsim train relay --config relay_curriculum --out outputs/train/relay_cur --resume --timesteps 40000000
+  agentsim train relay --config relay_curriculum --out outputs/train/relay_cur --resume --timesteps 80000000
   agentsim train navigation --out outputs/train/nav --resume  # continue from the newest checkpoint that loads
   agentsim train navigation --out outputs/train/nav --eval-only --record eval.db
   agentsim run navigation --policy outputs/train/navigation    # the trained model beside the baselines"""

@@ -260,13 +260,13 @@ def read_state(out: Path) -> dict[str, Any]:
     """The state file of a run folder."""
     path = out / STATE_FILE
     if not path.is_file():
-        raise ValueError(f"--resume: no {STATE_FILE} in {str(out)!r} (not a curriculum run)")
+        raise ValueError(f"no {STATE_FILE} in {str(out)!r} (not a curriculum run)")
     try:
         state = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, ValueError) as exc:
-        raise ValueError(f"--resume: {str(path)!r} is not readable JSON: {exc}") from None
+        raise ValueError(f"{str(path)!r} is not readable JSON: {exc}") from None
     if not isinstance(state, dict) or not isinstance(state.get("config"), dict):
-        raise ValueError(f"--resume: {str(path)!r} is not a curriculum state")
+        raise ValueError(f"{str(path)!r} is not a curriculum state")
     return state
 
 
