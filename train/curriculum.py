@@ -69,10 +69,14 @@ __all__ = [
     "Curriculum",
     "CurriculumConfig",
     "StageConfig",
+    "default_evaluator",
+    "fresh_state",
     "has_curriculum",
     "load_curriculum",
+    "read_state",
     "record_evaluation",
     "run_curriculum",
+    "write_curve",
 ]
 
 STATE_FILE = "curriculum_state.json"
@@ -391,6 +395,8 @@ def run_curriculum(
         )
         done_segments += 1
     if state["evals"]:
+        from agentsim_env.train.plots import plot_curriculum
+
         plot_curriculum(cur, state, path / "curriculum.png")
     return state
 
@@ -410,41 +416,4 @@ def write_curve(cur: Curriculum, state: dict[str, Any], path: Path) -> Path:
                 w.writerow([e["timesteps"], e["stage"], st.name, f"{e['value']:.6g}", thr, e["event"], *clocks])
 
     write_atomic(path, write)
-    return path
-
-
-def plot_curriculum(cur: Curriculum, state: dict[str, Any], path: Path) -> Path:
-    """The metric against agent-steps, one colour per stage, stage boundaries and thresholds marked."""
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(8, 4.2), dpi=110)
-    evals, starts = state["evals"], [0] + [p["timesteps"] for p in state["promotions"]]
-    end = max(int(state["timesteps"]), 1)
-    for k in range(int(state["stage"]) + 1):
-        pts = [(e["timesteps"], e["value"]) for e in evals if e["stage"] == k]
-        st = cur.spec.stages[k]
-        hi = starts[k + 1] if k + 1 < len(starts) else end
-        colour = f"C{k % 10}"
-        if pts:
-            xs, ys = zip(*pts)
-            ax.plot(xs, ys, "o-", color=colour, ms=3, lw=1.4, label=f"{k + 1} {st.name}")
-        if st.threshold is not None:
-            ax.hlines(st.threshold, starts[k], hi, colors=colour, linestyles=":", lw=1)
-        if k > 0:
-            how = state["promotions"][k - 1]["how"]
-            ax.axvline(starts[k], color="grey", ls="--" if how == "promoted" else "-.", lw=0.8)
-    ax.set_xlim(0, end * 1.02)
-    ax.set_ylim(-0.03, 1.03)
-    ax.set_xlabel("agent-steps")
-    ax.set_ylabel(f"{cur.spec.metric} ({cur.spec.eval_seeds} held-out seeds)")
-    ax.set_title(
-        f"{cur.base.scenario} curriculum, seed {cur.base.seed}: {int(state['timesteps']):,} agent-steps, "
-        f"{float(state['cpu_s']):.0f} s CPU\n(dotted: thresholds; dashed: promotions; dash-dot: budget advances)",
-        fontsize=9,
-    )
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=7, loc="best", title="stage", title_fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
     return path
