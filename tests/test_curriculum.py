@@ -299,3 +299,9 @@ def test_agentsim_train_curriculum_end_to_end(tmp_path: Path, capsys: pytest.Cap
     assert "run@pair" in (out / "eval.md").read_text() or "run@pairs" in (out / "eval.md").read_text()
     assert main(["train", "relay", "--config", str(path), "--out", str(out), "--quiet"]) == 2
     assert "already holds a curriculum run" in capsys.readouterr().err
+    assert main(["train", "relay", "--config", str(path), "--out", str(out), "--quiet", "--eval-only"]) == 0
+    assert "curriculum: stage 2/2 (pairs) reached" in capsys.readouterr().out
+    more = ["--resume", "--timesteps", str(state["timesteps"] + 1024)]
+    assert main(["train", "relay", "--config", str(path), "--out", str(out), "--quiet", *more]) == 0
+    again = json.loads((out / STATE_FILE).read_text())
+    assert again["timesteps"] >= state["timesteps"] + 1024 and again["segment"] == state["segment"] + 1

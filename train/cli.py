@@ -136,21 +136,25 @@ def cmd_train(args: argparse.Namespace) -> int:
     from agentsim_env.scenarios.registry import scenario_class
 
     scenario_class(args.scenario)  # an unknown scenario is named before anything else
-    from agentsim_env.train.curriculum import Curriculum
+    from agentsim_env.train.curriculum import STATE_FILE, Curriculum
 
     cfg = _load(args)
+    curriculum = isinstance(cfg, Curriculum)
     if args.resume and args.eval_only:
         raise ValueError("give --resume or --eval-only, not both")
+    if curriculum and args.record_training:
+        raise ValueError("--record-training is not available with a curriculum config")
     out = Path(args.out or f"outputs/train/{args.scenario}")
-    if isinstance(cfg, Curriculum):
-        return _cmd_curriculum(args, cfg, out)
-    has_run = (out / "model.zip").exists() or any((out / "checkpoints").glob("*.zip"))
+    if curriculum:
+        has_run = (out / STATE_FILE).exists()
+    else:
+        has_run = (out / "model.zip").exists() or any((out / "checkpoints").glob("*.zip"))
     if args.eval_only and not (out / "model.zip").exists():
         raise ValueError(f"--eval-only: no model.zip in {str(out)!r}")
     if has_run and not (args.resume or args.eval_only):
         raise ValueError(
-            f"--out {str(out)!r} already holds a run: pass --resume to continue it, --eval-only to "
-            "evaluate it, or choose another --out"
+            f"--out {str(out)!r} already holds a {'curriculum ' if curriculum else ''}run: pass --resume to "
+            "continue it, --eval-only to evaluate it, or choose another --out"
         )
     for option, value in (("--record", args.record), ("--record-training", args.record_training)):
         if value:
@@ -162,7 +166,7 @@ def cmd_train(args: argparse.Namespace) -> int:
                 raise ValueError(f"{option} {exc}") from None
     created = prepare_out(out)
     try:
-        return _train_and_report(args, cfg, out)
+        return (_curriculum_and_report if curriculum else _train_and_report)(args, cfg, out)
     except BaseException:
         remove_created(created)
         raise
@@ -219,7 +223,7 @@ def _train_and_report(args: argparse.Namespace, cfg: Any, out: Path) -> int:
     return 0
 
 
-def _cmd_curriculum(args: argparse.Namespace, cur: Any, out: Path) -> int:
+def _curriculum_and_report(args: argparse.Namespace, cur: Any, out: Path) -> int:
     """``agentsim train`` with a curriculum config: train stage by stage, then evaluate the newest model at the
     stage reached and at the last stage (the target), beside the baselines there."""
     from tqdm.auto import tqdm
@@ -227,33 +231,11 @@ def _cmd_curriculum(args: argparse.Namespace, cur: Any, out: Path) -> int:
     from agentsim_env.train.curriculum import STATE_FILE, read_state, run_curriculum
     from agentsim_env.train.evaluate import evaluate_policies, format_table, write_table
 
-    if args.record_training:
-        raise ValueError("--record-training is not available with a curriculum config")
-    has_run = (out / STATE_FILE).exists()
-    if args.eval_only and not (out / "model.zip").exists():
-        raise ValueError(f"--eval-only: no model.zip in {str(out)!r}")
-    if has_run and not (args.resume or args.eval_only):
-        raise ValueError(
-            f"--out {str(out)!r} already holds a curriculum run: pass --resume to continue it, --eval-only to "
-            "evaluate it, or choose another --out"
-        )
-    if args.record:
-        from agentsim_env.recorder.schema import StoreError, check_store_path
-
-        try:
-            check_store_path(args.record)
-        except StoreError as exc:
-            raise ValueError(f"--record {exc}") from None
-    created = prepare_out(out)
-    try:
-        say = lambda line: tqdm.write(line, file=sys.stdout)  # noqa: E731  (lines between the progress bars)
-        if args.eval_only:
-            state = read_state(out)
-        else:
-            state = run_curriculum(cur, out, resume=args.resume, progress=not args.quiet, say=say)
-    except BaseException:
-        remove_created(created)
-        raise
+    say = lambda line: tqdm.write(line, file=sys.stdout)  # noqa: E731  (lines between the progress bars)
+    if args.eval_only:
+        state = read_state(out)
+    else:
+        state = run_curriculum(cur, out, resume=args.resume, progress=not args.quiet, say=say)
     k, last = int(state["stage"]), len(cur.stages) - 1
     names = [s.name for s in cur.spec.stages]
     print(
