@@ -27,6 +27,8 @@ examples:
   agentsim train navigation --timesteps 200000 --out outputs/train/nav_small
   agentsim train uav_release --timesteps 20000 --eval-baselines default   # evaluate beside B5_cvt only
   agentsim train relay --config relay_nocomm --set seed=1 ppo.learning_rate=0.0001
+  agentsim train relay --config relay_curriculum --out outputs/train/relay_cur   # stage by stage (curriculum:)
+  agentsim train relay --config relay_curriculum --out outputs/train/relay_cur --resume --timesteps 80000000
   agentsim train navigation --out outputs/train/nav --resume  # continue from the newest checkpoint that loads
   agentsim train navigation --out outputs/train/nav --eval-only --record eval.db
   agentsim run navigation --policy outputs/train/navigation    # the trained model beside the baselines"""
@@ -74,7 +76,9 @@ def _arguments(t: argparse.ArgumentParser) -> None:
         "--config",
         default=None,
         metavar="FILE",
-        help="YAML config or shipped config name (default: the scenario's shipped config)",
+        help="YAML config or shipped config name (default: the scenario's shipped config); a config with a "
+        "'curriculum:' section trains one network stage by stage, promoted on an evaluation threshold "
+        "(--timesteps is then the total budget over all stages)",
     )
     t.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE", help="config keys over the file's")
     t.add_argument("--timesteps", type=int, default=None, help="agent-steps to train (over the config's)")
@@ -85,7 +89,7 @@ def _arguments(t: argparse.ArgumentParser) -> None:
     t.add_argument(
         "--resume",
         action="store_true",
-        help="continue the run in --out from its newest checkpoint that loads",
+        help="continue the run in --out from its newest checkpoint that loads (a curriculum: from its state file)",
     )
     t.add_argument("--eval-only", action="store_true", help="evaluate the model in --out, do not train")
     t.add_argument("--no-eval", action="store_true", help="skip the evaluation against the baselines")
@@ -112,7 +116,9 @@ def _arguments(t: argparse.ArgumentParser) -> None:
 
 
 def _load(args: argparse.Namespace) -> Any:
+    """The ``TrainConfig``, or the ``Curriculum`` of a config with a ``curriculum:`` section."""
     from agentsim_env.train.config import load_config
+    from agentsim_env.train.curriculum import has_curriculum, load_curriculum
 
     overrides = parse_overrides(args.scenario, args.set or [])
     for key in ("timesteps", "seed", "worlds", "vec"):
@@ -120,6 +126,8 @@ def _load(args: argparse.Namespace) -> Any:
             overrides[key] = getattr(args, key)
     if getattr(args, "eval_baselines", None) is not None:
         overrides["eval"] = {**overrides.get("eval", {}), "baselines": args.eval_baselines}
+    if args.config is not None and has_curriculum(args.config, args.scenario):
+        return load_curriculum(args.config, overrides, scenario=args.scenario)
     return load_config(args.config, overrides, scenario=args.scenario)
 
 
@@ -128,17 +136,25 @@ def cmd_train(args: argparse.Namespace) -> int:
     from agentsim_env.scenarios.registry import scenario_class
 
     scenario_class(args.scenario)  # an unknown scenario is named before anything else
+    from agentsim_env.train.curriculum import STATE_FILE, Curriculum
+
     cfg = _load(args)
+    curriculum = isinstance(cfg, Curriculum)
     if args.resume and args.eval_only:
         raise ValueError("give --resume or --eval-only, not both")
+    if curriculum and args.record_training:
+        raise ValueError("--record-training is not available with a curriculum config")
     out = Path(args.out or f"outputs/train/{args.scenario}")
-    has_run = (out / "model.zip").exists() or any((out / "checkpoints").glob("*.zip"))
+    if curriculum:
+        has_run = (out / STATE_FILE).exists()
+    else:
+        has_run = (out / "model.zip").exists() or any((out / "checkpoints").glob("*.zip"))
     if args.eval_only and not (out / "model.zip").exists():
         raise ValueError(f"--eval-only: no model.zip in {str(out)!r}")
     if has_run and not (args.resume or args.eval_only):
         raise ValueError(
-            f"--out {str(out)!r} already holds a run: pass --resume to continue it, --eval-only to "
-            "evaluate it, or choose another --out"
+            f"--out {str(out)!r} already holds a {'curriculum ' if curriculum else ''}run: pass --resume to "
+            "continue it, --eval-only to evaluate it, or choose another --out"
         )
     for option, value in (("--record", args.record), ("--record-training", args.record_training)):
         if value:
@@ -150,7 +166,7 @@ def cmd_train(args: argparse.Namespace) -> int:
                 raise ValueError(f"{option} {exc}") from None
     created = prepare_out(out)
     try:
-        return _train_and_report(args, cfg, out)
+        return (_curriculum_and_report if curriculum else _train_and_report)(args, cfg, out)
     except BaseException:
         remove_created(created)
         raise
@@ -204,6 +220,44 @@ def _train_and_report(args: argparse.Namespace, cfg: Any, out: Path) -> int:
         print(f"learning curve: {png} (CSV: {out / 'curve.csv'}; TensorBoard: tensorboard --logdir {out / 'tb'})")
     if args.record:
         print(f"evaluation episodes recorded to {args.record}")
+    return 0
+
+
+def _curriculum_and_report(args: argparse.Namespace, cur: Any, out: Path) -> int:
+    """``agentsim train`` with a curriculum config: train stage by stage, then evaluate the newest model at the
+    stage reached and at the last stage (the target), beside the baselines there."""
+    from tqdm.auto import tqdm
+
+    from agentsim_env.train.curriculum import STATE_FILE, read_state, run_curriculum
+    from agentsim_env.train.evaluate import evaluate_policies, format_table, write_table
+
+    say = lambda line: tqdm.write(line, file=sys.stdout)  # noqa: E731  (lines between the progress bars)
+    if args.eval_only:
+        state = read_state(out)
+    else:
+        state = run_curriculum(cur, out, resume=args.resume, progress=not args.quiet, say=say)
+    k, last = int(state["stage"]), len(cur.stages) - 1
+    names = [s.name for s in cur.spec.stages]
+    print(
+        f"\n{cur.base.scenario} curriculum: stage {k + 1}/{last + 1} ({names[k]}) reached, "
+        f"{state['finished'] or 'not finished'}; {int(state['timesteps']):,} agent-steps in "
+        f"{state['wall_s']:.0f} s wall / {state['cpu_s']:.0f} s CPU -> {out / 'model.zip'}"
+    )
+    if not args.no_eval:
+        rows = []
+        for j in sorted({k, last}):
+            cfg = cur.stages[j] if j == last else cur.stages[j].replace(eval={"baselines": "none"})
+            got = evaluate_policies(
+                cfg, out, name=f"{out.name}@{names[j]}", record=args.record, progress=not args.quiet, report=say
+            )
+            rows += [{"stage": names[j], **r} for r in got]
+        csv_path, md_path = write_table(rows, out)
+        seeds = cur.base.eval.seed_list()
+        print(f"\nevaluation over seeds {seeds[0]}..{seeds[-1]} ({len(seeds)} episodes per policy):\n")
+        print(format_table(rows))
+        print(f"\nwritten: {csv_path}, {md_path}")
+    if (out / "curriculum.png").exists():
+        print(f"curriculum curve: {out / 'curriculum.png'} (CSV: {out / 'curriculum.csv'}; state: {out / STATE_FILE})")
     return 0
 
 

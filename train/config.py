@@ -32,11 +32,13 @@ from agentsim_env.core.validation import short_repr
 __all__ = [
     "ACTIVATIONS",
     "CONFIG_DIR",
+    "INBOX_ENCODERS",
     "VEC_KINDS",
     "EvalConfig",
     "PPOConfig",
     "TrainConfig",
     "load_config",
+    "read_config_data",
     "save_config",
     "shipped_configs",
 ]
@@ -46,6 +48,9 @@ CONFIG_DIR = Path(__file__).resolve().parent / "configs"
 VecKind = Annotated[Literal["native", "supersuit"], Choice]
 #: Vector-env paths ``vec`` may name.
 VEC_KINDS: tuple[str, ...] = typing.get_args(typing.get_args(VecKind)[0])
+InboxEncoderKind = Annotated[Literal["none", "mean", "max", "attention"], Choice]
+#: Inbox encoders ``ppo.inbox_encoder`` may name (``agentsim_env.train.inbox_encoder``).
+INBOX_ENCODERS: tuple[str, ...] = typing.get_args(typing.get_args(InboxEncoderKind)[0])
 Activation = Annotated[Literal["tanh", "relu"], Choice]
 #: Activation functions ``ppo.activation`` may name.
 ACTIVATIONS: tuple[str, ...] = typing.get_args(typing.get_args(Activation)[0])
@@ -75,6 +80,10 @@ class PPOConfig:
         net_arch: Hidden layer widths of the policy and value networks, 1..8 layers of 1..4096.
         activation: ``tanh`` or ``relu``.
         log_std_init: Initial log standard deviation of the Gaussian actions, -10..10.
+        inbox_encoder: How the network reads the inbox: ``none`` (the flat vector into the MLP, as before),
+            or each message row through a shared MLP pooled by ``mean``, ``max`` or ``attention`` (one head,
+            learned query); see ``agentsim_env.train.inbox_encoder``. Needs a scenario with comms.
+        inbox_hidden: Width of the inbox encoder's row code, 1..1024.
     """
 
     n_steps: Annotated[Int, Field(ge=1, le=100_000)] = 64
@@ -95,6 +104,8 @@ class PPOConfig:
     )
     activation: Activation = "tanh"
     log_std_init: Annotated[Real, Field(ge=-10.0, le=10.0)] = 0.0
+    inbox_encoder: InboxEncoderKind = "none"
+    inbox_hidden: Annotated[Int, Field(ge=1, le=1024)] = 32
 
 
 @config("eval")
@@ -166,9 +177,14 @@ class TrainConfig:
                 continue
             checked.append(keys)
             try:
-                make_scenario(self.scenario, **dict(keys))
+                built = make_scenario(self.scenario, **dict(keys))
             except (TypeError, ValueError) as exc:
                 raise ValueError(f"{where}: {exc}") from None
+            if self.ppo.inbox_encoder != "none" and "inbox" not in built.obs_parts():
+                raise ValueError(
+                    f"ppo.inbox_encoder {self.ppo.inbox_encoder!r} needs an inbox, and {self.scenario!r} has none "
+                    f"with {where}; give it comms (env.comms) or set ppo.inbox_encoder to 'none'"
+                )
 
     def eval_env(self, baseline: bool = False) -> dict[str, Any]:
         """Scenario keys of the evaluation episodes: ``env``, then ``eval.env`` (then ``eval.baseline_env``)."""
@@ -226,27 +242,12 @@ def shipped_configs() -> dict[str, Path]:
     return {p.stem: p for p in sorted(CONFIG_DIR.glob("*.yaml"))}
 
 
-def load_config(
-    source: str | Path | dict[str, Any] | None = None,
-    overrides: dict[str, Any] | None = None,
-    *,
-    scenario: str | None = None,
-) -> TrainConfig:
-    """Load a training config.
-
-    Args:
-        source: A YAML path, the name of a shipped config (``navigation``, ``relay``, ...), a dict, or ``None``
-            (the shipped config named like ``scenario``, else the defaults).
-        overrides: Keys over the loaded ones (sections as dicts of some fields, e.g. ``{"ppo": {"n_steps": 32}}``).
-        scenario: The scenario, when the file does not name one; it must agree when both do.
-
-    Returns:
-        The validated config.
+def read_config_data(source: str | Path | dict[str, Any] | None, scenario: str | None = None) -> dict[str, Any]:
+    """The keys of a config source, unchecked: a YAML path, a shipped config's name, a dict (copied), or ``None``
+    (the shipped config named like ``scenario``, else ``{}``).
 
     Raises:
-        ValueError: A missing file, bad YAML, a file outside the bounds of ``agentsim_env.train.yaml_load``
-            (1 MiB, 32 levels, 10,000 values with aliases expanded, no duplicate keys), an unknown key or a bad
-            value (the message names it).
+        ValueError: A missing or unreadable file, bad YAML or one past the loader's bounds, not a mapping.
     """
     data: dict[str, Any]
     if source is None:
@@ -278,6 +279,32 @@ def load_config(
         if not isinstance(loaded, dict):
             raise ValueError(f"config file {str(path)!r} must hold a mapping of keys, got {type(loaded).__name__}")
         data = loaded
+    return data
+
+
+def load_config(
+    source: str | Path | dict[str, Any] | None = None,
+    overrides: dict[str, Any] | None = None,
+    *,
+    scenario: str | None = None,
+) -> TrainConfig:
+    """Load a training config.
+
+    Args:
+        source: A YAML path, the name of a shipped config (``navigation``, ``relay``, ...), a dict, or ``None``
+            (the shipped config named like ``scenario``, else the defaults).
+        overrides: Keys over the loaded ones (sections as dicts of some fields, e.g. ``{"ppo": {"n_steps": 32}}``).
+        scenario: The scenario, when the file does not name one; it must agree when both do.
+
+    Returns:
+        The validated config.
+
+    Raises:
+        ValueError: A missing file, bad YAML, a file outside the bounds of ``agentsim_env.train.yaml_load``
+            (1 MiB, 32 levels, 10,000 values with aliases expanded, no duplicate keys), an unknown key or a bad
+            value (the message names it).
+    """
+    data = read_config_data(source, scenario)
     if scenario is not None:
         if data.get("scenario", scenario) != scenario:
             raise ValueError(f"the config is for scenario {short_repr(data['scenario'])}, not {scenario!r}")

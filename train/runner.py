@@ -41,7 +41,7 @@ from agentsim_env.train.checkpoints import (
 )
 from agentsim_env.train.config import TrainConfig, save_config
 
-__all__ = ["TrainResult", "latest_checkpoint", "make_model", "make_vec_env", "train"]
+__all__ = ["TrainResult", "latest_checkpoint", "make_model", "make_vec_env", "save_run", "train"]
 
 
 @dataclass
@@ -87,7 +87,8 @@ def make_vec_env(cfg: TrainConfig) -> Any:
 
 
 def make_model(cfg: TrainConfig, vec: Any, tensorboard: str | None = None) -> Any:
-    """A fresh ``stable_baselines3.PPO`` (MlpPolicy, CPU) with ``cfg.ppo``'s hyperparameters."""
+    """A fresh ``stable_baselines3.PPO`` (MlpPolicy, CPU) with ``cfg.ppo``'s hyperparameters (and its inbox
+    encoder as the features extractor, when ``ppo.inbox_encoder`` names one)."""
     import torch
     from stable_baselines3 import PPO
 
@@ -96,6 +97,23 @@ def make_model(cfg: TrainConfig, vec: Any, tensorboard: str | None = None) -> An
     if p.lr_schedule == "linear":
         lr = _Linear(p.learning_rate)
     activation = {"tanh": torch.nn.Tanh, "relu": torch.nn.ReLU}[p.activation]
+    policy_kwargs: dict[str, Any] = {
+        "net_arch": list(p.net_arch),
+        "activation_fn": activation,
+        "log_std_init": p.log_std_init,
+    }
+    if p.inbox_encoder != "none":
+        from agentsim_env.train.inbox_encoder import InboxEncoder, inbox_layout
+
+        lay = inbox_layout(cfg.scenario, cfg.env)
+        policy_kwargs["features_extractor_class"] = InboxEncoder
+        policy_kwargs["features_extractor_kwargs"] = {
+            "inbox_start": lay.start,
+            "inbox_rows": lay.rows,
+            "row_features": lay.features,
+            "pool": p.inbox_encoder,
+            "hidden": p.inbox_hidden,
+        }
     return PPO(
         "MlpPolicy",
         vec,
@@ -114,11 +132,7 @@ def make_model(cfg: TrainConfig, vec: Any, tensorboard: str | None = None) -> An
         vf_coef=p.vf_coef,
         max_grad_norm=p.max_grad_norm,
         target_kl=p.target_kl,
-        policy_kwargs={
-            "net_arch": list(p.net_arch),
-            "activation_fn": activation,
-            "log_std_init": p.log_std_init,
-        },
+        policy_kwargs=policy_kwargs,
     )
 
 
@@ -249,6 +263,24 @@ def _resume(cfg: TrainConfig, path: Path, vec: Any) -> tuple[Resumed, bytes | No
     return resumed, curve, resumed.clocks or curve_clocks
 
 
+def save_run(model: Any, cfg: TrainConfig, path: Path, *, wall_s: float, cpu_s: float) -> Path:
+    """Write ``model.zip`` and ``config.json`` (what it was trained on, versions, budget) into ``path``, each
+    atomically, so that the folder loads as a policy (``agentsim run --policy PATH``); returns the model's path."""
+    write_model_atomic(model, path / "model.zip")
+    meta = {
+        "scenario": cfg.scenario,
+        "env": cfg.env,
+        "train": cfg.to_dict(),
+        "versions": _versions(),
+        "timesteps_done": int(model.num_timesteps),
+        "wall_s": round(wall_s, 3),
+        "cpu_s": round(cpu_s, 3),
+        "machine": platform.processor() or platform.machine(),
+    }
+    write_json_atomic(path / "config.json", meta)
+    return path / "model.zip"
+
+
 def train(
     cfg: TrainConfig,
     out: str | Path | None = None,
@@ -358,18 +390,7 @@ def _train(
     cpu = monitor.cpu_s() if monitor.started else clocks["cpu_s"]
     curve: list[dict[str, float]] = []
     if path is not None:
-        write_model_atomic(model, path / "model.zip")
-        meta = {
-            "scenario": cfg.scenario,
-            "env": cfg.env,
-            "train": cfg.to_dict(),
-            "versions": _versions(),
-            "timesteps_done": int(model.num_timesteps),
-            "wall_s": round(wall, 3),
-            "cpu_s": round(cpu, 3),
-            "machine": platform.processor() or platform.machine(),
-        }
-        write_json_atomic(path / "config.json", meta)
+        save_run(model, cfg, path, wall_s=wall, cpu_s=cpu)
         if (path / "curve.csv").exists():
             curve = read_curve(path / "curve.csv")
     vec.close()
