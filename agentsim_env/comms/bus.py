@@ -26,24 +26,7 @@ Rules (one line each, the tests check them):
 - Bus messages have ``hops = 0`` (no relaying). Message ids are unique per bus until ``reset``; buses that
   share one world between them (below) number their messages independently, so ids may repeat across them.
 
-Keyed loss draws: the uniform of a pair is a hash (two chained SplitMix64 rounds, ``bus_kernels.keyed_draws``) of
-
-    (episode key of the world, created step within the episode, sender, seq, kind, receiver)
-
-- episode key: ``rng.integers(2**63)`` from the generator ``reset_world(w, rng)`` receives (a function of the
-  episode seed; ``reset`` / the constructor take one per world the same way);
-- created step within the episode: ``created - starts[world]``, where ``starts`` (``set_starts``, 0 until set)
-  is the step at which each world's episode began. Steps are a global tick that no reset rewinds, so without
-  it the same episode started at another tick would lose other messages; the comms stack sets it before each
-  delivery (a message sent between a reset and the first step is the episode's step 0);
-- seq: the message's index among the messages its sender created in the same step (a per-slot counter that
-  restarts every step, counting every message created, bandwidth drops included, and the heartbeat answers
-  the slot creates). Sender -1 (environment / controller) rows are numbered per (world, kind, target)
-  instead: the n-th ENV message to slot r in a step has seq n-1 whoever sends the others;
-- sender and receiver: slot indices within their world (``slot % N``; -1 for the environment / controller,
-  and as the receiver of an answer to the controller), so world ``w`` of a batch draws what one world does.
-
-So a pair's fate depends only on what the message is, not on the batch, its order or the process drawing it.
+Keyed loss draws: a pair's uniform is a hash of what the message is (``comms.delivery`` gives the key).
 
 Inbox order: within one delivery call a receiver gets its rows in ``(created, sender, seq, kind)`` order
 (the last one pushed is the newest, inbox row 0). The comms stack pushes the environment's collision notices
@@ -55,20 +38,22 @@ rows, ``split.route`` says which bus must see each (by the owner of its receiver
 only. ``deliver`` is ``take_due`` + ``deliver_rows`` over every slot, so both paths run the same code.
 
 Event records, ``DueRows`` and the in-flight queue live in ``comms.events``, sequence numbers in
-``comms.sequence``, input checks in ``comms.checks``, the numba kernels in ``comms.bus_kernels`` and
+``comms.sequence``, input checks in ``comms.checks``, the channel model's settings in ``comms.channel``, which pairs
+of a batch survive the channel in ``comms.delivery``, the numba kernels in ``comms.bus_kernels`` and
 ``comms.routing``.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Annotated, Any
+from typing import Any
 
 import numpy as np
-from pydantic import Field
 
-from agentsim_env.comms.bus_kernels import bandwidth_kernel, keyed_draws
+from agentsim_env.comms.bus_kernels import bandwidth_kernel
+from agentsim_env.comms.channel import Bandwidth, ChannelConfig, Latency, Probability, Range
 from agentsim_env.comms.checks import bool_mask, int_vector, validate_send, world_arrays
+from agentsim_env.comms.delivery import channel_pairs
 from agentsim_env.comms.events import DeliveryEvents, DueRows, MessageLog, _Queue
 from agentsim_env.comms.inbox import Inbox
 from agentsim_env.comms.messages import (
@@ -79,45 +64,24 @@ from agentsim_env.comms.messages import (
     HEARTBEAT,
     KIND_NAMES,
 )
-from agentsim_env.comms.routing import expand_on, filter_pairs_on, group_members
-from agentsim_env.comms.sequence import Sequencer, inbox_order
-from agentsim_env.core.config_model import Int, Real, config
+from agentsim_env.comms.sequence import Sequencer
 
-__all__ = ["BUS_KINDS", "ChannelConfig", "DeliveryEvents", "DueRows", "MessageBus", "MessageLog"]
+__all__ = [
+    "BUS_KINDS",
+    "Bandwidth",
+    "ChannelConfig",
+    "DeliveryEvents",
+    "DueRows",
+    "Latency",
+    "MessageBus",
+    "MessageLog",
+    "Probability",
+    "Range",
+]
 
 BUS_KINDS = (AGENT, GROUP, ENV, HEARTBEAT)
-# Read-only inputs of the delivery kernels when a batch has no GROUP message / the channel no loss.
-_NO_SLOTS = np.zeros(0, dtype=np.int64)
-_NO_DRAWS = np.zeros(0)
 _ALL_SEEN = np.zeros(0, dtype=bool)
 _ZERO_HOPS = np.zeros(1, dtype=np.int16)
-
-
-Latency = Annotated[Int, Field(ge=0)]
-"""Steps between send and delivery, >= 0."""
-Probability = Annotated[Real, Field(ge=0.0, le=1.0)]
-"""A probability, in [0, 1]."""
-Bandwidth = Annotated[Int, Field(ge=0)]
-"""Messages per agent and step, >= 0 (0: unlimited)."""
-Range = Annotated[Real, Field(gt=0.0)]
-"""A distance in metres, > 0."""
-
-
-@config("comms")
-class ChannelConfig:
-    """Channel model of a bus.
-
-    Attributes:
-        latency: Steps between send and delivery (>= 0; 0 = delivered in the step it was sent).
-        loss: Probability that a (message, receiver) pair is lost, in [0, 1] (1 = dead channel).
-        bandwidth: Messages an agent may send per step (>= 0; 0 = unlimited).
-        max_range: Largest sender-receiver distance in metres (> 0), or None for no limit.
-    """
-
-    latency: Latency = 0
-    loss: Probability = 0.0
-    bandwidth: Bandwidth = 0
-    max_range: Range | None = None
 
 
 class MessageBus:
@@ -533,45 +497,21 @@ class MessageBus:
         return out
 
     def _deliver_rows(self, rows, step, pos, online, group, mine, seen) -> MessageLog:  # type: ignore[no-untyped-def]
-        order = inbox_order(rows, self.n_slots)  # the pairs come out in it; the rows stay where they are
-        kind, snd, tgt = rows.kind, rows.sender, rows.target
-        kid, offsets, slots = _NO_SLOTS, _NO_SLOTS, _NO_SLOTS
-        grp = kind == GROUP
-        if grp.any():
-            n_g = int(max(group.max(initial=-1), tgt[grp].max())) + 1
-            members = online if mine is None else online & mine
-            kid, offsets, slots = group_members(
-                members, group, self._world_of, self.n_worlds, n_g, rows.world * n_g + tgt
-            )
-        threads = self.inbox.threads
-        rep, recv = expand_on(threads, kind, snd, tgt, kid, offsets, slots, order)
-        if mine is not None and rep.shape[0]:
-            own = mine[np.where(recv >= 0, recv, snd[rep])]  # an answer belongs to the bus owning its sender
-            if not own.all():
-                rep, recv = rep[own], recv[own]
-        loss = float(self.channel.loss)
-        u = _NO_DRAWS
-        if loss > 0.0 and rep.shape[0]:
-            self._check_keys(rows.world)
-            when = rows.created - self.starts[rows.world]  # the step within the world's episode
-            u = keyed_draws(rep, recv, self.keys, rows.world, self.n_agents, when, snd, rows.seq, kind)
-        r_max = self.channel.max_range
-        ok, dr, n_hb, n_ans = filter_pairs_on(
-            threads,
-            rep,
-            recv,
-            rows.msg,
-            kind,
-            snd,
-            tgt,
-            rows.created,
-            online,
-            seen,
+        ok, dr, n_hb, n_ans = channel_pairs(
+            rows,
+            self.channel,
+            self.inbox,
+            self._world_of,
+            self.n_worlds,
+            self.n_agents,
+            self.keys,
+            self.starts,
             pos,
-            -1.0 if r_max is None else r_max * r_max,
-            u,
-            loss,
-            self.inbox.dropped,
+            online,
+            group,
+            mine,
+            seen,
+            self._check_keys,
         )
         if dr[0].shape[0]:
             when = np.full(dr[0].shape[0], step, dtype=np.int64)
