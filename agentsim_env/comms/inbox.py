@@ -273,22 +273,7 @@ class Inbox:
         p = np.asarray(pos, dtype=np.float64)
         if p.shape != (self.n_slots, 3):
             raise ValueError(f"pos must have shape ({self.n_slots}, 3), got {p.shape}")
-        args = (
-            self.valid,
-            self.kind,
-            self.sender,
-            self.hops,
-            self.created,
-            self.payload,
-            p,
-            int(step),
-            self.pos_scale,
-            self.age_horizon,
-            self.hop_horizon,
-            out,
-            int(col),
-            float(clip),
-        )
+        args = (*self._observe_args(p, step), out, int(col), float(clip))
         self.threads.run(lambda lo, hi, _: observe_kernel(lo, hi, *args), self.n_slots)
 
     def observe_rows(self, pos: np.ndarray, step: int, rows: np.ndarray, clip: float = np.inf) -> np.ndarray:
@@ -297,23 +282,14 @@ class Inbox:
         p = np.ascontiguousarray(pos, dtype=np.float64)
         r = np.ascontiguousarray(rows, dtype=np.int64)
         out = np.empty((r.shape[0], self.size, self.n_features), dtype=np.float32)
-        observe_rows_kernel(
-            r,
-            self.valid,
-            self.kind,
-            self.sender,
-            self.hops,
-            self.created,
-            self.payload,
-            p,
-            int(step),
-            self.pos_scale,
-            self.age_horizon,
-            self.hop_horizon,
-            out.reshape(r.shape[0], self.size * self.n_features),
-            float(clip),
-        )
+        flat = out.reshape(r.shape[0], self.size * self.n_features)
+        observe_rows_kernel(r, *self._observe_args(p, step), flat, float(clip))  # type: ignore[call-arg]
         return out
+
+    def _observe_args(self, pos: np.ndarray, step: int) -> tuple[Any, ...]:
+        """The observation kernels' inputs before their output: the inbox arrays, positions, step and scales."""
+        inbox = (self.valid, self.kind, self.sender, self.hops, self.created, self.payload)
+        return (*inbox, pos, int(step), self.pos_scale, self.age_horizon, self.hop_horizon)
 
     def clear(self, slots: np.ndarray | None = None) -> None:
         """Empty the inboxes and zero the counters of ``slots`` (all slots when None).
