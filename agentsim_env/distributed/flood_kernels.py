@@ -194,16 +194,69 @@ def hop_kernel(
 
 
 @nb.njit(cache=True)
-def group_by_rank(rank, rows, n_ranks):  # type: ignore[no-untyped-def]
-    """A stable counting sort of entry indices by their row's rank: O(entries + ranks)."""
-    count = np.zeros(n_ranks + 1, dtype=np.int64)
-    for q in range(rows.shape[0]):
-        count[rank[rows[q]] + 1] += 1
-    for r in range(n_ranks):
+def order_entries(rank, n_rows, fr_row, fr_slot, fr_hops, g_row, g_slot, g_hops):  # type: ignore[no-untyped-def]
+    """The hop's frontier entries, own ones (``fr_*``) then the ghosts' (``g_*``), grouped by their row's rank.
+
+    A stable counting sort (O(entries + rows)) that writes the sorted columns at once, without concatenating
+    the two sources first. ``fr_hops`` is per row (an own entry relays at its row's hop count).
+
+    Returns:
+        ``(e_row, e_slot, e_own, e_hops, relayed)``: the sorted entries (``e_own``: an own entry) and, per row,
+        whether an own entry relays it.
+    """
+    nf = fr_row.shape[0]
+    ng = g_row.shape[0]
+    count = np.zeros(n_rows + 1, dtype=np.int64)
+    relayed = np.zeros(n_rows, dtype=np.bool_)
+    for q in range(nf):
+        count[rank[fr_row[q]] + 1] += 1
+        relayed[fr_row[q]] = True
+    for q in range(ng):
+        count[rank[g_row[q]] + 1] += 1
+    for r in range(n_rows):
         count[r + 1] += count[r]
-    order = np.empty(rows.shape[0], dtype=np.int64)
-    for q in range(rows.shape[0]):
-        r = rank[rows[q]]
-        order[count[r]] = q
-        count[r] += 1
-    return order
+    ne = nf + ng
+    e_row = np.empty(ne, dtype=np.int64)
+    e_slot = np.empty(ne, dtype=np.int64)
+    e_own = np.empty(ne, dtype=np.bool_)
+    e_hops = np.empty(ne, dtype=np.int32)
+    for q in range(nf):
+        f = fr_row[q]
+        r = rank[f]
+        at = count[r]
+        count[r] = at + 1
+        e_row[at] = f
+        e_slot[at] = fr_slot[q]
+        e_own[at] = True
+        e_hops[at] = fr_hops[f]
+    for q in range(ng):
+        f = g_row[q]
+        r = rank[f]
+        at = count[r]
+        count[r] = at + 1
+        e_row[at] = f
+        e_slot[at] = g_slot[q]
+        e_own[at] = False
+        e_hops[at] = g_hops[q]
+    return e_row, e_slot, e_own, e_hops, relayed
+
+
+@nb.njit(cache=True)
+def next_frontier(out_v, out_f, out_h, nd, limit):  # type: ignore[no-untyped-def]
+    """The own frontier after a hop: the deliveries ``out_*[:nd]`` (grouped by row) of rows still below their hop
+    limit, as ``(fr_row, fr_slot, has_fr)`` (``has_fr``: per row of ``limit``, whether it has an entry)."""
+    n = 0
+    for k in range(nd):
+        n += out_h[k] < limit[out_f[k]]
+    fr_row = np.empty(n, dtype=np.int64)
+    fr_slot = np.empty(n, dtype=np.int64)
+    has_fr = np.zeros(limit.shape[0], dtype=np.bool_)
+    j = 0
+    for k in range(nd):
+        f = out_f[k]
+        if out_h[k] < limit[f]:
+            fr_row[j] = f
+            fr_slot[j] = out_v[k]
+            has_fr[f] = True
+            j += 1
+    return fr_row, fr_slot, has_fr

@@ -48,7 +48,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from agentsim_env.comms.overlay import OverlayStats, check_flood_starts
-from agentsim_env.distributed.flood_kernels import group_by_rank, hop_kernel, split_reads
+from agentsim_env.distributed.flood_kernels import hop_kernel, next_frontier, order_entries, split_reads
 
 _I64 = np.int64
 
@@ -465,13 +465,18 @@ class PartFloods:
             self._clock - 1 + g.left[gk].astype(np.int64),
         )
         n = self._c.shape[0]
-        e_row = np.concatenate([self._fr_row, g_rows])
-        e_slot = np.concatenate([self._fr_slot, g.slot[gk].astype(np.int64)])
-        e_own = np.concatenate([np.ones(self._fr_row.shape[0], dtype=bool), np.zeros(g_rows.shape[0], dtype=bool)])
-        e_hops = np.concatenate([self._hops[self._fr_row], g.hops[gk].astype(np.int32)])
         rank = np.empty(n, dtype=np.int64)
         rank[np.lexsort((self._q, self._o, self._c))] = np.arange(n)
-        order = group_by_rank(rank, e_row, n)
+        e_row, e_slot, e_own, e_hops, relayed = order_entries(
+            rank,
+            n,
+            self._fr_row,
+            self._fr_slot,
+            self._hops,
+            g_rows,
+            g.slot[gk].astype(np.int64),
+            g.hops[gk].astype(np.int32),
+        )
         start, end, indices = (np.ascontiguousarray(a, dtype=np.int64) for a in links)
         if e_row.shape[0] and (start.shape != (self.n_slots,) or end.shape != (self.n_slots,)):
             raise ValueError(
@@ -479,17 +484,16 @@ class PartFloods:
                 f"spreads, got {start.shape} and {end.shape}"
             )
         add_start, add_len, add_v = self._adds()
-        relayed = np.flatnonzero(np.bincount(self._fr_row, minlength=n))  # sorted distinct rows
         spare, out_v, out_f, out_h = self._buffers()
         spare, npool, rd_start, rd_len, out_v, out_f, out_h, nd, row_h, edges, self._token = hop_kernel(
             start,
             end,
             indices,
             own,
-            e_row[order],
-            e_slot[order],
-            e_own[order],
-            e_hops[order],
+            e_row,
+            e_slot,
+            e_own,
+            e_hops,
             self._rd_start,
             self._rd_len,
             self._pool,
@@ -514,20 +518,17 @@ class PartFloods:
         done = row_h >= 0
         self._end[done] = self._clock + self._limit[done] - row_h[done]
         self._hops[done] = row_h[done]
-        goes = out_h < self._limit[out_f]
-        fr_row, fr_slot = out_f[goes], out_v[goes]
+        fr_row, fr_slot, has_fr = next_frontier(out_v, out_f, out_h, nd, self._limit)
         keys = self.keys()
         self._stats = PartHopStats(
             self._started,
             len(out),
             int(edges) - len(out),
             keys[relayed],
-            keys[np.flatnonzero(np.bincount(fr_row, minlength=n))],
+            keys[has_fr],
         )
         self._started = 0
         # forget the floods that cannot spread any more, or that no own slot read
-        has_fr = np.zeros(n, dtype=bool)
-        has_fr[fr_row] = True
         keep = (self._end > self._clock) & ((self._rd_len > 0) | has_fr)
         new_id = np.cumsum(keep) - 1
         self._fr_row, self._fr_slot = new_id[fr_row], fr_slot
