@@ -14,9 +14,12 @@ phase      each shard posts                                             each sha
            entries its agents near an edge hold                         frontier entries of its ghosts
 ``bus``    the due bus messages whose receivers are not its own (all    the rows for its own receivers
            GROUP rows)                                                  (routed by the owner of each slot)
-``want``   the senders in its inboxes it cannot see (beyond its halo)   the own slots others asked for
+``groups`` the scenario's per-group partial sums over its own agents,  the sums over every shard; the own
+           and the senders in its inboxes it cannot see (beyond its    slots others asked for
+           halo)
+``want``   the senders of ``groups`` when the scenario has no group     the own slots others asked for
+           sums (or the observations are built again in the step)
 ``have``   the positions of the slots it was asked for                  every answer (it keeps its own)
-``groups`` the scenario's per-group partial sums over its own agents    the sums over every shard
 ========== ============================================================ ====================================
 
 The routing is a pure function of the posts (:meth:`Bridge.route`), run where the posts meet: in this process
@@ -96,7 +99,12 @@ class Bridge:
     def route(self, phase: str, posts: dict[int, Packed]) -> dict[int, Packed]:
         """What each shard that posted gets back in ``phase`` (its bytes counted in ``bytes``)."""
         out = self._route(phase, posts)
-        if phase == "motion":
+        if phase == "groups":  # the sums, and the far senders asked for with them (counted as ``want``)
+            self._count("groups", nbytes([p["partials"] for p in posts.values()]))
+            self._count("groups", nbytes([o["sums"] for o in out.values()]))
+            self._count("want", nbytes([p["want"] for p in posts.values()]))
+            self._count("want", nbytes([o["serve"] for o in out.values()]))
+        elif phase == "motion":
             for p in posts.values():
                 self._count("halo", nbytes(p["edge"]))
                 self._count("handover", nbytes(p["leave"]) + nbytes(p.get("leave_floods")))
@@ -123,18 +131,24 @@ class Bridge:
         if phase == "bus":
             return self._bus(posts)
         if phase == "want":  # each shard gets the slots of its own whose positions others asked for
-            want = np.unique(np.concatenate([p["slots"] for p in posts.values()])) if posts else _EMPTY
-            owner = self.slot_owner[want] if self.slot_owner.size else np.full(want.size, -1)
-            return {k: {"slots": want[owner == k]} for k in posts}
+            return {k: {"slots": v} for k, v in self._serve({k: p["slots"] for k, p in posts.items()}).items()}
         if phase == "have":  # every answer to every shard (each keeps what it asked for)
             got = concat_rows([{"slots": p["slots"], "pos": p["pos"]} for p in posts.values()])
             got = got or {"slots": _EMPTY, "pos": np.zeros((0, 3))}
             return dict.fromkeys(posts, got)
-        if phase == "groups":
+        if phase == "groups":  # the sums over every shard, and the ``want`` routing of the same step
             from agentsim_env.scenarios.rewards import combine_partials
 
-            return dict.fromkeys(posts, combine_partials(list(posts.values())))
+            sums = combine_partials([p["partials"] for p in posts.values()])
+            serve = self._serve({k: p["want"] for k, p in posts.items()})
+            return {k: {"sums": sums, "serve": serve[k]} for k in posts}
         raise ValueError(f"unknown exchange phase {phase!r}")
+
+    def _serve(self, want: dict[int, np.ndarray]) -> dict[int, np.ndarray]:
+        """For each shard, the slots of its own whose positions the others asked for (``want``: each shard's ask)."""
+        asked = np.unique(np.concatenate(list(want.values()))) if want else _EMPTY
+        owner = self.slot_owner[asked] if self.slot_owner.size else np.full(asked.size, -1)
+        return {k: asked[owner == k] for k in want}
 
     def _motion(self, posts: dict[int, Packed]) -> dict[int, Packed]:
         strips = self.strips

@@ -100,6 +100,7 @@ class Shard:
         self.acting = np.zeros(s, dtype=bool)
         self.arrived = _NONE
         """The slots handed over to this shard in the latest step."""
+        self._asked: tuple[int, np.ndarray, np.ndarray] | None = None  # (tick, need, serve) of ``combine``
         self.config = config
         self.carry: dict[str, np.ndarray] = {"acting": self.acting}
         """The shard's own per-slot arrays that travel with a handed-over agent (a rollout adds its sums)."""
@@ -284,27 +285,48 @@ class Shard:
         """The current positions of the senders in own inboxes that live on other shards beyond the halo.
 
         An inbox observation locates each message's sender where it is now; a sender far away is known only
-        to its own shard: two exchanges fetch those positions (who wants which, then the answers).
+        to its own shard: two exchanges fetch those positions (who wants which, then the answers); one when the
+        scoring's group sums asked already (``combine``).
         """
-        comms, st = self.world.comms, self.world.state
-        if comms is None:
+        st = self.world.state
+        if self.world.comms is None:
             return
-        inbox = comms.bus.inbox
-        snd = inbox.sender[inbox.valid & self.own[:, None]]
-        need = np.zeros(st.n_slots, dtype=bool)  # a mask, not np.unique: linear in the inbox rows
-        need[snd[snd >= 0]] = True
-        need &= ~(self.own | self.ghost)
-        want = np.flatnonzero(need)
         tick = int(self.world.tick)
-        serve = self.swap((tick, "want"), self.index, {"slots": want})["slots"]
+        if self._asked is not None and self._asked[0] == tick:  # asked with the group sums of this step
+            _, need, serve = self._asked
+        else:
+            need = self._need()
+            serve = self.swap((tick, "want"), self.index, {"slots": np.flatnonzero(need)})["slots"]
+        self._asked = None
         got = self.swap((tick, "have"), self.index, {"slots": serve, "pos": st.pos[serve]})
         sl, pos = got["slots"], got["pos"]
         sel = need[sl]
         st.pos[sl[sel]] = pos[sel]
 
+    def _need(self) -> np.ndarray:
+        """``(S,)`` the senders in own inboxes that are neither own nor ghosts (a mask: linear in the inbox rows)."""
+        comms = self.world.comms
+        need = np.zeros(self.world.state.n_slots, dtype=bool)
+        if comms is None:
+            return need
+        inbox = comms.bus.inbox
+        snd = inbox.sender[inbox.valid & self.own[:, None]]
+        need[snd[snd >= 0]] = True
+        need &= ~(self.own | self.ghost)
+        return need
+
     def combine(self, partials: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-        """The per-group sums of every shard."""
-        return self.swap((int(self.world.tick), "groups"), self.index, partials)
+        """The per-group sums of every shard.
+
+        The far senders whose positions the observations will need ride along (the inboxes are final once the
+        bus delivered): ``_sender_positions`` then needs one exchange instead of two. An own agent that ends in
+        the scoring after this leaves a few more asked for than needed; their answers are not used.
+        """
+        tick = int(self.world.tick)
+        need = self._need()
+        got = self.swap((tick, "groups"), self.index, {"partials": partials, "want": np.flatnonzero(need)})
+        self._asked = (tick, need, got["serve"])
+        return got["sums"]
 
     # ------------------------------------------------------------------ episode
     def reset(
@@ -325,6 +347,7 @@ class Shard:
         """
         t0 = time.perf_counter()
         self._pause()
+        self._asked = None
         world, st = self.world, self.world.state
         self.strips.owner = np.asarray(owner, dtype=np.int64).copy()
         if tick is not None:  # the coordinator's clock: a shard started anew keeps step with the others
@@ -354,6 +377,7 @@ class Shard:
             The scenario's result and the terminated mask (``self.acting`` holds the slots that acted and are
             own after the hand-overs).
         """
+        self._asked = None
         world, st = self.world, self.world.state
         self.strips.owner = np.asarray(control["owner"], dtype=np.int64).copy()
         for kind, centre, half in control.get("objects", ()):
