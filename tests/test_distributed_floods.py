@@ -221,3 +221,38 @@ def test_bad_arguments_name_the_field() -> None:
     part.start(np.array([0]), 1, None, 0)
     with pytest.raises(ValueError, match="links"):  # a flood to spread needs the range graph
         part.hop(no_links, np.ones(4, bool), FloodEntries.empty(1))
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), rows=st.integers(0, 9), n_own=st.integers(0, 30), n_ghost=st.integers(0, 30))
+def test_hop_entry_and_frontier_kernels_equal_their_numpy_forms(seed: int, rows: int, n_own: int, n_ghost: int) -> None:
+    """``order_entries`` is the stable sort by row rank of the own entries followed by the ghosts' ones, and
+    ``next_frontier`` keeps the deliveries below their row's hop limit (each against its plain numpy form)."""
+    from agentsim_env.distributed.flood_kernels import next_frontier, order_entries
+
+    rng = np.random.default_rng(seed)
+    rows = max(rows, 1)
+    rank = rng.permutation(rows).astype(np.int64)
+    fr_row, g_row = rng.integers(0, rows, n_own), rng.integers(0, rows, n_ghost)
+    fr_slot, g_slot = rng.integers(0, 50, n_own), rng.integers(0, 50, n_ghost)
+    hops = rng.integers(0, 4, rows).astype(np.int32)
+    g_hops = rng.integers(0, 4, n_ghost).astype(np.int32)
+    e_row, e_slot, e_own, e_hops, relayed = order_entries(rank, rows, fr_row, fr_slot, hops, g_row, g_slot, g_hops)
+    all_row = np.concatenate([fr_row, g_row])
+    order = np.argsort(rank[all_row], kind="stable")
+    np.testing.assert_array_equal(e_row, all_row[order])
+    np.testing.assert_array_equal(e_slot, np.concatenate([fr_slot, g_slot])[order])
+    np.testing.assert_array_equal(e_own, np.concatenate([np.ones(n_own, bool), np.zeros(n_ghost, bool)])[order])
+    np.testing.assert_array_equal(e_hops, np.concatenate([hops[fr_row], g_hops])[order])
+    np.testing.assert_array_equal(relayed, np.bincount(fr_row, minlength=rows) > 0)
+
+    nd = int(rng.integers(0, 40))
+    out_f = np.sort(rng.integers(0, rows, nd + 5))  # buffers longer than the deliveries, grouped by row
+    out_v = rng.integers(0, 50, nd + 5)
+    out_h = rng.integers(1, 5, nd + 5).astype(np.int32)
+    limit = rng.integers(1, 5, rows).astype(np.int32)
+    f_row, f_slot, has_fr = next_frontier(out_v, out_f, out_h, nd, limit)
+    goes = out_h[:nd] < limit[out_f[:nd]]
+    np.testing.assert_array_equal(f_row, out_f[:nd][goes])
+    np.testing.assert_array_equal(f_slot, out_v[:nd][goes])
+    np.testing.assert_array_equal(has_fr, np.bincount(out_f[:nd][goes], minlength=rows) > 0)
