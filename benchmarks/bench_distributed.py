@@ -211,6 +211,44 @@ def run_steps(n: int, shards: int | None, traffic: str, steps: int, backend: str
     return out
 
 
+def stage_table(n: int, steps: int, ray: Any) -> str:
+    """Where a shard's step goes: each stage of a 2-shard rollout against half of the same stage in one process
+    (``shard_stages``)."""
+    import tempfile
+
+    import shard_stages as ss
+
+    ray.cloudpickle.register_pickle_by_value(ss)  # the shards build the timed policy from this module's code
+    acts = actions(n, "full")
+    env = build(n, None, api="rollout")
+    env.rollout(Cycle(acts, env.scenario.act_parts()), 2, seed=0)  # compiles, as the shards' warm-up below
+    stamps: list[float] = []
+
+    def clock(env: Any, taken: int, view: Any) -> bool:
+        stamps.append(time.perf_counter())
+        return False
+
+    ss.install(ss.all_targets(1))
+    try:
+        env.rollout(Cycle(acts, env.scenario.act_parts()), steps, seed=0, on_step=clock)
+        one = ss.per_step_ms(dict(ss._RECORD), 1)
+    finally:
+        ss.uninstall()
+        close(env)
+    step_one = float(np.mean(np.diff(stamps[2:]))) * 1e3
+    with tempfile.TemporaryDirectory() as folder:
+        env = build(n, 2, "ray", "rollout")
+        try:
+            env.rollout(Cycle(acts, env.scenario.act_parts()), 2, seed=0)
+            env.rollout(ss.TimedCycle(acts, env.scenario.act_parts(), folder), steps, seed=0)
+            wait = _shard_times(env)["wait_ms"]
+        finally:
+            close(env)
+        shards = [ss.per_step_ms(r, 1) for r in ss.read_shards(folder)]
+    rows = ss.table_rows(one, step_one, shards, wait)
+    return markdown_table(["stage", "one process ms", "half of it", "each shard ms", "slowest shard - half"], rows)
+
+
 def same_result(a: Any, b: Any) -> bool:
     """Whether two rollouts ended with the same returns, final positions and events."""
     return bool(
@@ -599,8 +637,26 @@ def main(argv: list[str] | None = None) -> int:
     )
     p.add_argument("--shards", type=str, default="2,4,8", help="shard counts of --scaling, comma separated")
     p.add_argument("--steps", type=int, default=None, help="steps of each measured rollout")
+    p.add_argument(
+        "--stages",
+        type=int,
+        metavar="N",
+        default=None,
+        help="only the stage table: N agents, each stage of a 2-shard rollout against half of one process's",
+    )
     args = p.parse_args(argv)
     q = args.quick
+    if args.stages is not None:
+        print(f"# Where a shard's step goes\n\nMachine: {machine_description()}\n")
+        ray = start_ray()
+        if ray is None:
+            print("Ray is not installed: pip install 'agentsim-env[ray]'")
+            return 1
+        try:
+            print(stage_table(args.stages, args.steps or 12, ray))
+        finally:
+            ray.shutdown()
+        return 0
     if args.scaling is not None:
         ks = [int(x) for x in args.shards.split(",") if x.strip()]
         print(f"# One world over K shards on one machine\n\nMachine: {machine_description()}\n")

@@ -37,3 +37,28 @@ def test_bytes_through_the_exchange_grow_with_the_shards() -> None:
     assert by_k[3]["groups"] > by_k[2]["groups"]  # every shard posts and gets every group's sums
     table = bd.hub_table(by_k, 2000)
     assert table.count("\n") == 3
+
+
+@pytest.mark.slow
+def test_stage_table_times_every_stage_in_both_shards() -> None:
+    """``--stages``: the timed policy runs inside both Ray shards and every stage gets a time from each."""
+    pytest.importorskip("ray")
+    import subprocess
+
+    out = subprocess.run(
+        [sys.executable, str(ROOT / "benchmarks" / "bench_distributed.py"), "--stages", "3000", "--steps", "4"],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        check=True,
+    ).stdout
+    rows = [line for line in out.splitlines() if line.startswith("| ") and "---" not in line][1:]
+    import shard_stages as ss
+
+    assert len(rows) == len(ss.STAGES) + 3
+    for line in rows[: len(ss.STAGES)]:
+        cells = [c.strip() for c in line.strip("|").split("|")]
+        shards = [float(x) for x in cells[3].split(" / ")]
+        assert len(shards) == 2 and all(x > 0 for x in shards), line
+        if cells[1] != "-":
+            assert float(cells[1]) > 0, line

@@ -5,10 +5,11 @@ everywhere) and a replica of the static scene; its own agents and its ghosts are
 call, ``step`` (or ``act`` in a rollout, the policy inside the shard): the scenario's ``run_step`` (stage 1 for
 the own agents that act, ``World.step``, the scoring), the same code as one process, with the world's ``bridge``
 set to the shard, so the step meets the other shards at the exchange (``distributed.exchange``, routed by
-``distributed.bridge``) at six barriers: after the motion (hand-overs and ghosts), after the groups stage (the
+``distributed.bridge``) at five barriers: after the motion (hand-overs and ghosts), after the groups stage (the
 ghosts that went offline, the overlay's ghost frontier), at the bus delivery (messages across shards), at the
-scoring (per-group sums) and before the observations (the positions of far senders in its inboxes, asked for and
-answered). What it returns is what the caller asked for: the own agents' rows of rewards, terminations and infos,
+scoring (per-group sums, and the far senders in its inboxes whose positions the observations need) and before
+the observations (those positions answered). A scenario without group sums asks for the far senders in a barrier
+of their own (six). What it returns is what the caller asked for: the own agents' rows of rewards, terminations and infos,
 their observations (``obs=True``) and their kinematics (``kinematics=True``, for a mirror of the world).
 
 This module imports no Ray: ``distributed.ray_backend`` wraps a ``Shard`` in an actor.

@@ -1,6 +1,6 @@
 """The exchange's data path for Ray shards: one TCP connection per shard to the exchange actor, framed pickles.
 
-A step of shards meets at about six barriers (``distributed.exchange``). Through Ray actor calls each barrier cost
+A step of shards meets at five or six barriers (``distributed.exchange``). Through Ray actor calls each barrier cost
 ~5 ms of latency and ~8 ms of CPU per step across the processes (task submission, gRPC, the object store for
 payloads over 100 KB), measured with no simulation at all (``benchmarks/bench_distributed.py``, "exchange
 floor"). Here a shard keeps one TCP connection to the exchange actor, which serves it on its own asyncio loop
