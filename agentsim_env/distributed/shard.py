@@ -8,11 +8,10 @@ set to the shard, so the step meets the other shards at the exchange (``distribu
 ``distributed.bridge``) at five barriers: after the motion (hand-overs and ghosts), after the groups stage (the
 ghosts that went offline, the overlay's ghost frontier), at the bus delivery (messages across shards), at the
 scoring (per-group sums, and the far senders in its inboxes whose positions the observations need) and before
-the observations (those positions answered). A scenario without group sums asks for the far senders in a barrier
-of their own (six). What it returns is what the caller asked for: the own agents' rows of rewards, terminations and infos,
-their observations (``obs=True``) and their kinematics (``kinematics=True``, for a mirror of the world).
-
-This module imports no Ray: ``distributed.ray_backend`` wraps a ``Shard`` in an actor.
+the observations (those positions answered); a scenario without group sums asks for the far senders in a barrier
+of their own (six). What it returns is what the caller asked for: the own agents' rows of rewards, terminations
+and infos, their observations (``obs=True``) and their kinematics (``kinematics=True``, for a mirror of the
+world).
 """
 
 from __future__ import annotations
