@@ -172,7 +172,9 @@ def _sharded(name: str) -> None:
     """The default baseline and random actions over two in-process shards (the shard code Ray runs in its
     workers), once as they are and once with Ray's read-only transport."""
     from agentsim_env.distributed.env import make as make_distributed
+    from agentsim_env.distributed.row_kernels import warm
 
+    warm()  # the driver's row copies of Ray shards sharing memory with it (the local shards below do not)
     for store in (False, True):
         env = make_distributed(name, shards=2, backend="local", **_config(name, SHARDED[name]))
         if store:

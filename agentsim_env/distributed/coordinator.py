@@ -29,6 +29,7 @@ from agentsim_env.core.collisions import CollisionEvents
 from agentsim_env.distributed.backends import Failure
 from agentsim_env.distributed.bridge import Packed, nbytes
 from agentsim_env.distributed.partition import Strips
+from agentsim_env.distributed.row_kernels import scatter_rows
 from agentsim_env.scenarios.base import Scenario, StepResult, StepScores
 from agentsim_env.sim import StepEvents, World
 
@@ -240,7 +241,8 @@ class Coordinator:
         """Shard ``k``'s observation rows into ``obs``: returned, or written into the shared segment (``obs_shm``)."""
         out = self.obs
         assert out is not None
-        out[r["slots"]] = r["obs"] if "obs" in r else self.backend.obs_rows(k, int(r["obs_n"]))
+        rows = r["obs"] if "obs" in r else self.backend.obs_rows(k, int(r["obs_n"]))
+        scatter_rows(out, np.asarray(r["slots"]), np.asarray(rows))
 
     def _take(self, replies: dict[int, Packed], obs: bool, taken: set[int] | frozenset[int] = frozenset()) -> None:
         # ``taken``: shards whose observation rows were scattered as their reply came in

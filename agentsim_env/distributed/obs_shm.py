@@ -31,6 +31,8 @@ from typing import Any
 
 import numpy as np
 
+from agentsim_env.distributed.row_kernels import gather_rows
+
 ROW_BYTES = 4  # float32
 
 
@@ -191,7 +193,7 @@ class ActionSegment:
         into, rows = self._regions.views(k)
         into[:n] = slots
         for name, _, _ in self.layout:
-            np.take(parts[name], slots, axis=0, out=rows[name][:n])
+            gather_rows(parts[name], slots, rows[name][:n])
         return n
 
     def close(self) -> None:
