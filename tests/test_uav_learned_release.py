@@ -50,6 +50,7 @@ def test_defaults_keep_the_old_mode() -> None:
         {"autopilot_altitude": 100.0},
         {"autopilot_lane": 0.1},
         {"release_cost": -1.0},
+        {"autopilot_offset": 1},
     ],
 )
 def test_autopilot_fields_are_validated(bad: dict) -> None:
@@ -82,6 +83,41 @@ def test_autopilot_flies_itself_and_masks_releases_in_transit() -> None:
     t_first = env.world.payloads.objects.get("release_t").min()
     assert t_first >= (max(transit) + 1) * env.scenario.config.dt - 1e-9  # ...and no release before the sweep
     assert not env.agents  # payload empty: the mission ended
+    env.close()
+
+
+def _sides(routes, log) -> list[float]:
+    """Per step and UAV on a leg after its first one: the signed distance of the UAV to the left of its leg."""
+    out = []
+    for pos, _, wp in log:
+        for j in range(pos.shape[0]):
+            if 2 <= wp[j] < routes.n_wp[j]:
+                a, b = routes.points[j, wp[j] - 1], routes.points[j, wp[j]]
+                u = (b - a) / max(np.linalg.norm(b - a), 1e-9)
+                out.append(float(u[0] * (pos[j, 1] - a[1]) - u[1] * (pos[j, 0] - a[0])))
+    return out
+
+
+def test_lane_offset_action_moves_the_sweep_sideways() -> None:
+    """``autopilot_offset``: motion[0] = +-1 flies half a lane to either side of the lane while sweeping, 0 on the
+    lane; transit is not offset; without the flag motion is ignored (the test above)."""
+    plain = agentsim_env.make("uav_release", **PILOT)
+    ref = _fly(plain, lambda o: -1.0, motion=0.0, max_steps=400)
+    plain.close()
+    env = agentsim_env.make("uav_release", **PILOT, autopilot_offset=True)
+    lane = env.scenario.config.autopilot_lane
+    routes = env.scenario.pilot.routes
+    runs = {m: _fly(env, lambda o: -1.0, motion=m, max_steps=400) for m in (0.0, 1.0, -1.0)}
+    for m, log in runs.items():  # transit: the plain autopilot's flight
+        for (p0, _, w0), (p1, _, w1) in zip(ref, log, strict=True):
+            if (w0 == 0).all() and (w1 == 0).all():
+                np.testing.assert_array_equal(p0, p1, err_msg=f"motion {m}")
+    left, right, centre = (np.array(_sides(routes, runs[m])) for m in (1.0, -1.0, 0.0))
+    assert min(len(left), len(right), len(centre)) > 50
+    # most of the time each track sits on its side of the leg, about half a lane off (it turns at the corners)
+    assert np.median(left) > 0.4 * lane and np.median(right) < -0.4 * lane
+    assert np.median(np.abs(centre)) < 1.0
+    assert np.abs(np.concatenate([left, right])).max() < 0.5 * lane + 4.0
     env.close()
 
 

@@ -5,7 +5,9 @@ With ``autopilot=True`` the scenario flies every UAV itself. The zones are cover
 order from the base); the lane length is split into ``n_agents`` pieces of equal length, one per UAV. A UAV
 flies from the base to the start of its piece at ``max_speed`` ("transit"), then along it at
 ``autopilot_speed`` ("sweep"), slowing down before each corner, and hovers once its piece is done. The
-altitude is held at ``autopilot_altitude``.
+altitude is held at ``autopilot_altitude``. With ``autopilot_offset=True`` the policy's ``motion[0]`` in [-1, 1]
+shifts the waypoint a sweeping UAV flies to by up to half a lane spacing sideways (left of its flying direction
+when positive), so it can move its releases between the lanes.
 
 A release goes where the sensor is predicted to land: ``p + v * k + wind(z) * t_fall``, with ``k`` and
 ``t_fall`` calibrated once by the ballistic model (``payloads.ballistic.predict_landing``) at the sweep speed
@@ -30,6 +32,9 @@ if TYPE_CHECKING:
     from agentsim_env.uav.config import UavReleaseConfig
 
 __all__ = ["ClaimMap", "SweepRoutes", "lane_segments", "throw_coefficients"]
+
+LOOKAHEAD_M = 6.0
+"""With lane offsets, how far ahead of its projection on its shifted leg a sweeping UAV aims (m)."""
 
 
 def _zone_order(zones: ZoneSet, start: np.ndarray) -> list[int]:
@@ -119,13 +124,18 @@ class SweepRoutes:
         altitude: float,
         max_accel: float,
         max_speed: float,
+        offset: np.ndarray | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
         """Velocity commands ``(S, 3)`` / ``max_speed`` and the advanced waypoint indices.
 
         ``wp`` is the index of the waypoint flown to (0: transit to the route's start); a slot whose
-        ``wp`` is past its last waypoint hovers.
+        ``wp`` is past its last waypoint hovers. ``offset`` ``(S,)`` m shifts a sweeping slot's leg (from
+        waypoint ``wp - 1`` to ``wp``) sideways, to its left when positive, and the slot follows the shifted leg
+        (``_pursue``); without it, the slot flies straight at its waypoint.
         """
         n = self.n_wp[agent]
+        if offset is not None:
+            return self._pursue(agent, pos, wp, n, offset, speed, transit_speed, altitude, max_accel, max_speed)
         done = wp >= n
         k = np.minimum(wp, n - 1)
         goal = self.points[agent, k]
@@ -136,13 +146,75 @@ class SweepRoutes:
         goal = self.points[agent, k]
         delta = goal - pos[:, :2]
         d = np.linalg.norm(delta, axis=1)
+        return self._velocity(delta, d, wp, done, pos, speed, transit_speed, altitude, max_accel, max_speed), wp
+
+    @staticmethod
+    def _velocity(
+        delta: np.ndarray,
+        stop: np.ndarray,
+        wp: np.ndarray,
+        done: np.ndarray,
+        pos: np.ndarray,
+        speed: float,
+        transit_speed: float,
+        altitude: float,
+        max_accel: float,
+        max_speed: float,
+    ) -> np.ndarray:
+        # towards ``delta`` at the sweep (or transit) speed, slowing to stop ``stop`` m ahead; altitude held
         v = np.where(wp == 0, transit_speed, speed)
-        v = np.minimum(v, np.sqrt(2.0 * 0.8 * max_accel * d))  # stop at the corner
-        vxy = delta / np.maximum(d, 1e-9)[:, None] * v[:, None]
+        v = np.minimum(v, np.sqrt(2.0 * 0.8 * max_accel * np.maximum(stop, 0.0)))  # stop at the corner
+        vxy = delta / np.maximum(np.linalg.norm(delta, axis=1), 1e-9)[:, None] * v[:, None]
         vxy[done] = 0.0
         vz = np.clip(altitude - pos[:, 2], -3.0, 3.0)
         cmd = np.column_stack([vxy, vz]) / max_speed
-        return np.clip(cmd, -1.0, 1.0), wp
+        return np.clip(cmd, -1.0, 1.0)
+
+    def _legs(
+        self, agent: np.ndarray, wp: np.ndarray, n: np.ndarray, offset: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Each slot's leg (to waypoint ``wp``) shifted by ``offset`` to its left when sweeping: ``(start, unit
+        direction, length, sweeping)``."""
+        k = np.minimum(wp, n - 1)
+        b = self.points[agent, k]
+        a = self.points[agent, np.maximum(k - 1, 0)]
+        leg = b - a
+        length = np.linalg.norm(leg, axis=1)
+        u = leg / np.maximum(length, 1e-9)[:, None]
+        sweeping = (wp >= 1) & (wp < n) & (length > 1e-9)
+        shift = np.where(sweeping, offset, 0.0)
+        return a + np.column_stack([-u[:, 1], u[:, 0]]) * shift[:, None], u, length, sweeping
+
+    def _pursue(
+        self,
+        agent: np.ndarray,
+        pos: np.ndarray,
+        wp: np.ndarray,
+        n: np.ndarray,
+        offset: np.ndarray,
+        speed: float,
+        transit_speed: float,
+        altitude: float,
+        max_accel: float,
+        max_speed: float,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """``command`` with lateral offsets: a sweeping slot follows its shifted leg (it aims ``LOOKAHEAD_M``
+        ahead of its projection on it) and moves on once less than 1.5 m of the leg is left; transit as without."""
+        xy = pos[:, :2]
+        done = wp >= n
+        start, u, length, sweeping = self._legs(agent, wp, n, offset)
+        left = length - np.einsum("ij,ij->i", xy - start, u)
+        d0 = np.linalg.norm(self.points[agent, np.minimum(wp, n - 1)] - xy, axis=1)
+        arrived = np.where(sweeping, left < 1.5, d0 < 1.5)
+        wp = np.where(~done & arrived, wp + 1, wp)
+        done = wp >= n
+        start, u, length, sweeping = self._legs(agent, wp, n, offset)
+        along = np.einsum("ij,ij->i", xy - start, u)
+        aim = start + u * np.clip(along + LOOKAHEAD_M, 0.0, length)[:, None]
+        goal = self.points[agent, np.minimum(wp, n - 1)]
+        delta = np.where(sweeping[:, None], aim - xy, goal - xy)
+        stop = np.where(sweeping, length - along, np.linalg.norm(goal - xy, axis=1))
+        return self._velocity(delta, stop, wp, done, pos, speed, transit_speed, altitude, max_accel, max_speed), wp
 
     def progress(self, agent: np.ndarray, pos: np.ndarray, wp: np.ndarray) -> np.ndarray:
         """Fraction of each UAV's route flown, in [0, 1] (0 during transit, 1 once done)."""
@@ -246,9 +318,12 @@ class AutopilotMode:
             xy = xy + wind.mean_velocity_at(st.pos[:, 2], st.world_id)[:, :2] * self.t_fall
         return xy
 
-    def fly(self, world: World, wp: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Velocity commands ``(S, 3)`` (/ ``max_speed``) and the advanced waypoint indices."""
+    def fly(self, world: World, wp: np.ndarray, lateral: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Velocity commands ``(S, 3)`` (/ ``max_speed``) and the advanced waypoint indices; ``lateral`` ``(S,)``
+        in [-1, 1] offsets each sweeping UAV from its lane by ``lateral x autopilot_lane / 2`` m (to the left of
+        its flying direction when positive)."""
         c, st = self.c, world.state
+        offset = None if lateral is None else np.clip(lateral, -1.0, 1.0) * (float(c.autopilot_lane) / 2.0)
         agent = np.arange(st.n_slots) % int(c.n_agents)
         b = c.body
         return self.routes.command(
@@ -260,6 +335,7 @@ class AutopilotMode:
             float(c.autopilot_altitude),
             float(b.max_accel),
             float(b.max_speed),
+            offset,
         )
 
     def progress(self, world: World, wp: np.ndarray) -> np.ndarray:

@@ -47,8 +47,9 @@ class UavReleaseConfig(ScenarioConfig):
     Autopilot mode (``autopilot=True``, see ``uav_autopilot`` and the scenario docstring): the scenario flies a
     sweep at ``autopilot_speed`` m/s (0.5..``body.max_speed``) and ``autopilot_altitude`` m (inside
     ``body.altitude``) over lanes ``autopilot_lane`` m apart (1..1e4); ``release_cost`` (0..100, in units of the mean
-    weighted coverage per required sensor, ``1 / zones.n_sensors``) is the shaping baseline of a release. These fields
-    do nothing when ``autopilot`` is off.
+    weighted coverage per required sensor, ``1 / zones.n_sensors``) is the shaping baseline of a release;
+    ``autopilot_offset`` (bool) lets the policy's ``motion[0]`` offset each UAV sideways from its lane by up to half
+    a lane spacing. These fields do nothing when ``autopilot`` is off.
     """
 
     nested: ClassVar[dict[str, type]] = {
@@ -96,6 +97,7 @@ class UavReleaseConfig(ScenarioConfig):
     autopilot_altitude: Real = 10.0  # inside body.altitude
     autopilot_lane: Annotated[Real, Field(ge=1.0, le=1e4)] = 16.0
     release_cost: Annotated[Real, Field(ge=0.0, le=100.0)] = 1.0
+    autopilot_offset: Flag = False
 
     def __post_init__(self) -> None:
         in_range("autopilot_speed", self.autopilot_speed, 0.5, self.body.max_speed)

@@ -38,7 +38,7 @@ payload. The mission also completes once every UAV has finished its sweep and no
 
 | action part | autopilot mode                                                   |
 |-------------|------------------------------------------------------------------|
-| motion      | ignored (the autopilot flies)                                    |
+| motion      | ignored (the autopilot flies); with ``autopilot_offset=True``, ``motion[0]`` x ``autopilot_lane`` / 2 m offsets the UAV sideways from its lane while it sweeps (left of its flying direction when positive), the other components ignored |
 | release     | trigger > 0 releases at the predicted landing point; dx, dy ignored |
 | comm        | as without autopilot                                             |
 
@@ -54,7 +54,8 @@ sensors - w_fidelity x change of the zone's radial W1 - w_energy x energy / batt
 radius - w_out x landings outside every zone; at the end of the episode every UAV still flying gets
 w_lcc x largest-component fraction + w_lifetime x FND / FND of the oracle layout (B8).
 
-Version history: v0, first release; autopilot mode added (off by default, layouts unchanged without it).
+Version history: v0, first release; autopilot mode added (off by default, layouts unchanged without it); the
+autopilot's lane offset action added (``autopilot_offset``, off by default, layouts unchanged).
 """
 
 from __future__ import annotations
@@ -196,7 +197,8 @@ class UavReleaseScenario(Scenario[UavReleaseConfig]):
         if self.pilot is None:
             super().apply_actions(world, actions, acting)
         else:  # the autopilot flies; releases only while sweeping
-            cmd, t.wp[:] = self.pilot.fly(world, t.wp)
+            lateral = actions["motion"][:, 0] if c.autopilot_offset else None
+            cmd, t.wp[:] = self.pilot.fly(world, t.wp, lateral)
             decode_velocity_unchecked(world.motion, acting, cmd, st.max_speed)
             may &= self.pilot.on_route(t.wp, st.n_slots)
         rel = actions["release"]
