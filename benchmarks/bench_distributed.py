@@ -240,7 +240,7 @@ def stage_table(n: int, steps: int, ray: Any) -> str:
         env = build(n, 2, "ray", "rollout")
         try:
             env.rollout(Cycle(acts, env.scenario.act_parts()), 2, seed=0)
-            env.rollout(ss.TimedCycle(acts, env.scenario.act_parts(), folder), steps, seed=0)
+            env.rollout(ss.TimedCycle(Cycle(acts, env.scenario.act_parts()), folder), steps, seed=0)
             wait = _shard_times(env)["wait_ms"]
         finally:
             close(env)

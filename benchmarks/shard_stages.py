@@ -150,32 +150,27 @@ def per_step_ms(record: dict[str, list[float]], skip: int) -> dict[str, float]:
 
 
 class TimedCycle:
-    """A row policy playing a fixed action cycle (as ``bench_distributed.Cycle``) that times the stages of the
-    shard it runs in: ``reset`` installs the wrappers, every step writes the timings to ``folder``."""
+    """A row policy that times the stages of the shard it runs in: ``reset`` installs the wrappers, every step
+    writes the timings to ``folder``; ``inner`` (``bench_distributed.Cycle``) chooses the actions."""
 
-    def __init__(self, acts: list[np.ndarray], parts: dict[str, Any], folder: str) -> None:
-        self.acts = [np.asarray(a).reshape(a.shape[-2], a.shape[-1]) for a in acts]
-        self.parts = [(k, p.size, tuple(p.shape)) for k, p in parts.items()]
+    def __init__(self, inner: Any, folder: str) -> None:
+        self.inner = inner
         self.folder = folder
 
     def reset(self, seed: int | None = None) -> None:
         """Install the shard's timers (this runs in the shard's process)."""
         install(all_targets(2))
         _RECORD.clear()
+        self.inner.reset(seed)
 
     def act_rows(self, obs: dict[str, np.ndarray], slots: np.ndarray, step: int) -> dict[str, np.ndarray]:
-        """The rows ``slots`` of the cycle's array for ``step``; the timings so far to this shard's file."""
+        """The inner policy's rows; the timings so far to this shard's file."""
         if step:
             path = Path(self.folder) / f"shard-{os.getpid()}.json"
             tmp = path.with_suffix(".tmp")
             tmp.write_text(json.dumps(_RECORD))
             os.replace(tmp, path)
-        a = self.acts[step % len(self.acts)][slots]
-        out, c = {}, 0
-        for key, size, shape in self.parts:
-            out[key] = a[:, c : c + size].reshape(len(slots), *shape)
-            c += size
-        return out
+        return self.inner.act_rows(obs, slots, step)  # type: ignore[no-any-return]
 
 
 def read_shards(folder: str) -> list[dict[str, list[float]]]:

@@ -194,6 +194,20 @@ def hop_kernel(
 
 
 @nb.njit(cache=True)
+def _place(rank, count, row, slot, hops, per_row, own, e_row, e_slot, e_own, e_hops):  # type: ignore[no-untyped-def]
+    # Entries (row, slot) at their row's next place (``count``: each rank's next position); hops per row or per entry.
+    for q in range(row.shape[0]):
+        f = row[q]
+        r = rank[f]
+        at = count[r]
+        count[r] = at + 1
+        e_row[at] = f
+        e_slot[at] = slot[q]
+        e_own[at] = own
+        e_hops[at] = hops[f] if per_row else hops[q]
+
+
+@nb.njit(cache=True)
 def order_entries(rank, n_rows, fr_row, fr_slot, fr_hops, g_row, g_slot, g_hops):  # type: ignore[no-untyped-def]
     """The hop's frontier entries, own ones (``fr_*``) then the ghosts' (``g_*``), grouped by their row's rank.
 
@@ -220,24 +234,8 @@ def order_entries(rank, n_rows, fr_row, fr_slot, fr_hops, g_row, g_slot, g_hops)
     e_slot = np.empty(ne, dtype=np.int64)
     e_own = np.empty(ne, dtype=np.bool_)
     e_hops = np.empty(ne, dtype=np.int32)
-    for q in range(nf):
-        f = fr_row[q]
-        r = rank[f]
-        at = count[r]
-        count[r] = at + 1
-        e_row[at] = f
-        e_slot[at] = fr_slot[q]
-        e_own[at] = True
-        e_hops[at] = fr_hops[f]
-    for q in range(ng):
-        f = g_row[q]
-        r = rank[f]
-        at = count[r]
-        count[r] = at + 1
-        e_row[at] = f
-        e_slot[at] = g_slot[q]
-        e_own[at] = False
-        e_hops[at] = g_hops[q]
+    _place(rank, count, fr_row, fr_slot, fr_hops, True, True, e_row, e_slot, e_own, e_hops)
+    _place(rank, count, g_row, g_slot, g_hops, False, False, e_row, e_slot, e_own, e_hops)
     return e_row, e_slot, e_own, e_hops, relayed
 
 
