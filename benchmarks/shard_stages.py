@@ -1,10 +1,10 @@
 """Where a shard's step goes: the stages of one process and of a shard, timed by the same wrappers.
 
-Used by ``bench_distributed.py --stages``. Each stage is a method (or a few) of the pipeline, wrapped with a
-timer in the process that runs it: in this process for one process, inside each shard process for the shards
-(the policy object that plays the action cycle installs the wrappers when the shard resets it, and writes its
-shard's timings to a folder this process reads after the rollout). The table sets each stage of a shard against
-half of the same stage in one process: what a perfect split over 2 shards would cost.
+``bench_distributed.py --stages`` prints ``stage_table``. Each stage is a method (or a few) of the pipeline,
+wrapped with a timer in the process that runs it: in this process for one process, inside each shard process for
+the shards (the policy object that plays the action cycle installs the wrappers when the shard resets it, and
+writes its shard's timings to a folder this process reads after the rollout). The table sets each stage of a
+shard against half of the same stage in one process: what a perfect split over 2 shards would cost.
 """
 
 from __future__ import annotations
@@ -13,12 +13,15 @@ import functools
 import importlib
 import json
 import os
-import statistics
+import sys
+import tempfile
 import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from common import markdown_table
+from distributed_setup import Cycle, actions, build, close, shard_times, ship_by_value
 
 #: (row label, methods timed in one process, methods timed in a shard); "module:Class.method".
 STAGES: list[tuple[str, list[str], list[str]]] = [
@@ -182,21 +185,24 @@ def table_rows(
     one: dict[str, float], step_one: float, shards: list[dict[str, float]], wait_ms: float
 ) -> list[list[str]]:
     """Rows: stage, one process ms, half of it, each shard's ms, the slowest shard minus the half (``step_one``:
-    one process's wall ms per step, policy and observations included)."""
+    one process's wall ms per step, policy and observations included). A stage whose methods never ran in a
+    process (or that one process does not have) shows "-" there."""
     rows = []
     total_one = total_shard = 0.0
     for label, t_one, t_shard in STAGES:
+        ran_one = any(t in one for t in t_one)
         a = sum(one.get(t, 0.0) for t in t_one)
         b = [sum(s.get(t, 0.0) for t in t_shard) for s in shards]
         worst = max(b) if b else 0.0
         total_one += a
         total_shard += worst
+        cells = [f"{x:.1f}" if any(t in s for t in t_shard) else "-" for x, s in zip(b, shards, strict=True)]
         rows.append(
             [
                 label,
-                f"{a:.1f}" if t_one else "-",
-                f"{a / 2:.1f}" if t_one else "-",
-                " / ".join(f"{x:.1f}" for x in b),
+                f"{a:.1f}" if ran_one else "-",
+                f"{a / 2:.1f}" if ran_one else "-",
+                " / ".join(cells),
                 f"{worst - a / 2:+.1f}",
             ]
         )
@@ -223,6 +229,35 @@ def table_rows(
     return rows
 
 
-def median_ms(times: list[float]) -> float:
-    """Median of a list of seconds, in ms."""
-    return 1e3 * statistics.median(times) if times else 0.0
+def stage_table(n: int, steps: int, ray: Any) -> str:
+    """Where a shard's step goes: each stage of a 2-shard rollout against half of the same stage in one process
+    (``ray``: the running Ray module)."""
+    ship_by_value(sys.modules[__name__])  # the shards build the timed policy from this module's code
+    acts = actions(n, "full")
+    env = build(n, None, api="rollout")
+    env.rollout(Cycle(acts, env.scenario.act_parts()), 2, seed=0)  # compiles, as the shards' warm-up below
+    stamps: list[float] = []
+
+    def clock(env: Any, taken: int, view: Any) -> bool:
+        stamps.append(time.perf_counter())
+        return False
+
+    install(all_targets(1))
+    try:
+        env.rollout(Cycle(acts, env.scenario.act_parts()), steps, seed=0, on_step=clock)
+        one = per_step_ms(dict(_RECORD), 1)
+    finally:
+        uninstall()
+        close(env)
+    step_one = float(np.mean(np.diff(stamps[2:]))) * 1e3
+    with tempfile.TemporaryDirectory() as folder:
+        env = build(n, 2, "ray", "rollout")
+        try:
+            env.rollout(Cycle(acts, env.scenario.act_parts()), 2, seed=0)
+            env.rollout(TimedCycle(Cycle(acts, env.scenario.act_parts()), folder), steps, seed=0)
+            wait = shard_times(env)["wait_ms"]
+        finally:
+            close(env)
+        shards = [per_step_ms(r, 1) for r in read_shards(folder)]
+    rows = table_rows(one, step_one, shards, wait)
+    return markdown_table(["stage", "one process ms", "half of it", "each shard ms", "slowest shard - half"], rows)
