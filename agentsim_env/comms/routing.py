@@ -170,26 +170,26 @@ def pair_columns(lo, hi, rep, recv, reason, msg, kind, snd, tgt, created, a, b, 
 
 
 @nb.njit(cache=True)
+def _event_columns(n):  # type: ignore[no-untyped-def]
+    # the columns both event tables have: message, kind, sender, target, receiver, created step
+    return (
+        np.empty(n, dtype=np.int64),
+        np.empty(n, dtype=np.int8),
+        np.empty(n, dtype=np.int64),
+        np.empty(n, dtype=np.int64),
+        np.empty(n, dtype=np.int64),
+        np.empty(n, dtype=np.int64),
+    )
+
+
+@nb.njit(cache=True)
 def pair_arrays(n_ok, n_dr):  # type: ignore[no-untyped-def]
-    """Fresh delivered and dropped event columns of ``n_ok`` and ``n_dr`` rows."""
-    ok = (
-        np.empty(n_ok, dtype=np.int64),
-        np.empty(n_ok, dtype=np.int8),
-        np.empty(n_ok, dtype=np.int64),
-        np.empty(n_ok, dtype=np.int64),
-        np.empty(n_ok, dtype=np.int64),
-        np.empty(n_ok, dtype=np.int64),
-        np.empty(n_ok, dtype=np.int64),
-    )
-    dr = (
-        np.empty(n_dr, dtype=np.int64),
-        np.empty(n_dr, dtype=np.int8),
-        np.empty(n_dr, dtype=np.int64),
-        np.empty(n_dr, dtype=np.int64),
-        np.empty(n_dr, dtype=np.int64),
-        np.empty(n_dr, dtype=np.int64),
-        np.empty(n_dr, dtype=np.int8),
-    )
+    """Fresh delivered and dropped event columns of ``n_ok`` and ``n_dr`` rows (the delivered ones end with the
+    message's row, the dropped ones with the reason)."""
+    m, k, s, t, r, c = _event_columns(n_ok)
+    ok = (m, k, s, t, r, c, np.empty(n_ok, dtype=np.int64))
+    m, k, s, t, r, c = _event_columns(n_dr)
+    dr = (m, k, s, t, r, c, np.empty(n_dr, dtype=np.int8))
     return ok, dr
 
 
