@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from agentsim_env.train.config import TrainConfig
-from agentsim_env.wrappers.metrics import outcome
+from agentsim_env.wrappers.metrics import final_values, outcome
 
 __all__ = ["baselines_of", "evaluate_policies", "format_table", "write_table"]
 
@@ -67,10 +67,7 @@ def _play(
     last: dict[str, float] = {}
 
     def note_finals(_env: Any, infos: dict[str, dict[str, Any]]) -> None:
-        for k in finals:
-            vals = [float(i[k]) for i in infos.values() if k in i]
-            if vals:
-                last[k] = float(np.mean(vals))
+        last.update(final_values(infos, finals))
 
     for s in seeds:
         last.clear()

@@ -16,7 +16,7 @@ import numpy as np
 
 from agentsim_env.wrappers.parallel import ParallelEnvWrapper
 
-__all__ = ["EpisodeMetrics", "outcome"]
+__all__ = ["EpisodeMetrics", "final_values", "outcome"]
 
 
 def outcome(env: Any) -> dict[str, float]:
@@ -28,6 +28,16 @@ def outcome(env: Any) -> dict[str, float]:
         ok = np.asarray(sc.group_success(env.world, 0), dtype=bool)
         return {"groups_reached": float(ok.mean()), "all_groups_reached": float(ok.all())}
     return {}
+
+
+def final_values(infos: dict[str, dict[str, Any]], keys: Any) -> dict[str, float]:
+    """Each of ``keys`` that this step's ``infos`` carry: its mean over the agents that carry it."""
+    out = {}
+    for k in keys:
+        vals = [float(i[k]) for i in infos.values() if k in i]
+        if vals:
+            out[k] = float(np.mean(vals))
+    return out
 
 
 def _number(v: Any) -> bool:
@@ -66,10 +76,7 @@ class EpisodeMetrics(ParallelEnvWrapper):
             vals = [float(i[k]) for i in infos.values() if k in i and _number(i[k])]
             if vals:
                 self._sums[k] = self._sums.get(k, 0.0) + sum(vals)
-        for k in sc.final_keys:
-            vals = [float(i[k]) for i in infos.values() if k in i]
-            if vals:
-                self._last[k] = float(np.mean(vals))
+        self._last.update(final_values(infos, sc.final_keys))
 
     def summary(self) -> dict[str, float]:
         """The episode so far: ``{event}_per_agent`` for each event counter that fired, the final keys' last
