@@ -352,12 +352,13 @@ def run_curriculum(
         cfg, spec_k, folder = cur.stages[k], cur.spec.stages[k], cur.stage_dir(path, k)
         folder.mkdir(parents=True, exist_ok=True)
         t0, c0 = time.perf_counter(), time.process_time()
-        vec = make_vec_env(cfg.replace(seed=_segment_seed(cfg.seed, int(state["segment"]))))
+        seed = _segment_seed(cfg.seed, int(state["segment"]))
+        vec = make_vec_env(cfg.replace(seed=seed))
         if state["checkpoint"] is None:
             model = make_model(cfg, vec)
         else:  # load, not set_env: the stages' env counts differ, and a resumed segment starts the same way
             model = load_model(path / state["checkpoint"], env=vec, device="cpu")
-        model.set_random_seed(_segment_seed(cfg.seed, int(state["segment"])))
+        model.set_random_seed(seed)
         left = cur.base.timesteps - int(model.num_timesteps)
         if spec_k.budget:
             left = min(left, spec_k.budget - (int(model.num_timesteps) - int(state["stage_start"])))
