@@ -134,18 +134,50 @@ def test_objects_added_at_run_time_reach_every_shard() -> None:
     del new_id
 
 
-def test_batched_front_end_equals_one_process() -> None:
+@pytest.mark.parametrize("hold", [True, False])
+def test_batched_front_end_equals_one_process(hold: bool) -> None:
+    # hold: the caller keeps the previous step's result (the step writes into a fresh array) or lets it go (the
+    # step writes its rows into the same array again); agents terminate on the way (their last rows stay)
     kw = {"n_agents": 150, "comms": COMMS}
     a, b = BatchedEnv("navigation", 1, **kw), DistributedBatchedEnv("navigation", 2, backend="local", **kw)
     oa, ob = a.reset(seed=1), b.reset(seed=1)
     assert np.array_equal(oa, ob)
     rng = np.random.default_rng(0)
+    held, ended = None, 0
     for _ in range(40):
         act = rng.uniform(-1, 1, (1, 150, a.act_dim))
         ra, rb = a.step(act), b.step(act)
         for f in ("obs", "rewards", "terminated", "truncated", "alive"):
             assert np.array_equal(getattr(ra, f), getattr(rb, f)), f
+        assert (rb.obs is not getattr(held, "obs", None)) or not hold
+        ended = int((~rb.alive).sum())
+        held = rb if hold else None
+        del ra, rb
+    assert ended > 0  # the rows of agents that no longer act were compared too
     b.close()
+
+
+@pytest.mark.parametrize("hold", [True, False])
+def test_the_batched_front_end_hands_a_lost_shards_agents_their_last_rows(hold: bool) -> None:
+    env = DistributedBatchedEnv("navigation", 2, backend="local", n_agents=200, collisions=False)
+    env.reset(seed=0)
+    rng = np.random.default_rng(0)
+    for _ in range(5):
+        res = env.step(rng.uniform(-1, 1, (1, 200, env.act_dim)))
+    doomed = np.flatnonzero(env.coordinator.owner == 1)
+    assert doomed.size
+    last = res.obs[0, doomed].copy()
+    if not hold:
+        del res  # the next step writes into the same array
+    env.coordinator.backend.kill(1)
+    for i in range(3):
+        got = env.step(rng.uniform(-1, 1, (1, 200, env.act_dim)))
+        assert got.terminated[0, doomed].all() == (i == 0)
+        assert not got.alive[0, doomed].any()
+        # the step of the loss hands out the row of the step before; later the rows of agents gone are zeros
+        assert np.array_equal(got.obs[0, doomed], last if i == 0 else np.zeros_like(last))
+        assert got.alive[0].sum() == 200 - doomed.size
+    env.close()
 
 
 # ---------------------------------------------------------------------------------------------- faults

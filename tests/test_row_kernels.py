@@ -63,3 +63,18 @@ def test_other_dtypes_fall_back_to_numpy() -> None:
     got = np.zeros((1, 2), np.float32)
     gather_rows(np.arange(6.0).reshape(3, 2), np.array([1]), got)
     np.testing.assert_array_equal(got, [[2, 3]])
+
+
+@pytest.mark.parametrize("n", [10, 8192, 20001])
+def test_a_scatter_split_over_two_threads_writes_what_one_thread_does(n: int) -> None:
+    rng = np.random.default_rng(n)
+    slots = rng.permutation(n + 50)[:n].astype(np.int64)
+    rows = rng.normal(size=(n, 7)).astype(np.float32)
+    one = rng.normal(size=(n + 50, 7)).astype(np.float32)
+    two = one.copy()
+    want = one.copy()
+    want[slots] = rows
+    scatter_rows(one, slots, rows)
+    scatter_rows(two, slots, rows, threads=2)
+    np.testing.assert_array_equal(one, want)
+    np.testing.assert_array_equal(two, want)

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import logging
 import time
+import weakref
 from dataclasses import dataclass
 from typing import Any
 
@@ -133,6 +134,9 @@ class Coordinator:
         self._traffic = Traffic()
         self._unread = 0  # steps whose exchange bytes the exchange still holds (fetched when traffic is read)
         self.obs: np.ndarray | None = None
+        """Every slot's observation row as last gathered (complete after a reset; a step given ``out`` writes its
+        rows there and keeps here only the rows of the agents that ended)."""
+        self._filled: Any = None  # weak reference to the last ``out`` a step filled
         self.kinematics = True
         """Gather every own agent's position each step into ``world`` (the mirror); off for rollouts."""
         self.profile: dict[str, Any] = {}
@@ -237,14 +241,21 @@ class Coordinator:
         self._objects.append((sc.kind[-k:].copy(), sc.centre[-k:].copy(), sc.half[-k:].copy()))
 
     # ------------------------------------------------------------------ gathering
-    def _take_obs(self, k: int, r: Packed) -> None:
-        """Shard ``k``'s observation rows into ``obs``: returned, or written into the shared segment (``obs_shm``)."""
-        out = self.obs
+    def _take_obs(self, k: int, r: Packed, out: np.ndarray | None = None, threads: int = 1) -> None:
+        """Shard ``k``'s observation rows into ``out`` (default ``obs``): returned, or written into the shared
+        segment (``obs_shm``); over ``threads`` threads."""
+        out = self.obs if out is None else out
         assert out is not None
         rows = r["obs"] if "obs" in r else self.backend.obs_rows(k, int(r["obs_n"]))
-        scatter_rows(out, np.asarray(r["slots"]), np.asarray(rows))
+        scatter_rows(out, np.asarray(r["slots"]), np.asarray(rows), threads)
 
-    def _take(self, replies: dict[int, Packed], obs: bool, taken: set[int] | frozenset[int] = frozenset()) -> None:
+    def _take(
+        self,
+        replies: dict[int, Packed],
+        obs: bool,
+        taken: set[int] | frozenset[int] = frozenset(),
+        out: np.ndarray | None = None,
+    ) -> None:
         # ``taken``: shards whose observation rows were scattered as their reply came in
         st = self.world.state
         for k, r in replies.items():
@@ -252,16 +263,13 @@ class Coordinator:
         if obs:
             for k, r in replies.items():
                 if k not in taken:
-                    self._take_obs(k, r)
+                    self._take_obs(k, r, out)
         for r in replies.values():
             if "pos" in r:
-                mine = r["own"]
-                st.pos[mine], st.vel[mine], st.heading[mine], st.online[mine] = (
-                    r["pos"],
-                    r["vel"],
-                    r["heading"],
-                    r["online"],
-                )
+                mine = np.asarray(r["own"])
+                scatter_rows(st.pos, mine, np.asarray(r["pos"]))
+                scatter_rows(st.vel, mine, np.asarray(r["vel"]))
+                st.heading[mine], st.online[mine] = r["heading"], r["online"]
 
     # ------------------------------------------------------------------ episode
     def reset(self, seed: np.random.SeedSequence, gather: bool = True) -> None:
@@ -274,6 +282,7 @@ class Coordinator:
         placement = world.reset_world(0, seed)
         sc.reset_world(world, 0, placement)
         self._ended, self._objects, self.lost = _NONE, [], _NONE
+        self._filled = None
         self.owner[:] = -1
         s = world.state.n_slots
         self.obs = np.zeros((s, _obs_dim(sc)), np.float32)
@@ -378,6 +387,7 @@ class Coordinator:
         returns, pos, sums, alive = _rollout_rows(self.world, finished, self.scenario.info_keys())
         self.owner[:] = -1
         self.obs = np.zeros((self.world.state.n_slots, _obs_dim(self.scenario)), np.float32)
+        self._filled = None
         for k, r in got.items():  # where step() goes on from: the owners, the live agents' observations
             self.owner[r["own"]] = k
             self.obs[r["live"]] = r["obs"]
@@ -391,6 +401,27 @@ class Coordinator:
             "sums": sums,
             "live": alive,
         }
+
+    def filled(self, out: np.ndarray) -> bool:
+        """Whether the last step wrote every slot's observation row into ``out``."""
+        return self._filled is not None and self._filled() is out
+
+    def _complete(self, out: np.ndarray, replies: dict[int, Packed], acting: np.ndarray) -> None:
+        """The rows of ``out`` no shard wrote this step: an ended agent's last row (kept in ``obs``); an agent of
+        a shard lost in this step keeps the row of the previous step (the previous ``out``, still referenced)."""
+        fresh = np.zeros(out.shape[0], dtype=bool)
+        for r in replies.values():
+            fresh[r["slots"]] = True
+        stale = np.flatnonzero(~fresh)
+        if not stale.size:
+            return
+        assert self.obs is not None
+        rows = self.obs[stale]
+        prev = self._filled() if self._filled is not None else None
+        if prev is not None and prev.shape == out.shape:  # (``out`` itself when the caller let it go)
+            was = acting[stale]  # acting, yet no row: its shard was lost now
+            rows[was] = prev[stale[was]]
+        out[stale] = rows
 
     def _step_view(self, replies: dict[int, Packed]) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
         """A rollout step's masks and info arrays over every slot, positions into the mirror."""
@@ -408,12 +439,16 @@ class Coordinator:
                 info[k][sl] = v
         return acted, still, info
 
-    def step(self, parts: dict[str, np.ndarray], acting: np.ndarray) -> tuple[StepResult, np.ndarray]:
+    def step(
+        self, parts: dict[str, np.ndarray], acting: np.ndarray, out: np.ndarray | None = None
+    ) -> tuple[StepResult, np.ndarray]:
         """One step over the shards: each runs it for its own agents; their rows come back.
 
         Args:
             parts: Validated action parts ``(S, size)`` of every slot.
             acting: ``(S,)`` the live slots.
+            out: ``(S, obs_dim)`` float32: where the step's observation rows go, every slot's row (``filled``
+                then says so); ``None``: into ``obs``.
 
         Returns:
             The step's result over every slot and the slots that terminated (those of an offline shard too).
@@ -443,9 +478,11 @@ class Coordinator:
                 tr.actions += slots.nbytes + n * sum(v[0].nbytes for v in parts.values())
         self._objects = []
         taken: set[int] = set()
+        live = sum(1 for k in calls if self.shards[k].alive)
 
         def early(k: int, r: Packed) -> None:  # scatter a shard's rows while the slower ones still run
-            self._take_obs(k, r)
+            last = len(taken) + 1 == live  # the others are done: their CPUs are free
+            self._take_obs(k, r, out, threads=2 if last else 1)
             taken.add(k)
 
         replies = self._call("step", calls, early)
@@ -465,7 +502,9 @@ class Coordinator:
             tr.replies += nbytes(r) + 4 * int(r.get("obs_n", 0)) * _obs_dim(self.scenario)  # shared rows: float32
         for key in keys:
             info.setdefault(key, np.zeros(s))
-        self._take(replies, obs=True, taken=taken)
+        self._take(replies, obs=True, taken=taken, out=out)
+        if out is not None:
+            self._complete(out, replies, acting)
         self._unread += 1
         lost = self.lost
         if lost.size:  # agents of a shard that went offline: they terminate now, with their last observation
@@ -473,6 +512,10 @@ class Coordinator:
         col = [r for r in replies.values() if r["col.agent"].size]
         events = _merge_collisions(col)
         ended = np.flatnonzero(terminated)
+        if out is not None:  # an ended agent's row is its last one: kept for the steps it no longer acts in
+            assert self.obs is not None
+            self.obs[ended] = out[ended]
+            self._filled = weakref.ref(out)
         world.set_offline(ended)
         self.owner[ended] = -1
         self._ended = np.union1d(ended, lost)

@@ -255,15 +255,19 @@ class DistributedBatchedEnv(BatchedEnv):
     def _reset_core(self, worlds: list[int], seeds: list[np.random.SeedSequence]) -> None:
         self.coordinator.reset(seeds[0])
 
-    def _step_core(self, parts: dict[str, np.ndarray], acting: np.ndarray) -> tuple[Any, np.ndarray]:
-        return self.coordinator.step(parts, acting)
+    def _step_core(
+        self, parts: dict[str, np.ndarray], acting: np.ndarray, out: np.ndarray | None = None
+    ) -> tuple[Any, np.ndarray]:
+        return self.coordinator.step(parts, acting, out)
 
     def _flat_obs(
         self, rows: np.ndarray | None = None, step: int = 0, result: Any = None, out: np.ndarray | None = None
     ) -> np.ndarray:
         obs = self.coordinator.obs  # built on the shards, gathered by the step
         assert obs is not None
-        if out is None:
+        if out is not None and self.coordinator.filled(out):  # the step wrote the rows there
+            flat = out
+        elif out is None:
             flat = obs.copy()
         else:
             np.copyto(out, obs)

@@ -134,8 +134,11 @@ class BatchedEnv:
         """Start the episodes of ``worlds`` (the distributed front end runs them over its shards)."""
         reset_worlds(self.scenario, self.world, worlds, seeds)
 
-    def _step_core(self, parts: dict[str, np.ndarray], acting: np.ndarray) -> tuple[Any, np.ndarray]:
-        """Stages 1-10 for clipped action parts (the distributed front end runs them over its shards)."""
+    def _step_core(
+        self, parts: dict[str, np.ndarray], acting: np.ndarray, out: np.ndarray | None = None
+    ) -> tuple[Any, np.ndarray]:
+        """Stages 1-10 for clipped action parts (the distributed front end runs them over its shards, and
+        writes the observation rows into ``out``, the array ``_flat_obs`` then gets)."""
         return run_step(self.scenario, self.world, parts, acting)
 
     def reset(self, seed: int | Sequence[int] | None = None) -> np.ndarray:
@@ -223,9 +226,10 @@ class BatchedEnv:
             w, i = divmod(bad, self.n_agents)
             raise ValueError(f"actions of world {w}, agent {i} contain NaN or inf")
         parts = {k: a[:, sl] for k, sl in self._act_layout.items()}
-        res, term = self._step_core(parts, acting)
+        out = self._obs_out.get()
+        res, term = self._step_core(parts, acting, out)
         self.steps += 1
-        obs = self._flat_obs(acting, int(self.steps.max()) if self.check_finite else 0, res, self._obs_out.get())
+        obs = self._flat_obs(acting, int(self.steps.max()) if self.check_finite else 0, res, out)
         term = np.asarray(term, dtype=bool)
         trunc, done_worlds, n_done = finish_step(
             term, acting, self.steps >= self.scenario.max_steps, self.alive, obs.reshape(-1, self.obs_dim)
