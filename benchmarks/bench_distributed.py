@@ -17,7 +17,8 @@ a. 100,000 and 200,000 agents: one process vs 2 shards on Ray (a local cluster o
    (returns, final positions, events) equal one process's.
 b. Bytes per step against the number of agents near the strip edge (2 shards, ``backend="local"``: the bytes do
    not depend on the backend): the halo grows with the map side, i.e. with sqrt(N) at fixed density.
-c. On paper: 1,000,000 agents on 16 machines, from the measurements of table a (assumptions printed).
+c. The coordinator's part of a rollout step against the number of shards (a small world: 1, 2, 4, 8 shards).
+d. On paper: 1,000,000 agents on 16 machines, from the measurements above (assumptions printed).
 
 Timing is wall time (the shards run in other processes); on a shared machine the numbers move with its load.
 Ray is started once for the whole run and stopped at the end; without Ray the Ray rows are skipped.
@@ -220,6 +221,30 @@ def scaling_table(n: int, shard_counts: list[int], steps: int) -> str:
     )
 
 
+def coordinator_cost(n: int, shard_counts: list[int], steps: int) -> tuple[str, tuple[float, float]]:
+    """Table d: the coordinator's part of a rollout step against the number of shards, on a world small enough
+    that the shards' own work does not matter (the median over steps of the step call's wall time outside the
+    slowest shard's call, and the driver process's CPU time a step, its rollout's reset included), and the least
+    squares line ``a + b K`` through the first column (what the estimate on paper takes)."""
+    rows, ks, ms = [], [], []
+    for k in shard_counts:
+        env = build(n, k, api="rollout")
+        policy = Cycle(actions(n, "full"), env.scenario.act_parts())
+        env.rollout(policy, 2, seed=0)
+        c0 = time.process_time()
+        env.rollout(policy, steps, seed=0)
+        cpu = (time.process_time() - c0) / steps * 1e3
+        st = env.coordinator.profile["steps"][1:]
+        outside = float(np.median([wall - max(call) for wall, call, _ in st])) * 1e3
+        close(env)
+        ks.append(k)
+        ms.append(outside)
+        rows.append([str(k), fmt_num(outside), fmt_num(cpu)])
+    b, a = np.polyfit(ks, ms, 1) if len(ks) > 1 else (0.0, ms[0])
+    table = markdown_table(["shards", "coordinator ms / step", "driver CPU ms / step"], rows)
+    return table + f"\n\nLine through the first column: {a:.2f} + {b:.2f} ms a shard.", (float(a), float(b))
+
+
 def main(argv: list[str] | None = None) -> int:
     """Print the tables."""
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -307,8 +332,15 @@ def main(argv: list[str] | None = None) -> int:
                 "message goes to every shard), so with K shards (K - 1) / K of the named ones cross and every "
                 "GROUP message is sent K times."
             )
+            n_coord, coord_ks = (2_000, [1, 2]) if q else (2_000, [1, 2, 4, 8])
+            print(
+                f"\n## The coordinator's part of a rollout step vs shards ({n_coord:,} agents, full traffic, "
+                f"{steps}-step rollouts)\n"
+            )
+            coord_table, coord_line = coordinator_cost(n_coord, coord_ks, steps)
+            print(coord_table)
             print(f"\n## On paper: {PAPER_N:,} agents on {PAPER_K} machines\n")
-            print(paper_table(res, sizes[0], floor, by_k, n_small))
+            print(paper_table(res, sizes[0], floor, by_k, n_small, coord_line))
             one = (
                 res[sizes[-1], "rollout", "one process"]["step_ms"] / res[sizes[0], "rollout", "one process"]["step_ms"]
             )
@@ -322,7 +354,8 @@ def main(argv: list[str] | None = None) -> int:
                 f"others (bus, positions, groups) times {PAPER_N:,} / {n_small:,}, routed at the CPU cost per byte "
                 f"measured above and sent over "
                 f"10 Gb/s links (one exchange: every byte on its one CPU and link; shards exchanging directly: "
-                f"each carries 1 / {PAPER_K} of them); the coordinator's share linear in the number of shards; "
+                f"each carries 1 / {PAPER_K} of them); the coordinator's part on the line through the table above at "
+                f"{PAPER_K} shards; "
                 f"one process linear in N, the choice that favours one process (measured here: worse than linear, "
                 f"{one:.2f}x "
                 f"for {sizes[-1] / sizes[0]:.0f}x the agents)."

@@ -30,6 +30,7 @@ def paper_table(
     floor: dict[str, float],
     by_k: dict[int, dict[str, float]],
     n_small: int,
+    coord_line: tuple[float, float],
 ) -> str:
     """Table f: 1,000,000 agents on 16 machines from this run's measurements (see ``main`` for the assumptions)."""
     one = res[n_ref, "rollout", "one process"]
@@ -47,7 +48,7 @@ def paper_table(
     b = by_k[kk]
     edge = sum(b[f] for f in ("halo", "handover", "offline"))
     hub_bytes = edge * np.sqrt(n / n_small) + (b["total"] - edge) * n / n_small
-    coord = two["coord_ms"] * k / 2  # the coordinator's calls grow with the number of shards
+    coord = coord_line[0] + coord_line[1] * k  # measured against the number of shards on a small world
     rows = []
     for label, fixed, peer in (
         ("full-length slot arrays, one exchange (today)", FIXED_MS_PER_SLOT * n, False),

@@ -65,3 +65,34 @@ def test_stage_table_times_every_stage_in_both_shards() -> None:
         if t_one:
             assert float(cells[1]) >= 0, line
     assert float(rows[-2].split("|")[4].split("/")[0].strip(" *")) > 0  # the shards' whole step
+
+
+@pytest.mark.slow
+def test_coordinator_cost_table_has_a_row_per_shard_count_and_its_line() -> None:
+    """Table d of ``bench_distributed``: the coordinator's part of a rollout step over 1 and 2 Ray shards."""
+    pytest.importorskip("ray")
+    import subprocess
+
+    code = (
+        "import bench_distributed as b, distributed_setup as ds\n"
+        "ray = ds.start_ray()\n"
+        "table, (a, slope) = b.coordinator_cost(600, [1, 2], 3)\n"
+        "print(table)\n"
+        "print('LINE', a, slope)\n"
+        "ray.shutdown()\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        check=True,
+        cwd=ROOT / "benchmarks",
+    ).stdout
+    rows = [line for line in out.splitlines() if line.startswith("| ") and "---" not in line][1:]
+    assert [r.split("|")[1].strip() for r in rows] == ["1", "2"]
+    for r in rows:
+        cells = [float(c.replace(",", "")) for c in r.strip("|").split("|")[1:]]
+        assert all(c > 0 for c in cells), r  # a step's calls cost the driver some time and CPU
+    a, slope = (float(x) for x in out.split("LINE")[1].split())
+    assert abs(a + slope - float(rows[0].split("|")[2])) < 1e-6 + 0.05 * abs(a + slope) + 0.01

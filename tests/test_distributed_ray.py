@@ -72,7 +72,7 @@ def test_a_rollout_inside_ray_shards_on_two_nodes_equals_one_process(name: str, 
     assert np.array_equal(got.returns, ref.returns) and np.array_equal(got.final_pos, ref.final_pos)
 
 
-def test_the_shard_beside_the_driver_takes_actions_and_sends_rows_through_shared_memory() -> None:
+def test_the_shard_beside_the_driver_takes_actions_and_sends_rows_and_replies_through_shared_memory() -> None:
     env = make_sharded("navigation", shards=2, n_agents=200, collisions=False)
     try:
         env.reset(seed=0)
@@ -82,7 +82,9 @@ def test_the_shard_beside_the_driver_takes_actions_and_sends_rows_through_shared
         # the shard on this node writes into the segment; the one on the other node returns its rows
         assert backend.shared == {0: backend.node_of(0) == here, 1: backend.node_of(1) == here}
         assert sorted(backend.shared.values()) == [False, True]
-        paths = [os.path.join("/dev/shm", seg.name) for seg in (backend.obs_segment, backend.act_segment)]
+        segments = (backend.obs_segment, backend.act_segment, *backend.reply_segments)
+        paths = [os.path.join("/dev/shm", seg.name) for seg in segments]
+        assert len(paths) == 4
         for path in paths:
             st = os.stat(path)
             assert stat.S_IMODE(st.st_mode) == 0o600 and st.st_uid == os.getuid()

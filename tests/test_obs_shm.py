@@ -10,7 +10,7 @@ import sys
 import numpy as np
 import pytest
 
-from agentsim_env.distributed.obs_shm import ActionReader, ActionSegment, ObsSegment, ObsWriter
+from agentsim_env.distributed.obs_shm import ObsSegment, ObsWriter, RowReader, RowSegment, reply_layouts
 
 if not sys.platform.startswith("linux"):  # pragma: no cover - POSIX segments live in /dev/shm
     pytest.skip("reads /dev/shm", allow_module_level=True)
@@ -110,13 +110,13 @@ LAYOUT = (("motion", 3, "<f8"), ("comm", 7, "<f8"))
 
 
 def test_actions_written_by_the_driver_are_read_by_their_shard() -> None:
-    seg = ActionSegment(2, 50, LAYOUT)
+    seg = RowSegment(2, 50, LAYOUT)
     try:
         rng = np.random.default_rng(1)
         parts = {"motion": rng.uniform(-1, 1, (50, 3)), "comm": rng.uniform(-1, 1, (50, 7))}
         mine, theirs = np.array([3, 7, 8, 40]), np.array([0, 1, 49])
         assert seg.write(1, mine, parts) == 4 and seg.write(0, theirs, parts) == 3
-        reader = ActionReader(seg.name, 1, 2, 50, LAYOUT)
+        reader = RowReader(seg.name, 1, 2, 50, LAYOUT)
         slots, rows = reader.read(4)
         assert np.array_equal(slots, mine) and list(rows) == ["motion", "comm"]
         for name, v in parts.items():
@@ -131,7 +131,7 @@ def test_actions_written_by_the_driver_are_read_by_their_shard() -> None:
 
 
 def test_the_action_segment_is_its_owners_only_and_gone_after_close() -> None:
-    seg = ActionSegment(2, 10, LAYOUT)
+    seg = RowSegment(2, 10, LAYOUT)
     path = os.path.join("/dev/shm", seg.name)
     assert stat.S_IMODE(os.stat(path).st_mode) == 0o600
     seg.close()
@@ -142,9 +142,52 @@ def test_the_action_segment_is_its_owners_only_and_gone_after_close() -> None:
 
 @pytest.mark.parametrize(("region", "n_shards", "n_slots"), [(2, 2, 10), (-1, 2, 10), (0, 3, 10), (0, 2, 11)])
 def test_a_reader_refuses_a_region_the_action_segment_does_not_hold(region: int, n_shards: int, n_slots: int) -> None:
-    seg = ActionSegment(2, 10, LAYOUT)
+    seg = RowSegment(2, 10, LAYOUT)
     try:
         with pytest.raises(ValueError, match="action segment"):
-            ActionReader(seg.name, region, n_shards, n_slots, LAYOUT)
+            RowReader(seg.name, region, n_shards, n_slots, LAYOUT)
     finally:
         seg.close()
+
+
+def test_reply_rows_written_by_a_shard_are_read_by_the_driver_exactly() -> None:
+    # the acting agents' rewards, terminations and infos (bool, int and float infos carried as float64) and the
+    # own agents' slots, with or without their kinematics
+    acted_layout, own_layout = reply_layouts(3)
+    acted, own = RowSegment(2, 60, acted_layout, "acted"), RowSegment(2, 60, own_layout, "own")
+    try:
+        rng = np.random.default_rng(2)
+        cols = {
+            "rewards": rng.normal(size=60),
+            "terminated": rng.uniform(size=60) < 0.3,
+            "info0": (rng.uniform(size=60) < 0.5).astype(np.float64),
+            "info1": rng.integers(-(2**40), 2**40, 60).astype(np.float64),
+            "info2": rng.normal(size=60).astype(np.float32).astype(np.float64),
+        }
+        kin = {"pos": rng.normal(size=(60, 3)), "vel": rng.normal(size=(60, 3)), "heading": rng.normal(size=60)}
+        kin["online"] = rng.uniform(size=60) < 0.9
+        w_acted = RowReader(acted.name, 1, 2, 60, acted_layout, "reply")
+        w_own = RowReader(own.name, 1, 2, 60, own_layout, "reply")
+        slots, mine = np.array([4, 9, 33, 59]), np.array([4, 9, 12, 33, 59])
+        assert w_acted.write(slots, cols) == 4 and w_own.write(mine, kin) == 5
+        got_slots, got = acted.rows(1, 4)
+        assert np.array_equal(got_slots, slots)
+        for name, v in cols.items():
+            assert np.array_equal(got[name][:, 0], v[slots]), name
+        assert got["terminated"].dtype == bool
+        assert np.array_equal(got["info1"][:, 0].astype(np.int64), cols["info1"][slots].astype(np.int64))
+        got_mine, got_kin = own.rows(1, 5)
+        assert np.array_equal(got_mine, mine)
+        for name, v in kin.items():
+            assert np.array_equal(got_kin[name].reshape(v[mine].shape), v[mine]), name
+        assert w_own.write(np.array([1, 2]), None) == 2  # the slots only
+        assert np.array_equal(own.rows(1, 2)[0], [1, 2])
+        with pytest.raises(ValueError, match="holds 60 rows"):
+            w_acted.write(np.arange(61), cols)
+        with pytest.raises(ValueError, match="rows in"):
+            acted.rows(1, 61)
+        w_acted.close()
+        w_own.close()
+    finally:
+        acted.close()
+        own.close()

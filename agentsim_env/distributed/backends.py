@@ -122,14 +122,20 @@ class LocalShards:
         """The shard owning each slot (for routing bus messages)."""
         self.exchange.set_slot_owner(owner)
 
-    def share_rows(self, n_slots: int, obs_dim: int, act_layout: tuple[tuple[str, int, str], ...]) -> None:
+    def share_rows(
+        self, n_slots: int, obs_dim: int, act_layout: tuple[tuple[str, int, str], ...], n_info: int = 0
+    ) -> None:
         """Nothing to share: in-process shards get their actions and hand their rows over by reference."""
-        del n_slots, obs_dim, act_layout
+        del n_slots, obs_dim, act_layout, n_info
 
     def write_actions(self, k: int, slots: Any, parts: dict[str, Any]) -> int | None:
         """None: an in-process shard's call carries its actions by reference."""
         del k, slots, parts
         return None
+
+    def reply_rows(self, k: int, reply: Packed) -> None:
+        """Never called: in-process shards return their rows in the reply."""
+        raise RuntimeError(f"shard {k} returns its rows in its reply, not {sorted(reply)}")
 
     def obs_rows(self, k: int, n: int) -> Any:
         """Never called: in-process shards return their rows in the reply."""

@@ -249,22 +249,13 @@ class Coordinator:
         rows = r["obs"] if "obs" in r else self.backend.obs_rows(k, int(r["obs_n"]))
         scatter_rows(out, np.asarray(r["slots"]), np.asarray(rows), threads)
 
-    def _take(
-        self,
-        replies: dict[int, Packed],
-        obs: bool,
-        taken: set[int] | frozenset[int] = frozenset(),
-        out: np.ndarray | None = None,
-    ) -> None:
-        # ``taken``: shards whose observation rows were scattered as their reply came in
+    def _take(self, replies: dict[int, Packed], obs: bool, out: np.ndarray | None = None, threads: int = 1) -> None:
+        """The replies' owners, observation rows (into ``out``, default ``obs``) and kinematics (into the mirror)."""
         st = self.world.state
         for k, r in replies.items():
             self.owner[r["own"]] = k
-        if obs:
-            for k, r in replies.items():
-                if k not in taken:
-                    self._take_obs(k, r, out)
-        for r in replies.values():
+            if obs:
+                self._take_obs(k, r, out, threads)
             if "pos" in r:
                 mine = np.asarray(r["own"])
                 scatter_rows(st.pos, mine, np.asarray(r["pos"]))
@@ -287,7 +278,8 @@ class Coordinator:
         s = world.state.n_slots
         self.obs = np.zeros((s, _obs_dim(sc)), np.float32)
         if gather:  # shards beside the driver take their actions and send their rows through shared memory
-            self.backend.share_rows(s, _obs_dim(sc), tuple((k, p.size, "<f8") for k, p in sc.act_parts().items()))
+            layout = tuple((k, p.size, "<f8") for k, p in sc.act_parts().items())
+            self.backend.share_rows(s, _obs_dim(sc), layout, len(sc.info_keys()))
         replies = self._call(
             "reset",
             {
@@ -479,18 +471,14 @@ class Coordinator:
         self._objects = []
         taken: set[int] = set()
         live = sum(1 for k in calls if self.shards[k].alive)
-
-        def early(k: int, r: Packed) -> None:  # scatter a shard's rows while the slower ones still run
-            last = len(taken) + 1 == live  # the others are done: their CPUs are free
-            self._take_obs(k, r, out, threads=2 if last else 1)
-            taken.add(k)
-
-        replies = self._call("step", calls, early)
         rewards = np.zeros(s)
         terminated = np.zeros(s, dtype=bool)
         info: dict[str, np.ndarray] = {}
         keys = self.scenario.info_keys()
-        for r in replies.values():
+
+        def take(k: int, r: Packed) -> None:  # a shard's rows, as its reply comes in (the slower ones still run)
+            if "rows_n" in r:  # written into the shared segments: views of them
+                self.backend.reply_rows(k, r)
             sl = r["slots"]
             rewards[sl] = r["rewards"]
             terminated[sl] = r["terminated"]
@@ -500,9 +488,16 @@ class Coordinator:
                     info[key] = np.zeros(s, dtype=v.dtype)
                 info[key][sl] = v
             tr.replies += nbytes(r) + 4 * int(r.get("obs_n", 0)) * _obs_dim(self.scenario)  # shared rows: float32
+            last = len(taken) + 1 == live  # the others are done: their CPUs are free
+            self._take({k: r}, obs=True, out=out, threads=2 if last else 1)
+            taken.add(k)
+
+        replies = self._call("step", calls, take)
+        for k, r in replies.items():  # a backend that does not call back
+            if k not in taken:
+                take(k, r)
         for key in keys:
             info.setdefault(key, np.zeros(s))
-        self._take(replies, obs=True, taken=taken, out=out)
         if out is not None:
             self._complete(out, replies, acting)
         self._unread += 1

@@ -6,8 +6,11 @@ the shard's step (~20-30 ms a step at 100,000 agents on 2 CPUs, measured) and re
 shard on the driver's node instead writes its rows straight into its region of a segment that the driver created
 (``ObsSegment``), and replies with their count; the driver scatters them into its observation array as it does
 with rows returned through Ray. Actions go the other way the same way: the driver writes such a shard's acting
-slots and action rows into its region of a second segment (``ActionSegment``) before the call, which then
-carries only their count instead of 8.8 MB through the object store. A shard on another node keeps Ray for both.
+slots and action rows into its region of a second segment (``RowSegment``) before the call, which then
+carries only their count instead of 8.8 MB through the object store. The reply's other per-agent rows (rewards,
+terminations, infos of the acting agents; every own agent's kinematics for the driver's mirror: ~5 MB a shard at
+100,000 agents, ~4 ms more a call through the object store, measured) come back through two more such segments
+(``reply_layouts``), so the reply itself is a few hundred bytes. A shard on another node keeps Ray for all of it.
 
 Region ``k`` belongs to shard ``k`` and holds up to every slot of the world (a shard may come to own them all);
 a segment is a file of ``/dev/shm`` whose pages exist only once written, so it occupies about one row per acting
@@ -133,7 +136,7 @@ class ObsWriter:
         _release(self._shm, unlink=False)
 
 
-def _action_bytes(n_slots: int, layout: tuple[tuple[str, int, str], ...]) -> list[int]:
+def _row_bytes(n_slots: int, layout: tuple[tuple[str, int, str], ...]) -> list[int]:
     # byte offsets within a region: the slots (int64), then each part's rows, each block 64-byte aligned
     offsets, at = [], 0
     for nbytes in [int(n_slots) * 8] + [int(n_slots) * size * np.dtype(dt).itemsize for _, size, dt in layout]:
@@ -143,12 +146,12 @@ def _action_bytes(n_slots: int, layout: tuple[tuple[str, int, str], ...]) -> lis
     return offsets
 
 
-class _ActionRegions:
+class _Regions:
     """Views of the action regions of a segment (``layout``: each part's name, row size and dtype)."""
 
     def __init__(self, buf: Any, n_slots: int, layout: tuple[tuple[str, int, str], ...]) -> None:
         self.n_slots, self.layout = int(n_slots), layout
-        self.offsets = _action_bytes(n_slots, layout)
+        self.offsets = _row_bytes(n_slots, layout)
         self._buf = buf
 
     @property
@@ -169,20 +172,42 @@ class _ActionRegions:
         return slots, parts
 
 
-class ActionSegment:
-    """The driver's action segment: per shard, its acting slots and their action rows.
+def reply_layouts(n_info: int) -> tuple[tuple[tuple[str, int, str], ...], tuple[tuple[str, int, str], ...]]:
+    """The layouts of a step reply's per-agent rows: the acting agents' (reward, termination and the scenario's
+    ``n_info`` info values, carried as float64: exact for its bools, ints and floats) and every own agent's
+    kinematics (for the driver's mirror)."""
+    acted = (("rewards", 1, "<f8"), ("terminated", 1, "|b1"), *((f"info{i}", 1, "<f8") for i in range(n_info)))
+    own = (("pos", 3, "<f8"), ("vel", 3, "<f8"), ("heading", 1, "<f8"), ("online", 1, "|b1"))
+    return acted, own
+
+
+class RowSegment:
+    """A driver's segment of rows by slot: per shard, a list of slots and their rows of each part (the step API's
+    actions, written by the driver; the replies' per-agent rows, written by the shards: ``reply_layouts``).
 
     Args:
         n_shards: Number of shards K (one region each).
         n_slots: Slots in the world (a region's capacity).
-        layout: Each action part's name, row size and dtype (``np.dtype.str``), in order.
+        layout: Each part's name, row size and dtype (``np.dtype.str``), in order.
+        kind: What it holds, in its name (``act``, ``acted``, ``own``).
     """
 
-    def __init__(self, n_shards: int, n_slots: int, layout: tuple[tuple[str, int, str], ...]) -> None:
+    def __init__(
+        self, n_shards: int, n_slots: int, layout: tuple[tuple[str, int, str], ...], kind: str = "act"
+    ) -> None:
         self.n_shards, self.n_slots, self.layout = int(n_shards), int(n_slots), tuple(layout)
-        self._shm: SharedMemory | None = _create("act", self.n_shards * _action_bytes(self.n_slots, self.layout)[-1])
+        self._shm: SharedMemory | None = _create(kind, self.n_shards * _row_bytes(self.n_slots, self.layout)[-1])
         self.name = self._shm.name.lstrip("/")
-        self._regions = _ActionRegions(self._shm.buf, self.n_slots, self.layout)
+        self._regions = _Regions(self._shm.buf, self.n_slots, self.layout)
+
+    def rows(self, k: int, n: int) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        """The first ``n`` slots and rows of region ``k`` (views: read them before the shard's next call)."""
+        if self._shm is None:
+            raise RuntimeError("the row segment is closed")
+        if not (0 <= k < self.n_shards and 0 <= n <= self.n_slots):
+            raise ValueError(f"shard must be in [0, {self.n_shards}) and rows in [0, {self.n_slots}], got {k}, {n}")
+        slots, parts = self._regions.views(k)
+        return slots[:n], {name: rows[:n] for name, rows in parts.items()}
 
     def write(self, k: int, slots: np.ndarray, parts: dict[str, np.ndarray]) -> int:
         """Shard ``k``'s acting ``slots`` and their rows of ``parts`` (``(S, size)`` each) into its region; their
@@ -199,25 +224,51 @@ class ActionSegment:
     def close(self) -> None:
         """Unmap and remove the segment (idempotent)."""
         shm, self._shm = self._shm, None
-        self._regions = _ActionRegions(memoryview(b""), 0, ())
+        self._regions = _Regions(memoryview(b""), 0, ())
         _release(shm, unlink=True)
 
 
-class ActionReader:
-    """A shard's view of its region of the driver's action segment (mapped, never owned).
+class RowReader:
+    """A shard's view of its region of a driver's row segment (mapped, never owned).
 
     Raises:
         ValueError: When the segment is smaller than ``n_shards`` regions of that layout.
     """
 
     def __init__(
-        self, name: str, region: int, n_shards: int, n_slots: int, layout: tuple[tuple[str, int, str], ...]
+        self,
+        name: str,
+        region: int,
+        n_shards: int,
+        n_slots: int,
+        layout: tuple[tuple[str, int, str], ...],
+        what: str = "action",
     ) -> None:
         if not 0 <= region < n_shards:
-            raise ValueError(f"the action segment has regions 0..{n_shards - 1}, got {region}")
-        self._shm = shm = _attach(name, int(n_shards) * _action_bytes(n_slots, layout)[-1], "action")
+            raise ValueError(f"the {what} segment has regions 0..{n_shards - 1}, got {region}")
+        self._shm = shm = _attach(name, int(n_shards) * _row_bytes(n_slots, layout)[-1], what)
         self.n_slots = int(n_slots)
-        self._slots, self._parts = _ActionRegions(shm.buf, n_slots, tuple(layout)).views(int(region))
+        self._slots, self._parts = _Regions(shm.buf, n_slots, tuple(layout)).views(int(region))
+
+    def write(self, slots: np.ndarray, parts: dict[str, np.ndarray] | None) -> int:
+        """``slots`` and the rows ``parts[name][slots]`` of every part of the layout (full-length arrays, 1-D for
+        a part of row size 1; ``None``: the slots only) into the region; their count (what the reply then
+        carries).
+
+        Raises:
+            ValueError: For more slots than the region holds.
+        """
+        n = int(slots.shape[0])
+        if n > self.n_slots:
+            raise ValueError(f"the region holds {self.n_slots} rows, got {n}")
+        self._slots[:n] = slots
+        for name, rows in self._parts.items() if parts is not None else ():
+            src = parts[name]
+            if src.ndim == 1:
+                np.take(src, slots, out=rows[:n, 0])
+            else:
+                gather_rows(src, slots, rows[:n])
+        return n
 
     def read(self, n: int) -> tuple[np.ndarray, dict[str, np.ndarray]]:
         """The ``n`` acting slots the driver wrote (a copy) and their action rows (views, valid during the call)."""

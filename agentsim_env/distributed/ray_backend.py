@@ -45,10 +45,12 @@ import time
 from collections.abc import Iterator
 from typing import Any
 
+import numpy as np
+
 from agentsim_env.distributed.backends import Failure, raised
 from agentsim_env.distributed.bridge import Bridge, Packed
 from agentsim_env.distributed.exchange import ExchangeActor
-from agentsim_env.distributed.obs_shm import ActionReader, ActionSegment, ObsSegment, ObsWriter
+from agentsim_env.distributed.obs_shm import ObsSegment, ObsWriter, RowReader, RowSegment, reply_layouts
 from agentsim_env.distributed.partition import Strips
 from agentsim_env.distributed.shard import Shard as _Shard
 from agentsim_env.distributed.wire import TOKEN_BYTES, WireClient
@@ -316,19 +318,28 @@ class Shard(OnNode):
         self.obs: ObsWriter | None = None
         self.worker.address = f"{self.worker.address} on node {self.node()[:12]}"
 
-    def attach_rows(self, node: str, obs: tuple[str, int, int, int], act: tuple[str, int, int, Any]) -> bool:
-        """Read the step API's actions from and write its observation rows into region ``index`` of the
-        driver's segments (``distributed.obs_shm``: ``obs`` = name, shards, slots, row length; ``act`` = name,
-        shards, slots, layout) when this actor runs on the driver's node ``node``; whether it does."""
+    def attach_rows(
+        self,
+        node: str,
+        obs: tuple[str, int, int, int],
+        act: tuple[str, int, int, Any],
+        reply: tuple[tuple[str, int, int, Any], tuple[str, int, int, Any]],
+    ) -> bool:
+        """Read the step API's actions from and write its observation rows and per-agent reply rows into region
+        ``index`` of the driver's segments (``distributed.obs_shm``: ``obs`` = name, shards, slots, row length;
+        ``act`` and each of ``reply`` = name, shards, slots, layout) when this actor runs on the driver's node
+        ``node``; whether it does."""
         if node != self.node():
             return False
         k = self.worker.index
-        for old in (self.obs, self.worker.act_in):
+        for old in (self.obs, self.worker.act_in, *(self.worker.reply_out or ())):
             if old is not None:
                 old.close()
         self.obs = ObsWriter(obs[0], k, *obs[1:])
         self.worker.obs_out = self.obs.array
-        self.worker.act_in = ActionReader(act[0], k, act[1], act[2], tuple(tuple(p) for p in act[3]))
+        self.worker.act_in = RowReader(act[0], k, act[1], act[2], tuple(tuple(p) for p in act[3]))
+        acted, own = (RowReader(r[0], k, r[1], r[2], tuple(tuple(p) for p in r[3]), "reply") for r in reply)
+        self.worker.reply_out = (acted, own)
         return True
 
     def reset(self, *args: Any) -> Packed:
@@ -411,29 +422,46 @@ class RayShards:
         self.actors: dict[int, Any] = {k: self._start(k) for k in range(self.n_shards)}
         self.address = address or "local cluster on 127.0.0.1"
         self.obs_segment: ObsSegment | None = None
-        self.act_segment: ActionSegment | None = None
+        self.act_segment: RowSegment | None = None
+        self.reply_segments: tuple[RowSegment, RowSegment] | None = None
         self.shared: dict[int, bool] = {}
         """Which workers take their actions from ``act_segment`` and write their observation rows into
         ``obs_segment`` (those on the driver's node)."""
 
-    def share_rows(self, n_slots: int, obs_dim: int, act_layout: tuple[tuple[str, int, str], ...]) -> None:
-        """Workers on the driver's node exchange the step API's actions and observation rows through
-        shared-memory segments (``distributed.obs_shm``) instead of Ray's object store; the others keep Ray."""
-        if self.obs_segment is None or self.act_segment is None:
+    def share_rows(
+        self, n_slots: int, obs_dim: int, act_layout: tuple[tuple[str, int, str], ...], n_info: int = 0
+    ) -> None:
+        """Workers on the driver's node exchange the step API's actions, observation rows and per-agent reply
+        rows (``n_info``: the scenario's info keys) through shared-memory segments (``distributed.obs_shm``)
+        instead of Ray's object store; the others keep Ray."""
+        if self.obs_segment is None or self.act_segment is None or self.reply_segments is None:
+            self._close_segments()
             self.obs_segment = ObsSegment(self.n_shards, n_slots, obs_dim)
-            self.act_segment = ActionSegment(self.n_shards, n_slots, act_layout)
+            self.act_segment = RowSegment(self.n_shards, n_slots, act_layout)
+            acted, own = reply_layouts(n_info)
+            self.reply_segments = (
+                RowSegment(self.n_shards, n_slots, acted, "acted"),
+                RowSegment(self.n_shards, n_slots, own, "own"),
+            )
         for k in self.actors:
             if k not in self.shared:
                 self._attach_rows(k)
 
+    def _close_segments(self) -> None:
+        for seg in (self.obs_segment, self.act_segment, *(self.reply_segments or ())):
+            if seg is not None:
+                seg.close()
+        self.obs_segment, self.act_segment, self.reply_segments = None, None, None
+
     def _attach_rows(self, k: int) -> None:
-        obs, act = self.obs_segment, self.act_segment
-        assert obs is not None and act is not None
+        obs, act, reply = self.obs_segment, self.act_segment, self.reply_segments
+        assert obs is not None and act is not None and reply is not None
         here = str(self._ray.get_runtime_context().get_node_id())
         ref = self.actors[k].attach_rows.remote(
             here,
             (obs.name, obs.n_shards, obs.n_slots, obs.obs_dim),
             (act.name, act.n_shards, act.n_slots, act.layout),
+            tuple((r.name, r.n_shards, r.n_slots, r.layout) for r in reply),
         )
         try:
             self.shared[k] = bool(self._ray.get(ref, timeout=STARTUP_TIMEOUT_S))
@@ -446,6 +474,24 @@ class RayShards:
         if self.act_segment is None or not self.shared.get(k):
             return None
         return self.act_segment.write(k, slots, parts)
+
+    def reply_rows(self, k: int, reply: Packed) -> None:
+        """Worker ``k``'s per-agent reply rows, written into its regions of the reply segments, into ``reply``
+        as the keys a reply through Ray carries (views: read them before the worker's next call)."""
+        if self.reply_segments is None or not self.shared.get(k):
+            raise RuntimeError(f"shard {k} does not share its reply rows")
+        acted, own = self.reply_segments
+        slots, cols = acted.rows(k, int(reply.pop("rows_n")))
+        reply["slots"], reply["rewards"], reply["terminated"] = slots, cols["rewards"][:, 0], cols["terminated"][:, 0]
+        reply["info"] = {
+            key: cols[f"info{i}"][:, 0].astype(np.dtype(dt), copy=False)
+            for i, (key, dt) in enumerate(reply.pop("info_dtypes"))
+        }
+        mine, kin = own.rows(k, int(reply.pop("own_n")))
+        reply["own"] = mine
+        if reply.pop("own_kin"):
+            reply["pos"], reply["vel"] = kin["pos"], kin["vel"]
+            reply["heading"], reply["online"] = kin["heading"][:, 0], kin["online"][:, 0]
 
     def obs_rows(self, k: int, n: int) -> Any:
         """The ``n`` observation rows worker ``k`` wrote into the segment in its latest call (a view)."""
@@ -567,9 +613,7 @@ class RayShards:
             self._ray.kill(self.exchange, no_restart=True)
         except Exception:  # already gone
             pass
-        for seg in (self.obs_segment, self.act_segment):
-            if seg is not None:
-                seg.close()
-        self.obs_segment, self.act_segment, self.shared = None, None, {}
+        self._close_segments()
+        self.shared = {}
         leave_cluster(self._ray, self._own)
         self._own = False

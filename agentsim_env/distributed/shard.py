@@ -111,7 +111,10 @@ class Shard:
         """Where the step API's observation rows go instead of the reply (``distributed.obs_shm``), if set."""
         self.act_in: Any = None
         """Where the step API's actions come from when a call carries only their count (an
-        ``obs_shm.ActionReader``), if set."""
+        ``obs_shm.RowReader``), if set."""
+        self.reply_out: tuple[Any, Any] | None = None
+        """Where a step's per-agent reply rows go instead of the reply (``obs_shm.RowReader`` of the acting
+        agents' rows and of the own agents' kinematics), if set."""
         self.world.bridge = self
         self.overlay: ShardOverlay | None = None
         comms = self.world.comms
@@ -159,7 +162,18 @@ class Shard:
     def _rows_out(self, slots: np.ndarray, res: Any, terminated: np.ndarray, obs: bool, kin: bool) -> Packed:
         st = self.world.state
         out: Packed = {"slots": slots, "own": np.flatnonzero(self.own)}
-        if res is not None:
+        if res is not None and self.reply_out is not None:  # into this shard's regions of the driver's segments
+            acted, own = self.reply_out
+            info = list(res.info.items())
+            cols = {"rewards": np.asarray(res.rewards, dtype=np.float64), "terminated": terminated}
+            cols.update({f"info{i}": np.asarray(v, dtype=np.float64) for i, (_, v) in enumerate(info)})
+            out["rows_n"] = acted.write(slots, cols)
+            out["info_dtypes"] = tuple((k, np.asarray(v).dtype.str) for k, v in info)
+            kinematics = {"pos": st.pos, "vel": st.vel, "heading": st.heading, "online": st.online}
+            out["own_n"] = own.write(out.pop("own"), kinematics if kin else None)
+            out["own_kin"], kin = kin, False
+            del out["slots"]
+        elif res is not None:
             out["rewards"] = np.asarray(res.rewards, dtype=np.float64)[slots]
             out["terminated"] = terminated[slots]
             out["info"] = {k: v[slots] for k, v in res.info.items()}
