@@ -105,3 +105,8 @@ def test_inbox_flat_write_refuses_bad_outputs_by_name(make_out: Any, col: int, m
         inbox.observe_flat(np.zeros((6, 3)), 0, frozen, 0, 1e4)
     with pytest.raises(ValueError, match="pos must have shape"):
         inbox.observe_flat(np.zeros((5, 3)), 0, np.zeros((6, 40), dtype=np.float32), 0, 1e4)
+    rows = np.array([0, 2, 5])  # the rows form a shard uses: the same checks over len(rows) rows
+    with pytest.raises(ValueError, match=match):
+        inbox.observe_rows_flat(np.zeros((6, 3)), 0, rows, make_out(3), col, 1e4)
+    with pytest.raises(ValueError, match="writable"):
+        inbox.observe_rows_flat(np.zeros((6, 3)), 0, rows, frozen[:3], 0, 1e4)

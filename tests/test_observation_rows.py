@@ -1,5 +1,6 @@
-"""``Scenario.observation_rows`` (what a shard computes for its own agents) gives exactly the rows of
-``Scenario.observation`` (every slot), for every scenario and for the inbox and sensor parts."""
+"""``Scenario.observation_rows`` and ``flat_observation_rows`` (what a shard computes for its own agents) give
+exactly the rows of ``Scenario.observation`` and ``flat_observation`` (every slot), for every scenario and for the
+inbox and sensor parts."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ import agentsim_env
 CASES = [
     ("navigation", {"n_agents": 60}),
     ("navigation", {"n_agents": 60, "comms": {"loss": 0.2}, "gnss": {"sigma_h": 1.0}}),
+    ("navigation", {"n_agents": 60, "comms": {"loss": 0.2}}),
     ("relay", {"n_groups": 3, "group_size": 4}),
     ("rendezvous", {}),
     ("uav_release", {}),
@@ -40,5 +42,13 @@ def test_observation_rows_equal_the_rows_of_every_slot(name: str, config: dict) 
         for k, v in full.items():
             assert part[k].shape == (rows.size, *v.shape[1:]), k
             np.testing.assert_array_equal(part[k], v[rows], err_msg=k)
+        # the flat rows (a shard's step API writes them straight into its shared rows), fresh or into a wider
+        # array's columns (any row stride)
+        flat = sc.flat_observation(world)
+        np.testing.assert_array_equal(sc.flat_observation_rows(world, rows), flat[rows])
+        wide = np.full((rows.size, flat.shape[1] + 5), np.nan, dtype=np.float32)
+        sc.flat_observation_rows(world, rows, wide[:, 2 : 2 + flat.shape[1]])
+        np.testing.assert_array_equal(wide[:, 2 : 2 + flat.shape[1]], flat[rows])
+        assert np.isnan(wide[:, :2]).all() and np.isnan(wide[:, 2 + flat.shape[1] :]).all()
     if world.comms is not None:
         assert world.comms.bus.inbox.valid.any(), "no message arrived: the inbox rows would not be checked"

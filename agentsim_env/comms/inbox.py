@@ -279,12 +279,27 @@ class Inbox:
     def observe_rows(self, pos: np.ndarray, step: int, rows: np.ndarray, clip: float = np.inf) -> np.ndarray:
         """The features of the inboxes of ``rows`` only: ``(len(rows), M, F)`` float32, a fresh array (the rows
         ``observe`` gives them, clipped alike; a shard observes its own agents only)."""
-        p = np.ascontiguousarray(pos, dtype=np.float64)
         r = np.ascontiguousarray(rows, dtype=np.int64)
         out = np.empty((r.shape[0], self.size, self.n_features), dtype=np.float32)
-        flat = out.reshape(r.shape[0], self.size * self.n_features)
-        observe_rows_kernel(r, *self._observe_args(p, step), flat, float(clip))  # type: ignore[call-arg]
+        self.observe_rows_flat(pos, step, r, out.reshape(r.shape[0], self.size * self.n_features), 0, clip)
         return out
+
+    def observe_rows_flat(
+        self, pos: np.ndarray, step: int, rows: np.ndarray, out: np.ndarray, col: int, clip: float = np.inf
+    ) -> None:
+        """``observe_rows`` written into columns ``[col, col + M F)`` of a 2D float32 ``out`` ``(len(rows),
+        width)`` (any row stride), as ``observe_flat`` writes every slot's."""
+        r = np.ascontiguousarray(rows, dtype=np.int64)
+        unit = out.ndim == 2 and (out.strides[1] == 4 or out.size == 0)  # numpy may give empty arrays other strides
+        if not unit or out.shape[0] != r.shape[0] or out.dtype != np.float32 or not out.flags.writeable:
+            raise ValueError(
+                f"out must be a writable float32 array ({r.shape[0]}, width) with unit column stride, got "
+                f"{out.shape} {out.dtype}"
+            )
+        if not 0 <= col <= out.shape[1] - self.size * self.n_features:
+            raise ValueError(f"col must leave {self.size * self.n_features} columns, got {col} of {out.shape[1]}")
+        p = np.ascontiguousarray(pos, dtype=np.float64)
+        observe_rows_kernel(r, *self._observe_args(p, step), out, int(col), float(clip))  # type: ignore[call-arg]
 
     def _observe_args(self, pos: np.ndarray, step: int) -> tuple[Any, ...]:
         """The observation kernels' inputs before their output: the inbox arrays, positions, step and scales."""

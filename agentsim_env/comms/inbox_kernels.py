@@ -276,8 +276,10 @@ def observe_rows_kernel(
     age_h,
     hop_h,  # type: ignore[no-untyped-def]
     out,
+    col,
     lim,
 ):
+    # Slot rows[r]'s inbox into row r of out, from column col (any row stride).
     for r in range(rows.shape[0]):
         _observe_row(
             rows[r],
@@ -294,6 +296,6 @@ def observe_rows_kernel(
             age_h,
             hop_h,
             out,
-            0,
+            col,
             lim,
         )

@@ -433,6 +433,16 @@ class CommsStack:
         """``observe`` for the slots ``rows`` only (fresh arrays): what a shard needs for its own agents."""
         return self.bus.inbox.observe_rows(pos, step, rows, clip), self._stats(rows)
 
+    def observe_rows_flat(
+        self, pos: np.ndarray, step: int, rows: np.ndarray, out: np.ndarray, col: int, clip: float
+    ) -> None:
+        """``observe_rows`` written into columns ``[col, col + M F + 2)`` of ``out`` ``(len(rows), width)``
+        float32, as ``observe_flat`` writes every slot's."""
+        inbox = self.bus.inbox
+        width = inbox.size * inbox.n_features
+        inbox.observe_rows_flat(pos, step, rows, out, col, clip)
+        out[:, col + width : col + width + 2] = self._stats(rows)
+
     def _stats(self, rows: slice | np.ndarray) -> np.ndarray:
         """Received and dropped this step / inbox size, ``(n, 2)`` float32 in [0, 1]."""
         m = float(self.cfg.inbox_size)

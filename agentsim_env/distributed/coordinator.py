@@ -470,7 +470,6 @@ class Coordinator:
                 tr.actions += slots.nbytes + n * sum(v[0].nbytes for v in parts.values())
         self._objects = []
         taken: set[int] = set()
-        live = sum(1 for k in calls if self.shards[k].alive)
         rewards = np.zeros(s)
         terminated = np.zeros(s, dtype=bool)
         info: dict[str, np.ndarray] = {}
@@ -488,8 +487,10 @@ class Coordinator:
                     info[key] = np.zeros(s, dtype=v.dtype)
                 info[key][sl] = v
             tr.replies += nbytes(r) + 4 * int(r.get("obs_n", 0)) * _obs_dim(self.scenario)  # shared rows: float32
-            last = len(taken) + 1 == live  # the others are done: their CPUs are free
-            self._take({k: r}, obs=True, out=out, threads=2 if last else 1)
+            # on two threads: the shards meet at a barrier just before their observations, so they answer within
+            # a few ms of each other and the other CPU is idle by then (measured: the second reply is in before
+            # the first one's rows are copied)
+            self._take({k: r}, obs=True, out=out, threads=2)
             taken.add(k)
 
         replies = self._call("step", calls, take)

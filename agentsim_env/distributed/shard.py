@@ -280,7 +280,7 @@ class Shard:
     def flat_rows(self, slots: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """The flat observation rows of ``slots``, computed for those rows only (``Scenario.observation_rows``),
         into ``out`` when given."""
-        return self.flat_layout(self.scenario.observation_rows(self.world, slots), slots.size, out)
+        return self.scenario.flat_observation_rows(self.world, slots, out)
 
     @staticmethod
     def flat_layout(parts: dict[str, np.ndarray], n: int, out: np.ndarray | None = None) -> np.ndarray:

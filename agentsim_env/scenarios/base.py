@@ -383,6 +383,24 @@ class Scenario(ABC, Generic[ConfigT]):
             )
         return out
 
+    def flat_observation_rows(self, world: World, slots: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """:meth:`observation_rows` in the flat layout ``(len(slots), obs_dim)`` float32, into ``out`` when given:
+        the rows :meth:`flat_observation` gives ``slots`` (a shard's own agents), the inbox and counters
+        written in place."""
+        n = int(np.asarray(slots).shape[0])
+        if world.comms is None or type(self).observation is not Scenario.observation:
+            return flat_parts(self.observation_rows(world, slots), n, out)
+        parts = self.observe_rows(world, slots)
+        for s in world.sensors:
+            if s.obs_part is not None:
+                parts[s.name] = s.observe(world.readings[s.name])[slots]
+        lead = sum(int(np.prod(p.shape[1:], dtype=np.int64)) for p in parts.values())
+        if out is None:
+            out = np.empty((n, lead + comms_width(world)), dtype=np.float32)
+        flat_parts(parts, n, out[:, :lead])
+        world.comms.observe_rows_flat(world.state.pos, max(world.tick - 1, 0), slots, out, lead, INBOX_CLIP)
+        return out
+
     def flat_observation(self, world: World, out: np.ndarray | None = None) -> np.ndarray:
         """Every observation part of every slot in the flat layout ``(S, obs_dim)`` float32.
 
@@ -450,7 +468,7 @@ def flat_parts(
 ) -> np.ndarray:
     """Observation parts ``{part: (S, ...)}`` concatenated per slot into ``(S, obs_dim)`` float32: ``out`` when
     given, else a fresh array; with ``threads``, row ranges are copied on them (numpy copies without the GIL)."""
-    cols = [p.reshape(n_slots, -1) for p in parts.values()]
+    cols = [p.reshape(n_slots, int(np.prod(p.shape[1:], dtype=np.int64))) for p in parts.values()]
     if out is None:
         if threads is None or threads.num_threads == 1:
             return np.concatenate(cols, axis=1, dtype=np.float32)

@@ -50,7 +50,15 @@ from agentsim_env.core.config_model import Int, Real, config, in_range
 from agentsim_env.core.pipeline import Sensor
 from agentsim_env.core.threads import light_min_rows
 from agentsim_env.motion import MotionLimits
-from agentsim_env.scenarios.base import Scenario, SlotState, StepResult, comms_width, slot, write_comms
+from agentsim_env.scenarios.base import (
+    INBOX_CLIP,
+    Scenario,
+    SlotState,
+    StepResult,
+    comms_width,
+    slot,
+    write_comms,
+)
 from agentsim_env.scenarios.config import ObstacleHeights, ObstacleSizes, ScenarioConfig
 from agentsim_env.scenarios.placement import jittered_points, obstacle_layout, placement_problem
 from agentsim_env.scenarios.rewards import RewardConfig, compose_rewards, task_partials
@@ -453,12 +461,34 @@ class NavigationScenario(Scenario[NavigationConfig]):
 
     def observe_rows(self, world: World, slots: np.ndarray) -> dict[str, np.ndarray]:
         """self, lidar and task parts of ``slots`` only (fresh arrays)."""
+        k = self.lidar.n_rays
+        rows = np.ascontiguousarray(slots, dtype=np.int64)
+        out = self._write_obs_rows(world, rows, np.empty((rows.shape[0], self._obs.shape[1]), dtype=np.float32))
+        return {
+            "self": out[:, :SELF_DIM],
+            "lidar": out[:, SELF_DIM : SELF_DIM + 2 * k].reshape(-1, k, 2),
+            "task": out[:, SELF_DIM + 2 * k :],
+        }
+
+    def flat_observation_rows(self, world: World, slots: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """The flat rows of ``slots`` written straight into ``out`` (or a fresh array): the three parts by the
+        rows kernel, then the inbox and counters (with comms), when no sensor adds a part."""
+        if any(s.obs_part is not None for s in world.sensors) or type(self).observation is not Scenario.observation:
+            return super().flat_observation_rows(world, slots, out)
+        rows = np.ascontiguousarray(slots, dtype=np.int64)
+        lead = self._obs.shape[1]
+        if out is None:
+            out = np.empty((rows.shape[0], lead + comms_width(world)), dtype=np.float32)
+        self._write_obs_rows(world, rows, out[:, :lead])
+        if world.comms is not None:
+            world.comms.observe_rows_flat(world.state.pos, max(world.tick - 1, 0), rows, out, lead, INBOX_CLIP)
+        return out
+
+    def _write_obs_rows(self, world: World, rows: np.ndarray, out: np.ndarray) -> np.ndarray:
+        """The self | lidar | task columns of slots ``rows`` into row ``r`` of ``out`` ``(len(rows), lead)``."""
         c, st = self.config, world.state
         scan = world.scan
         assert scan is not None
-        k = self.lidar.n_rays
-        rows = np.ascontiguousarray(slots, dtype=np.int64)
-        out = np.empty((rows.shape[0], self._obs.shape[1]), dtype=np.float32)
         lo, hi = float(c.body.altitude[0]), float(c.body.altitude[1])
         _observe_rows_kernel(
             rows,
@@ -474,11 +504,7 @@ class NavigationScenario(Scenario[NavigationConfig]):
             float(c.body.max_speed),
             out,
         )
-        return {
-            "self": out[:, :SELF_DIM],
-            "lidar": out[:, SELF_DIM : SELF_DIM + 2 * k].reshape(-1, k, 2),
-            "task": out[:, SELF_DIM + 2 * k :],
-        }
+        return out
 
     def flat_observation(self, world: World, out: np.ndarray | None = None) -> np.ndarray:
         """The flat layout written straight into ``out`` or a fresh array: the three parts by the observation
