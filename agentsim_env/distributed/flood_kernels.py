@@ -114,9 +114,10 @@ def hop_kernel(
     the parts' counts add up to the single process's.
 
     ``new_pool``, ``out_v``, ``out_f`` and ``out_h`` are buffers the caller keeps between hops (grown here when
-    too small, returned either way; ``new_pool`` must not be ``pool``). The inner loop has no branch: every
-    neighbour is written at the end of the output and kept only when it is own and fresh (most neighbours of a
-    second hop have read the flood already, so a branch would mispredict often).
+    too small, returned either way; ``new_pool`` must not be ``pool``). The inner loop branches on "own and
+    fresh": the branch-free form of the single process's kernel (write every neighbour, keep the fresh ones) was
+    measured slower here (44-48 against 39-41 ms a hop at 100,000 agents over 2 shards), as a part's links often
+    lead to ghosts.
 
     Returns:
         ``(new_pool, npool, new_start, new_len, out_v, out_f, out_h, nd, row_h, edges, token)``: the rebuilt
