@@ -262,7 +262,9 @@ class RowReader:
         if n > self.n_slots:
             raise ValueError(f"the region holds {self.n_slots} rows, got {n}")
         self._slots[:n] = slots
-        for name, rows in self._parts.items() if parts is not None else ():
+        if parts is None:
+            return n
+        for name, rows in self._parts.items():
             src = parts[name]
             if src.ndim == 1:
                 np.take(src, slots, out=rows[:n, 0])
