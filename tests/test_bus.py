@@ -133,6 +133,27 @@ def test_inbox_order_newest_first_and_overflow() -> None:
         ib.push(np.array([0]), AGENT, 0, 0, 0, np.zeros((1, 2)))
 
 
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), n=st.integers(1, 30), k=st.integers(0, 80))
+def test_mark_senders_equals_its_numpy_form(seed: int, n: int, k: int) -> None:
+    # the senders in the inboxes of some rows (a shard's own agents), ENV messages (sender -1) skipped, old rows
+    # pushed out of a full inbox not counted
+    rng = np.random.default_rng(seed)
+    ib = Inbox(n, 3, 1)
+    snd = rng.integers(-1, n, k)
+    ib.push(rng.integers(0, n, k), AGENT, snd, 0, 0, np.zeros((k, 1)))
+    rows = np.flatnonzero(rng.uniform(size=n) < 0.5)
+    want = np.zeros(n, dtype=bool)
+    got = ib.sender[rows][ib.valid[rows]]
+    want[got[got >= 0]] = True
+    out = np.zeros(n, dtype=bool)
+    ib.mark_senders(rows, out)
+    np.testing.assert_array_equal(out, want)
+    for bad in (np.zeros(n + 1, dtype=bool), np.zeros(n, dtype=np.int64)):
+        with pytest.raises(ValueError, match="writable bool array"):
+            ib.mark_senders(rows, bad)
+
+
 def test_observe_feature_layout() -> None:
     ib = Inbox(2, 3, 2, age_horizon=10, hop_horizon=4, pos_scale=2.0)
     ib.push(np.array([0]), OVERLAY, 1, 2, 5, np.array([[7.0, 8.0]]))

@@ -12,6 +12,7 @@ from agentsim_env.comms.inbox_kernels import (
     EMPTY_BATCH,
     SAME_ROWS,
     kernel_batch,
+    mark_senders_kernel,
     observe_kernel,
     observe_rows_kernel,
     push_count,
@@ -300,6 +301,19 @@ class Inbox:
             raise ValueError(f"col must leave {self.size * self.n_features} columns, got {col} of {out.shape[1]}")
         p = np.ascontiguousarray(pos, dtype=np.float64)
         observe_rows_kernel(r, *self._observe_args(p, step), out, int(col), float(clip))  # type: ignore[call-arg]
+
+    def mark_senders(self, rows: np.ndarray, out: np.ndarray) -> None:
+        """Set ``out[s]`` for every sender ``s`` of a message in the inboxes of ``rows`` (``out``: ``(S,)`` bool;
+        ENV messages, which have no sender, are skipped): linear in the rows' inbox entries, not in every slot's.
+
+        Raises:
+            ValueError: For an ``out`` that is not a writable ``(S,)`` bool array.
+        """
+        if out.shape != (self.n_slots,) or out.dtype != np.bool_ or not out.flags.writeable:
+            raise ValueError(
+                f"out must be a writable bool array of shape ({self.n_slots},), got {out.shape} {out.dtype}"
+            )
+        mark_senders_kernel(np.ascontiguousarray(rows, dtype=np.int64), self.valid, self.sender, out)
 
     def _observe_args(self, pos: np.ndarray, step: int) -> tuple[Any, ...]:
         """The observation kernels' inputs before their output: the inbox arrays, positions, step and scales."""

@@ -299,3 +299,15 @@ def observe_rows_kernel(
             col,
             lim,
         )
+
+
+@nb.njit(cache=True)
+def mark_senders_kernel(rows, valid, sender, out):  # type: ignore[no-untyped-def]
+    # out[s] = True for every sender s >= 0 of a valid message in the inboxes of rows.
+    for i in range(rows.shape[0]):
+        r = rows[i]
+        for j in range(valid.shape[1]):
+            if valid[r, j]:
+                s = sender[r, j]
+                if s >= 0:
+                    out[s] = True

@@ -318,14 +318,13 @@ class Shard:
         st.pos[sl[sel]] = pos[sel]
 
     def _need(self) -> np.ndarray:
-        """``(S,)`` the senders in own inboxes that are neither own nor ghosts (a mask: linear in the inbox rows)."""
+        """``(S,)`` the senders in own inboxes that are neither own nor ghosts (a mask: linear in the own inbox
+        rows)."""
         comms = self.world.comms
         need = np.zeros(self.world.state.n_slots, dtype=bool)
         if comms is None:
             return need
-        inbox = comms.bus.inbox
-        snd = inbox.sender[inbox.valid & self.own[:, None]]
-        need[snd[snd >= 0]] = True
+        comms.bus.inbox.mark_senders(np.flatnonzero(self.own), need)
         need &= ~(self.own | self.ghost)
         return need
 
