@@ -10,6 +10,7 @@ in process, faster and in more cases: tests/test_distributed.py.
 
 from __future__ import annotations
 
+import logging
 import os
 import stat
 import subprocess
@@ -91,6 +92,29 @@ def test_the_shard_beside_the_driver_takes_actions_and_sends_rows_and_replies_th
     finally:
         env.close()
     assert not any(os.path.exists(path) for path in paths)  # removed with the env
+
+
+def test_a_small_dev_shm_sends_the_rows_through_ray_with_one_warning(
+    monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    # a /dev/shm too small for the segments (docker's default is 64 MB): writing past it would kill the shard
+    from agentsim_env.distributed import obs_shm
+
+    monkeypatch.setattr(obs_shm, "shm_room", lambda: 4096)  # bytes: less than 200 agents' rows need
+    with caplog.at_level(logging.WARNING, logger="agentsim_env.distributed"):
+        compare("navigation", 2, 20, backend="ray", n_agents=200, collisions=False)
+        env = make_sharded("navigation", shards=2, n_agents=200, collisions=False)
+        try:
+            env.reset(seed=0)
+            live_steps(env, 3, np.random.default_rng(0))
+            env.reset(seed=1)
+            backend = env.coordinator.backend
+            assert backend.obs_segment is None and backend.reply_segments is None
+            assert backend.shared == {0: False, 1: False}
+        finally:
+            env.close()
+    warned = [r for r in caplog.records if "object store instead" in r.getMessage()]
+    assert len(warned) == 2  # once per env, not once per reset
 
 
 def _wait_dead(actor: object, timeout_s: float = 60.0) -> None:

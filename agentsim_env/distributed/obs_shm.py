@@ -27,6 +27,7 @@ ownership.
 
 from __future__ import annotations
 
+import os
 import secrets
 from multiprocessing import resource_tracker
 from multiprocessing.shared_memory import SharedMemory
@@ -179,6 +180,25 @@ def reply_layouts(n_info: int) -> tuple[tuple[tuple[str, int, str], ...], tuple[
     acted = (("rewards", 1, "<f8"), ("terminated", 1, "|b1"), *((f"info{i}", 1, "<f8") for i in range(n_info)))
     own = (("pos", 3, "<f8"), ("vel", 3, "<f8"), ("heading", 1, "<f8"), ("online", 1, "|b1"))
     return acted, own
+
+
+SHM_DIR = "/dev/shm"
+
+
+def shm_room() -> int | None:
+    """Bytes free in ``/dev/shm`` (where the segments' pages live), or ``None`` where it cannot be read."""
+    try:
+        st = os.statvfs(SHM_DIR)
+    except OSError:
+        return None
+    return int(st.f_bavail) * int(st.f_frsize)
+
+
+def rows_bytes(n_slots: int, obs_dim: int, act_layout: tuple[tuple[str, int, str], ...], n_info: int) -> int:
+    """The pages the step API's segments come to hold when every slot's rows are written once (the regions of
+    all shards together: each slot is one shard's at a time)."""
+    acted, own = reply_layouts(n_info)
+    return _region_bytes(n_slots, obs_dim) + sum(_row_bytes(n_slots, lay)[-1] for lay in (act_layout, acted, own))
 
 
 class RowSegment:

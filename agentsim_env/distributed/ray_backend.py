@@ -47,6 +47,7 @@ from typing import Any
 
 import numpy as np
 
+from agentsim_env.distributed import obs_shm
 from agentsim_env.distributed.backends import Failure, raised
 from agentsim_env.distributed.bridge import Bridge, Packed
 from agentsim_env.distributed.exchange import ExchangeActor
@@ -424,6 +425,7 @@ class RayShards:
         self.obs_segment: ObsSegment | None = None
         self.act_segment: RowSegment | None = None
         self.reply_segments: tuple[RowSegment, RowSegment] | None = None
+        self._shm_warned = False
         self.shared: dict[int, bool] = {}
         """Which workers take their actions from ``act_segment`` and write their observation rows into
         ``obs_segment`` (those on the driver's node)."""
@@ -434,6 +436,21 @@ class RayShards:
         """Workers on the driver's node exchange the step API's actions, observation rows and per-agent reply
         rows (``n_info``: the scenario's info keys) through shared-memory segments (``distributed.obs_shm``)
         instead of Ray's object store; the others keep Ray."""
+        need = obs_shm.rows_bytes(n_slots, obs_dim, act_layout, n_info)
+        room = obs_shm.shm_room()
+        if self.obs_segment is None and room is not None and 2 * need > room:  # a full /dev/shm kills its writer
+            if not self._shm_warned:
+                log.warning(
+                    "%s holds %d MB free, the step API's shared rows need about %d MB (twice that kept free): "
+                    "their rows go through Ray's object store instead (slower; a larger /dev/shm, e.g. docker "
+                    "--shm-size, brings them back)",
+                    obs_shm.SHM_DIR,
+                    room >> 20,
+                    need >> 20,
+                )
+                self._shm_warned = True
+            self.shared = dict.fromkeys(self.actors, False)
+            return
         if self.obs_segment is None or self.act_segment is None or self.reply_segments is None:
             self._close_segments()
             self.obs_segment = ObsSegment(self.n_shards, n_slots, obs_dim)
