@@ -47,7 +47,7 @@ from typing import Any
 
 import numpy as np
 
-from agentsim_env.distributed import obs_shm
+import agentsim_env.distributed.obs_shm as obs_shm
 from agentsim_env.distributed.backends import Failure, raised
 from agentsim_env.distributed.bridge import Bridge, Packed
 from agentsim_env.distributed.exchange import ExchangeActor
