@@ -117,6 +117,81 @@ def test_a_small_dev_shm_sends_the_rows_through_ray_with_one_warning(
     assert len(warned) == 2  # once per env, not once per reset
 
 
+def _in_full(obs: np.ndarray, backend: object) -> int:
+    """Which of the observation segment's full arrays ``obs`` lies in (-1: none)."""
+    seg = backend.obs_segment  # type: ignore[attr-defined]
+    return next((b for b, a in enumerate(seg.full) if np.shares_memory(obs, a)), -1)
+
+
+@pytest.mark.parametrize("hold", [0, 1, 2])
+def test_the_batched_front_end_fills_the_shared_arrays_and_equals_one_process(hold: int) -> None:
+    # hold: how many earlier results the caller keeps. The shard beside the driver writes its observation rows
+    # straight into a shared array the step returns (the other shard's rows come through Ray and are copied in);
+    # an array the caller still holds, or the previous step's, is never written: when both are held, the step
+    # falls back to an array of its own. Agents terminate on the way (their last rows stay).
+    from agentsim_env.distributed import DistributedBatchedEnv
+    from agentsim_env.env.vector import BatchedEnv
+
+    kw = {"n_agents": 150, "comms": SHARDABLE["navigation"]["comms"]}
+    a, b = BatchedEnv("navigation", 1, **kw), DistributedBatchedEnv("navigation", 2, **kw)
+    try:
+        assert np.array_equal(a.reset(seed=1), b.reset(seed=1))
+        backend = b.coordinator.backend
+        assert sorted(backend.shared.values()) == [False, True]
+        rng = np.random.default_rng(0)
+        held: list[tuple[object, np.ndarray]] = []
+        used, ended = [], 0
+        for _ in range(30):
+            act = rng.uniform(-1, 1, (1, 150, a.act_dim))
+            ra, rb = a.step(act), b.step(act)
+            for f in ("obs", "rewards", "terminated", "truncated", "alive"):
+                assert np.array_equal(getattr(ra, f), getattr(rb, f)), f
+            assert all(np.array_equal(r.obs, snap) for r, snap in held)  # what the caller holds did not change
+            used.append(_in_full(rb.obs, backend))
+            ended = int((~rb.alive).sum())
+            if hold:
+                held = [*held, (rb, rb.obs.copy())][-hold:]
+            del ra, rb
+        assert ended > 0
+        if hold < 2:  # the two arrays in turn
+            assert used == [i % 2 for i in range(30)]
+        else:  # when both are held, an array of its own; never the previous step's again
+            assert used[:3] == [0, 1, -1] and {0, 1} <= set(used[3:])
+            assert all(u == -1 or u != v for u, v in zip(used[1:], used, strict=False))
+    finally:
+        b.close()
+
+
+def test_a_shard_lost_while_filling_the_shared_array_leaves_the_step_its_last_rows() -> None:
+    # the shard beside the driver sleeps past the deadline in the step it was told to fill a shared array: it may
+    # still write there until its process is gone, so the step's rows come from a copy, the agents of the lost
+    # shard get the rows of the step before, and that array is never handed out again
+    from agentsim_env.distributed import DistributedBatchedEnv
+
+    env = DistributedBatchedEnv("navigation", 2, n_agents=200, collisions=False, timeout_s=1.0)
+    try:
+        env.reset(seed=0)
+        backend = env.coordinator.backend
+        k = next(k for k, shared in backend.shared.items() if shared)
+        rng = np.random.default_rng(0)
+        for _ in range(3):
+            res = env.step(rng.uniform(-1, 1, (1, 200, env.act_dim)))
+        doomed = np.flatnonzero(env.coordinator.owner == k)
+        last = res.obs[0, doomed].copy()
+        b = 1 - _in_full(res.obs, backend)  # the array the next step fills
+        del res
+        backend.set_delay(k, 30.0)
+        got = env.step(rng.uniform(-1, 1, (1, 200, env.act_dim)))
+        assert not env.shards[k].alive and "deadline" in env.shards[k].reason
+        assert _in_full(got.obs, backend) == -1 and backend.obs_segment.retired == {b}
+        assert got.terminated[0, doomed].all() and np.array_equal(got.obs[0, doomed], last)
+        for _ in range(4):
+            got = env.step(rng.uniform(-1, 1, (1, 200, env.act_dim)))
+            assert _in_full(got.obs, backend) != b
+    finally:
+        env.close()
+
+
 def _wait_dead(actor: object, timeout_s: float = 60.0) -> None:
     """Return once calls to ``actor`` fail because it died."""
     deadline = time.monotonic() + timeout_s

@@ -110,3 +110,27 @@ def test_inbox_flat_write_refuses_bad_outputs_by_name(make_out: Any, col: int, m
         inbox.observe_rows_flat(np.zeros((6, 3)), 0, rows, make_out(3), col, 1e4)
     with pytest.raises(ValueError, match="writable"):
         inbox.observe_rows_flat(np.zeros((6, 3)), 0, rows, frozen[:3], 0, 1e4)
+
+
+@pytest.mark.parametrize(
+    ("at", "match"),
+    [
+        ([0, 1], "one row of out in \\[0, 6\\) per row of rows \\(3\\)"),
+        ([0, 1, 6], "values 0..6"),
+        ([-1, 0, 1], "values -1..1"),
+    ],
+)
+def test_inbox_rows_at_given_rows_refuse_rows_out_of_range(at: list, match: str) -> None:
+    from agentsim_env.comms.inbox import Inbox
+
+    inbox = Inbox(6, 1, 4)
+    out = np.full((6, 40), np.nan, dtype=np.float32)
+    rows = np.array([0, 2, 5])
+    with pytest.raises(ValueError, match=match):
+        inbox.observe_rows_flat(np.zeros((6, 3)), 0, rows, out, 0, 1e4, np.array(at))
+    assert np.isnan(out).all()  # nothing written
+    inbox.observe_rows_flat(np.zeros((6, 3)), 0, rows, out, 0, 1e4, np.array([5, 0, 3]))
+    expect = np.full((3, 40), np.nan, dtype=np.float32)
+    inbox.observe_rows_flat(np.zeros((6, 3)), 0, rows, expect, 0, 1e4)
+    np.testing.assert_array_equal(out[[5, 0, 3]], expect)
+    assert np.isnan(out[[1, 2, 4]]).all()

@@ -106,6 +106,71 @@ def test_the_driver_reads_only_rows_a_region_holds(k: int, n: int) -> None:
         seg.close()
 
 
+_FULL_CHILD = """
+import sys
+import numpy as np
+from agentsim_env.distributed.obs_shm import ObsWriter
+name = sys.argv[1]
+w = ObsWriter(name, 0, 2, 10, 4)
+slots = np.array([7, 2, 5])
+w.full[1][slots] = np.arange(12, dtype=np.float32).reshape(3, 4)
+w.close()
+"""
+
+
+def test_a_shard_writes_rows_at_their_slots_of_a_full_array_the_driver_hands_out() -> None:
+    seg = ObsSegment(2, 10, 4)
+    try:
+        assert len(seg.full) == 2 and all(a.shape == (10, 4) and a.dtype == np.float32 for a in seg.full)
+        done = subprocess.run(
+            [sys.executable, "-c", _FULL_CHILD, seg.name], capture_output=True, text=True, timeout=120
+        )
+        assert done.returncode == 0, done.stderr
+        assert np.array_equal(seg.full[1][[7, 2, 5]], np.arange(12, dtype=np.float32).reshape(3, 4))
+        assert not seg.full[1][[0, 1, 3, 4, 6, 8, 9]].any() and not seg.full[0].any()
+        assert not seg.rows(0, 10).any() and not seg.rows(1, 10).any()  # after the shards' regions
+    finally:
+        seg.close()
+
+
+def test_a_full_array_is_handed_out_only_when_nobody_holds_it() -> None:
+    seg = ObsSegment(2, 10, 4)
+    try:
+        a = seg.free_full()
+        assert a is seg.full[0] and seg.full_index(a) == 0
+        b = seg.free_full(avoid=a)  # the previous step's is never handed out next
+        assert b is seg.full[1]
+        assert seg.free_full() is None  # both held
+        view = b[2:4].reshape(-1)  # a view of a view still holds it
+        del a, b
+        assert seg.free_full(avoid=seg.full[1]) is seg.full[0]
+        assert seg.free_full(avoid=seg.full[0]) is None
+        del view
+        assert seg.free_full(avoid=seg.full[0]) is seg.full[1]
+        seg.retired.add(1)
+        assert seg.free_full(avoid=seg.full[0]) is None
+        assert seg.free_full() is seg.full[0]  # (one assert each: pytest keeps an assert's values until its end)
+        assert seg.full_index(np.zeros((10, 4), np.float32)) == -1
+    finally:
+        seg.close()
+
+
+def test_a_full_array_held_past_close_stays_readable() -> None:
+    # the caller may keep the last observations after env.close(): the mapping goes with the last array, not
+    # with the segment (a view of an unmapped segment would crash the interpreter when read)
+    seg = ObsSegment(2, 10, 4)
+    kept = seg.free_full()
+    assert kept is not None
+    kept[:] = 3.0
+    obs = kept.reshape(1, 10, 4)
+    path = _path(seg)
+    del kept
+    seg.close()
+    assert not os.path.exists(path) and seg.full == ()
+    assert float(obs.sum()) == 120.0
+    obs[0, 0, 0] = 1.0  # still writable memory of this process
+
+
 LAYOUT = (("motion", 3, "<f8"), ("comm", 7, "<f8"))
 
 

@@ -50,5 +50,41 @@ def test_observation_rows_equal_the_rows_of_every_slot(name: str, config: dict) 
         sc.flat_observation_rows(world, rows, wide[:, 2 : 2 + flat.shape[1]])
         np.testing.assert_array_equal(wide[:, 2 : 2 + flat.shape[1]], flat[rows])
         assert np.isnan(wide[:, :2]).all() and np.isnan(wide[:, 2 + flat.shape[1] :]).all()
+        # at given rows of an array of every slot's row (the shared array a shard fills at its slots' rows); the
+        # other rows untouched
+        every = np.full((world.state.n_slots, flat.shape[1]), np.nan, dtype=np.float32)
+        assert sc.flat_observation_rows(world, rows, every, at=rows) is every
+        np.testing.assert_array_equal(every[rows], flat[rows])
+        rest = np.setdiff1d(np.arange(world.state.n_slots), rows)
+        assert np.isnan(every[rest]).all()
     if world.comms is not None:
         assert world.comms.bus.inbox.valid.any(), "no message arrived: the inbox rows would not be checked"
+
+
+@pytest.mark.parametrize(
+    ("out", "at", "match"),
+    [
+        (None, [0, 1], "at needs out"),
+        (np.zeros((10, 3), dtype=np.float32), [0, 1], "out must be a writable float32 array"),
+        ("f64", [0, 1], "out must be a writable float32 array"),
+        ("frozen", [0, 1], "out must be a writable float32 array"),
+        ("ok", [0], "at must give each of the 2 slots a row of out"),
+        ("ok", [0, 10], "at must give each of the 2 slots a row of out in \\[0, 10\\)"),
+        ("ok", [-1, 3], "at must give each"),
+    ],
+)
+@pytest.mark.parametrize(("name", "config"), [CASES[0], CASES[2], CASES[3]], ids=["nav", "nav-comms", "relay"])
+def test_flat_rows_at_bad_rows_are_refused_by_name(name: str, config: dict, out: object, at: list, match: str) -> None:
+    env = agentsim_env.make(name, **config)
+    env.reset(seed=0)
+    sc, world = env.scenario, env.world
+    width = sc.flat_observation(world).shape[1]
+    arrays = {
+        "ok": np.zeros((10, width), dtype=np.float32),
+        "f64": np.zeros((10, width), dtype=np.float64),
+        "frozen": np.zeros((10, width), dtype=np.float32),
+    }
+    arrays["frozen"].flags.writeable = False
+    target = arrays.get(out, out) if isinstance(out, str) else out
+    with pytest.raises(ValueError, match=match):
+        sc.flat_observation_rows(world, np.array([1, 2]), target, at=np.array(at))

@@ -286,21 +286,39 @@ class Inbox:
         return out
 
     def observe_rows_flat(
-        self, pos: np.ndarray, step: int, rows: np.ndarray, out: np.ndarray, col: int, clip: float = np.inf
+        self,
+        pos: np.ndarray,
+        step: int,
+        rows: np.ndarray,
+        out: np.ndarray,
+        col: int,
+        clip: float = np.inf,
+        at: np.ndarray | None = None,
     ) -> None:
-        """``observe_rows`` written into columns ``[col, col + M F)`` of a 2D float32 ``out`` ``(len(rows),
-        width)`` (any row stride), as ``observe_flat`` writes every slot's."""
+        """``observe_rows`` written into columns ``[col, col + M F)`` of a 2D float32 ``out`` (any row stride), as
+        ``observe_flat`` writes every slot's: slot ``rows[r]`` into row ``r`` of ``out`` ``(len(rows), width)``,
+        or into row ``at[r]`` of ``out`` ``(>= max(at) + 1, width)`` when ``at`` is given."""
         r = np.ascontiguousarray(rows, dtype=np.int64)
         unit = out.ndim == 2 and (out.strides[1] == 4 or out.size == 0)  # numpy may give empty arrays other strides
-        if not unit or out.shape[0] != r.shape[0] or out.dtype != np.float32 or not out.flags.writeable:
+        n_out = r.shape[0] if at is None else out.shape[0] if out.ndim == 2 else -1
+        if not unit or out.shape[0] != n_out or out.dtype != np.float32 or not out.flags.writeable:
+            want = f"({r.shape[0]}, width)" if at is None else "(rows, width)"
             raise ValueError(
-                f"out must be a writable float32 array ({r.shape[0]}, width) with unit column stride, got "
-                f"{out.shape} {out.dtype}"
+                f"out must be a writable float32 array {want} with unit column stride, got {out.shape} {out.dtype}"
             )
         if not 0 <= col <= out.shape[1] - self.size * self.n_features:
             raise ValueError(f"col must leave {self.size * self.n_features} columns, got {col} of {out.shape[1]}")
+        if at is None:
+            rows_at = np.arange(r.shape[0], dtype=np.int64)
+        else:
+            rows_at = np.ascontiguousarray(at, dtype=np.int64)
+            if rows_at.shape != r.shape or (rows_at.size and not 0 <= rows_at.min() <= rows_at.max() < n_out):
+                raise ValueError(
+                    f"at must hold one row of out in [0, {n_out}) per row of rows ({r.shape[0]}), got shape "
+                    f"{rows_at.shape}" + (f" and values {rows_at.min()}..{rows_at.max()}" if rows_at.size else "")
+                )
         p = np.ascontiguousarray(pos, dtype=np.float64)
-        observe_rows_kernel(r, *self._observe_args(p, step), out, int(col), float(clip))  # type: ignore[call-arg]
+        observe_rows_kernel(r, rows_at, *self._observe_args(p, step), out, int(col), float(clip))  # type: ignore[call-arg]
 
     def mark_senders(self, rows: np.ndarray, out: np.ndarray) -> None:
         """Set ``out[s]`` for every sender ``s`` of a message in the inboxes of ``rows`` (``out``: ``(S,)`` bool;

@@ -264,6 +264,7 @@ def observe_kernel(
 @nb.njit(cache=True, error_model="numpy")
 def observe_rows_kernel(
     rows,
+    at,
     valid,
     kind,
     sender,
@@ -279,11 +280,11 @@ def observe_rows_kernel(
     col,
     lim,
 ):
-    # Slot rows[r]'s inbox into row r of out, from column col (any row stride).
+    # Slot rows[r]'s inbox into row at[r] of out, from column col (any row stride).
     for r in range(rows.shape[0]):
         _observe_row(
             rows[r],
-            r,
+            at[r],
             valid,
             kind,
             sender,

@@ -434,14 +434,25 @@ class CommsStack:
         return self.bus.inbox.observe_rows(pos, step, rows, clip), self._stats(rows)
 
     def observe_rows_flat(
-        self, pos: np.ndarray, step: int, rows: np.ndarray, out: np.ndarray, col: int, clip: float
+        self,
+        pos: np.ndarray,
+        step: int,
+        rows: np.ndarray,
+        out: np.ndarray,
+        col: int,
+        clip: float,
+        at: np.ndarray | None = None,
     ) -> None:
-        """``observe_rows`` written into columns ``[col, col + M F + 2)`` of ``out`` ``(len(rows), width)``
-        float32, as ``observe_flat`` writes every slot's."""
+        """``observe_rows`` written into columns ``[col, col + M F + 2)`` of ``out`` float32, as ``observe_flat``
+        writes every slot's: slot ``rows[r]`` into row ``r`` (``out``: ``(len(rows), width)``), or into row
+        ``at[r]`` when ``at`` is given."""
         inbox = self.bus.inbox
         width = inbox.size * inbox.n_features
-        inbox.observe_rows_flat(pos, step, rows, out, col, clip)
-        out[:, col + width : col + width + 2] = self._stats(rows)
+        inbox.observe_rows_flat(pos, step, rows, out, col, clip, at)
+        if at is None:
+            out[:, col + width : col + width + 2] = self._stats(rows)
+        else:
+            out[at, col + width : col + width + 2] = self._stats(rows)
 
     def _stats(self, rows: slice | np.ndarray) -> np.ndarray:
         """Received and dropped this step / inbox size, ``(n, 2)`` float32 in [0, 1]."""

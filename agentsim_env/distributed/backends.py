@@ -141,6 +141,20 @@ class LocalShards:
         """Never called: in-process shards return their rows in the reply."""
         raise RuntimeError(f"shard {k} returns its {n} observation rows in its reply")
 
+    def obs_buffer(self, avoid: Any = None) -> Any:
+        """None: in-process shards hand their rows over by reference (the driver copies them where they go)."""
+        del avoid
+        return None
+
+    def full_index(self, out: Any) -> int:
+        """-1: no array of every slot's row is shared with in-process shards."""
+        del out
+        return -1
+
+    def retire(self, b: int) -> None:
+        """Nothing to retire (no shared arrays)."""
+        del b
+
     def exchange_bytes(self) -> dict[str, int]:
         """The bytes the exchange routed since the previous call, by phase."""
         return self.exchange.take_bytes()

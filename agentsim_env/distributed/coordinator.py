@@ -136,7 +136,9 @@ class Coordinator:
         self.obs: np.ndarray | None = None
         """Every slot's observation row as last gathered (complete after a reset; a step given ``out`` writes its
         rows there and keeps here only the rows of the agents that ended)."""
-        self._filled: Any = None  # weak reference to the last ``out`` a step filled
+        self._filled: Any = None  # weak reference to the array the last step filled
+        self._given: Any = None  # weak reference to the ``out`` the last step was given (the same, or its copy)
+        self._copy: np.ndarray | None = None  # that copy, when the last step made one
         self.kinematics = True
         """Gather every own agent's position each step into ``world`` (the mirror); off for rollouts."""
         self.profile: dict[str, Any] = {}
@@ -273,7 +275,7 @@ class Coordinator:
         placement = world.reset_world(0, seed)
         sc.reset_world(world, 0, placement)
         self._ended, self._objects, self.lost = _NONE, [], _NONE
-        self._filled = None
+        self._filled = self._given = None
         self.owner[:] = -1
         s = world.state.n_slots
         self.obs = np.zeros((s, _obs_dim(sc)), np.float32)
@@ -394,9 +396,20 @@ class Coordinator:
             "live": alive,
         }
 
-    def filled(self, out: np.ndarray) -> bool:
-        """Whether the last step wrote every slot's observation row into ``out``."""
-        return self._filled is not None and self._filled() is out
+    def filled(self, out: np.ndarray) -> np.ndarray | None:
+        """The array holding every slot's observation row of the last step when it was given ``out``: ``out``
+        itself, or a copy of it when a shard was lost while it may still have been writing there; None when the
+        last step was not given ``out``."""
+        if self._filled is None or self._given is None or self._given() is not out:
+            return None
+        return self._filled()  # type: ignore[no-any-return]
+
+    def obs_buffer(self) -> np.ndarray | None:
+        """An array for the next step's observation rows that the shards beside the driver fill themselves
+        (shared memory, ``obs_shm``): free, and not the previous step's; None when there is none (the caller
+        then gives its own array, and the rows are copied there)."""
+        prev = self._filled() if self._filled is not None else None
+        return self.backend.obs_buffer(prev)  # type: ignore[no-any-return]
 
     def _complete(self, out: np.ndarray, replies: dict[int, Packed], acting: np.ndarray) -> None:
         """The rows of ``out`` no shard wrote this step: an ended agent's last row (kept in ``obs``); an agent of
@@ -447,7 +460,7 @@ class Coordinator:
         """
         world, st = self.world, self.world.state
         s = st.n_slots
-        self.lost = _NONE
+        self.lost, self._copy = _NONE, None
         tr = self._traffic = Traffic()
         events_wanted = self.gather_events or bool(world.hooks)
         control: Packed = {
@@ -459,6 +472,7 @@ class Coordinator:
             "events": events_wanted,
         }
         calls: dict[int, tuple[Any, ...]] = {}
+        full = self.backend.full_index(out)  # an array the shards beside the driver fill at their slots' rows
         for k in range(len(self.shards)):
             slots = np.flatnonzero(acting & (self.owner == k))
             n = self.backend.write_actions(k, slots, parts) if self.shards[k].alive else None
@@ -466,7 +480,7 @@ class Coordinator:
                 calls[k] = (slots, {p: v[slots] for p, v in parts.items()}, control)
                 tr.actions += nbytes(calls[k][:2])
             else:  # written into the shard's region of the action segment: the call carries their count
-                calls[k] = (None, None, {**control, "act_n": n})
+                calls[k] = (None, None, {**control, "act_n": n, "obs_buf": full})
                 tr.actions += slots.nbytes + n * sum(v[0].nbytes for v in parts.values())
         self._objects = []
         taken: set[int] = set()
@@ -490,7 +504,7 @@ class Coordinator:
             # on two threads: the shards meet at a barrier just before their observations, so they answer within
             # a few ms of each other and the other CPU is idle by then (measured: the second reply is in before
             # the first one's rows are copied)
-            self._take({k: r}, obs=True, out=out, threads=2)
+            self._take({k: r}, obs="obs_at" not in r, out=out, threads=2)  # "obs_at": written there already
             taken.add(k)
 
         replies = self._call("step", calls, take)
@@ -499,6 +513,12 @@ class Coordinator:
                 take(k, r)
         for key in keys:
             info.setdefault(key, np.zeros(s))
+        given = out
+        if out is not None and full >= 0 and any(k not in replies and len(calls[k]) > 2 for k in calls):
+            # a shard lost in this step may still be writing into ``out`` until its process is gone: the step's
+            # rows are taken from a copy, and that array is never handed out again
+            self.backend.retire(full)
+            out = self._copy = out.copy()  # held here until the next step: the front end hands it out
         if out is not None:
             self._complete(out, replies, acting)
         self._unread += 1
@@ -511,7 +531,7 @@ class Coordinator:
         if out is not None:  # an ended agent's row is its last one: kept for the steps it no longer acts in
             assert self.obs is not None
             self.obs[ended] = out[ended]
-            self._filled = weakref.ref(out)
+            self._filled, self._given = weakref.ref(out), weakref.ref(given)  # type: ignore[arg-type]
         world.set_offline(ended)
         self.owner[ended] = -1
         self._ended = np.union1d(ended, lost)

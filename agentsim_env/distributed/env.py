@@ -24,6 +24,7 @@ from agentsim_env.distributed.bridge import Bridge
 from agentsim_env.distributed.coordinator import Coordinator, ShardInfo
 from agentsim_env.distributed.partition import Strips, halo_width
 from agentsim_env.distributed.shard import Shard
+from agentsim_env.env.buffers import Recycled
 from agentsim_env.env.parallel_env import ENV_KEYS, AgentSimParallelEnv
 from agentsim_env.env.rollout import RolloutResult, StepView, build_policy, check_seed, check_steps
 from agentsim_env.env.vector import BatchedEnv
@@ -246,6 +247,7 @@ class DistributedBatchedEnv(BatchedEnv):
         check_shardable(make_scenario(name, **config), shards)
         super().__init__(name, 1, check_finite=check_finite, **config)
         self.coordinator = build_coordinator(self.scenario, self.world, shards, backend, ray_address, timeout_s)
+        self._obs_out = SharedOut(self.coordinator, Recycled((self.world.state.n_slots, self.obs_dim), np.float32))
 
     @property
     def shards(self) -> list[ShardInfo]:
@@ -265,8 +267,9 @@ class DistributedBatchedEnv(BatchedEnv):
     ) -> np.ndarray:
         obs = self.coordinator.obs  # built on the shards, gathered by the step
         assert obs is not None
-        if out is not None and self.coordinator.filled(out):  # the step wrote the rows there
-            flat = out
+        filled = None if out is None else self.coordinator.filled(out)
+        if filled is not None:  # the step wrote the rows there (or into its copy)
+            flat = filled
         elif out is None:
             flat = obs.copy()
         else:
@@ -277,6 +280,20 @@ class DistributedBatchedEnv(BatchedEnv):
     def close(self) -> None:
         """Stop the shards."""
         self.coordinator.backend.close()
+
+
+class SharedOut:
+    """The array front end's observation arrays over shards: one the shards beside the driver fill themselves
+    (``Coordinator.obs_buffer``) when one is free, else the front end's own recycled array (``fallback``)."""
+
+    def __init__(self, coordinator: Any, fallback: Recycled) -> None:
+        self.coordinator = coordinator
+        self.fallback = fallback
+
+    def get(self) -> np.ndarray:
+        """An ``(S, obs_dim)`` float32 array for the next step's observations (uninitialised)."""
+        a = self.coordinator.obs_buffer()
+        return self.fallback.get() if a is None else a
 
 
 def _config_fields(scenario: Scenario) -> dict[str, Any]:

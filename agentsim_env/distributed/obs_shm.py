@@ -5,19 +5,26 @@ in ``navigation`` with comms). Returned through Ray, each shard's rows are copie
 the shard's step (~20-30 ms a step at 100,000 agents on 2 CPUs, measured) and read from there by the driver. A
 shard on the driver's node instead writes its rows straight into its region of a segment that the driver created
 (``ObsSegment``), and replies with their count; the driver scatters them into its observation array as it does
-with rows returned through Ray. Actions go the other way the same way: the driver writes such a shard's acting
-slots and action rows into its region of a second segment (``RowSegment``) before the call, which then
-carries only their count instead of 8.8 MB through the object store. The reply's other per-agent rows (rewards,
-terminations, infos of the acting agents; every own agent's kinematics for the driver's mirror: ~5 MB a shard at
-100,000 agents, ~4 ms more a call through the object store, measured) come back through two more such segments
-(``reply_layouts``), so the reply itself is a few hundred bytes. A shard on another node keeps Ray for all of it.
+with rows returned through Ray. The segment also holds two arrays of every slot's row (``ObsSegment.full``) that
+the array front end hands out as the step's observations, in turn: a step told to fill one of them has each such
+shard write its rows straight at their slots' rows there, and the driver copies nothing (73 MB a step at 100,000
+agents). An array is handed out again only once the caller let it go and it is not the one the previous step
+filled (whose rows stand in for the agents of a shard lost in a step). Actions go the other way the same way: the
+driver writes such a shard's acting slots and action rows into its region of a second segment (``RowSegment``)
+before the call, which then carries only their count instead of 8.8 MB through the object store. The reply's
+other per-agent rows (rewards, terminations, infos of the acting agents; every own agent's kinematics for the
+driver's mirror: ~5 MB a shard at 100,000 agents, ~4 ms more a call through the object store, measured) come back
+through two more such segments (``reply_layouts``), so the reply itself is a few hundred bytes. A shard on
+another node keeps Ray for all of it.
 
 Region ``k`` belongs to shard ``k`` and holds up to every slot of the world (a shard may come to own them all);
 a segment is a file of ``/dev/shm`` whose pages exist only once written, so it occupies about one row per acting
 agent, not ``K`` times the world. The driver reads a region only after its shard answered the step, and never the
 region of a shard that failed: a shard killed while writing leaves nothing half-written behind in what the driver
-keeps. A shard copies the slots it reads; it reads the action rows during the call, before the driver writes the
-next step's.
+keeps. A shard lost in a step told to fill a full array may have written part of its rows there, and may still be
+writing until its process is gone: the driver takes that step's rows from a copy made after the step (its agents'
+rows those of the previous step) and never hands that array out again. A shard copies the slots it reads; it
+reads the action rows during the call, before the driver writes the next step's.
 
 Security: the segments are created with mode 0600 (their owner only) under random names that only the driver
 and, through Ray, its shards know; a shard checks a segment's size before it maps rows. The driver unlinks them
@@ -27,8 +34,10 @@ ownership.
 
 from __future__ import annotations
 
+import mmap
 import os
 import secrets
+import sys
 from multiprocessing import resource_tracker
 from multiprocessing.shared_memory import SharedMemory
 from typing import Any
@@ -77,8 +86,32 @@ def _release(shm: SharedMemory | None, unlink: bool) -> None:
             pass
 
 
+N_FULL = 2  # the full arrays after the shards' regions: one handed out, the other the previous step's
+
+
+def _full_views(shm: SharedMemory, n_shards: int, n_slots: int, obs_dim: int) -> tuple[np.ndarray, ...]:
+    # Arrays a caller may keep past ``close``: mapped on their own, each a view of a 1-D array that numpy holds as
+    # a buffer export of that mapping, so the mapping lives as long as one of them does (views built on
+    # ``shm.buf`` would point into unmapped memory once the segment is closed: a crash when read). Views of them
+    # refer to that 1-D array (numpy collapses a view's base onto it): ``_in_use`` counts both.
+    size = _region_bytes(n_slots, obs_dim)
+    mm = mmap.mmap(shm._fd, (n_shards + N_FULL) * size)  # type: ignore[attr-defined]
+    return tuple(
+        np.frombuffer(mm, dtype=np.float32, count=n_slots * obs_dim, offset=(n_shards + b) * size).reshape(
+            n_slots, obs_dim
+        )
+        for b in range(N_FULL)
+    )
+
+
+def _in_use(full: tuple[np.ndarray, ...], b: int) -> bool:
+    # free: referenced by the tuple only (and getrefcount's argument); its 1-D base by it only (and the argument)
+    return sys.getrefcount(full[b]) != 2 or sys.getrefcount(full[b].base) != 2
+
+
 class ObsSegment:
-    """The driver's segment: ``n_shards`` regions of ``(n_slots, obs_dim)`` float32 rows.
+    """The driver's segment: ``n_shards`` regions of ``(n_slots, obs_dim)`` float32 rows, then ``N_FULL`` arrays
+    of every slot's row (``full``).
 
     Args:
         n_shards: Number of shards K (one region each).
@@ -88,8 +121,27 @@ class ObsSegment:
 
     def __init__(self, n_shards: int, n_slots: int, obs_dim: int) -> None:
         self.n_shards, self.n_slots, self.obs_dim = int(n_shards), int(n_slots), int(obs_dim)
-        self._shm: SharedMemory | None = _create("obs", self.n_shards * _region_bytes(self.n_slots, self.obs_dim))
+        size = (self.n_shards + N_FULL) * _region_bytes(self.n_slots, self.obs_dim)
+        self._shm: SharedMemory | None = _create("obs", size)
         self.name = self._shm.name.lstrip("/")
+        self.full: tuple[np.ndarray, ...] = _full_views(self._shm, self.n_shards, self.n_slots, self.obs_dim)
+        """The arrays of every slot's row ``(n_slots, obs_dim)`` the shards can fill at their slots' rows."""
+        self.retired: set[int] = set()
+        """The full arrays not handed out again (a shard lost while it may have been writing into them)."""
+
+    def free_full(self, avoid: np.ndarray | None = None) -> np.ndarray | None:
+        """A full array nobody else references (the caller let it go), neither ``avoid`` nor retired; or None."""
+        for b in range(len(self.full)):
+            if b not in self.retired and self.full[b] is not avoid and not _in_use(self.full, b):
+                return self.full[b]
+        return None
+
+    def full_index(self, out: np.ndarray | None) -> int:
+        """Which full array ``out`` is (-1: none of them)."""
+        for b, a in enumerate(self.full):
+            if out is a:
+                return b
+        return -1
 
     def rows(self, k: int, n: int) -> np.ndarray:
         """The first ``n`` rows shard ``k`` wrote this step (a view: copy or scatter them before the next step)."""
@@ -101,8 +153,9 @@ class ObsSegment:
         return np.ndarray((n, self.obs_dim), dtype=np.float32, buffer=self._shm.buf, offset=at)
 
     def close(self) -> None:
-        """Unmap and remove the segment (idempotent)."""
+        """Unmap and remove the segment (idempotent; a full array the caller still holds stays readable)."""
         shm, self._shm = self._shm, None
+        self.full = ()
         _release(shm, unlink=True)
 
 
@@ -123,17 +176,21 @@ class ObsWriter:
     def __init__(self, name: str, region: int, n_shards: int, n_slots: int, obs_dim: int) -> None:
         if not 0 <= region < n_shards:
             raise ValueError(f"the observation segment has regions 0..{n_shards - 1}, got {region}")
-        self._shm = shm = _attach(name, int(n_shards) * _region_bytes(n_slots, obs_dim), "observation")
+        need = (int(n_shards) + N_FULL) * _region_bytes(n_slots, obs_dim)
+        self._shm = shm = _attach(name, need, "observation")
         self.array: np.ndarray = np.ndarray(
             (int(n_slots), int(obs_dim)),
             dtype=np.float32,
             buffer=shm.buf,
             offset=int(region) * _region_bytes(n_slots, obs_dim),
         )
+        self.full: tuple[np.ndarray, ...] = _full_views(shm, int(n_shards), int(n_slots), int(obs_dim))
+        """The driver's arrays of every slot's row (``ObsSegment.full``): a step may have rows written there."""
 
     def close(self) -> None:
         """Unmap the region (the segment stays for the driver)."""
         self.array = np.zeros((0, 0), dtype=np.float32)
+        self.full = ()
         _release(self._shm, unlink=False)
 
 
@@ -196,9 +253,11 @@ def shm_room() -> int | None:
 
 def rows_bytes(n_slots: int, obs_dim: int, act_layout: tuple[tuple[str, int, str], ...], n_info: int) -> int:
     """The pages the step API's segments come to hold when every slot's rows are written once (the regions of
-    all shards together: each slot is one shard's at a time)."""
+    all shards together: each slot is one shard's at a time; the full arrays whole)."""
     acted, own = reply_layouts(n_info)
-    return _region_bytes(n_slots, obs_dim) + sum(_row_bytes(n_slots, lay)[-1] for lay in (act_layout, acted, own))
+    return (1 + N_FULL) * _region_bytes(n_slots, obs_dim) + sum(
+        _row_bytes(n_slots, lay)[-1] for lay in (act_layout, acted, own)
+    )
 
 
 class RowSegment:

@@ -337,7 +337,7 @@ class Shard(OnNode):
             if old is not None:
                 old.close()
         self.obs = ObsWriter(obs[0], k, *obs[1:])
-        self.worker.obs_out = self.obs.array
+        self.worker.obs_out, self.worker.obs_full = self.obs.array, self.obs.full
         self.worker.act_in = RowReader(act[0], k, act[1], act[2], tuple(tuple(p) for p in act[3]))
         acted, own = (RowReader(r[0], k, r[1], r[2], tuple(tuple(p) for p in r[3]), "reply") for r in reply)
         self.worker.reply_out = (acted, own)
@@ -515,6 +515,21 @@ class RayShards:
         if self.obs_segment is None or not self.shared.get(k):
             raise RuntimeError(f"shard {k} does not share its observation rows")
         return self.obs_segment.rows(k, n)
+
+    def obs_buffer(self, avoid: Any = None) -> Any:
+        """An array of every slot's observation row in the observation segment that no one else holds and that is
+        not ``avoid`` (``ObsSegment.free_full``): a step given it has the workers beside the driver write their
+        rows straight there; None when there is none."""
+        return None if self.obs_segment is None else self.obs_segment.free_full(avoid)
+
+    def full_index(self, out: Any) -> int:
+        """Which of the segment's full arrays ``out`` is (-1: none)."""
+        return -1 if self.obs_segment is None else self.obs_segment.full_index(out)
+
+    def retire(self, b: int) -> None:
+        """Never hand full array ``b`` out again (a worker lost while it may have been writing into it)."""
+        if self.obs_segment is not None:
+            self.obs_segment.retired.add(int(b))
 
     def _start(self, k: int) -> Any:
         name, config, strips = self._args

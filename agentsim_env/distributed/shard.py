@@ -109,6 +109,9 @@ class Shard:
         self.address = f"{socket.gethostname()}:{os.getpid()}"
         self.obs_out: np.ndarray | None = None
         """Where the step API's observation rows go instead of the reply (``distributed.obs_shm``), if set."""
+        self.obs_full: tuple[np.ndarray, ...] = ()
+        """The driver's arrays of every slot's observation row (``obs_shm.ObsSegment.full``): a step told to
+        fill one (``obs_buf`` in its control) writes its rows there at their slots' rows."""
         self.act_in: Any = None
         """Where the step API's actions come from when a call carries only their count (an
         ``obs_shm.RowReader``), if set."""
@@ -159,7 +162,9 @@ class Shard:
         right = (st.edges[r + 1] - x <= st.halo) & (r < st.n_strips - 1)
         return left | right
 
-    def _rows_out(self, slots: np.ndarray, res: Any, terminated: np.ndarray, obs: bool, kin: bool) -> Packed:
+    def _rows_out(
+        self, slots: np.ndarray, res: Any, terminated: np.ndarray, obs: bool, kin: bool, full: int = -1
+    ) -> Packed:
         st = self.world.state
         out: Packed = {"slots": slots, "own": np.flatnonzero(self.own)}
         if res is not None and self.reply_out is not None:  # into this shard's regions of the driver's segments
@@ -179,7 +184,10 @@ class Shard:
             out["info"] = {k: v[slots] for k, v in res.info.items()}
         if obs:
             self._sender_positions()
-            if self.obs_out is None:
+            if 0 <= full < len(self.obs_full):  # straight at their slots' rows of the array the step returns
+                self.flat_rows(slots, self.obs_full[full], at=slots)
+                out["obs_at"] = full
+            elif self.obs_out is None:
                 out["obs"] = self.flat_rows(slots)
             else:  # into this shard's region of the driver's segment
                 out["obs_n"] = int(self.flat_rows(slots, self.obs_out[: slots.size]).shape[0])
@@ -277,10 +285,10 @@ class Shard:
             *(MessageLog.concat([getattr(r, f) for r in rounds]) for f in ("sent", "delivered", "dropped")),
         )
 
-    def flat_rows(self, slots: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    def flat_rows(self, slots: np.ndarray, out: np.ndarray | None = None, at: np.ndarray | None = None) -> np.ndarray:
         """The flat observation rows of ``slots``, computed for those rows only (``Scenario.observation_rows``),
-        into ``out`` when given."""
-        return self.scenario.flat_observation_rows(self.world, slots, out)
+        into ``out`` when given (at its rows ``at`` when given)."""
+        return self.scenario.flat_observation_rows(self.world, slots, out, at)
 
     @staticmethod
     def flat_layout(parts: dict[str, np.ndarray], n: int, out: np.ndarray | None = None) -> np.ndarray:
@@ -482,7 +490,8 @@ class Shard:
         res, terminated = self.run(slots, full, control)
         world = self.world
         done = np.flatnonzero(self.acting)
-        out = self._rows_out(done, res, terminated, bool(control.get("obs", True)), bool(control.get("kinematics")))
+        obs, kin = bool(control.get("obs", True)), bool(control.get("kinematics"))
+        out = self._rows_out(done, res, terminated, obs, kin, int(control.get("obs_buf", -1)))
         col = world.last_events.collisions
         out["col.agent"], out["col.other"], out["col.obj"] = col.agent, col.other_agent, col.obj
         comms = world.comms

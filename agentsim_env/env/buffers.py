@@ -10,9 +10,16 @@ returned to a caller is never written again while the caller can still see it.
 from __future__ import annotations
 
 import sys
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
+
+
+class ArraySource(Protocol):
+    """Where an env takes the array a step returns (``Recycled``, or a front end's own source)."""
+
+    def get(self) -> np.ndarray:
+        """An array the caller may fill and return (uninitialised)."""
 
 
 class Recycled:

@@ -20,7 +20,7 @@ from agentsim_env.core.pipeline import EpisodeSeeds
 from agentsim_env.core.threads import check_num_threads
 from agentsim_env.core.validation import check_int, is_int, short_repr
 from agentsim_env.env.batch_kernels import finish_step, prepare_actions
-from agentsim_env.env.buffers import Recycled
+from agentsim_env.env.buffers import ArraySource, Recycled
 from agentsim_env.env.guard import CallGuard
 from agentsim_env.env.spaces import ACTION_RULE, REAL_KINDS, as_array, flat_layout
 from agentsim_env.scenarios.base import (
@@ -101,7 +101,7 @@ class BatchedEnv:
         self.steps = np.zeros(n_worlds, dtype=np.int64)
         self._seeds = [EpisodeSeeds() for _ in range(n_worlds)]
         self._started = False
-        self._obs_out = Recycled((self.world.state.n_slots, self.obs_dim), np.float32)
+        self._obs_out: ArraySource = Recycled((self.world.state.n_slots, self.obs_dim), np.float32)
         self._guard = CallGuard()  # reset and step: one thread at a time
 
     @property

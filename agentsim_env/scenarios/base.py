@@ -383,11 +383,26 @@ class Scenario(ABC, Generic[ConfigT]):
             )
         return out
 
-    def flat_observation_rows(self, world: World, slots: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    def flat_observation_rows(
+        self, world: World, slots: np.ndarray, out: np.ndarray | None = None, at: np.ndarray | None = None
+    ) -> np.ndarray:
         """:meth:`observation_rows` in the flat layout ``(len(slots), obs_dim)`` float32, into ``out`` when given:
         the rows :meth:`flat_observation` gives ``slots`` (a shard's own agents), the inbox and counters
-        written in place."""
+        written in place. With ``at``, slot ``slots[r]``'s row goes to row ``at[r]`` of ``out`` (required then,
+        e.g. an array of every slot's row with ``at = slots``).
+
+        Raises:
+            ValueError: For an ``out`` of the wrong shape or dtype, or an ``at`` that does not give each slot a row
+                of ``out``.
+        """
         n = int(np.asarray(slots).shape[0])
+        if at is not None:
+            if out is None:
+                raise ValueError("at needs out: the array whose rows it names")
+            at = check_rows_at(np.asarray(slots), at, out, sum(p.size for p in self.obs_parts().values()))
+            if world.comms is None or type(self).observation is not Scenario.observation:
+                out[at] = flat_parts(self.observation_rows(world, slots), n)
+                return out
         if world.comms is None or type(self).observation is not Scenario.observation:
             return flat_parts(self.observation_rows(world, slots), n, out)
         parts = self.observe_rows(world, slots)
@@ -397,8 +412,11 @@ class Scenario(ABC, Generic[ConfigT]):
         lead = sum(int(np.prod(p.shape[1:], dtype=np.int64)) for p in parts.values())
         if out is None:
             out = np.empty((n, lead + comms_width(world)), dtype=np.float32)
-        flat_parts(parts, n, out[:, :lead])
-        world.comms.observe_rows_flat(world.state.pos, max(world.tick - 1, 0), slots, out, lead, INBOX_CLIP)
+        if at is None:
+            flat_parts(parts, n, out[:, :lead])
+        else:
+            out[at, :lead] = flat_parts(parts, n)
+        world.comms.observe_rows_flat(world.state.pos, max(world.tick - 1, 0), slots, out, lead, INBOX_CLIP, at)
         return out
 
     def flat_observation(self, world: World, out: np.ndarray | None = None) -> np.ndarray:
@@ -458,6 +476,33 @@ def write_comms(world: World, out: np.ndarray, col: int) -> None:
     :meth:`Scenario.observation` gives them (the flat layout ends with them)."""
     assert world.comms is not None
     world.comms.observe_flat(world.state.pos, max(world.tick - 1, 0), out, col, INBOX_CLIP)
+
+
+def check_rows_at(slots: np.ndarray, at: np.ndarray | None, out: np.ndarray, width: int) -> np.ndarray:
+    """The rows of ``out`` the observation rows of ``slots`` go to (``at``; ``None``: ``0..len(slots)-1``), as
+    contiguous int64, after checking ``out`` (a writable float32 ``(rows, width)`` array) and that ``at`` names one
+    of its rows per slot.
+
+    Raises:
+        ValueError: Naming ``out`` or ``at`` and what they must be.
+    """
+    n = int(slots.shape[0])
+    rows = n if at is None else None
+    if (
+        out.ndim != 2
+        or out.shape[1] != width
+        or (rows is not None and out.shape[0] != rows)
+        or out.dtype != np.float32
+        or not out.flags.writeable
+    ):
+        want = f"({n}, {width})" if rows is not None else f"(rows, {width})"
+        raise ValueError(f"out must be a writable float32 array {want}, got {out.dtype} {out.shape}")
+    if at is None:
+        return np.arange(n, dtype=np.int64)
+    a = np.ascontiguousarray(at, dtype=np.int64)
+    if a.shape != (n,) or (n and not 0 <= int(a.min()) <= int(a.max()) < out.shape[0]):
+        raise ValueError(f"at must give each of the {n} slots a row of out in [0, {out.shape[0]}), got {a.shape} {a}")
+    return a
 
 
 def flat_parts(

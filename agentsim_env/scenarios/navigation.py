@@ -55,6 +55,7 @@ from agentsim_env.scenarios.base import (
     Scenario,
     SlotState,
     StepResult,
+    check_rows_at,
     comms_width,
     slot,
     write_comms,
@@ -170,10 +171,10 @@ def _observe_kernel(r0, r1, pos, vel, heading, goal, distance, hit_kind, side, l
 
 
 @nb.njit(cache=True, error_model="numpy")
-def _observe_rows_kernel(rows, pos, vel, heading, goal, distance, hit_kind, side, lo, hi, vmax, out):  # type: ignore[no-untyped-def]
-    # Slot rows[r] into row r of out (len(rows), 8 + 2K + 4): a shard's own agents.
+def _observe_rows_kernel(rows, at, pos, vel, heading, goal, distance, hit_kind, side, lo, hi, vmax, out):  # type: ignore[no-untyped-def]
+    # Slot rows[r] into row at[r] of out (., 8 + 2K + 4): a shard's own agents.
     for r in range(rows.shape[0]):
-        _observe_row(rows[r], r, pos, vel, heading, goal, distance, hit_kind, side, lo, hi, vmax, out)
+        _observe_row(rows[r], at[r], pos, vel, heading, goal, distance, hit_kind, side, lo, hi, vmax, out)
 
 
 @config()
@@ -463,35 +464,43 @@ class NavigationScenario(Scenario[NavigationConfig]):
         """self, lidar and task parts of ``slots`` only (fresh arrays)."""
         k = self.lidar.n_rays
         rows = np.ascontiguousarray(slots, dtype=np.int64)
-        out = self._write_obs_rows(world, rows, np.empty((rows.shape[0], self._obs.shape[1]), dtype=np.float32))
+        out = np.empty((rows.shape[0], self._obs.shape[1]), dtype=np.float32)
+        self._write_obs_rows(world, rows, out, np.arange(rows.shape[0], dtype=np.int64))
         return {
             "self": out[:, :SELF_DIM],
             "lidar": out[:, SELF_DIM : SELF_DIM + 2 * k].reshape(-1, k, 2),
             "task": out[:, SELF_DIM + 2 * k :],
         }
 
-    def flat_observation_rows(self, world: World, slots: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-        """The flat rows of ``slots`` written straight into ``out`` (or a fresh array): the three parts by the
-        rows kernel, then the inbox and counters (with comms), when no sensor adds a part."""
+    def flat_observation_rows(
+        self, world: World, slots: np.ndarray, out: np.ndarray | None = None, at: np.ndarray | None = None
+    ) -> np.ndarray:
+        """The flat rows of ``slots`` written straight into ``out`` (or a fresh array; at rows ``at`` when given):
+        the three parts by the rows kernel, then the inbox and counters (with comms), when no sensor adds a
+        part."""
         if any(s.obs_part is not None for s in world.sensors) or type(self).observation is not Scenario.observation:
-            return super().flat_observation_rows(world, slots, out)
+            return super().flat_observation_rows(world, slots, out, at)
         rows = np.ascontiguousarray(slots, dtype=np.int64)
         lead = self._obs.shape[1]
         if out is None:
+            if at is not None:
+                raise ValueError("at needs out: the array whose rows it names")
             out = np.empty((rows.shape[0], lead + comms_width(world)), dtype=np.float32)
-        self._write_obs_rows(world, rows, out[:, :lead])
+        rows_at = check_rows_at(rows, at, out, lead + comms_width(world))
+        self._write_obs_rows(world, rows, out, rows_at)
         if world.comms is not None:
-            world.comms.observe_rows_flat(world.state.pos, max(world.tick - 1, 0), rows, out, lead, INBOX_CLIP)
+            world.comms.observe_rows_flat(world.state.pos, max(world.tick - 1, 0), rows, out, lead, INBOX_CLIP, at)
         return out
 
-    def _write_obs_rows(self, world: World, rows: np.ndarray, out: np.ndarray) -> np.ndarray:
-        """The self | lidar | task columns of slots ``rows`` into row ``r`` of ``out`` ``(len(rows), lead)``."""
+    def _write_obs_rows(self, world: World, rows: np.ndarray, out: np.ndarray, at: np.ndarray) -> np.ndarray:
+        """The self | lidar | task columns of slot ``rows[r]`` into row ``at[r]`` of ``out`` (its first columns)."""
         c, st = self.config, world.state
         scan = world.scan
         assert scan is not None
         lo, hi = float(c.body.altitude[0]), float(c.body.altitude[1])
         _observe_rows_kernel(
             rows,
+            at,
             st.pos,
             st.vel,
             st.heading,
