@@ -88,11 +88,13 @@ class ShardRollout:
         acting = w.acting
         over = bool(control["over"])
         gone = acting & (terminated | over)
-        self.returns[acting] += np.asarray(res.rewards, dtype=np.float64)[acting]
+        # by index: a boolean mask over every slot with the own half set at random costs ~6x more a pass
+        done = np.flatnonzero(acting)
+        self.returns[done] += np.asarray(res.rewards, dtype=np.float64)[done]
         for k in self.info_keys:
             a = np.asarray(res.info[k])
             if a.dtype != bool:
-                self.sums[k][acting] += a[acting]
+                self.sums[k][done] += a[done]
         self.live &= ~gone
         self.ended_here |= acting & terminated
         w.own[acting & terminated] = False  # they stay where they stopped (``ended_here``)
@@ -107,7 +109,6 @@ class ShardRollout:
             "arrived": w.arrived,
         }
         if control.get("gather"):  # an observer of the steps: the acting agents' rows (no observations)
-            done = np.flatnonzero(acting)
             out["acted"], out["still"] = done, self.live[done]
             out["info"] = {k: np.asarray(v)[done] for k, v in res.info.items()}
             out["pos"] = st.pos[done]

@@ -302,7 +302,8 @@ def _array_loop(
         over = env._steps >= sc.max_steps
         truncated = acting & ~terminated if over else np.zeros(n_slots, dtype=bool)
         flat = env._flat_obs(acting, res)
-        returns[acting] += np.asarray(res.rewards, dtype=np.float64)[acting]
+        # by index (``live`` holds the acting slots): cheaper than a mask once some agents ended
+        returns[live] += np.asarray(res.rewards, dtype=np.float64)[live]
         for k, v in count_events(world.last_events).items():
             events[k] += v
         for k, arr in res.info.items():
@@ -310,7 +311,7 @@ def _array_loop(
             if a.dtype != bool:  # per agent first, so any split of the agents adds them up the same way
                 if k not in acc:
                     acc[k] = np.zeros(n_slots, dtype=np.float64)
-                acc[k][acting] += a[acting]
+                acc[k][live] += a[live]
         ended_t |= terminated
         ended_u |= truncated
         gone = terminated | truncated
