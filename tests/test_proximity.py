@@ -153,6 +153,26 @@ def test_ranges_change_between_scans_and_buffers_are_reused() -> None:
     assert np.abs(out.distance - ref.distance).max() <= 1e-5
 
 
+@pytest.mark.parametrize("seed", range(3))
+def test_reused_buffers_equal_fresh_ones_as_slots_go_offline_and_back(seed: int) -> None:
+    # the sensor's own rows of offline slots are rewritten only when they do not hold "nothing seen": a slot that
+    # goes offline, stays offline, comes back, goes again; and a caller writing into them between scans is not
+    # supported, so the rows are compared with a fresh buffer's each time
+    pos, heading, rng, radius, online, world, scene = _random_case(seed)
+    sensor = ProximitySensor(CONFIGS[seed % len(CONFIGS)])
+    gen = np.random.default_rng(seed)
+    on = online.copy()
+    for _ in range(6):
+        got = _scan(sensor, pos, heading, rng, radius, on, world, scene)
+        fresh = _scan(ProximitySensor(sensor.config), pos, heading, rng, radius, on, world, scene)
+        for f in ("distance", "hit_kind", "hit_id"):
+            np.testing.assert_array_equal(getattr(got, f), getattr(fresh, f), err_msg=f)
+        assert (got.hit_kind[~on] == HIT_NONE).all() and (got.distance[~on] == 1.0).all()
+        flip = gen.random(on.shape[0]) < 0.3
+        on = np.where(flip, ~on, on)
+        pos = pos + gen.normal(0, 0.5, pos.shape) * [1, 1, 0]
+
+
 # ------------------------------------------------------------------------------------------ hand-made
 def _one(pos, heading=0.0, rng=10.0, radius=0.5, online=True, world=0):
     """Arrays for a few slots given as lists."""

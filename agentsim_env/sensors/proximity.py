@@ -140,12 +140,13 @@ def _scan_prep(pos, radius, online, a_items, use_agents, o_kind, o_half):  # typ
 # value, and dropping the per-division zero check of the default model made the scan ~20 % faster.
 @nb.njit(cache=True, error_model="numpy", nogil=True)
 def _scan_kernel(
-    lo, hi, pos, heading, srange, online, world, a_grid, scene, o_grid, dirs, n_az, flags, prep, stamp, out
+    lo, hi, pos, heading, srange, online, world, a_grid, scene, o_grid, dirs, n_az, flags, prep, stamp, out, blank
 ):  # type: ignore[no-untyped-def]
     # Scans slots lo..hi-1 (rows are independent, so ranges may run on different threads, each with its own
     # ``stamp``). a_grid / o_grid = (cell_start, items, origin_x, origin_y, cell, nx, ny); scene = (kind,
     # centre, half, world); flags = (agents, objects, ground); prep = _scan_prep's result; out = (distance,
     # hit_kind, hit_id). Grid cells are per world, so whatever a cell lists belongs to the scanning slot's world.
+    # blank[i]: row i of out holds "nothing seen" already (an offline slot's row is written only when it is not).
     a_start, a_items, a_ox, a_oy, a_cell, a_nx, a_ny = a_grid
     o_start, o_items, o_ox, o_oy, o_cell, o_nx, o_ny = o_grid
     o_kind, o_centre, o_half, _ = scene  # object worlds are implied by the grid's per-world cells
@@ -161,10 +162,13 @@ def _scan_kernel(
     # Slot order: visiting slots in grid order measured slower at 100,000 agents (scattered output rows).
     for i in range(lo, hi):
         if not online[i]:
-            out_d[i, :] = 1.0
-            out_k[i, :] = HIT_NONE
-            out_id[i, :] = -1
+            if not blank[i]:
+                out_d[i, :] = 1.0
+                out_k[i, :] = HIT_NONE
+                out_id[i, :] = -1
+                blank[i] = True
             continue
+        blank[i] = False
         rng = srange[i]
         x, y, z = pos[i, 0], pos[i, 1], pos[i, 2]
         cs = (np.cos(heading[i]), np.sin(heading[i]))
@@ -394,6 +398,9 @@ class ProximitySensor:
         self.config = config if config is not None else ProximityConfig()
         self.directions = self.config.ray_directions()
         self._out: ScanResult | None = None
+        # per row of ``_out``: it holds "nothing seen" (an offline slot's row is rewritten only when it does not: a
+        # shard's world has most slots offline, ~4 ms a scan at 100,000 agents over 2 shards)
+        self._blank = np.zeros(0, dtype=np.bool_)
         self._stamps = [np.empty(0, dtype=np.int64)]
         self._given: tuple[object, ...] = ()  # the arrays of the last scan, and their kernel form
         self._arrays: tuple[np.ndarray, ...] = ()
@@ -473,7 +480,9 @@ class ProximitySensor:
             object_grid: ``build_object_grid(spec, centre, scene.footprint_radius(), obj_world)`` (footprints
                 must be covered); ``None`` sees no objects.
             ground: Whether the plane ``z = 0`` is solid (the scene's flag).
-            out: Buffers to fill; by default the sensor's own, reused by the next scan.
+            out: Buffers to fill; by default the sensor's own, reused by the next scan (there an offline slot's
+                row is rewritten only when it does not hold "nothing seen" already: the sensor's own rows are
+                not to be written by others).
 
         Returns:
             The filled :class:`ScanResult`.
@@ -493,7 +502,8 @@ class ProximitySensor:
         if out is None:
             if self._out is None or self._out.distance.shape != (s, k):
                 self._out = ScanResult.empty(s, k)
-            out = self._out
+                self._blank = np.ones(s, dtype=np.bool_)  # ``empty`` rows: "nothing seen"
+            out, blank = self._out, self._blank
         elif (
             out.distance.shape != (s, k)
             or out.distance.dtype != np.float32
@@ -503,6 +513,8 @@ class ProximitySensor:
             or out.hit_id.shape != (s, k)
         ):
             raise ValueError(f"out must hold (S, K) = ({s}, {k}) arrays of float32 / int8 / int32")
+        else:  # the caller's buffers: every offline row written
+            blank = np.zeros(s, dtype=np.bool_)
         use_agents = self.config.detect_agents and agent_grid is not None
         use_objects = self.config.detect_objects and object_grid is not None and kind.shape[0] > 0
         threads = self.threads
@@ -536,6 +548,7 @@ class ProximitySensor:
                 prep,
                 stamps[part],
                 bufs,
+                blank,
             ),
             s,
         )
