@@ -500,7 +500,9 @@ class Coordinator:
                 if key not in info:
                     info[key] = np.zeros(s, dtype=v.dtype)
                 info[key][sl] = v
-            tr.replies += nbytes(r) + 4 * int(r.get("obs_n", 0)) * _obs_dim(self.scenario)  # shared rows: float32
+            # rows through shared memory (float32), counted as they crossed: into a region, or at their slots' rows
+            shared = int(r.get("obs_n", 0)) + (len(sl) if "obs_at" in r else 0)
+            tr.replies += nbytes(r) + 4 * shared * _obs_dim(self.scenario)
             # on two threads: the shards meet at a barrier just before their observations, so they answer within
             # a few ms of each other and the other CPU is idle by then (measured: the second reply is in before
             # the first one's rows are copied)

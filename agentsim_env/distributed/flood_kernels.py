@@ -35,6 +35,32 @@ def _copy_readers(f, rd_start, rd_len, pool, add_start, add_len, add_v, keep, ne
 
 
 @nb.njit(cache=True)
+def leaving_reads(rd_start, rd_len, pool, leaving):  # type: ignore[no-untyped-def]
+    """The reads ``(row, slot)`` of the pool's lists whose slot ``x`` has ``leaving[x]``, in row order, the
+    lists left as they are (read only: the next hop drops the reads of slots no longer own).
+
+    Returns:
+        ``(out_row, out_slot)``.
+    """
+    n = 0
+    for f in range(rd_start.shape[0]):
+        for k in range(rd_start[f], rd_start[f] + rd_len[f]):
+            if leaving[pool[k]]:
+                n += 1
+    out_row = np.empty(n, dtype=np.int64)
+    out_slot = np.empty(n, dtype=np.int64)
+    n = 0
+    for f in range(rd_start.shape[0]):
+        for k in range(rd_start[f], rd_start[f] + rd_len[f]):
+            x = pool[k]
+            if leaving[x]:
+                out_row[n] = f
+                out_slot[n] = x
+                n += 1
+    return out_row, out_slot
+
+
+@nb.njit(cache=True)
 def split_reads(rd_start, rd_len, pool, add_start, add_len, add_v, keep):  # type: ignore[no-untyped-def]
     """Rebuild the reader lists with the readers ``x`` where ``keep[x]``; the others come out.
 

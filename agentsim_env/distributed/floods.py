@@ -48,7 +48,13 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from agentsim_env.comms.overlay import OverlayStats, check_flood_starts
-from agentsim_env.distributed.flood_kernels import hop_kernel, next_frontier, order_entries, split_reads
+from agentsim_env.distributed.flood_kernels import (
+    hop_kernel,
+    leaving_reads,
+    next_frontier,
+    order_entries,
+    split_reads,
+)
 
 _I64 = np.int64
 
@@ -265,7 +271,7 @@ class PartFloods:
 
     @property
     def n_reads(self) -> int:
-        """Own (slot, flood) reads kept."""
+        """Own (slot, flood) reads kept (those of slots handed over since the last hop counted until it)."""
         return int(self._rd_len.sum()) + int(self._add_row.shape[0])
 
     @property
@@ -392,19 +398,29 @@ class PartFloods:
         return self._entries(rows, self._fr_slot[sel], self._hops[rows])
 
     def take_leaving(self, slots: np.ndarray) -> FloodEntries:
-        """Remove and return the reads (and frontier entries) of ``slots``, which move to another part."""
+        """Return the reads (and remove the frontier entries) of ``slots``, which move to another part.
+
+        The reader lists are not rebuilt: the next ``hop`` drops the reads of slots no longer own (it keeps own
+        readers only), and until then a slot's reads are a fact about that slot that stays true. ``drop``
+        removes them.
+        """
         leaving = self._mask(slots)
-        add_start, add_len, add_v = self._adds()
-        self._pool, self._rd_start, self._rd_len, rows, out = split_reads(
-            self._rd_start, self._rd_len, self._pool, add_start, add_len, add_v, ~leaving
-        )
-        self._pool_buf = None  # a new buffer, which no spare is
-        self._add_row, self._add_slot = _e(), _e()
+        p_row, p_slot = leaving_reads(self._rd_start, self._rd_len, self._pool, leaving)
+        a = leaving[self._add_slot]
+        # per row: the pool's reads, then the added ones in the order they were added (``split_reads``'s order)
+        rows = np.concatenate([p_row, self._add_row[a]])
+        out = np.concatenate([p_slot, self._add_slot[a]])
+        order = np.argsort(rows, kind="stable")
+        rows, out = rows[order], out[order]
+        return self._entries(rows, out, self._take_frontier(leaving, rows, out))
+
+    def _take_frontier(self, leaving: np.ndarray, rows: np.ndarray, out: np.ndarray) -> np.ndarray:
+        # remove the frontier entries of the leaving slots; each read's hop count when it relays, else -1
         go = leaving[self._fr_slot]
         s = self.n_slots
         relays = np.isin(rows * s + out, self._fr_row[go] * s + self._fr_slot[go])
         self._fr_row, self._fr_slot = self._fr_row[~go], self._fr_slot[~go]
-        return self._entries(rows, out, np.where(relays, self._hops[rows], -1))
+        return np.where(relays, self._hops[rows], -1)
 
     def add(self, entries: FloodEntries) -> None:
         """Reads (and frontier entries: ``hops >= 0``) of slots that joined this part (``take_leaving``'s)."""
@@ -431,7 +447,14 @@ class PartFloods:
         For a whole world this equals ``Overlay.drop_slots`` (no link crosses worlds, so the world's floods end
         and their readers are all in it); a flood key reused after the reset then starts afresh.
         """
-        self.take_leaving(slots)
+        gone = self._mask(slots)
+        add_start, add_len, add_v = self._adds()
+        self._pool, self._rd_start, self._rd_len, rows, out = split_reads(
+            self._rd_start, self._rd_len, self._pool, add_start, add_len, add_v, ~gone
+        )
+        self._pool_buf = None  # a new buffer, which no spare is
+        self._add_row, self._add_slot = _e(), _e()
+        self._take_frontier(gone, rows, out)
 
     def hop(
         self, links: tuple[np.ndarray, np.ndarray, np.ndarray], own: np.ndarray, ghost_frontier: FloodEntries

@@ -53,17 +53,18 @@ def _agent_arrays(world: World) -> dict[str, np.ndarray]:
     return {k: v for k, v in slot_arrays(world).items() if not k.startswith(SHARD_PATHS)}
 
 
-def pack_rows(world: World, slots: np.ndarray) -> Packed:
-    """Every per-slot row of ``slots`` an agent takes with it to another shard (``sim.slot_rows``)."""
-    rows: Packed = {k: v[slots] for k, v in _agent_arrays(world).items()}
+def pack_rows(world: World, slots: np.ndarray, arrays: dict[str, np.ndarray] | None = None) -> Packed:
+    """Every per-slot row of ``slots`` an agent takes with it to another shard (``sim.slot_rows``; ``arrays``:
+    the world's agent arrays when the caller found them already)."""
+    rows: Packed = {k: v[slots] for k, v in (_agent_arrays(world) if arrays is None else arrays).items()}
     rows["slots"] = slots
     return rows
 
 
-def unpack_rows(world: World, rows: Packed) -> None:
-    """Write handed-over rows (``pack_rows``) into ``world``."""
+def unpack_rows(world: World, rows: Packed, arrays: dict[str, np.ndarray] | None = None) -> None:
+    """Write handed-over rows (``pack_rows``) into ``world`` (``arrays`` as for ``pack_rows``)."""
     slots = rows["slots"]
-    arrays = _agent_arrays(world)
+    arrays = _agent_arrays(world) if arrays is None else arrays
     for key, v in rows.items():
         if key in arrays:
             arrays[key][slots] = v
@@ -208,8 +209,10 @@ class Shard:
         if world.groups is not None and leaving.size:
             world.groups.settle_answers()  # heartbeat answers not yet read go with their agents
         leave: Packed = {"slots": leaving}
+        arrays: dict[str, np.ndarray] | None = None  # found once a call (a walk of the world's objects, ~1 ms)
         if leaving.size:  # the per-slot arrays are looked up only when an agent leaves
-            leave = pack_rows(world, leaving)
+            arrays = _agent_arrays(world)
+            leave = pack_rows(world, leaving, arrays)
             for name, arr in self.carry.items():
                 leave[f"w.{name}"] = arr[leaving]
         leave["x"] = st.pos[leaving, 0]
@@ -230,7 +233,7 @@ class Shard:
         self.arrived = _NONE
         if arrivals is not None and arrivals["slots"].size:
             new = self.arrived = arrivals["slots"]
-            unpack_rows(world, arrivals)
+            unpack_rows(world, arrivals, arrays)
             self.own[new] = True
             self.held[new] = True
             for name, arr in self.carry.items():
