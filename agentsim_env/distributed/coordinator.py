@@ -516,7 +516,11 @@ class Coordinator:
         for key in keys:
             info.setdefault(key, np.zeros(s))
         given = out
-        if out is not None and full >= 0 and any(k not in replies and len(calls[k]) > 2 for k in calls):
+        if (
+            out is not None
+            and full >= 0
+            and any(k not in replies and calls[k][2].get("obs_buf") == full for k in calls)
+        ):
             # a shard lost in this step may still be writing into ``out`` until its process is gone: the step's
             # rows are taken from a copy, and that array is never handed out again
             self.backend.retire(full)
