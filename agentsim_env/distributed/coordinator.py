@@ -18,94 +18,28 @@ from __future__ import annotations
 import logging
 import time
 import weakref
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from agentsim_env.comms.events import DeliveryEvents, MessageLog
-from agentsim_env.comms.overlay import Deliveries
-from agentsim_env.comms.stack import CommsEvents
-from agentsim_env.core.collisions import CollisionEvents
 from agentsim_env.distributed.backends import Failure
 from agentsim_env.distributed.bridge import Packed, nbytes
 from agentsim_env.distributed.partition import Strips
+from agentsim_env.distributed.replies import (
+    ShardInfo,
+    Traffic,
+    merge_collisions,
+    merge_comms,
+    obs_dim,
+    rollout_rows,
+)
 from agentsim_env.distributed.row_kernels import scatter_rows
 from agentsim_env.scenarios.base import Scenario, StepResult, StepScores
 from agentsim_env.sim import StepEvents, World
 
 log = logging.getLogger("agentsim_env.distributed")
+__all__ = ["Coordinator", "ShardInfo", "Traffic"]
 _NONE = np.zeros(0, dtype=np.int64)
-
-
-@dataclass(slots=True)
-class ShardInfo:
-    """What the coordinator knows of one shard (the integrator's map of machines).
-
-    Attributes:
-        index: Shard index k.
-        address: ``host:pid`` of its process (from its heartbeats).
-        alive: Whether it still answers.
-        last_answer: ``time.time()`` of its latest heartbeat.
-        last_step: The simulation tick of its latest heartbeat.
-        step_s: Seconds of its latest call (its exchanges included).
-        wait_s: Seconds of that call spent at the exchange (waiting for the others, routing, transfers).
-        reason: Why it went offline (empty while alive).
-        restarts: How many times it was started anew.
-    """
-
-    index: int
-    address: str = ""
-    alive: bool = True
-    last_answer: float = 0.0
-    last_step: int = -1
-    step_s: float = 0.0
-    wait_s: float = 0.0
-    reason: str = ""
-    restarts: int = 0
-
-
-@dataclass(slots=True)
-class Traffic:
-    """Bytes that crossed between processes in the latest step (or, after a rollout, per step of it), by kind.
-
-    ``actions`` and ``replies`` travel between the coordinator and the shards; the others between the shards,
-    through the exchange: ``halo`` (ghost positions), ``handover`` (the agents that changed shards, with all their
-    per-slot rows), ``offline`` (ghosts that went offline, the overlay's ghost frontier), ``bus`` (messages whose
-    receiver lives on another shard), ``positions`` (far inbox senders), ``groups`` (per-group sums).
-    """
-
-    actions: int = 0
-    replies: int = 0
-    halo: int = 0
-    handover: int = 0
-    offline: int = 0
-    bus: int = 0
-    positions: int = 0
-    groups: int = 0
-
-    @property
-    def total(self) -> int:
-        """Every byte of the step."""
-        return sum(getattr(self, f) for f in self.__slots__)  # type: ignore[attr-defined]
-
-    @property
-    def between_shards(self) -> int:
-        """The bytes of the exchanges (what crosses between machines besides the coordinator's calls)."""
-        return self.total - self.actions - self.replies
-
-    def add_exchange(self, counts: dict[str, int], scale: float = 1.0) -> None:
-        """Add the exchange's byte counts by phase (``Bridge.take_bytes``), times ``scale``."""
-        for phase, field_name in (
-            ("halo", "halo"),
-            ("handover", "handover"),
-            ("offline", "offline"),
-            ("bus", "bus"),
-            ("want", "positions"),
-            ("have", "positions"),
-            ("groups", "groups"),
-        ):
-            setattr(self, field_name, getattr(self, field_name) + int(counts.get(phase, 0) * scale))
 
 
 class Coordinator:
@@ -278,10 +212,10 @@ class Coordinator:
         self._filled = self._given = None
         self.owner[:] = -1
         s = world.state.n_slots
-        self.obs = np.zeros((s, _obs_dim(sc)), np.float32)
+        self.obs = np.zeros((s, obs_dim(sc)), np.float32)
         if gather:  # shards beside the driver take their actions and send their rows through shared memory
             layout = tuple((k, p.size, "<f8") for k, p in sc.act_parts().items())
-            self.backend.share_rows(s, _obs_dim(sc), layout, len(sc.info_keys()))
+            self.backend.share_rows(s, obs_dim(sc), layout, len(sc.info_keys()))
         replies = self._call(
             "reset",
             {
@@ -378,9 +312,9 @@ class Coordinator:
                 setattr(tr, f, int(getattr(tr, f) / taken))
         got = self._call("finish", dict.fromkeys(range(n), ()))
         finished = list(got.values())
-        returns, pos, sums, alive = _rollout_rows(self.world, finished, self.scenario.info_keys())
+        returns, pos, sums, alive = rollout_rows(self.world, finished, self.scenario.info_keys())
         self.owner[:] = -1
-        self.obs = np.zeros((self.world.state.n_slots, _obs_dim(self.scenario)), np.float32)
+        self.obs = np.zeros((self.world.state.n_slots, obs_dim(self.scenario)), np.float32)
         self._filled = None
         for k, r in got.items():  # where step() goes on from: the owners, the live agents' observations
             self.owner[r["own"]] = k
@@ -502,7 +436,7 @@ class Coordinator:
                 info[key][sl] = v
             # rows through shared memory (float32), counted as they crossed: into a region, or at their slots' rows
             shared = int(r.get("obs_n", 0)) + (len(sl) if "obs_at" in r else 0)
-            tr.replies += nbytes(r) + 4 * shared * _obs_dim(self.scenario)
+            tr.replies += nbytes(r) + 4 * shared * obs_dim(self.scenario)
             # on two threads: the shards meet at a barrier just before their observations, so they answer within
             # a few ms of each other and the other CPU is idle by then (measured: the second reply is in before
             # the first one's rows are copied)
@@ -532,7 +466,7 @@ class Coordinator:
         if lost.size:  # agents of a shard that went offline: they terminate now, with their last observation
             terminated[lost[acting[lost]]] = True
         col = [r for r in replies.values() if r["col.agent"].size]
-        events = _merge_collisions(col)
+        events = merge_collisions(col)
         ended = np.flatnonzero(terminated)
         if out is not None:  # an ended agent's row is its last one: kept for the steps it no longer acts in
             assert self.obs is not None
@@ -546,62 +480,10 @@ class Coordinator:
         ev = StepEvents(events, _NONE)
         ev.lost = lost
         if events_wanted and world.comms is not None:
-            ev.comms = _merge_comms(list(replies.values()), int(world.tick) - 1)
+            ev.comms = merge_comms(list(replies.values()), int(world.tick) - 1)
         res = StepResult(rewards, terminated, info)
         world.last_events = ev
         if world.hooks:
             ev.scores = StepScores(acting, rewards, terminated, info)
             world.run_hooks(ev)
         return res, terminated
-
-
-def _rollout_rows(
-    world: World, finished: list[Packed], info_keys: tuple[str, ...]
-) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray], np.ndarray]:
-    """Every agent's return, final position and info sums from the shards' last rows; the live slots."""
-    s = world.state.n_slots
-    returns = np.zeros(s)
-    pos = np.array(world.state.pos, dtype=np.float64)  # agents of a lost shard: where they were last seen
-    sums = {k: np.zeros(s) for k in info_keys}
-    live = []
-    for r in finished:
-        sl = r["slots"]
-        returns[sl], pos[sl] = r["returns"], r["pos"]
-        for k in info_keys:
-            sums[k][sl] = r["sums"][k]
-        live.append(r["live"])
-    alive = np.sort(np.concatenate(live)) if live else _NONE
-    return returns, pos, sums, alive
-
-
-def _merge_comms(replies: list[Packed], step: int) -> CommsEvents:
-    """The shards' message events of one step as one process's (bus logs and overlay deliveries)."""
-
-    def logs(key: str) -> MessageLog:
-        return MessageLog.concat([r[key] for r in replies if key in r])
-
-    bus = DeliveryEvents(step, logs("bus.sent"), logs("bus.delivered"), logs("bus.dropped"))
-    got = [r["overlay"] for r in replies if "overlay" in r]
-    ov = Deliveries(
-        *(
-            np.concatenate([getattr(d, f) for d in got])
-            for f in ("receiver", "flood", "origin", "hops", "created", "payload")
-        )
-    )
-    sent = np.sum([r["sent"] for r in replies if "sent" in r], axis=0)
-    return CommsEvents(bus, ov, sent)
-
-
-def _obs_dim(scenario: Scenario) -> int:
-    return int(sum(p.size for p in scenario.obs_parts().values()))
-
-
-def _merge_collisions(replies: list[Packed]) -> CollisionEvents:
-    """Every shard's collisions of its own agents, in slot order of the hit agent (the single-process order)."""
-    if not replies:
-        return CollisionEvents.empty()
-    agent = np.concatenate([r["col.agent"] for r in replies])
-    other = np.concatenate([r["col.other"] for r in replies])
-    obj = np.concatenate([r["col.obj"] for r in replies])
-    order = np.argsort(agent, kind="stable")
-    return CollisionEvents(agent[order], other[order], obj[order])
