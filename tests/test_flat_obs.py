@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 import agentsim_env
-from agentsim_env.scenarios.base import INBOX_CLIP, flat_parts, reset_worlds, run_step
+from agentsim_env.scenarios.base import reset_worlds, run_step
+from agentsim_env.scenarios.flat_layout import INBOX_CLIP, flat_parts
 from agentsim_env.scenarios.registry import scenario_class
 
 CASES = [(name, cfg) for name in agentsim_env.list_scenarios() for cfg in scenario_class(name).test_configs]

@@ -21,6 +21,7 @@ from agentsim_env.core.validation import check_choice
 from agentsim_env.env.agent_dicts import per_agent, rows, stay_dicts
 from agentsim_env.env.batch_kernels import scatter_part
 from agentsim_env.env.buffers import Recycled
+from agentsim_env.env.finite import assert_finite, check_finite_default
 from agentsim_env.env.guard import CallGuard
 from agentsim_env.env.messaging import MessageCalls
 from agentsim_env.env.rollout import RolloutCallback, RolloutResult, run_rollout
@@ -32,14 +33,8 @@ from agentsim_env.env.spaces import (
     split_action,
     stack_rows,
 )
-from agentsim_env.scenarios.base import (
-    Scenario,
-    assert_finite,
-    check_finite_default,
-    flat_parts,
-    reset_worlds,
-    run_step,
-)
+from agentsim_env.scenarios.base import Scenario, reset_worlds, run_step
+from agentsim_env.scenarios.flat_layout import flat_parts
 from agentsim_env.scenarios.registry import make_scenario
 
 RENDER_MODES = ("human", "rgb_array", "web")

@@ -21,15 +21,11 @@ from agentsim_env.core.threads import check_num_threads
 from agentsim_env.core.validation import check_int, is_int, short_repr
 from agentsim_env.env.batch_kernels import finish_step, prepare_actions
 from agentsim_env.env.buffers import ArraySource, Recycled
+from agentsim_env.env.finite import assert_finite, check_finite_default
 from agentsim_env.env.guard import CallGuard
 from agentsim_env.env.spaces import ACTION_RULE, REAL_KINDS, as_array, flat_layout
-from agentsim_env.scenarios.base import (
-    assert_finite,
-    check_finite_default,
-    flat_parts,
-    reset_worlds,
-    run_step,
-)
+from agentsim_env.scenarios.base import reset_worlds, run_step
+from agentsim_env.scenarios.flat_layout import flat_parts
 from agentsim_env.scenarios.registry import make_scenario
 
 MAX_WORLDS = 1_000_000

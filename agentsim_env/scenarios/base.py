@@ -24,7 +24,6 @@ actions of its own (releases) extends it.
 from __future__ import annotations
 
 import dataclasses
-import os
 from abc import ABC, abstractmethod
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
@@ -34,10 +33,10 @@ import numpy as np
 
 from agentsim_env.core.budget import check_memory
 from agentsim_env.core.pipeline import Part
-from agentsim_env.core.threads import RowThreads
 from agentsim_env.motion import MotionLimits, decode_primitive
 from agentsim_env.motion.actions import decode_velocity_unchecked
 from agentsim_env.scenarios.config import ScenarioConfig
+from agentsim_env.scenarios.flat_layout import INBOX_CLIP, check_rows_at, comms_width, flat_parts, write_comms
 from agentsim_env.scenarios.rewards import combine_partials
 from agentsim_env.sensors.proximity import ProximityConfig, ProximitySensor
 from agentsim_env.sim.world import StepEvents, StepScores, World
@@ -92,8 +91,6 @@ class SlotState:
 
 _BYTES_PER_SLOT = 1200
 """Fixed bytes per slot of the memory estimate (agent state, motion primitives, grid, bookkeeping)."""
-INBOX_CLIP = 1e4
-"""Bound of the inbox features in observations: each is clipped to ``[-INBOX_CLIP, INBOX_CLIP]``."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -461,116 +458,6 @@ def _declared_part(world: World, part: str) -> Part | None:
         if isinstance(s, ProximitySensor) and s.part_name == part:
             return s.part
     return None
-
-
-def comms_width(world: World) -> int:
-    """Columns of the inbox and counter parts in a flat observation row (0 without comms)."""
-    if world.comms is None:
-        return 0
-    inbox = world.comms.bus.inbox
-    return inbox.size * inbox.n_features + 2
-
-
-def write_comms(world: World, out: np.ndarray, col: int) -> None:
-    """The inbox (clipped to ``INBOX_CLIP``) and counter parts of every slot into ``out[:, col:]``, as
-    :meth:`Scenario.observation` gives them (the flat layout ends with them)."""
-    assert world.comms is not None
-    world.comms.observe_flat(world.state.pos, max(world.tick - 1, 0), out, col, INBOX_CLIP)
-
-
-def check_rows_at(slots: np.ndarray, at: np.ndarray | None, out: np.ndarray, width: int) -> np.ndarray:
-    """The rows of ``out`` the observation rows of ``slots`` go to (``at``; ``None``: ``0..len(slots)-1``), as
-    contiguous int64, after checking ``out`` (a writable float32 ``(rows, width)`` array) and that ``at`` names one
-    of its rows per slot.
-
-    Raises:
-        ValueError: Naming ``out`` or ``at`` and what they must be.
-    """
-    n = int(slots.shape[0])
-    rows = n if at is None else None
-    if (
-        out.ndim != 2
-        or out.shape[1] != width
-        or (rows is not None and out.shape[0] != rows)
-        or out.dtype != np.float32
-        or not out.flags.writeable
-    ):
-        want = f"({n}, {width})" if rows is not None else f"(rows, {width})"
-        raise ValueError(f"out must be a writable float32 array {want}, got {out.dtype} {out.shape}")
-    if at is None:
-        return np.arange(n, dtype=np.int64)
-    a = np.ascontiguousarray(at, dtype=np.int64)
-    if a.shape != (n,) or (n and not 0 <= int(a.min()) <= int(a.max()) < out.shape[0]):
-        raise ValueError(f"at must give each of the {n} slots a row of out in [0, {out.shape[0]}), got {a.shape} {a}")
-    return a
-
-
-def flat_parts(
-    parts: dict[str, np.ndarray],
-    n_slots: int,
-    out: np.ndarray | None = None,
-    threads: RowThreads | None = None,
-) -> np.ndarray:
-    """Observation parts ``{part: (S, ...)}`` concatenated per slot into ``(S, obs_dim)`` float32: ``out`` when
-    given, else a fresh array; with ``threads``, row ranges are copied on them (numpy copies without the GIL)."""
-    cols = [p.reshape(n_slots, int(np.prod(p.shape[1:], dtype=np.int64))) for p in parts.values()]
-    if out is None:
-        if threads is None or threads.num_threads == 1:
-            return np.concatenate(cols, axis=1, dtype=np.float32)
-        out = np.empty((n_slots, sum(c.shape[1] for c in cols)), dtype=np.float32)
-    if threads is None or threads.num_threads == 1:
-        return np.concatenate(cols, axis=1, out=out)
-    threads.run(lambda lo, hi, _: np.concatenate([c[lo:hi] for c in cols], axis=1, out=out[lo:hi]), n_slots)
-    return out
-
-
-CHECK_FINITE_ENV = "AGENTSIM_CHECK_FINITE"
-"""Environment variable that switches ``check_finite`` on by default (``1``, ``true`` or ``yes``)."""
-
-
-def check_finite_default(value: bool | None) -> bool:
-    """``value`` when given (it must be a bool), else whether ``AGENTSIM_CHECK_FINITE`` switches the check on."""
-    if value is None:
-        return os.environ.get(CHECK_FINITE_ENV, "").strip().lower() in ("1", "true", "yes")
-    if not isinstance(value, (bool, np.bool_)):
-        raise ValueError(f"check_finite must be True, False or None, got {value!r}")
-    return bool(value)
-
-
-def assert_finite(
-    scenario: Scenario[Any],
-    rows: np.ndarray,
-    step: int,
-    obs: dict[str, np.ndarray],
-    result: StepResult | None = None,
-) -> None:
-    """The ``check_finite`` debug switch: fail fast on the first NaN or inf an agent would receive.
-
-    Args:
-        scenario: The scenario (names the agents).
-        rows: ``(S,)`` bool, the slots whose values are handed out (live agents).
-        step: The step number, for the message.
-        obs: Observation parts ``{part: (S, ...)}``.
-        result: The step's rewards and infos (``None`` at reset).
-
-    Raises:
-        FloatingPointError: Naming the observation part, reward or info key, the agent, the world and the step.
-    """
-    named = [(f"observation part {k!r}", v) for k, v in obs.items()]
-    if result is not None:
-        named.append(("reward", result.rewards))
-        named += [(f"info {k!r}", v) for k, v in result.info.items() if np.issubdtype(v.dtype, np.floating)]
-    for what, arr in named:
-        bad = ~np.isfinite(arr.reshape(arr.shape[0], -1)).all(axis=1) & rows
-        if bad.any():
-            s = int(np.flatnonzero(bad)[0])
-            w, i = divmod(s, scenario.n_agents)
-            row = np.asarray(arr[s]).ravel()
-            values = row[~np.isfinite(row)][:3].tolist()
-            raise FloatingPointError(
-                f"{what} of agent '{scenario.agent_prefix}_{i}' (world {w}) is not finite at step {step}: "
-                f"{values}, in {int(bad.sum())} agent(s) (check_finite is on; scenario {scenario.name!r})"
-            )
 
 
 def reset_worlds(

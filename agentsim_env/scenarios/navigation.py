@@ -50,17 +50,9 @@ from agentsim_env.core.config_model import Int, Real, config, in_range
 from agentsim_env.core.pipeline import Sensor
 from agentsim_env.core.threads import light_min_rows
 from agentsim_env.motion import MotionLimits
-from agentsim_env.scenarios.base import (
-    INBOX_CLIP,
-    Scenario,
-    SlotState,
-    StepResult,
-    check_rows_at,
-    comms_width,
-    slot,
-    write_comms,
-)
+from agentsim_env.scenarios.base import Scenario, SlotState, StepResult, slot
 from agentsim_env.scenarios.config import ObstacleHeights, ObstacleSizes, ScenarioConfig
+from agentsim_env.scenarios.flat_layout import INBOX_CLIP, check_rows_at, comms_width, write_comms
 from agentsim_env.scenarios.placement import jittered_points, obstacle_layout, placement_problem
 from agentsim_env.scenarios.rewards import RewardConfig, compose_rewards, task_partials
 from agentsim_env.sensors.gnss import GnssConfig, GnssSensor
